@@ -1,0 +1,118 @@
+/* bounce: scenes (geometry and Lambertian materials), validation and patch meshing. */
+#ifndef BOUNCE_SCENE_H
+#define BOUNCE_SCENE_H
+
+#include <stddef.h>
+#include "bounce/status.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct bn_scene bn_scene;   /* opaque */
+
+/* Length unit of the scene file; areas and powers are reported in SI from it. */
+typedef enum bn_unit { BN_UNIT_M, BN_UNIT_CM, BN_UNIT_MM } bn_unit;
+const char *bn_unit_name(bn_unit u);            /* "m", "cm", "mm" */
+double bn_unit_to_metres(bn_unit u);            /* 1, 0.01, 0.001 */
+int bn_unit_parse(const char *s, bn_unit *out); /* 0 on success */
+
+#define BN_NAME_MAX 64
+/* A Lambertian material. rho: diffuse reflectance per channel in [0, 1] (OBJ Kd);
+ * Le: emitted radiance per channel, W m^-2 sr^-1, >= 0 (OBJ Ke). */
+typedef struct bn_material {
+    char   name[BN_NAME_MAX];
+    double rho[3];
+    double Le[3];
+} bn_material;
+
+/* A surface polygon after validation: planar, non-degenerate, convex quads or triangles
+ * kept as they are, everything else triangulated. Front side = right-hand rule of the
+ * vertex order; surfaces are one-sided (the back neither emits nor reflects). */
+typedef struct bn_face {
+    size_t   first;       /* index of its first entry in bn_scene_face_indices() */
+    unsigned nverts;      /* 3 or 4 */
+    unsigned material;    /* index into bn_scene_materials() */
+    double   normal[3];   /* unit, front side */
+    double   area;        /* scene units squared */
+    size_t   source;      /* index of the input polygon it came from (0-based) */
+    unsigned line;        /* line of that polygon in the file, 0 if not known */
+} bn_face;
+
+/* A patch: a planar triangle or quad inside one face. Corners index the patch-vertex array
+ * (bn_scene_patch_vertices); neighbours inside one face share corners (no T-junctions). */
+typedef struct bn_patch {
+    size_t   face;        /* index into bn_scene_faces() */
+    unsigned material;
+    unsigned ncorners;    /* 3 or 4, counter-clockwise seen from the front */
+    size_t   corner[4];
+    double   area;        /* scene units squared */
+    double   normal[3];   /* unit; equal to the face's */
+    double   centroid[3]; /* area centroid */
+} bn_patch;
+
+typedef struct bn_load_opts {
+    bn_unit unit;            /* length unit of the file (default metres) */
+    double  planar_tol;      /* non-planarity allowed, relative to the face's diameter (default 1e-6) */
+    bn_log  log;             /* warnings: dropped faces, triangulated faces, no emitter */
+} bn_load_opts;
+void bn_load_opts_default(bn_load_opts *o);
+
+/* Loads OBJ (+MTL), PLY or OFF by extension, validates, and builds faces (no patches yet:
+ * call bn_scene_mesh). On failure *out is NULL and err names the file, line and value. */
+bn_status bn_scene_load(const char *path, const bn_load_opts *o, bn_scene **out, bn_error *err);
+
+/* Builds a scene from arrays (tests, generators). verts: nverts*3 doubles; polys: for each
+ * polygon its vertex count followed by that many 0-based indices; poly_material: one
+ * material index per polygon. Same validation as bn_scene_load; `name` is used in messages. */
+bn_status bn_scene_from_arrays(const char *name, const double *verts, size_t nverts,
+                               const unsigned *polys, size_t npolys,
+                               const unsigned *poly_material,
+                               const bn_material *materials, size_t nmaterials,
+                               const bn_load_opts *o, bn_scene **out, bn_error *err);
+
+void bn_scene_destroy(bn_scene *s);   /* NULL is a no-op */
+
+/* Patch meshing. patch_size > 0: largest patch edge in scene units; else target_patches > 0:
+ * the patch size is chosen so the total count is close to it; no_subdivide: one patch per face.
+ * Planar quads become regular grids, triangles uniform subdivisions. Replaces earlier patches. */
+typedef struct bn_mesh_opts {
+    double patch_size;
+    size_t target_patches;
+    int    no_subdivide;
+} bn_mesh_opts;
+void bn_mesh_opts_default(bn_mesh_opts *o);   /* target_patches = BN_DEFAULT_PATCHES */
+#define BN_DEFAULT_PATCHES 1200
+bn_status bn_scene_mesh(bn_scene *s, const bn_mesh_opts *o, bn_error *err);
+
+/* Accessors. Returned arrays are borrowed: valid while the scene lives and is not re-meshed. */
+const char        *bn_scene_path(const bn_scene *s);
+bn_unit            bn_scene_unit(const bn_scene *s);
+const bn_material *bn_scene_materials(const bn_scene *s, size_t *count);
+const double      *bn_scene_vertices(const bn_scene *s, size_t *count);      /* xyz per vertex */
+const size_t      *bn_scene_face_indices(const bn_scene *s, size_t *count);
+const bn_face     *bn_scene_faces(const bn_scene *s, size_t *count);
+const bn_patch    *bn_scene_patches(const bn_scene *s, size_t *count);
+const double      *bn_scene_patch_vertices(const bn_scene *s, size_t *count); /* xyz */
+double             bn_scene_patch_size(const bn_scene *s);  /* edge length used by the mesher */
+/* Polygons read, and those dropped as degenerate or duplicate, and triangulated as non-planar. */
+typedef struct bn_scene_stats {
+    size_t input_polygons, degenerate_dropped, duplicates_dropped, nonplanar_split,
+           polygons_triangulated, back_to_back;
+} bn_scene_stats;
+bn_scene_stats     bn_scene_stats_get(const bn_scene *s);
+/* Axis-aligned bounding box of the faces, scene units. */
+void               bn_scene_bounds(const bn_scene *s, double lo[3], double hi[3]);
+/* A digest of geometry, materials and patches (FNV-1a 64), for cache keys. */
+unsigned long long bn_scene_digest(const bn_scene *s);
+
+/* Per-patch material helpers (borrowed scene). */
+const bn_material *bn_patch_material(const bn_scene *s, size_t patch);
+/* Emitted power of the scene, watts per channel: pi * sum_i A_i Le_i with A in m^2. */
+void bn_scene_emitted_power(const bn_scene *s, double watts[3]);
+size_t bn_scene_emitter_count(const bn_scene *s);   /* faces with Le > 0 in any channel */
+
+#ifdef __cplusplus
+}
+#endif
+#endif

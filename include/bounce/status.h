@@ -1,0 +1,86 @@
+/* bounce: status codes, error details and exit codes shared by every module. */
+#ifndef BOUNCE_STATUS_H
+#define BOUNCE_STATUS_H
+
+#include <stddef.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* One list makes the enum, bn_status_name() and bn_status_str() (libuv's UV_ERRNO_MAP).
+ * X(NAME, exit code, description). Exit codes are those of the `bounce` command:
+ * 0 success, 2 usage, 3 bad input, 4 resource limit, 5 numerical failure,
+ * 6 failed verdict, 130/143 interrupted by SIGINT/SIGTERM, 1 internal error. */
+#define BN_STATUS_MAP(X)                                                        \
+    X(OK,        0,   "success")                                                \
+    X(EUSAGE,    2,   "usage error")                                            \
+    X(EINPUT,    3,   "bad input")                                              \
+    X(EIO,       3,   "cannot read or write a file")                            \
+    X(ENOMEM,    4,   "resource limit (memory)")                                \
+    X(ENUMERIC,  5,   "numerical failure")                                      \
+    X(ENOTCONV,  5,   "not converged within the iteration limit")               \
+    X(EVERDICT,  6,   "a check or study verdict failed")                        \
+    X(EINTR,     130, "interrupted by SIGINT")                                  \
+    X(ETERM,     143, "interrupted by SIGTERM")                                 \
+    X(EINTERNAL, 1,   "internal error")
+
+typedef enum bn_status {
+#define BN__STATUS_ENUM(name, code, desc) BN_##name,
+    BN_STATUS_MAP(BN__STATUS_ENUM)
+#undef BN__STATUS_ENUM
+    BN_STATUS_COUNT
+} bn_status;
+
+const char *bn_status_name(bn_status s);   /* "EINPUT" */
+const char *bn_status_str(bn_status s);    /* "bad input" */
+int bn_status_exit_code(bn_status s);      /* the process exit code for s */
+
+/* The detail of a failure: the status and a message naming the file, line or value.
+ * Functions that can fail take a `bn_error *err` (may be NULL) and fill it on failure. */
+#define BN_ERROR_MSG_MAX 1024
+typedef struct bn_error {
+    bn_status status;
+    char msg[BN_ERROR_MSG_MAX];
+} bn_error;
+
+void bn_error_clear(bn_error *err);
+/* Sets err (if not NULL) and returns s. printf-style message. */
+bn_status bn_error_set(bn_error *err, bn_status s, const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 3, 4)))
+#endif
+    ;
+
+/* Log levels for the warnings and notes a library call may emit. */
+typedef enum bn_log_level { BN_LOG_DEBUG, BN_LOG_INFO, BN_LOG_WARN } bn_log_level;
+/* A sink for messages; `user` is passed through. NULL means "print warnings to stderr". */
+typedef void (*bn_log_fn)(void *user, bn_log_level level, const char *msg);
+typedef struct bn_log {
+    bn_log_fn fn;    /* NULL: warnings to stderr, info and debug dropped */
+    void *user;
+    int quiet;       /* nonzero: drop everything but warnings */
+} bn_log;
+void bn_logf(const bn_log *log, bn_log_level level, const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 3, 4)))
+#endif
+    ;
+
+/* Version of the library, "MAJOR.MINOR.PATCH". */
+const char *bn_version(void);
+
+/* Threads for the library's parallel loops (OpenMP); n <= 0 means all cores. Results never
+ * depend on it: random streams are seeded per patch or pixel and sample, not per thread. */
+void bn_threads_set(int n);
+int bn_threads_get(void);
+
+/* Interruption: the CLI installs handlers for SIGINT/SIGTERM that call bn_interrupt_raise;
+ * long loops poll bn_interrupted() and return BN_EINTR or BN_ETERM (its value). */
+void bn_interrupt_raise(bn_status s);
+bn_status bn_interrupted(void);   /* BN_OK while not interrupted */
+
+#ifdef __cplusplus
+}
+#endif
+#endif

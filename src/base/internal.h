@@ -1,0 +1,97 @@
+/* Internal helpers shared by the library's modules: checked allocation, checks, timing,
+ * counter-based random numbers, atomic output files, progress. Not installed. */
+#ifndef BOUNCE_BASE_INTERNAL_H
+#define BOUNCE_BASE_INTERNAL_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include "bounce/status.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#ifndef BN_VERSION_STRING
+#define BN_VERSION_STRING "0.0.0"
+#endif
+
+/* Programmer errors: print both values and abort (pbrt's CHECK_*). */
+#define BN_CHECK(c)                                                                    \
+    do {                                                                               \
+        if (!(c)) {                                                                    \
+            fprintf(stderr, "%s:%d: check failed: %s\n", __FILE__, __LINE__, #c);      \
+            abort();                                                                   \
+        }                                                                              \
+    } while (0)
+#define BN_CHECK_OP(a, op, b)                                                          \
+    do {                                                                               \
+        double bn__a = (double)(a), bn__b = (double)(b);                               \
+        if (!(bn__a op bn__b)) {                                                       \
+            fprintf(stderr, "%s:%d: check failed: %s %s %s (%.17g vs %.17g)\n",        \
+                    __FILE__, __LINE__, #a, #op, #b, bn__a, bn__b);                    \
+            abort();                                                                   \
+        }                                                                              \
+    } while (0)
+
+/* Allocation with overflow-checked sizes; NULL on failure or overflow (never aborts). */
+void *bn__calloc(size_t n, size_t size);
+void *bn__malloc_array(size_t n, size_t size);
+void *bn__realloc_array(void *p, size_t n, size_t size);
+char *bn__strdup(const char *s);
+/* Multiplies with overflow detection: returns 0 on overflow. */
+int bn__mul_size(size_t a, size_t b, size_t *out);
+
+/* Physical memory in bytes (0 if unknown) and the default --max-memory (80% of it). */
+size_t bn__physical_memory(void);
+
+/* Monotonic wall clock in seconds. */
+double bn__now(void);
+
+/* Counter-based random numbers: a stream is fixed by (seed, key1, key2) (patch or pixel, and
+ * sample index), so results do not depend on the thread that draws them. */
+typedef struct bn__rng { uint64_t state; } bn__rng;
+uint64_t bn__hash64(uint64_t x);
+bn__rng bn__rng_make(uint64_t seed, uint64_t key1, uint64_t key2);
+uint64_t bn__rng_u64(bn__rng *r);
+double bn__rng_uniform(bn__rng *r);   /* [0, 1) with 53 bits */
+
+/* Atomic output files: written to a temporary name beside the target and renamed when
+ * complete. Every temporary name is registered so an interrupt can remove it. */
+typedef struct bn__outfile {
+    FILE *fp;
+    char *path;
+    char *tmp;
+} bn__outfile;
+bn_status bn__outfile_open(bn__outfile *f, const char *path, const char *mode, bn_error *err);
+/* Closes, checks for write errors and renames into place (or removes the temp on failure). */
+bn_status bn__outfile_commit(bn__outfile *f, bn_error *err);
+void bn__outfile_abort(bn__outfile *f);
+/* Reserve a temporary name for libraries that write files themselves (OpenEXR, OIIO,
+ * OpenMesh): *tmp is malloc'd; call bn__tmpname_commit / bn__tmpname_abort afterwards. */
+bn_status bn__tmpname_reserve(const char *path, char **tmp, bn_error *err);
+bn_status bn__tmpname_commit(const char *path, char *tmp, bn_error *err);
+void bn__tmpname_abort(char *tmp);
+/* Removes every registered temporary file; async-signal-safe. */
+void bn__tmp_remove_all(void);
+
+/* A progress bar on a terminal (stderr is a tty and not quiet) for tasks > ~1.5 s. */
+typedef struct bn__progress {
+    const char *label;
+    double start, last;
+    size_t total;
+    int enabled, shown;
+} bn__progress;
+void bn__progress_begin(bn__progress *p, const char *label, size_t total, int quiet);
+void bn__progress_update(bn__progress *p, size_t done);   /* call from one thread */
+void bn__progress_end(bn__progress *p);
+
+/* FNV-1a 64 over bytes, chained. */
+uint64_t bn__fnv1a(uint64_t h, const void *data, size_t n);
+#define BN__FNV_INIT 0xcbf29ce484222325ULL
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,50 @@
+/* Small 3-vector helpers in double (scene geometry is held in double). */
+#ifndef BOUNCE_BASE_VEC_H
+#define BOUNCE_BASE_VEC_H
+
+#include <math.h>
+
+#define BN_PI 3.14159265358979323846
+
+static inline void bn_v3_sub(const double a[3], const double b[3], double o[3])
+{
+    o[0] = a[0] - b[0]; o[1] = a[1] - b[1]; o[2] = a[2] - b[2];
+}
+static inline void bn_v3_add(const double a[3], const double b[3], double o[3])
+{
+    o[0] = a[0] + b[0]; o[1] = a[1] + b[1]; o[2] = a[2] + b[2];
+}
+static inline double bn_v3_dot(const double a[3], const double b[3])
+{
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+static inline void bn_v3_cross(const double a[3], const double b[3], double o[3])
+{
+    double x = a[1] * b[2] - a[2] * b[1], y = a[2] * b[0] - a[0] * b[2], z = a[0] * b[1] - a[1] * b[0];
+    o[0] = x; o[1] = y; o[2] = z;
+}
+static inline double bn_v3_len(const double a[3]) { return sqrt(bn_v3_dot(a, a)); }
+static inline void bn_v3_scale(const double a[3], double s, double o[3])
+{
+    o[0] = a[0] * s; o[1] = a[1] * s; o[2] = a[2] * s;
+}
+/* o = a + s * b */
+static inline void bn_v3_madd(const double a[3], double s, const double b[3], double o[3])
+{
+    o[0] = a[0] + s * b[0]; o[1] = a[1] + s * b[1]; o[2] = a[2] + s * b[2];
+}
+static inline double bn_v3_normalize(double a[3])
+{
+    double l = bn_v3_len(a);
+    if (l > 0) { a[0] /= l; a[1] /= l; a[2] /= l; }
+    return l;
+}
+static inline double bn_v3_dist(const double a[3], const double b[3])
+{
+    double d[3];
+    bn_v3_sub(a, b, d);
+    return bn_v3_len(d);
+}
+static inline double bn_clamp(double x, double lo, double hi) { return x < lo ? lo : (x > hi ? hi : x); }
+
+#endif

@@ -1,0 +1,92 @@
+/* The `bounce` command: option tables, shared option groups, and the subcommands. */
+#ifndef BOUNCE_CLI_H
+#define BOUNCE_CLI_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+#include "bounce/scene.h"
+
+typedef enum bn_opt_type {
+    BN_OPT_FLAG,     /* int, set to 1 */
+    BN_OPT_INT,      /* int within [min, max] */
+    BN_OPT_SIZE,     /* size_t within [min, max] */
+    BN_OPT_U64,      /* uint64_t */
+    BN_OPT_DOUBLE,   /* finite double within [min, max] */
+    BN_OPT_STRING,   /* const char * */
+    BN_OPT_CHOICE,   /* int: index of the value in `choices` ("a|b|c") */
+    BN_OPT_VEC3,     /* double[3] from "x,y,z" */
+    BN_OPT_WXH       /* int[2] from "WxH" */
+} bn_opt_type;
+
+typedef struct bn_opt {
+    const char *name;      /* long name without dashes */
+    char        short_name;
+    bn_opt_type type;
+    void       *dest;
+    const char *choices;   /* BN_OPT_CHOICE */
+    double      min, max;  /* numeric range (inclusive) */
+    const char *metavar;
+    const char *help;      /* with the default, e.g. "(default 1e-6)" */
+} bn_opt;
+
+#define BN_CLI_MAX_OPTS 96
+typedef struct bn_optset {
+    bn_opt opt[BN_CLI_MAX_OPTS];
+    size_t n;
+    const char *usage;     /* "bounce info SCENE [options]" */
+    const char *summary;   /* one paragraph */
+    unsigned char seen[BN_CLI_MAX_OPTS];
+} bn_optset;
+
+void bn_optset_add(bn_optset *s, bn_opt o);
+/* Parses argv[1..]; positional arguments are collected in order. --help prints help and
+ * sets *help. Unknown options, missing or bad values are usage errors (exit 2) naming them. */
+bn_status bn_cli_parse(bn_optset *s, int argc, char **argv, const char **positional, size_t max_positional,
+                       size_t *npositional, int *help, bn_error *err);
+void bn_cli_print_help(const bn_optset *s, FILE *fp);
+/* Was the option given on the command line? */
+int bn_cli_given(const bn_optset *s, const char *name);
+
+/* Options every subcommand takes. */
+typedef struct bn_cli_common {
+    int      threads;     /* 0 = all cores */
+    uint64_t seed;
+    int      quiet;
+    const char *cmdline;  /* the full command line, for provenance */
+} bn_cli_common;
+void bn_cli_add_common(bn_optset *s, bn_cli_common *c);
+
+/* Scene loading and meshing options. */
+typedef struct bn_cli_scene {
+    int    unit;          /* index into "m|cm|mm" */
+    double patch_size;
+    size_t patches;
+    int    no_subdivide;
+    double planar_tol;
+} bn_cli_scene;
+void bn_cli_add_scene(bn_optset *s, bn_cli_scene *o);
+/* Loads and meshes; prints the error and returns its status on failure. */
+bn_status bn_cli_load_scene(const char *path, const bn_cli_scene *o, const bn_cli_common *c, bn_scene **out);
+
+/* Applies --threads to OpenMP. */
+void bn_cli_apply_threads(const bn_cli_common *c);
+/* Prints "bounce: <message>" and returns the exit code of the status. */
+int bn_cli_fail(const bn_error *err);
+/* Returns the exit code for an interrupted run if one happened, else 0. */
+int bn_cli_interrupted(void);
+
+/* The exit-code table, for --help. */
+extern const char bn_cli_exit_codes[];
+
+/* Subcommands: each takes argv from the subcommand's name on. */
+int bn_cmd_info(int argc, char **argv, bn_cli_common *c);
+int bn_cmd_formfactors(int argc, char **argv, bn_cli_common *c);
+int bn_cmd_solve(int argc, char **argv, bn_cli_common *c);
+int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c);
+int bn_cmd_bake(int argc, char **argv, bn_cli_common *c);
+int bn_cmd_trace(int argc, char **argv, bn_cli_common *c);
+int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c);
+int bn_cmd_study(int argc, char **argv, bn_cli_common *c);
+
+#endif

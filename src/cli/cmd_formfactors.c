@@ -1,0 +1,11 @@
+/* `bounce formfactors`: not implemented yet (placeholder until its issue lands). */
+#include "cli/cli.h"
+
+int bn_cmd_formfactors(int argc, char **argv, bn_cli_common *c)
+{
+    (void)argc;
+    (void)argv;
+    (void)c;
+    fprintf(stderr, "bounce: error: 'formfactors' is not implemented yet\n");
+    return 1;
+}

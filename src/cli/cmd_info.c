@@ -1,0 +1,112 @@
+/* `bounce info SCENE`: faces, patches, emitters, materials, bounds, area, power, memory. */
+#include "cli/cli.h"
+#include "base/internal.h"
+
+#include <math.h>
+#include <string.h>
+
+static void bn__bytes(double b, char *buf, size_t n)
+{
+    const char *u[] = {"B", "KiB", "MiB", "GiB", "TiB", "PiB"};
+    int i = 0;
+    while (b >= 1024 && i < 5) {
+        b /= 1024;
+        i++;
+    }
+    snprintf(buf, n, "%.3g %s", b, u[i]);
+}
+
+int bn_cmd_info(int argc, char **argv, bn_cli_common *c)
+{
+    bn_optset set;
+    bn_cli_scene so;
+    const char *pos[1];
+    size_t npos, nf, np, nm, nv;
+    int help, all_faces = 0;
+    bn_error err;
+    bn_scene *s = NULL;
+    const bn_face *faces;
+    const bn_material *mats;
+    double lo[3], hi[3], total = 0, watts[3], m;
+    bn_scene_stats st;
+    char buf[64];
+
+    memset(&set, 0, sizeof set);
+    memset(&so, 0, sizeof so);
+    set.usage = "bounce info SCENE [meshing options]";
+    set.summary = "Loads and validates SCENE (.obj with .mtl, .ply, .off), meshes it into patches and prints\n"
+                  "its faces, patches, emitters, materials, bounding box, total area, emitted power and the\n"
+                  "memory a dense K would take (N^2 floats).";
+    bn_cli_add_scene(&set, &so);
+    bn_optset_add(&set, (bn_opt){"all-faces", 0, BN_OPT_FLAG, &all_faces, NULL, 0, 0, NULL,
+                                 "list every face even when there are more than 64"});
+    bn_cli_add_common(&set, c);
+    bn_error_clear(&err);
+    if (bn_cli_parse(&set, argc, argv, pos, 1, &npos, &help, &err) != BN_OK)
+        return bn_cli_fail(&err);
+    if (help) {
+        bn_cli_print_help(&set, stdout);
+        return 0;
+    }
+    if (npos != 1) {
+        bn_error_set(&err, BN_EUSAGE, "info needs one SCENE argument (see --help)");
+        return bn_cli_fail(&err);
+    }
+    bn_cli_apply_threads(c);
+    {
+        bn_status lst = bn_cli_load_scene(pos[0], &so, c, &s);
+        if (lst != BN_OK)
+            return bn_status_exit_code(lst);
+    }
+
+    faces = bn_scene_faces(s, &nf);
+    mats = bn_scene_materials(s, &nm);
+    bn_scene_patches(s, &np);
+    bn_scene_vertices(s, &nv);
+    bn_scene_bounds(s, lo, hi);
+    st = bn_scene_stats_get(s);
+    m = bn_unit_to_metres(bn_scene_unit(s));
+    for (size_t f = 0; f < nf; f++)
+        total += faces[f].area;
+    bn_scene_emitted_power(s, watts);
+
+    printf("scene       %s\n", bn_scene_path(s));
+    printf("unit        %s (areas below in %s^2; powers in W)\n", bn_unit_name(bn_scene_unit(s)),
+           bn_unit_name(bn_scene_unit(s)));
+    printf("polygons    %zu read; %zu faces after validation (%zu non-planar split, %zu triangulated, "
+           "%zu degenerate dropped, %zu duplicates dropped)\n",
+           st.input_polygons, nf, st.nonplanar_split, st.polygons_triangulated, st.degenerate_dropped,
+           st.duplicates_dropped);
+    printf("vertices    %zu\n", nv);
+    printf("bounds      (%.6g, %.6g, %.6g) .. (%.6g, %.6g, %.6g)\n", lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
+    printf("total area  %.10g %s^2 (%.6g m^2)\n", total, bn_unit_name(bn_scene_unit(s)), total * m * m);
+    printf("emitters    %zu face%s; emitted power %.6g %.6g %.6g W (R G B; pi * sum A Le)\n",
+           bn_scene_emitter_count(s), bn_scene_emitter_count(s) == 1 ? "" : "s", watts[0], watts[1], watts[2]);
+    printf("patches     %zu (largest patch edge %.6g %s)\n", np, bn_scene_patch_size(s),
+           bn_unit_name(bn_scene_unit(s)));
+    bn__bytes((double)np * (double)np * 4.0, buf, sizeof buf);
+    printf("dense K     %s as float (N^2 x 4 bytes; F is stored once for all channels)\n", buf);
+
+    printf("\nmaterials   %zu\n", nm);
+    printf("  %-3s %-20s %-26s %-26s %6s %14s\n", "id", "name", "rho (Kd)", "Le (Ke, W m^-2 sr^-1)", "faces", "area");
+    for (size_t i = 0; i < nm; i++) {
+        size_t count = 0;
+        double a = 0;
+        for (size_t f = 0; f < nf; f++)
+            if (faces[f].material == i) {
+                count++;
+                a += faces[f].area;
+            }
+        printf("  %-3zu %-20s %-8.4g %-8.4g %-8.4g %-8.4g %-8.4g %-8.4g %6zu %14.10g\n", i, mats[i].name,
+               mats[i].rho[0], mats[i].rho[1], mats[i].rho[2], mats[i].Le[0], mats[i].Le[1], mats[i].Le[2], count, a);
+    }
+    printf("\nfaces       (front = right-hand rule of the vertex order; triangles of a split polygon share its line)\n");
+    printf("  %-5s %-6s %-20s %-5s %18s  %s\n", "face", "line", "material", "verts", "area", "normal");
+    for (size_t f = 0; f < nf && (f < 64 || all_faces); f++)
+        printf("  %-5zu %-6u %-20s %-5u %18.12g  (%.4f, %.4f, %.4f)\n", f, faces[f].line, mats[faces[f].material].name,
+               faces[f].nverts, faces[f].area, faces[f].normal[0], faces[f].normal[1], faces[f].normal[2]);
+    if (nf > 64 && !all_faces)
+        printf("  ... %zu more (--all-faces lists them)\n", nf - 64);
+    bn_scene_destroy(s);
+    return 0;
+}

@@ -1,0 +1,301 @@
+/* Table-driven option parsing shared by every subcommand: --name VALUE, --name=VALUE, -x VALUE. */
+#include "cli/cli.h"
+#include "base/internal.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+const char bn_cli_exit_codes[] =
+    "Exit codes: 0 success; 2 usage error; 3 bad input (scene or option values); 4 resource limit\n"
+    "(memory); 5 numerical failure (singular, diverged, NaN, not converged within the iteration\n"
+    "limit); 6 a cross-check or study verdict failed; 130 / 143 interrupted by SIGINT / SIGTERM.\n";
+
+void bn_optset_add(bn_optset *s, bn_opt o)
+{
+    BN_CHECK(s->n < BN_CLI_MAX_OPTS);
+    s->opt[s->n++] = o;
+}
+
+int bn_cli_given(const bn_optset *s, const char *name)
+{
+    for (size_t i = 0; i < s->n; i++)
+        if (strcmp(s->opt[i].name, name) == 0)
+            return s->seen[i];
+    return 0;
+}
+
+static int bn__choice_index(const char *choices, const char *v)
+{
+    const char *p = choices;
+    int idx = 0;
+    size_t n = strlen(v);
+    while (p && *p) {
+        const char *bar = strchr(p, '|');
+        size_t len = bar ? (size_t)(bar - p) : strlen(p);
+        if (len == n && strncmp(p, v, n) == 0)
+            return idx;
+        idx++;
+        p = bar ? bar + 1 : NULL;
+    }
+    return -1;
+}
+
+static int bn__parse_num(const char *v, double *out)
+{
+    char *end;
+    double x;
+    if (!v || !*v)
+        return 0;
+    errno = 0;
+    x = strtod(v, &end);
+    if (*end != '\0' || end == v || !isfinite(x))
+        return 0;
+    *out = x;
+    return 1;
+}
+
+static bn_status bn__set(const bn_opt *o, const char *v, bn_error *err)
+{
+    double x;
+    switch (o->type) {
+    case BN_OPT_FLAG:
+        *(int *)o->dest = 1;
+        return BN_OK;
+    case BN_OPT_STRING:
+        if (!*v)
+            return bn_error_set(err, BN_EUSAGE, "--%s needs a non-empty value", o->name);
+        *(const char **)o->dest = v;
+        return BN_OK;
+    case BN_OPT_CHOICE: {
+        int i = bn__choice_index(o->choices, v);
+        if (i < 0)
+            return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not one of %s", o->name, v, o->choices);
+        *(int *)o->dest = i;
+        return BN_OK;
+    }
+    case BN_OPT_VEC3: {
+        double p[3];
+        char buf[256], *a, *b;
+        if (strlen(v) >= sizeof buf)
+            return bn_error_set(err, BN_EUSAGE, "--%s: value too long", o->name);
+        memcpy(buf, v, strlen(v) + 1);
+        a = strchr(buf, ',');
+        b = a ? strchr(a + 1, ',') : NULL;
+        if (!a || !b)
+            return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not X,Y,Z", o->name, v);
+        *a = *b = '\0';
+        if (!bn__parse_num(buf, &p[0]) || !bn__parse_num(a + 1, &p[1]) || !bn__parse_num(b + 1, &p[2]))
+            return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not three finite numbers X,Y,Z", o->name, v);
+        memcpy(o->dest, p, sizeof p);
+        return BN_OK;
+    }
+    case BN_OPT_WXH: {
+        char *end;
+        long w, h;
+        errno = 0;
+        w = strtol(v, &end, 10);
+        if (end == v || *end != 'x' || errno)
+            return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not WIDTHxHEIGHT", o->name, v);
+        v = end + 1;
+        h = strtol(v, &end, 10);
+        if (end == v || *end != '\0' || errno || w < o->min || h < o->min || w > o->max || h > o->max)
+            return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not WIDTHxHEIGHT with sides in [%g, %g]", o->name, v,
+                                o->min, o->max);
+        ((int *)o->dest)[0] = (int)w;
+        ((int *)o->dest)[1] = (int)h;
+        return BN_OK;
+    }
+    case BN_OPT_U64: {
+        char *end;
+        unsigned long long u;
+        errno = 0;
+        u = strtoull(v, &end, 0);
+        if (end == v || *end != '\0' || errno || v[0] == '-')
+            return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not a non-negative integer", o->name, v);
+        *(uint64_t *)o->dest = u;
+        return BN_OK;
+    }
+    case BN_OPT_INT:
+    case BN_OPT_SIZE:
+    case BN_OPT_DOUBLE:
+        if (!bn__parse_num(v, &x))
+            return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not a finite number", o->name, v);
+        if (x < o->min || x > o->max)
+            return bn_error_set(err, BN_EUSAGE, "--%s: %s is outside [%g, %g]", o->name, v, o->min, o->max);
+        if (o->type != BN_OPT_DOUBLE && x != floor(x))
+            return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not a whole number", o->name, v);
+        if (o->type == BN_OPT_INT)
+            *(int *)o->dest = (int)x;
+        else if (o->type == BN_OPT_SIZE)
+            *(size_t *)o->dest = (size_t)x;
+        else
+            *(double *)o->dest = x;
+        return BN_OK;
+    }
+    return bn_error_set(err, BN_EINTERNAL, "option type");
+}
+
+bn_status bn_cli_parse(bn_optset *s, int argc, char **argv, const char **positional, size_t max_positional,
+                       size_t *npositional, int *help, bn_error *err)
+{
+    int only_positional = 0;
+    *npositional = 0;
+    *help = 0;
+    memset(s->seen, 0, sizeof s->seen);
+    for (int i = 1; i < argc; i++) {
+        const char *a = argv[i], *val = NULL;
+        const bn_opt *o = NULL;
+        size_t oi = 0;
+        char name[128];
+        if (only_positional || a[0] != '-' || a[1] == '\0') {
+            if (*npositional >= max_positional)
+                return bn_error_set(err, BN_EUSAGE, "unexpected argument '%s' (see --help)", a);
+            positional[(*npositional)++] = a;
+            continue;
+        }
+        if (strcmp(a, "--") == 0) {
+            only_positional = 1;
+            continue;
+        }
+        if (strcmp(a, "--help") == 0 || strcmp(a, "-h") == 0) {
+            *help = 1;
+            return BN_OK;
+        }
+        if (a[1] == '-') {
+            const char *eq = strchr(a + 2, '=');
+            size_t len = eq ? (size_t)(eq - (a + 2)) : strlen(a + 2);
+            if (len >= sizeof name)
+                return bn_error_set(err, BN_EUSAGE, "unknown option '%.40s...'", a);
+            memcpy(name, a + 2, len);
+            name[len] = '\0';
+            if (eq)
+                val = eq + 1;
+            for (oi = 0; oi < s->n; oi++)
+                if (strcmp(s->opt[oi].name, name) == 0) {
+                    o = &s->opt[oi];
+                    break;
+                }
+        } else if (a[2] == '\0') {
+            for (oi = 0; oi < s->n; oi++)
+                if (s->opt[oi].short_name == a[1]) {
+                    o = &s->opt[oi];
+                    break;
+                }
+        }
+        if (!o)
+            return bn_error_set(err, BN_EUSAGE, "unknown option '%s' (see --help)", a);
+        if (o->type == BN_OPT_FLAG) {
+            if (val)
+                return bn_error_set(err, BN_EUSAGE, "--%s takes no value", o->name);
+        } else if (!val) {
+            if (i + 1 >= argc)
+                return bn_error_set(err, BN_EUSAGE, "--%s needs a value (%s)", o->name, o->metavar ? o->metavar : "");
+            val = argv[++i];
+        }
+        {
+            bn_status st = bn__set(o, val, err);
+            if (st != BN_OK)
+                return st;
+        }
+        s->seen[oi] = 1;
+    }
+    return BN_OK;
+}
+
+void bn_cli_print_help(const bn_optset *s, FILE *fp)
+{
+    fprintf(fp, "usage: %s\n\n%s\n\noptions:\n", s->usage, s->summary);
+    for (size_t i = 0; i < s->n; i++) {
+        const bn_opt *o = &s->opt[i];
+        char left[96];
+        if (o->short_name)
+            snprintf(left, sizeof left, "-%c, --%s%s%s", o->short_name, o->name, o->metavar ? " " : "",
+                     o->metavar ? o->metavar : "");
+        else
+            snprintf(left, sizeof left, "    --%s%s%s", o->name, o->metavar ? " " : "", o->metavar ? o->metavar : "");
+        fprintf(fp, "  %-28s %s\n", left, o->help);
+    }
+    fprintf(fp, "  %-28s %s\n\n%s", "-h, --help", "this help", bn_cli_exit_codes);
+}
+
+void bn_cli_add_common(bn_optset *s, bn_cli_common *c)
+{
+    bn_optset_add(s, (bn_opt){"threads", 0, BN_OPT_INT, &c->threads, NULL, 0, 4096, "N",
+                              "threads (default 0: all cores); results do not depend on it"});
+    bn_optset_add(s, (bn_opt){"seed", 0, BN_OPT_U64, &c->seed, NULL, 0, 0, "S",
+                              "random seed for every sampled quantity (default 1)"});
+    bn_optset_add(s, (bn_opt){"quiet", 'q', BN_OPT_FLAG, &c->quiet, NULL, 0, 0, NULL,
+                              "no progress bars or summaries; warnings and errors only"});
+}
+
+void bn_cli_add_scene(bn_optset *s, bn_cli_scene *o)
+{
+    bn_optset_add(s, (bn_opt){"unit", 0, BN_OPT_CHOICE, &o->unit, "m|cm|mm", 0, 0, "m|cm|mm",
+                              "length unit of the scene file, for SI areas and powers (default m)"});
+    bn_optset_add(s, (bn_opt){"patch-size", 0, BN_OPT_DOUBLE, &o->patch_size, NULL, 1e-300, 1e300, "S",
+                              "largest patch edge, scene units (default: from --patches)"});
+    bn_optset_add(s, (bn_opt){"patches", 0, BN_OPT_SIZE, &o->patches, NULL, 1, 1e9, "N",
+                              "target total patch count (default 1200)"});
+    bn_optset_add(s, (bn_opt){"no-subdivide", 0, BN_OPT_FLAG, &o->no_subdivide, NULL, 0, 0, NULL,
+                              "one patch per input polygon (after triangulation)"});
+    bn_optset_add(s, (bn_opt){"planar-tol", 0, BN_OPT_DOUBLE, &o->planar_tol, NULL, 0, 1, "T",
+                              "non-planarity allowed before a polygon is split, relative to its size (default 1e-6)"});
+}
+
+static void bn__cli_log(void *user, bn_log_level level, const char *msg)
+{
+    const bn_cli_common *c = user;
+    if (level == BN_LOG_WARN)
+        fprintf(stderr, "bounce: warning: %s\n", msg);
+    else if (level == BN_LOG_INFO && !c->quiet)
+        fprintf(stderr, "bounce: %s\n", msg);
+}
+
+bn_status bn_cli_load_scene(const char *path, const bn_cli_scene *o, const bn_cli_common *c, bn_scene **out)
+{
+    bn_load_opts lo;
+    bn_mesh_opts mo;
+    bn_error err;
+    bn_status st;
+    bn_error_clear(&err);
+    bn_load_opts_default(&lo);
+    lo.unit = (bn_unit)o->unit;
+    if (o->planar_tol > 0)
+        lo.planar_tol = o->planar_tol;
+    lo.log.fn = bn__cli_log;
+    lo.log.user = (void *)c;
+    lo.log.quiet = c->quiet;
+    st = bn_scene_load(path, &lo, out, &err);
+    if (st != BN_OK) {
+        bn_cli_fail(&err);
+        return st;
+    }
+    bn_mesh_opts_default(&mo);
+    mo.patch_size = o->patch_size;
+    if (o->patches)
+        mo.target_patches = o->patches;
+    mo.no_subdivide = o->no_subdivide;
+    st = bn_scene_mesh(*out, &mo, &err);
+    if (st != BN_OK) {
+        bn_cli_fail(&err);
+        bn_scene_destroy(*out);
+        *out = NULL;
+    }
+    return st;
+}
+
+int bn_cli_fail(const bn_error *err)
+{
+    fprintf(stderr, "bounce: error: %s\n", err->msg[0] ? err->msg : bn_status_str(err->status));
+    return bn_status_exit_code(err->status);
+}
+
+int bn_cli_interrupted(void)
+{
+    bn_status s = bn_interrupted();
+    return s == BN_OK ? 0 : bn_status_exit_code(s);
+}
+
+void bn_cli_apply_threads(const bn_cli_common *c) { bn_threads_set(c->threads); }

@@ -1,0 +1,222 @@
+/* Planar patch meshing: quads become regular bilinear grids, triangles uniform subdivisions.
+ * Patch vertices are shared inside a face (no T-junctions); patch areas sum to the face's. */
+#include "scene/scene_internal.h"
+#include "base/vec.h"
+
+#include <math.h>
+#include <string.h>
+
+void bn_mesh_opts_default(bn_mesh_opts *o)
+{
+    memset(o, 0, sizeof *o);
+    o->target_patches = BN_DEFAULT_PATCHES;
+}
+
+static const double *bn__fv(const bn_scene *s, const bn_face *f, unsigned i)
+{
+    return s->verts + 3 * s->fidx[f->first + i];
+}
+
+static unsigned bn__divisions(double len, double size)
+{
+    double n = ceil(len / size - 1e-9);   /* an edge of exactly k*size gets k divisions */
+    if (!(n >= 1))
+        return 1;
+    if (n > 1e6)
+        return 1000000u;
+    return (unsigned)n;
+}
+
+/* Grid resolution of a face for patch edge `size` (size <= 0: one patch). */
+static void bn__face_grid(const bn_scene *s, const bn_face *f, double size, unsigned *nu, unsigned *nv)
+{
+    if (size <= 0) {
+        *nu = *nv = 1;
+        return;
+    }
+    if (f->nverts == 4) {
+        double a = fmax(bn_v3_dist(bn__fv(s, f, 0), bn__fv(s, f, 1)), bn_v3_dist(bn__fv(s, f, 3), bn__fv(s, f, 2)));
+        double b = fmax(bn_v3_dist(bn__fv(s, f, 0), bn__fv(s, f, 3)), bn_v3_dist(bn__fv(s, f, 1), bn__fv(s, f, 2)));
+        *nu = bn__divisions(a, size);
+        *nv = bn__divisions(b, size);
+    } else {
+        double e = fmax(bn_v3_dist(bn__fv(s, f, 0), bn__fv(s, f, 1)),
+                        fmax(bn_v3_dist(bn__fv(s, f, 1), bn__fv(s, f, 2)), bn_v3_dist(bn__fv(s, f, 2), bn__fv(s, f, 0))));
+        *nu = *nv = bn__divisions(e, size);
+    }
+}
+
+static double bn__count(const bn_scene *s, double size)
+{
+    double total = 0;
+    for (size_t f = 0; f < s->nfaces; f++) {
+        unsigned nu, nv;
+        bn__face_grid(s, &s->faces[f], size, &nu, &nv);
+        total += s->faces[f].nverts == 4 ? (double)nu * nv : (double)nu * nu;
+    }
+    return total;
+}
+
+static void bn__patch_finish(bn_patch *p, const double *pv, const double normal[3])
+{
+    const double *a = pv + 3 * p->corner[0], *b = pv + 3 * p->corner[1], *c = pv + 3 * p->corner[2];
+    double e1[3], e2[3], cr[3];
+    memcpy(p->normal, normal, 3 * sizeof(double));
+    bn_v3_sub(b, a, e1);
+    bn_v3_sub(c, a, e2);
+    bn_v3_cross(e1, e2, cr);
+    if (p->ncorners == 3) {
+        p->area = 0.5 * bn_v3_len(cr);
+        for (int k = 0; k < 3; k++)
+            p->centroid[k] = (a[k] + b[k] + c[k]) / 3.0;
+    } else {
+        const double *d = pv + 3 * p->corner[3];
+        double a1 = 0.5 * fabs(bn_v3_dot(cr, normal)), a2, f1[3], f2[3], cr2[3];
+        bn_v3_sub(c, a, f1);
+        bn_v3_sub(d, a, f2);
+        bn_v3_cross(f1, f2, cr2);
+        a2 = 0.5 * fabs(bn_v3_dot(cr2, normal));
+        p->area = a1 + a2;
+        for (int k = 0; k < 3; k++)
+            p->centroid[k] = p->area > 0 ? (a1 * (a[k] + b[k] + c[k]) + a2 * (a[k] + c[k] + d[k])) / (3.0 * p->area)
+                                         : 0.25 * (a[k] + b[k] + c[k] + d[k]);
+    }
+}
+
+bn_status bn_scene_mesh(bn_scene *s, const bn_mesh_opts *o, bn_error *err)
+{
+    bn_mesh_opts defo;
+    double size;
+    double count_d;
+    size_t np = 0, nv = 0, ip = 0, iv = 0;
+    bn_patch *patches;
+    double *pv;
+
+    if (!o) {
+        bn_mesh_opts_default(&defo);
+        o = &defo;
+    }
+    if (o->no_subdivide) {
+        size = 0;
+    } else if (o->patch_size > 0) {
+        if (!isfinite(o->patch_size))
+            return bn_error_set(err, BN_EINPUT, "--patch-size %g is not a finite positive length", o->patch_size);
+        size = o->patch_size;
+    } else if (o->target_patches > 0) {
+        /* Bisection on log(size): the count falls as the size grows. */
+        double d[3], hi_s, lo_s;
+        bn_v3_sub(s->hi, s->lo, d);
+        hi_s = 2 * bn_v3_len(d) + 1e-300;
+        lo_s = hi_s * 1e-7;
+        if (bn__count(s, hi_s) >= (double)o->target_patches) {
+            size = hi_s;
+        } else {
+            for (int it = 0; it < 60; it++) {
+                double mid = sqrt(lo_s * hi_s);
+                if (bn__count(s, mid) > (double)o->target_patches)
+                    lo_s = mid;
+                else
+                    hi_s = mid;
+            }
+            size = hi_s;   /* the finest size whose count does not exceed the target */
+        }
+    } else {
+        return bn_error_set(err, BN_EUSAGE, "meshing needs a patch size, a target patch count or no-subdivide");
+    }
+    count_d = bn__count(s, size);
+    if (count_d > 1e9)
+        return bn_error_set(err, BN_ENOMEM, "patch size %g would make %.3g patches (more than 1e9)", size, count_d);
+    for (size_t f = 0; f < s->nfaces; f++) {
+        unsigned nu, nvv;
+        bn__face_grid(s, &s->faces[f], size, &nu, &nvv);
+        if (s->faces[f].nverts == 4) {
+            np += (size_t)nu * nvv;
+            nv += (size_t)(nu + 1) * (nvv + 1);
+        } else {
+            np += (size_t)nu * nu;
+            nv += (size_t)(nu + 1) * (nu + 2) / 2;
+        }
+    }
+    patches = bn__malloc_array(np, sizeof *patches);
+    pv = bn__malloc_array(nv, 3 * sizeof(double));
+    if (!patches || !pv) {
+        free(patches);
+        free(pv);
+        return bn_error_set(err, BN_ENOMEM, "out of memory for %zu patches", np);
+    }
+    for (size_t fi = 0; fi < s->nfaces; fi++) {
+        const bn_face *f = &s->faces[fi];
+        unsigned nu, nvv;
+        size_t base = iv;
+        bn__face_grid(s, f, size, &nu, &nvv);
+        if (f->nverts == 4) {
+            const double *a = bn__fv(s, f, 0), *b = bn__fv(s, f, 1), *c = bn__fv(s, f, 2), *d = bn__fv(s, f, 3);
+            for (unsigned j = 0; j <= nvv; j++)
+                for (unsigned i = 0; i <= nu; i++) {
+                    double u = (double)i / nu, v = (double)j / nvv;
+                    double *q = pv + 3 * iv++;
+                    /* Exact corners at the ends keep neighbouring faces' vertices identical. */
+                    for (int k = 0; k < 3; k++)
+                        q[k] = (1 - u) * (1 - v) * a[k] + u * (1 - v) * b[k] + u * v * c[k] + (1 - u) * v * d[k];
+                }
+            for (unsigned j = 0; j < nvv; j++)
+                for (unsigned i = 0; i < nu; i++) {
+                    bn_patch *p = &patches[ip++];
+                    memset(p, 0, sizeof *p);
+                    p->face = fi;
+                    p->material = f->material;
+                    p->ncorners = 4;
+                    p->corner[0] = base + (size_t)j * (nu + 1) + i;
+                    p->corner[1] = p->corner[0] + 1;
+                    p->corner[2] = p->corner[1] + (nu + 1);
+                    p->corner[3] = p->corner[0] + (nu + 1);
+                    bn__patch_finish(p, pv, f->normal);
+                }
+        } else {
+            const double *a = bn__fv(s, f, 0), *b = bn__fv(s, f, 1), *c = bn__fv(s, f, 2);
+            unsigned n = nu;
+            /* Row j holds the points i = 0 .. n - j: index base + row_start(j) + i. */
+#define BN__TRI_ID(i, j) (base + (size_t)(j) * (n + 1) - (size_t)(j) * ((j) - 1) / 2 + (i))
+            for (unsigned j = 0; j <= n; j++)
+                for (unsigned i = 0; i + j <= n; i++) {
+                    double u = (double)i / n, v = (double)j / n;
+                    double *q = pv + 3 * iv++;
+                    for (int k = 0; k < 3; k++)
+                        q[k] = (1 - u - v) * a[k] + u * b[k] + v * c[k];
+                }
+            for (unsigned j = 0; j < n; j++)
+                for (unsigned i = 0; i + j < n; i++) {
+                    bn_patch *p = &patches[ip++];
+                    memset(p, 0, sizeof *p);
+                    p->face = fi;
+                    p->material = f->material;
+                    p->ncorners = 3;
+                    p->corner[0] = BN__TRI_ID(i, j);
+                    p->corner[1] = BN__TRI_ID(i + 1, j);
+                    p->corner[2] = BN__TRI_ID(i, j + 1);
+                    bn__patch_finish(p, pv, f->normal);
+                    if (i + j + 1 < n) {
+                        p = &patches[ip++];
+                        memset(p, 0, sizeof *p);
+                        p->face = fi;
+                        p->material = f->material;
+                        p->ncorners = 3;
+                        p->corner[0] = BN__TRI_ID(i + 1, j);
+                        p->corner[1] = BN__TRI_ID(i + 1, j + 1);
+                        p->corner[2] = BN__TRI_ID(i, j + 1);
+                        bn__patch_finish(p, pv, f->normal);
+                    }
+                }
+#undef BN__TRI_ID
+        }
+    }
+    BN_CHECK(ip == np && iv == nv);
+    free(s->patches);
+    free(s->pverts);
+    s->patches = patches;
+    s->npatches = np;
+    s->pverts = pv;
+    s->npverts = nv;
+    s->patch_size = size;
+    return BN_OK;
+}

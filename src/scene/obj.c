@@ -1,0 +1,343 @@
+/* Wavefront OBJ and MTL reader: Kd is diffuse reflectance, Ke emitted radiance.
+ *
+ * Our own reader rather than tinyobjloader: every error must name its line, and tinyobjloader
+ * turns `nan` into 0 and keeps out-of-range indices silently, so validation would need a
+ * second full parser anyway. tests/ compare this reader with tinyobjloader on real files.
+ * Handles CRLF, tabs, comments after values, relative (negative) indices, v/vt/vn forms,
+ * `g`/`o`/`s` anywhere, several mtllib files, and MTL statements with leading spaces. */
+#define _POSIX_C_SOURCE 200809L
+#include "scene/scene_internal.h"
+
+#include <ctype.h>
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define BN__MAX_FACE_VERTS 65536u
+
+/* Strips a trailing comment and CR/LF; returns the line. */
+static char *bn__strip(char *s)
+{
+    char *hash = strchr(s, '#');
+    size_t n;
+    if (hash)
+        *hash = '\0';
+    n = strlen(s);
+    while (n > 0 && (s[n - 1] == '\n' || s[n - 1] == '\r' || isspace((unsigned char)s[n - 1])))
+        s[--n] = '\0';
+    while (*s && isspace((unsigned char)*s))
+        s++;
+    return s;
+}
+
+/* Next whitespace-separated token, or NULL. */
+static char *bn__token(char **cursor)
+{
+    char *s = *cursor, *start;
+    while (*s && isspace((unsigned char)*s))
+        s++;
+    if (!*s) {
+        *cursor = s;
+        return NULL;
+    }
+    start = s;
+    while (*s && !isspace((unsigned char)*s))
+        s++;
+    if (*s)
+        *s++ = '\0';
+    *cursor = s;
+    return start;
+}
+
+/* Parses a finite double token; 0 on failure (empty, junk, nan, inf, overflow). */
+static int bn__parse_double(const char *tok, double *out)
+{
+    char *end;
+    double v;
+    if (!tok)
+        return 0;
+    errno = 0;
+    v = strtod(tok, &end);
+    if (end == tok || *end != '\0')
+        return 0;
+    if (!isfinite(v) || (errno == ERANGE && fabs(v) > 1.0))
+        return 0;
+    *out = v;
+    return 1;
+}
+
+static const char *bn__show(const char *tok) { return tok ? tok : "(missing)"; }
+
+typedef struct bn__mtl_ref {
+    char name[BN_NAME_MAX];
+} bn__mtl_ref;
+
+static int bn__find_material(const bn__soup *s, const char *name)
+{
+    for (size_t i = 0; i < s->nmats; i++)
+        if (strcmp(s->mats[i].name, name) == 0)
+            return (int)i;
+    return -1;
+}
+
+/* Reads `values` finite numbers (a single value means grey). */
+static bn_status bn__mtl_rgb(const char *file, unsigned line, const char *key, char **cur,
+                             double out[3], bn_error *err)
+{
+    char *t0 = bn__token(cur), *t1 = bn__token(cur), *t2 = bn__token(cur);
+    if (t0 && (strcmp(t0, "spectral") == 0 || strcmp(t0, "xyz") == 0))
+        return bn_error_set(err, BN_EINPUT, "%s:%u: %s %s is not supported: give RGB values", file, line, key, t0);
+    if (!bn__parse_double(t0, &out[0]))
+        return bn_error_set(err, BN_EINPUT, "%s:%u: %s needs finite numbers, got '%s'", file, line, key, bn__show(t0));
+    if (!t1) {
+        out[1] = out[2] = out[0];
+        return BN_OK;
+    }
+    if (!bn__parse_double(t1, &out[1]) || !bn__parse_double(t2, &out[2]))
+        return bn_error_set(err, BN_EINPUT, "%s:%u: %s needs 1 or 3 finite numbers, got '%s %s %s'", file, line,
+                            key, t0, bn__show(t1), bn__show(t2));
+    return BN_OK;
+}
+
+static bn_status bn__read_mtl(const char *path, const char *objpath, unsigned objline, bn__soup *s,
+                              const bn_log *log, bn_error *err)
+{
+    FILE *fp = fopen(path, "rb");
+    char *buf = NULL;
+    size_t cap = 0;
+    unsigned line = 0;
+    int cur = -1;
+    bn_status st = BN_OK;
+    if (!fp)
+        return bn_error_set(err, BN_EIO, "%s:%u: cannot open material library %s: %s", objpath, objline, path,
+                            strerror(errno));
+    while (getline(&buf, &cap, fp) >= 0) {
+        char *l, *kw, *c;
+        line++;
+        l = bn__strip(buf);
+        c = l;
+        kw = bn__token(&c);
+        if (!kw)
+            continue;
+        if (strcmp(kw, "newmtl") == 0) {
+            char *name = bn__token(&c);
+            bn_material m;
+            if (!name) {
+                st = bn_error_set(err, BN_EINPUT, "%s:%u: newmtl without a name", path, line);
+                break;
+            }
+            if (strlen(name) >= BN_NAME_MAX) {
+                st = bn_error_set(err, BN_EINPUT, "%s:%u: material name longer than %d characters", path, line,
+                                  BN_NAME_MAX - 1);
+                break;
+            }
+            if (bn__find_material(s, name) >= 0) {
+                bn_logf(log, BN_LOG_WARN, "%s:%u: material '%s' defined again; the later definition wins", path,
+                        line, name);
+                cur = bn__find_material(s, name);
+                continue;
+            }
+            memset(&m, 0, sizeof m);
+            snprintf(m.name, sizeof m.name, "%s", name);
+            m.rho[0] = m.rho[1] = m.rho[2] = 0.8;   /* the MTL default Kd when a material has none */
+            if (!bn__soup_add_material(s, &m)) {
+                st = bn_error_set(err, BN_ENOMEM, "out of memory reading %s", path);
+                break;
+            }
+            cur = (int)s->nmats - 1;
+        } else if (strcmp(kw, "Kd") == 0 || strcmp(kw, "Ke") == 0) {
+            double v[3];
+            int is_kd = kw[1] == 'd';
+            if (cur < 0) {
+                st = bn_error_set(err, BN_EINPUT, "%s:%u: %s before any newmtl", path, line, kw);
+                break;
+            }
+            st = bn__mtl_rgb(path, line, kw, &c, v, err);
+            if (st != BN_OK)
+                break;
+            for (int k = 0; k < 3; k++) {
+                if (is_kd && (v[k] < 0.0 || v[k] > 1.0)) {
+                    st = bn_error_set(err, BN_EINPUT,
+                                      "%s:%u: material '%s': Kd %g is outside [0, 1] (reflectance above 1 makes "
+                                      "the light-transport series diverge)",
+                                      path, line, s->mats[cur].name, v[k]);
+                    break;
+                }
+                if (!is_kd && v[k] < 0.0) {
+                    st = bn_error_set(err, BN_EINPUT, "%s:%u: material '%s': negative emission Ke %g", path, line,
+                                      s->mats[cur].name, v[k]);
+                    break;
+                }
+            }
+            if (st != BN_OK)
+                break;
+            memcpy(is_kd ? s->mats[cur].rho : s->mats[cur].Le, v, sizeof v);
+        }
+        /* Ka, Ks, Ns, Ni, d, Tr, illum and maps: not part of a Lambertian model; ignored. */
+    }
+    free(buf);
+    if (st == BN_OK && ferror(fp))
+        st = bn_error_set(err, BN_EIO, "%s: read error", path);
+    fclose(fp);
+    return st;
+}
+
+/* Resolves an OBJ vertex reference (1-based, or negative relative); 0 on failure. */
+static int bn__resolve_index(const char *tok, size_t nverts, size_t *out)
+{
+    char *end;
+    long long v;
+    errno = 0;
+    v = strtoll(tok, &end, 10);
+    if (end == tok || (*end != '\0' && *end != '/') || errno == ERANGE)
+        return 0;
+    if (v > 0 && (unsigned long long)v <= nverts) {
+        *out = (size_t)(v - 1);
+        return 1;
+    }
+    if (v < 0 && (unsigned long long)(-v) <= nverts) {
+        *out = nverts - (size_t)(-v);
+        return 1;
+    }
+    return 0;
+}
+
+bn_status bn__read_obj(const char *path, bn__soup *s, const bn_log *log, bn_error *err)
+{
+    FILE *fp = fopen(path, "rb");
+    char *buf = NULL, *dir;
+    size_t cap = 0, *fv = NULL, fv_cap = 0;
+    unsigned line = 0;
+    int cur = -1, default_mat = -1;
+    bn_status st = BN_OK;
+    const char *slash;
+
+    if (!fp)
+        return bn_error_set(err, BN_EIO, "%s: cannot open: %s", path, strerror(errno));
+    slash = strrchr(path, '/');
+    dir = bn__strdup(path);
+    if (!dir) {
+        fclose(fp);
+        return bn_error_set(err, BN_ENOMEM, "out of memory");
+    }
+    dir[slash ? (size_t)(slash - path) + 1 : 0] = '\0';
+
+    while (st == BN_OK && getline(&buf, &cap, fp) >= 0) {
+        char *l, *kw, *c;
+        line++;
+        l = bn__strip(buf);
+        c = l;
+        kw = bn__token(&c);
+        if (!kw)
+            continue;
+        if (strcmp(kw, "v") == 0) {
+            double p[3];
+            char *t[3];
+            for (int k = 0; k < 3; k++)
+                t[k] = bn__token(&c);
+            for (int k = 0; k < 3; k++)
+                if (!bn__parse_double(t[k], &p[k])) {
+                    st = bn_error_set(err, BN_EINPUT, "%s:%u: vertex coordinate '%s' is not a finite number", path,
+                                      line, bn__show(t[k]));
+                    break;
+                }
+            if (st == BN_OK && !bn__soup_add_vertex(s, p))
+                st = bn_error_set(err, BN_ENOMEM, "out of memory reading %s", path);
+        } else if (strcmp(kw, "f") == 0) {
+            unsigned n = 0;
+            char *t;
+            while ((t = bn__token(&c)) != NULL) {
+                size_t vi;
+                if (n >= BN__MAX_FACE_VERTS) {
+                    st = bn_error_set(err, BN_EINPUT, "%s:%u: face with more than %u vertices", path, line,
+                                      BN__MAX_FACE_VERTS);
+                    break;
+                }
+                if (!bn__resolve_index(t, s->nverts, &vi)) {
+                    st = bn_error_set(err, BN_EINPUT,
+                                      "%s:%u: vertex index '%s' is out of range (%zu vertices defined so far)",
+                                      path, line, t, s->nverts);
+                    break;
+                }
+                if (n >= fv_cap) {
+                    size_t nc = fv_cap ? 2 * fv_cap : 16;
+                    size_t *p = bn__realloc_array(fv, nc, sizeof *p);
+                    if (!p) {
+                        st = bn_error_set(err, BN_ENOMEM, "out of memory reading %s", path);
+                        break;
+                    }
+                    fv = p;
+                    fv_cap = nc;
+                }
+                fv[n++] = vi;
+            }
+            if (st != BN_OK)
+                break;
+            if (n < 3) {
+                st = bn_error_set(err, BN_EINPUT, "%s:%u: face with %u vertices (a face needs at least 3)", path,
+                                  line, n);
+                break;
+            }
+            if (cur < 0) {
+                if (default_mat < 0) {
+                    bn_material m;
+                    memset(&m, 0, sizeof m);
+                    snprintf(m.name, sizeof m.name, "(default)");
+                    m.rho[0] = m.rho[1] = m.rho[2] = 0.5;
+                    bn_logf(log, BN_LOG_WARN, "%s:%u: faces without usemtl get the default material (grey, rho 0.5)",
+                            path, line);
+                    if (!bn__soup_add_material(s, &m)) {
+                        st = bn_error_set(err, BN_ENOMEM, "out of memory");
+                        break;
+                    }
+                    default_mat = (int)s->nmats - 1;
+                }
+                cur = default_mat;
+            }
+            if (!bn__soup_add_polygon(s, fv, n, (unsigned)cur, line))
+                st = bn_error_set(err, BN_ENOMEM, "out of memory reading %s", path);
+        } else if (strcmp(kw, "usemtl") == 0) {
+            char *name = bn__token(&c);
+            if (!name) {
+                st = bn_error_set(err, BN_EINPUT, "%s:%u: usemtl without a name", path, line);
+                break;
+            }
+            cur = bn__find_material(s, name);
+            if (cur < 0)
+                st = bn_error_set(err, BN_EINPUT, "%s:%u: unknown material '%s' (not defined in any mtllib read so far)",
+                                  path, line, name);
+        } else if (strcmp(kw, "mtllib") == 0) {
+            char *name;
+            while ((name = bn__token(&c)) != NULL && st == BN_OK) {
+                size_t n = strlen(dir) + strlen(name) + 1;
+                char *p = malloc(n);
+                if (!p) {
+                    st = bn_error_set(err, BN_ENOMEM, "out of memory");
+                    break;
+                }
+                if (name[0] == '/')
+                    snprintf(p, n, "%s", name);
+                else
+                    snprintf(p, n, "%s%s", dir, name);
+                st = bn__read_mtl(p, path, line, s, log, err);
+                free(p);
+            }
+        } else if (strcmp(kw, "vt") == 0 || strcmp(kw, "vn") == 0 || strcmp(kw, "vp") == 0 ||
+                   strcmp(kw, "g") == 0 || strcmp(kw, "o") == 0 || strcmp(kw, "s") == 0 ||
+                   strcmp(kw, "l") == 0 || strcmp(kw, "p") == 0 || strcmp(kw, "mg") == 0 ||
+                   strcmp(kw, "usemap") == 0 || strcmp(kw, "maplib") == 0) {
+            /* Not needed for a Lambertian patch model. */
+        } else {
+            bn_logf(log, BN_LOG_DEBUG, "%s:%u: statement '%s' ignored", path, line, kw);
+        }
+    }
+    if (st == BN_OK && ferror(fp))
+        st = bn_error_set(err, BN_EIO, "%s: read error", path);
+    free(buf);
+    free(fv);
+    free(dir);
+    fclose(fp);
+    return st;
+}

@@ -1,0 +1,665 @@
+/* Scene validation (degenerate, duplicate, non-planar polygons), faces, accessors. */
+#define _POSIX_C_SOURCE 200809L
+#include "scene/scene_internal.h"
+#include "base/vec.h"
+
+#include <ctype.h>
+#include <math.h>
+#include <string.h>
+#include <strings.h>
+
+const char *bn_unit_name(bn_unit u) { return u == BN_UNIT_MM ? "mm" : u == BN_UNIT_CM ? "cm" : "m"; }
+double bn_unit_to_metres(bn_unit u) { return u == BN_UNIT_MM ? 1e-3 : u == BN_UNIT_CM ? 1e-2 : 1.0; }
+int bn_unit_parse(const char *s, bn_unit *out)
+{
+    if (strcmp(s, "m") == 0) *out = BN_UNIT_M;
+    else if (strcmp(s, "cm") == 0) *out = BN_UNIT_CM;
+    else if (strcmp(s, "mm") == 0) *out = BN_UNIT_MM;
+    else return -1;
+    return 0;
+}
+
+void bn_load_opts_default(bn_load_opts *o)
+{
+    memset(o, 0, sizeof *o);
+    o->unit = BN_UNIT_M;
+    o->planar_tol = 1e-6;   /* relative to the face diameter: far above double rounding (1e-16),
+                               far below the millimetre errors of measured models (1e-3) */
+}
+
+/* ---------------- polygon soup ---------------- */
+void bn__soup_free(bn__soup *s)
+{
+    free(s->verts);
+    free(s->counts);
+    free(s->mat);
+    free(s->line);
+    free(s->idx);
+    free(s->mats);
+    memset(s, 0, sizeof *s);
+}
+
+static int bn__grow(void **p, size_t *cap, size_t need, size_t elem)
+{
+    size_t nc;
+    void *q;
+    if (need <= *cap)
+        return 1;
+    nc = *cap ? *cap : 64;
+    while (nc < need) {
+        if (nc > SIZE_MAX / 2)
+            return 0;
+        nc *= 2;
+    }
+    q = bn__realloc_array(*p, nc, elem);
+    if (!q)
+        return 0;
+    *p = q;
+    *cap = nc;
+    return 1;
+}
+
+int bn__soup_add_vertex(bn__soup *s, const double p[3])
+{
+    if (!bn__grow((void **)&s->verts, &s->verts_cap, 3 * (s->nverts + 1), sizeof(double)))
+        return 0;
+    memcpy(s->verts + 3 * s->nverts, p, 3 * sizeof(double));
+    s->nverts++;
+    return 1;
+}
+
+int bn__soup_add_polygon(bn__soup *s, const size_t *idx, unsigned n, unsigned mat, unsigned line)
+{
+    size_t cap = s->polys_cap;
+    if (s->npolys + 1 > cap) {
+        size_t c1 = cap, c2 = cap, c3 = cap;
+        if (!bn__grow((void **)&s->counts, &c1, s->npolys + 1, sizeof(unsigned)) ||
+            !bn__grow((void **)&s->mat, &c2, s->npolys + 1, sizeof(unsigned)) ||
+            !bn__grow((void **)&s->line, &c3, s->npolys + 1, sizeof(unsigned)))
+            return 0;
+        s->polys_cap = c1;
+    }
+    if (!bn__grow((void **)&s->idx, &s->idx_cap, s->nidx + n, sizeof(size_t)))
+        return 0;
+    memcpy(s->idx + s->nidx, idx, n * sizeof(size_t));
+    s->nidx += n;
+    s->counts[s->npolys] = n;
+    s->mat[s->npolys] = mat;
+    s->line[s->npolys] = line;
+    s->npolys++;
+    return 1;
+}
+
+int bn__soup_add_material(bn__soup *s, const bn_material *m)
+{
+    if (!bn__grow((void **)&s->mats, &s->mats_cap, s->nmats + 1, sizeof *m))
+        return 0;
+    s->mats[s->nmats++] = *m;
+    return 1;
+}
+
+/* ---------------- face building ---------------- */
+typedef struct bn__builder {
+    bn_scene *sc;
+    size_t faces_cap, fidx_cap;
+} bn__builder;
+
+static const double *bn__vp(const bn__soup *s, size_t i) { return s->verts + 3 * i; }
+
+/* Newell's normal (not normalised): twice the area vector of a planar polygon. */
+static void bn__newell(const bn__soup *s, const size_t *v, unsigned n, double nrm[3])
+{
+    nrm[0] = nrm[1] = nrm[2] = 0;
+    for (unsigned i = 0; i < n; i++) {
+        const double *a = bn__vp(s, v[i]), *b = bn__vp(s, v[(i + 1) % n]);
+        nrm[0] += (a[1] - b[1]) * (a[2] + b[2]);
+        nrm[1] += (a[2] - b[2]) * (a[0] + b[0]);
+        nrm[2] += (a[0] - b[0]) * (a[1] + b[1]);
+    }
+}
+
+static double bn__diameter(const bn__soup *s, const size_t *v, unsigned n)
+{
+    double d = 0;
+    for (unsigned i = 0; i < n; i++)
+        for (unsigned j = i + 1; j < n; j++) {
+            double e = bn_v3_dist(bn__vp(s, v[i]), bn__vp(s, v[j]));
+            if (e > d)
+                d = e;
+        }
+    return d;
+}
+
+static bn_status bn__emit_face(bn__builder *b, const bn__soup *s, const size_t *v, unsigned n, unsigned mat,
+                               size_t source, unsigned line, const double unit_normal[3], double area)
+{
+    bn_scene *sc = b->sc;
+    bn_face *f;
+    if (!bn__grow((void **)&sc->faces, &b->faces_cap, sc->nfaces + 1, sizeof(bn_face)) ||
+        !bn__grow((void **)&sc->fidx, &b->fidx_cap, sc->nfidx + n, sizeof(size_t)))
+        return BN_ENOMEM;
+    (void)s;
+    f = &sc->faces[sc->nfaces++];
+    memset(f, 0, sizeof *f);
+    f->first = sc->nfidx;
+    f->nverts = n;
+    f->material = mat;
+    memcpy(f->normal, unit_normal, sizeof f->normal);
+    f->area = area;
+    f->source = source;
+    f->line = line;
+    memcpy(sc->fidx + sc->nfidx, v, n * sizeof(size_t));
+    sc->nfidx += n;
+    return BN_OK;
+}
+
+/* Emits triangle (a, b, c) unless it is degenerate; counts drops. */
+static bn_status bn__emit_triangle(bn__builder *b, const bn__soup *s, size_t a, size_t bb, size_t c,
+                                   unsigned mat, size_t source, unsigned line, double area_eps, size_t *dropped)
+{
+    size_t v[3] = {a, bb, c};
+    double e1[3], e2[3], n[3], area;
+    bn_v3_sub(bn__vp(s, bb), bn__vp(s, a), e1);
+    bn_v3_sub(bn__vp(s, c), bn__vp(s, a), e2);
+    bn_v3_cross(e1, e2, n);
+    area = 0.5 * bn_v3_normalize(n);
+    if (!(area > area_eps) || !(area > 1e-10 * pow(bn__diameter(s, v, 3), 2))) {
+        (*dropped)++;
+        return BN_OK;
+    }
+    return bn__emit_face(b, s, v, 3, mat, source, line, n, area);
+}
+
+/* Ear clipping in the plane orthogonal to `nrm` (O(n^2)); out receives n-2 triangles. */
+static int bn__ear_clip(const bn__soup *s, const size_t *v, unsigned n, const double nrm[3], size_t *out)
+{
+    int ax = 0, ay, az;
+    double sign;
+    unsigned *idx = malloc(n * sizeof *idx), m = n, ntri = 0;
+    double (*p)[2] = malloc(n * sizeof *p);
+    if (!idx || !p) {
+        free(idx);
+        free(p);
+        return -1;
+    }
+    if (fabs(nrm[1]) > fabs(nrm[ax])) ax = 1;
+    if (fabs(nrm[2]) > fabs(nrm[ax])) ax = 2;
+    ay = (ax + 1) % 3;
+    az = (ax + 2) % 3;
+    sign = nrm[ax] > 0 ? 1.0 : -1.0;
+    for (unsigned i = 0; i < n; i++) {
+        idx[i] = i;
+        p[i][0] = bn__vp(s, v[i])[ay];
+        p[i][1] = bn__vp(s, v[i])[az];
+    }
+    while (m > 3) {
+        int found = 0;
+        for (unsigned i = 0; i < m && !found; i++) {
+            unsigned ia = idx[(i + m - 1) % m], ib = idx[i], ic = idx[(i + 1) % m];
+            double cr = (p[ib][0] - p[ia][0]) * (p[ic][1] - p[ia][1]) - (p[ib][1] - p[ia][1]) * (p[ic][0] - p[ia][0]);
+            int inside = 0;
+            if (sign * cr <= 0)
+                continue;   /* reflex or collinear */
+            for (unsigned j = 0; j < m && !inside; j++) {
+                unsigned q = idx[j];
+                double d1, d2, d3;
+                if (q == ia || q == ib || q == ic)
+                    continue;
+                d1 = (p[ib][0] - p[ia][0]) * (p[q][1] - p[ia][1]) - (p[ib][1] - p[ia][1]) * (p[q][0] - p[ia][0]);
+                d2 = (p[ic][0] - p[ib][0]) * (p[q][1] - p[ib][1]) - (p[ic][1] - p[ib][1]) * (p[q][0] - p[ib][0]);
+                d3 = (p[ia][0] - p[ic][0]) * (p[q][1] - p[ic][1]) - (p[ia][1] - p[ic][1]) * (p[q][0] - p[ic][0]);
+                inside = sign * d1 >= 0 && sign * d2 >= 0 && sign * d3 >= 0;
+            }
+            if (inside)
+                continue;
+            out[3 * ntri + 0] = v[ia];
+            out[3 * ntri + 1] = v[ib];
+            out[3 * ntri + 2] = v[ic];
+            ntri++;
+            memmove(idx + i, idx + i + 1, (m - i - 1) * sizeof *idx);
+            m--;
+            found = 1;
+        }
+        if (!found) {
+            free(idx);
+            free(p);
+            return 0;
+        }
+    }
+    out[3 * ntri + 0] = v[idx[0]];
+    out[3 * ntri + 1] = v[idx[1]];
+    out[3 * ntri + 2] = v[idx[2]];
+    free(idx);
+    free(p);
+    return 1;
+}
+
+/* Face key for duplicate detection: vertex positions sorted. */
+typedef struct bn__fkey {
+    size_t face;
+    unsigned n;
+    double p[4][3];
+} bn__fkey;
+
+static int bn__cmp_pt(const void *a, const void *b)
+{
+    const double *x = a, *y = b;
+    for (int k = 0; k < 3; k++)
+        if (x[k] != y[k])
+            return x[k] < y[k] ? -1 : 1;
+    return 0;
+}
+
+static int bn__cmp_fkey(const void *a, const void *b)
+{
+    const bn__fkey *x = a, *y = b;
+    if (x->n != y->n)
+        return x->n < y->n ? -1 : 1;
+    for (unsigned i = 0; i < x->n; i++) {
+        int c = bn__cmp_pt(x->p[i], y->p[i]);
+        if (c)
+            return c;
+    }
+    return x->face < y->face ? -1 : (x->face > y->face);
+}
+
+static int bn__same_key(const bn__fkey *x, const bn__fkey *y)
+{
+    if (x->n != y->n)
+        return 0;
+    for (unsigned i = 0; i < x->n; i++)
+        if (bn__cmp_pt(x->p[i], y->p[i]))
+            return 0;
+    return 1;
+}
+
+static bn_status bn__drop_duplicates(bn_scene *sc, const char *path, const bn_log *log)
+{
+    bn__fkey *keys;
+    unsigned char *drop;
+    size_t w = 0, nf = sc->nfaces;
+    if (nf < 2)
+        return BN_OK;
+    keys = bn__malloc_array(nf, sizeof *keys);
+    drop = bn__calloc(nf, 1);
+    if (!keys || !drop) {
+        free(keys);
+        free(drop);
+        return BN_ENOMEM;
+    }
+    for (size_t f = 0; f < nf; f++) {
+        keys[f].face = f;
+        keys[f].n = sc->faces[f].nverts;
+        for (unsigned i = 0; i < keys[f].n; i++)
+            memcpy(keys[f].p[i], sc->verts + 3 * sc->fidx[sc->faces[f].first + i], 3 * sizeof(double));
+        qsort(keys[f].p, keys[f].n, sizeof keys[f].p[0], bn__cmp_pt);
+    }
+    qsort(keys, nf, sizeof *keys, bn__cmp_fkey);
+    for (size_t i = 0; i < nf;) {
+        size_t j = i + 1;
+        while (j < nf && bn__same_key(&keys[i], &keys[j]))
+            j++;
+        /* keys[i..j) share their vertices; keys[i] is the earliest face. */
+        for (size_t k = i + 1; k < j; k++) {
+            const bn_face *a = &sc->faces[keys[i].face], *b = &sc->faces[keys[k].face];
+            if (bn_v3_dot(a->normal, b->normal) > 0) {
+                drop[keys[k].face] = 1;
+                sc->stats.duplicates_dropped++;
+                bn_logf(log, BN_LOG_WARN, "%s:%u: face duplicates the face at line %u; dropped", path, b->line,
+                        a->line);
+            } else {
+                sc->stats.back_to_back++;
+                bn_logf(log, BN_LOG_WARN,
+                        "%s:%u: face lies back to back with the face at line %u (a two-sided panel); both kept",
+                        path, b->line, a->line);
+            }
+        }
+        i = j;
+    }
+    for (size_t f = 0; f < nf; f++)
+        if (!drop[f])
+            sc->faces[w++] = sc->faces[f];
+    sc->nfaces = w;
+    free(keys);
+    free(drop);
+    return BN_OK;
+}
+
+bn_status bn__scene_build(const char *path, const bn__soup *s, const bn_load_opts *o, bn_scene **out,
+                          bn_error *err)
+{
+    bn_load_opts defo;
+    bn__builder b;
+    bn_scene *sc;
+    bn_status st = BN_OK;
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY}, diag, area_eps;
+    size_t pos = 0, *tri = NULL, tri_cap = 0, degenerate = 0;
+
+    *out = NULL;
+    if (!o) {
+        bn_load_opts_default(&defo);
+        o = &defo;
+    }
+    if (s->npolys == 0)
+        return bn_error_set(err, BN_EINPUT, "%s: the scene has no faces", path);
+    for (size_t m = 0; m < s->nmats; m++)
+        for (int c = 0; c < 3; c++) {
+            const bn_material *mt = &s->mats[m];
+            if (!isfinite(mt->rho[c]) || mt->rho[c] < 0 || mt->rho[c] > 1)
+                return bn_error_set(err, BN_EINPUT, "%s: material '%s': reflectance %g is outside [0, 1]", path,
+                                    mt->name, mt->rho[c]);
+            if (!isfinite(mt->Le[c]) || mt->Le[c] < 0)
+                return bn_error_set(err, BN_EINPUT, "%s: material '%s': emitted radiance %g is negative or not finite",
+                                    path, mt->name, mt->Le[c]);
+        }
+    for (size_t v = 0; v < s->nverts; v++)
+        for (int k = 0; k < 3; k++)
+            if (!isfinite(s->verts[3 * v + k]))
+                return bn_error_set(err, BN_EINPUT, "%s: vertex %zu has a coordinate that is not finite (%g)", path,
+                                    v, s->verts[3 * v + k]);
+    /* Bounds over used vertices. */
+    for (size_t i = 0; i < s->nidx; i++) {
+        if (s->idx[i] >= s->nverts)
+            return bn_error_set(err, BN_EINPUT, "%s: vertex index %zu out of range (%zu vertices)", path, s->idx[i],
+                                s->nverts);
+        for (int k = 0; k < 3; k++) {
+            double x = s->verts[3 * s->idx[i] + k];
+            lo[k] = fmin(lo[k], x);
+            hi[k] = fmax(hi[k], x);
+        }
+    }
+    for (size_t p = 0; p < s->npolys; p++)
+        if (s->mat[p] >= s->nmats)
+            return bn_error_set(err, BN_EINPUT, "%s: polygon %zu has material %u of %zu", path, p, s->mat[p],
+                                s->nmats);
+    {
+        double d[3];
+        bn_v3_sub(hi, lo, d);
+        diag = bn_v3_len(d);
+    }
+    /* A face smaller than this (in area) is below double rounding at the scene's size. */
+    area_eps = 1e-24 * diag * diag;
+
+    sc = calloc(1, sizeof *sc);
+    if (!sc)
+        return bn_error_set(err, BN_ENOMEM, "out of memory");
+    memset(&b, 0, sizeof b);
+    b.sc = sc;
+    sc->path = bn__strdup(path);
+    sc->unit = o->unit;
+    sc->nmats = s->nmats;
+    sc->mats = bn__malloc_array(s->nmats, sizeof *sc->mats);
+    sc->nverts = s->nverts;
+    sc->verts = bn__malloc_array(3 * s->nverts, sizeof(double));
+    if (!sc->path || !sc->mats || !sc->verts) {
+        bn_scene_destroy(sc);
+        return bn_error_set(err, BN_ENOMEM, "out of memory");
+    }
+    memcpy(sc->mats, s->mats, s->nmats * sizeof *sc->mats);
+    memcpy(sc->verts, s->verts, 3 * s->nverts * sizeof(double));
+    memcpy(sc->lo, lo, sizeof lo);
+    memcpy(sc->hi, hi, sizeof hi);
+    sc->stats.input_polygons = s->npolys;
+
+    for (size_t p = 0; p < s->npolys && st == BN_OK; p++) {
+        unsigned n0 = s->counts[p], n = 0, line = s->line[p], mat = s->mat[p];
+        size_t *v;
+        double nrm[3], area, diam, dev = 0, c[3] = {0, 0, 0};
+        if (!bn__grow((void **)&tri, &tri_cap, 4 * (size_t)n0, sizeof(size_t))) {
+            st = BN_ENOMEM;
+            break;
+        }
+        v = tri + 3 * (size_t)n0; /* tri[0 .. 3n0) holds up to n0 - 2 triangles, then n0 scratch */
+        /* Drop repeated vertices (same index or same position as the previous one). */
+        for (unsigned i = 0; i < n0; i++) {
+            size_t vi = s->idx[pos + i];
+            if (n > 0 && (vi == v[n - 1] || bn__cmp_pt(bn__vp(s, vi), bn__vp(s, v[n - 1])) == 0))
+                continue;
+            v[n++] = vi;
+        }
+        while (n > 1 && (v[0] == v[n - 1] || bn__cmp_pt(bn__vp(s, v[0]), bn__vp(s, v[n - 1])) == 0))
+            n--;
+        pos += n0;
+        if (n < 3) {
+            degenerate++;
+            continue;
+        }
+        bn__newell(s, v, n, nrm);
+        area = 0.5 * bn_v3_normalize(nrm);
+        diam = bn__diameter(s, v, n);
+        if (!(area > area_eps) || !(area > 1e-10 * diam * diam)) {
+            degenerate++;
+            continue;
+        }
+        for (unsigned i = 0; i < n; i++)
+            bn_v3_add(c, bn__vp(s, v[i]), c);
+        bn_v3_scale(c, 1.0 / n, c);
+        for (unsigned i = 0; i < n; i++) {
+            double d[3];
+            bn_v3_sub(bn__vp(s, v[i]), c, d);
+            dev = fmax(dev, fabs(bn_v3_dot(d, nrm)));
+        }
+        if (n == 3) {
+            st = bn__emit_triangle(&b, s, v[0], v[1], v[2], mat, p, line, area_eps, &degenerate);
+            continue;
+        }
+        if (dev > o->planar_tol * diam) {
+            sc->stats.nonplanar_split++;
+            if (n == 4) {
+                bn_logf(&o->log, BN_LOG_WARN,
+                        "%s:%u: quad is non-planar by %.3g (%.2g of its size); split into two triangles along the "
+                        "diagonal from its 1st to its 3rd vertex",
+                        path, line, dev, dev / diam);
+                st = bn__emit_triangle(&b, s, v[0], v[1], v[2], mat, p, line, area_eps, &degenerate);
+                if (st == BN_OK)
+                    st = bn__emit_triangle(&b, s, v[0], v[2], v[3], mat, p, line, area_eps, &degenerate);
+                continue;
+            }
+            bn_logf(&o->log, BN_LOG_WARN, "%s:%u: polygon of %u vertices is non-planar by %.3g; triangulated", path,
+                    line, n, dev);
+        } else if (n == 4) {
+            int convex = 1;
+            for (unsigned i = 0; i < 4; i++) {
+                double e1[3], e2[3], cr[3];
+                bn_v3_sub(bn__vp(s, v[(i + 1) % 4]), bn__vp(s, v[i]), e1);
+                bn_v3_sub(bn__vp(s, v[(i + 2) % 4]), bn__vp(s, v[(i + 1) % 4]), e2);
+                bn_v3_cross(e1, e2, cr);
+                if (bn_v3_dot(cr, nrm) <= 1e-12 * diam * diam)
+                    convex = 0;
+            }
+            if (convex) {
+                st = bn__emit_face(&b, s, v, 4, mat, p, line, nrm, area);
+                continue;
+            }
+        }
+        /* Planar non-convex quads and polygons of 5+ vertices: ear clipping. */
+        sc->stats.polygons_triangulated++;
+        {
+            int r = bn__ear_clip(s, v, n, nrm, tri);
+            if (r < 0) {
+                st = BN_ENOMEM;
+                break;
+            }
+            if (r == 0) {
+                st = bn_error_set(err, BN_EINPUT, "%s:%u: polygon of %u vertices intersects itself; cannot triangulate",
+                                  path, line, n);
+                break;
+            }
+            for (unsigned t = 0; t < n - 2 && st == BN_OK; t++)
+                st = bn__emit_triangle(&b, s, tri[3 * t], tri[3 * t + 1], tri[3 * t + 2], mat, p, line, area_eps,
+                                       &degenerate);
+        }
+    }
+    free(tri);
+    if (st == BN_ENOMEM)
+        bn_error_set(err, st, "out of memory building faces of %s", path);
+    if (st == BN_OK)
+        st = bn__drop_duplicates(sc, path, &o->log);
+    if (st != BN_OK) {
+        if (st == BN_ENOMEM)
+            bn_error_set(err, st, "out of memory building faces of %s", path);
+        bn_scene_destroy(sc);
+        return st;
+    }
+    sc->stats.degenerate_dropped = degenerate;
+    if (degenerate)
+        bn_logf(&o->log, BN_LOG_WARN, "%s: %zu degenerate (zero-area) face%s dropped", path, degenerate,
+                degenerate == 1 ? "" : "s");
+    if (sc->nfaces == 0) {
+        bn_scene_destroy(sc);
+        return bn_error_set(err, BN_EINPUT, "%s: no face with a non-zero area", path);
+    }
+    if (bn_scene_emitter_count(sc) == 0)
+        bn_logf(&o->log, BN_LOG_WARN, "%s: no emitter (no material with Ke > 0): the result will be black", path);
+    *out = sc;
+    return BN_OK;
+}
+
+bn_status bn_scene_from_arrays(const char *name, const double *verts, size_t nverts, const unsigned *polys,
+                               size_t npolys, const unsigned *poly_material, const bn_material *materials,
+                               size_t nmaterials, const bn_load_opts *o, bn_scene **out, bn_error *err)
+{
+    bn__soup s;
+    bn_status st = BN_OK;
+    size_t k = 0;
+    memset(&s, 0, sizeof s);
+    *out = NULL;
+    for (size_t v = 0; v < nverts && st == BN_OK; v++)
+        if (!bn__soup_add_vertex(&s, verts + 3 * v))
+            st = BN_ENOMEM;
+    for (size_t m = 0; m < nmaterials && st == BN_OK; m++)
+        if (!bn__soup_add_material(&s, &materials[m]))
+            st = BN_ENOMEM;
+    for (size_t p = 0; p < npolys && st == BN_OK; p++) {
+        unsigned n = polys[k++];
+        size_t *idx = bn__malloc_array(n, sizeof *idx);
+        if (!idx) {
+            st = BN_ENOMEM;
+            break;
+        }
+        for (unsigned i = 0; i < n; i++)
+            idx[i] = polys[k++];
+        if (!bn__soup_add_polygon(&s, idx, n, poly_material[p], 0))
+            st = BN_ENOMEM;
+        free(idx);
+    }
+    if (st == BN_OK)
+        st = bn__scene_build(name, &s, o, out, err);
+    else
+        bn_error_set(err, st, "out of memory");
+    bn__soup_free(&s);
+    return st;
+}
+
+static const char *bn__ext(const char *path)
+{
+    const char *slash = strrchr(path, '/'), *dot = strrchr(path, '.');
+    if (!dot || (slash && dot < slash))
+        return "";
+    return dot + 1;
+}
+
+bn_status bn_scene_load(const char *path, const bn_load_opts *o, bn_scene **out, bn_error *err)
+{
+    bn__soup s;
+    bn_load_opts defo;
+    bn_status st;
+    const char *ext = bn__ext(path);
+    *out = NULL;
+    if (!o) {
+        bn_load_opts_default(&defo);
+        o = &defo;
+    }
+    memset(&s, 0, sizeof s);
+    if (strcasecmp(ext, "obj") == 0)
+        st = bn__read_obj(path, &s, &o->log, err);
+    else if (strcasecmp(ext, "ply") == 0 || strcasecmp(ext, "off") == 0)
+        st = bn__read_openmesh(path, &s, &o->log, err);
+    else
+        st = bn_error_set(err, BN_EINPUT, "%s: unknown scene format '.%s' (bounce reads .obj, .ply and .off)", path,
+                          ext);
+    if (st == BN_OK)
+        st = bn__scene_build(path, &s, o, out, err);
+    bn__soup_free(&s);
+    return st;
+}
+
+void bn_scene_destroy(bn_scene *s)
+{
+    if (!s)
+        return;
+    free(s->path);
+    free(s->mats);
+    free(s->verts);
+    free(s->fidx);
+    free(s->faces);
+    free(s->patches);
+    free(s->pverts);
+    free(s);
+}
+
+const char *bn_scene_path(const bn_scene *s) { return s->path; }
+bn_unit bn_scene_unit(const bn_scene *s) { return s->unit; }
+#define BN__ACCESS(fn, type, arr, cnt)                  \
+    const type *fn(const bn_scene *s, size_t *count)    \
+    {                                                   \
+        if (count)                                      \
+            *count = s->cnt;                            \
+        return s->arr;                                  \
+    }
+BN__ACCESS(bn_scene_materials, bn_material, mats, nmats)
+BN__ACCESS(bn_scene_vertices, double, verts, nverts)
+BN__ACCESS(bn_scene_face_indices, size_t, fidx, nfidx)
+BN__ACCESS(bn_scene_faces, bn_face, faces, nfaces)
+BN__ACCESS(bn_scene_patches, bn_patch, patches, npatches)
+BN__ACCESS(bn_scene_patch_vertices, double, pverts, npverts)
+#undef BN__ACCESS
+double bn_scene_patch_size(const bn_scene *s) { return s->patch_size; }
+bn_scene_stats bn_scene_stats_get(const bn_scene *s) { return s->stats; }
+
+void bn_scene_bounds(const bn_scene *s, double lo[3], double hi[3])
+{
+    memcpy(lo, s->lo, sizeof s->lo);
+    memcpy(hi, s->hi, sizeof s->hi);
+}
+
+const bn_material *bn_patch_material(const bn_scene *s, size_t patch) { return &s->mats[s->patches[patch].material]; }
+
+static int bn__emits(const bn_material *m) { return m->Le[0] > 0 || m->Le[1] > 0 || m->Le[2] > 0; }
+
+size_t bn_scene_emitter_count(const bn_scene *s)
+{
+    size_t n = 0;
+    for (size_t f = 0; f < s->nfaces; f++)
+        n += bn__emits(&s->mats[s->faces[f].material]);
+    return n;
+}
+
+void bn_scene_emitted_power(const bn_scene *s, double watts[3])
+{
+    double m = bn_unit_to_metres(s->unit);
+    watts[0] = watts[1] = watts[2] = 0;
+    for (size_t f = 0; f < s->nfaces; f++)
+        for (int c = 0; c < 3; c++)
+            watts[c] += BN_PI * s->faces[f].area * m * m * s->mats[s->faces[f].material].Le[c];
+}
+
+unsigned long long bn_scene_digest(const bn_scene *s)
+{
+    uint64_t h = BN__FNV_INIT;
+    int u = (int)s->unit;
+    h = bn__fnv1a(h, &u, sizeof u);
+    for (size_t m = 0; m < s->nmats; m++) {
+        h = bn__fnv1a(h, s->mats[m].name, strlen(s->mats[m].name));
+        h = bn__fnv1a(h, s->mats[m].rho, sizeof s->mats[m].rho);
+        h = bn__fnv1a(h, s->mats[m].Le, sizeof s->mats[m].Le);
+    }
+    h = bn__fnv1a(h, s->verts, s->nverts * 3 * sizeof(double));
+    h = bn__fnv1a(h, s->fidx, s->nfidx * sizeof(size_t));
+    for (size_t f = 0; f < s->nfaces; f++)
+        h = bn__fnv1a(h, &s->faces[f].material, sizeof(unsigned));
+    h = bn__fnv1a(h, s->pverts, s->npverts * 3 * sizeof(double));
+    for (size_t p = 0; p < s->npatches; p++)
+        h = bn__fnv1a(h, s->patches[p].corner, sizeof s->patches[p].corner);
+    return (unsigned long long)h;
+}

@@ -1,0 +1,63 @@
+/* The scene's internal layout, shared by the readers, the mesher and the library's modules. */
+#ifndef BOUNCE_SCENE_INTERNAL_H
+#define BOUNCE_SCENE_INTERNAL_H
+
+#include "bounce/scene.h"
+#include "base/internal.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* A polygon soup as a reader produces it, before validation. */
+typedef struct bn__soup {
+    double   *verts;      /* xyz */
+    size_t    nverts, verts_cap;
+    unsigned *counts;     /* vertices per polygon */
+    unsigned *mat;        /* material per polygon */
+    unsigned *line;       /* source line per polygon (0 if none) */
+    size_t    npolys, polys_cap;
+    size_t   *idx;        /* 0-based vertex indices, polygon after polygon */
+    size_t    nidx, idx_cap;
+    bn_material *mats;
+    size_t    nmats, mats_cap;
+} bn__soup;
+
+void bn__soup_free(bn__soup *s);
+int bn__soup_add_vertex(bn__soup *s, const double p[3]);                 /* 0 on OOM */
+int bn__soup_add_polygon(bn__soup *s, const size_t *idx, unsigned n, unsigned mat, unsigned line);
+int bn__soup_add_material(bn__soup *s, const bn_material *m);
+
+/* Readers. `path` is used in messages. */
+bn_status bn__read_obj(const char *path, bn__soup *out, const bn_log *log, bn_error *err);
+/* PLY and OFF through OpenMesh (src/adapters). */
+bn_status bn__read_openmesh(const char *path, bn__soup *out, const bn_log *log, bn_error *err);
+
+/* Validates a soup and builds faces; takes ownership of nothing (copies). */
+bn_status bn__scene_build(const char *path, const bn__soup *soup, const bn_load_opts *o,
+                          bn_scene **out, bn_error *err);
+
+struct bn_scene {
+    char        *path;
+    bn_unit      unit;
+    bn_material *mats;
+    size_t       nmats;
+    double      *verts;
+    size_t       nverts;
+    size_t      *fidx;      /* face vertex indices */
+    size_t       nfidx;
+    bn_face     *faces;
+    size_t       nfaces;
+    bn_patch    *patches;
+    size_t       npatches;
+    double      *pverts;    /* patch vertices, xyz */
+    size_t       npverts;
+    double       patch_size;
+    bn_scene_stats stats;
+    double       lo[3], hi[3];
+};
+
+#ifdef __cplusplus
+}
+#endif
+#endif
