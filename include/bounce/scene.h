@@ -112,6 +112,11 @@ const bn_material *bn_patch_material(const bn_scene *s, size_t patch);
 void bn_scene_emitted_power(const bn_scene *s, double watts[3]);
 size_t bn_scene_emitter_count(const bn_scene *s);   /* faces with Le > 0 in any channel */
 
+/* Per-patch emission E (= Le, W m^-2 sr^-1) and reflectance rho, written into caller-allocated
+ * arrays of N*3 doubles (patch-major, channel-minor: a[3*i + c]). */
+void bn_scene_patch_emission(const bn_scene *s, double *E);
+void bn_scene_patch_reflectance(const bn_scene *s, double *rho);
+
 #ifdef __cplusplus
 }
 #endif

@@ -663,3 +663,17 @@ unsigned long long bn_scene_digest(const bn_scene *s)
         h = bn__fnv1a(h, s->patches[p].corner, sizeof s->patches[p].corner);
     return (unsigned long long)h;
 }
+
+void bn_scene_patch_emission(const bn_scene *s, double *E)
+{
+    for (size_t i = 0; i < s->npatches; i++)
+        for (int c = 0; c < 3; c++)
+            E[3 * i + c] = s->mats[s->patches[i].material].Le[c];
+}
+
+void bn_scene_patch_reflectance(const bn_scene *s, double *rho)
+{
+    for (size_t i = 0; i < s->npatches; i++)
+        for (int c = 0; c < 3; c++)
+            rho[3 * i + c] = s->mats[s->patches[i].material].rho[c];
+}

@@ -1,0 +1,155 @@
+/* The test runner: `test_x --list`, `test_x NAME` (one test), `test_x` (all, in order). */
+#define _POSIX_C_SOURCE 200809L
+#include "bn_test.h"
+
+#include <errno.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#define BN_MAX_TESTS 512
+static struct {
+    const char *name;
+    bn_test_fn fn;
+} bn_tests[BN_MAX_TESTS];
+static int bn_ntests;
+static char bn_tmpdir[4096];
+
+void bn_test_register(const char *name, bn_test_fn fn)
+{
+    if (bn_ntests < BN_MAX_TESTS) {
+        bn_tests[bn_ntests].name = name;
+        bn_tests[bn_ntests].fn = fn;
+        bn_ntests++;
+    }
+}
+
+const char *bn_test_source_dir(void) { return BN_TEST_SOURCE_DIR; }
+const char *bn_test_bounce_exe(void) { return BN_TEST_BOUNCE_EXE; }
+const char *bn_test_tmpdir(void) { return bn_tmpdir; }
+
+const char *bn_test_path(const char *rel)
+{
+    static char buf[8][4096];
+    static int k;
+    char *b = buf[k++ & 7];
+    snprintf(b, 4096, "%s/%s", BN_TEST_SOURCE_DIR, rel);
+    return b;
+}
+
+const char *bn_test_tmp(const char *name)
+{
+    static char buf[8][4096];
+    static int k;
+    char *b = buf[k++ & 7];
+    snprintf(b, 4096, "%s/%s", bn_tmpdir, name);
+    return b;
+}
+
+int bn_test_run(const char *cmdline, char **output)
+{
+    char *full;
+    size_t n = strlen(cmdline) + 16;
+    FILE *p;
+    int st;
+    full = malloc(n);
+    snprintf(full, n, "%s 2>&1", cmdline);
+    p = popen(full, "r");
+    free(full);
+    if (!p)
+        BN_FAIL("popen failed: %s", strerror(errno));
+    {
+        size_t cap = 4096, len = 0, r;
+        char *buf = malloc(cap);
+        while ((r = fread(buf + len, 1, cap - len - 1, p)) > 0) {
+            len += r;
+            if (cap - len < 1024) {
+                cap *= 2;
+                buf = realloc(buf, cap);
+            }
+        }
+        buf[len] = '\0';
+        if (output)
+            *output = buf;
+        else
+            free(buf);
+    }
+    st = pclose(p);
+    if (WIFEXITED(st))
+        return WEXITSTATUS(st);
+    if (WIFSIGNALED(st))
+        return 128 + WTERMSIG(st);
+    return -1;
+}
+
+int bn_test_bounce(const char *args, char **output)
+{
+    size_t n = strlen(args) + strlen(BN_TEST_BOUNCE_EXE) + 8;
+    char *cmd = malloc(n);
+    int rc;
+    snprintf(cmd, n, "%s %s", BN_TEST_BOUNCE_EXE, args);
+    rc = bn_test_run(cmd, output);
+    free(cmd);
+    return rc;
+}
+
+char *bn_test_read_file(const char *path, size_t *size)
+{
+    FILE *fp = fopen(path, "rb");
+    long len;
+    char *buf;
+    if (!fp)
+        return NULL;
+    fseek(fp, 0, SEEK_END);
+    len = ftell(fp);
+    fseek(fp, 0, SEEK_SET);
+    buf = malloc((size_t)len + 1);
+    if (fread(buf, 1, (size_t)len, fp) != (size_t)len) {
+        free(buf);
+        fclose(fp);
+        return NULL;
+    }
+    buf[len] = '\0';
+    fclose(fp);
+    if (size)
+        *size = (size_t)len;
+    return buf;
+}
+
+int bn_test_file_exists(const char *path)
+{
+    struct stat sb;
+    return stat(path, &sb) == 0;
+}
+
+static void bn_make_tmpdir(const char *name)
+{
+    char cmd[8192];
+    snprintf(bn_tmpdir, sizeof bn_tmpdir, "%s/%s", BN_TEST_BINARY_DIR, name);
+    snprintf(cmd, sizeof cmd, "rm -rf '%s' && mkdir -p '%s'", bn_tmpdir, bn_tmpdir);
+    if (system(cmd) != 0)
+        BN_FAIL("cannot make %s", bn_tmpdir);
+}
+
+int main(int argc, char **argv)
+{
+    if (argc > 1 && strcmp(argv[1], "--list") == 0) {
+        for (int i = 0; i < bn_ntests; i++)
+            printf("%s\n", bn_tests[i].name);
+        return 0;
+    }
+    for (int i = 0; i < bn_ntests; i++) {
+        if (argc > 1 && strcmp(argv[1], bn_tests[i].name) != 0)
+            continue;
+        bn_make_tmpdir(bn_tests[i].name);
+        bn_tests[i].fn();
+        printf("ok %s\n", bn_tests[i].name);
+        if (argc > 1)
+            return 0;
+    }
+    if (argc > 1) {
+        fprintf(stderr, "no test named %s\n", argv[1]);
+        return 2;
+    }
+    return 0;
+}

@@ -1,0 +1,89 @@
+/* A small test runner (libuv's test-list style): each BN_TEST in a file is registered with
+ * ctest as its own process (`test_x NAME`); assertions print both values. */
+#ifndef BN_TEST_H
+#define BN_TEST_H
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef void (*bn_test_fn)(void);
+void bn_test_register(const char *name, bn_test_fn fn);
+
+#define BN_TEST(name)                                                                          \
+    static void bn_test_##name(void);                                                          \
+    __attribute__((constructor)) static void bn_test_reg_##name(void)                          \
+    {                                                                                          \
+        bn_test_register(#name, bn_test_##name);                                               \
+    }                                                                                          \
+    static void bn_test_##name(void)
+
+#define BN_FAIL(...)                                                                           \
+    do {                                                                                       \
+        fprintf(stderr, "%s:%d: FAIL: ", __FILE__, __LINE__);                                  \
+        fprintf(stderr, __VA_ARGS__);                                                          \
+        fprintf(stderr, "\n");                                                                 \
+        exit(1);                                                                               \
+    } while (0)
+
+#define BN_ASSERT(c)                                                                           \
+    do {                                                                                       \
+        if (!(c))                                                                              \
+            BN_FAIL("%s", #c);                                                                 \
+    } while (0)
+
+#define BN_ASSERT_OP(a, op, b)                                                                 \
+    do {                                                                                       \
+        double bn_a_ = (double)(a), bn_b_ = (double)(b);                                       \
+        if (!(bn_a_ op bn_b_))                                                                 \
+            BN_FAIL("%s %s %s (%.17g vs %.17g)", #a, #op, #b, bn_a_, bn_b_);                   \
+    } while (0)
+#define BN_ASSERT_EQ(a, b) BN_ASSERT_OP(a, ==, b)
+#define BN_ASSERT_LE(a, b) BN_ASSERT_OP(a, <=, b)
+#define BN_ASSERT_LT(a, b) BN_ASSERT_OP(a, <, b)
+#define BN_ASSERT_GE(a, b) BN_ASSERT_OP(a, >=, b)
+#define BN_ASSERT_GT(a, b) BN_ASSERT_OP(a, >, b)
+
+/* |a - b| <= tol (absolute). */
+#define BN_ASSERT_NEAR(a, b, tol)                                                              \
+    do {                                                                                       \
+        double bn_a_ = (double)(a), bn_b_ = (double)(b), bn_t_ = (double)(tol);                \
+        if (!(fabs(bn_a_ - bn_b_) <= bn_t_))                                                   \
+            BN_FAIL("%s = %.17g, %s = %.17g, |diff| %.3g > tol %.3g", #a, bn_a_, #b, bn_b_,     \
+                    fabs(bn_a_ - bn_b_), bn_t_);                                               \
+    } while (0)
+/* |a - b| <= rtol * |b| (relative to the expected value b). */
+#define BN_ASSERT_REL(a, b, rtol)                                                              \
+    do {                                                                                       \
+        double bn_a_ = (double)(a), bn_b_ = (double)(b), bn_t_ = (double)(rtol);               \
+        if (!(fabs(bn_a_ - bn_b_) <= bn_t_ * fabs(bn_b_)))                                     \
+            BN_FAIL("%s = %.17g, expected %s = %.17g, relative error %.3g > %.3g", #a, bn_a_,   \
+                    #b, bn_b_, fabs(bn_a_ - bn_b_) / fabs(bn_b_), bn_t_);                      \
+    } while (0)
+#define BN_ASSERT_STATUS(expr, expected)                                                       \
+    do {                                                                                       \
+        int bn_s_ = (int)(expr), bn_e_ = (int)(expected);                                      \
+        if (bn_s_ != bn_e_)                                                                    \
+            BN_FAIL("%s returned %d, expected %d", #expr, bn_s_, bn_e_);                       \
+    } while (0)
+
+/* Paths configured by CMake. */
+const char *bn_test_source_dir(void);   /* the repository */
+const char *bn_test_bounce_exe(void);   /* the bounce command */
+const char *bn_test_tmpdir(void);       /* a fresh folder for this test's files */
+/* "<source>/<rel>" in a static buffer rotation (8 slots). */
+const char *bn_test_path(const char *rel);
+/* "<tmpdir>/<name>". */
+const char *bn_test_tmp(const char *name);
+
+/* Runs a shell command line, capturing stdout and stderr together into *output (malloc'd,
+ * may be NULL). Returns the exit code, or 128 + signal if it was killed. */
+int bn_test_run(const char *cmdline, char **output);
+/* Runs `bounce ARGS` (args appended after the executable). */
+int bn_test_bounce(const char *args, char **output);
+/* Reads a whole file (malloc'd, NUL-terminated) or NULL. */
+char *bn_test_read_file(const char *path, size_t *size);
+int bn_test_file_exists(const char *path);
+
+#endif
