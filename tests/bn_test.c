@@ -13,7 +13,7 @@ static struct {
     bn_test_fn fn;
 } bn_tests[BN_MAX_TESTS];
 static int bn_ntests;
-static char bn_tmpdir[4096];
+static char bn_tmpdir[8192];
 
 void bn_test_register(const char *name, bn_test_fn fn)
 {
@@ -39,10 +39,10 @@ const char *bn_test_path(const char *rel)
 
 const char *bn_test_tmp(const char *name)
 {
-    static char buf[8][4096];
+    static char buf[8][16384];
     static int k;
     char *b = buf[k++ & 7];
-    snprintf(b, 4096, "%s/%s", bn_tmpdir, name);
+    snprintf(b, 16384, "%s/%s", bn_tmpdir, name);
     return b;
 }
 
@@ -124,7 +124,7 @@ int bn_test_file_exists(const char *path)
 
 static void bn_make_tmpdir(const char *name)
 {
-    char cmd[8192];
+    char cmd[20000];
     snprintf(bn_tmpdir, sizeof bn_tmpdir, "%s/%s", BN_TEST_BINARY_DIR, name);
     snprintf(cmd, sizeof cmd, "rm -rf '%s' && mkdir -p '%s'", bn_tmpdir, bn_tmpdir);
     if (system(cmd) != 0)

@@ -184,15 +184,28 @@ static bn_status bn__read_mtl(const char *path, const char *objpath, unsigned ob
     return st;
 }
 
-/* Resolves an OBJ vertex reference (1-based, or negative relative); 0 on failure. */
+/* Checks the vt and vn parts of a reference "v", "v/vt", "v//vn" or "v/vt/vn" (integers or empty). */
+static int bn__ref_tail_ok(const char *p)
+{
+    for (int part = 0; part < 2 && *p == '/'; part++) {
+        p++;
+        if (*p == '-' || *p == '+')
+            p++;
+        while (isdigit((unsigned char)*p))
+            p++;
+    }
+    return *p == '\0';
+}
+
+/* Resolves an OBJ vertex reference (1-based, or negative relative): 1 ok, 0 out of range, -1 malformed. */
 static int bn__resolve_index(const char *tok, size_t nverts, size_t *out)
 {
     char *end;
     long long v;
     errno = 0;
     v = strtoll(tok, &end, 10);
-    if (end == tok || (*end != '\0' && *end != '/') || errno == ERANGE)
-        return 0;
+    if (end == tok || errno == ERANGE || !bn__ref_tail_ok(end))
+        return -1;
     if (v > 0 && (unsigned long long)v <= nverts) {
         *out = (size_t)(v - 1);
         return 1;
@@ -255,7 +268,13 @@ bn_status bn__read_obj(const char *path, bn__soup *s, const bn_log *log, bn_erro
                                       BN__MAX_FACE_VERTS);
                     break;
                 }
-                if (!bn__resolve_index(t, s->nverts, &vi)) {
+                int r = bn__resolve_index(t, s->nverts, &vi);
+                if (r < 0) {
+                    st = bn_error_set(err, BN_EINPUT, "%s:%u: malformed vertex reference '%s' (expected v, v/vt, v//vn or v/vt/vn)",
+                                      path, line, t);
+                    break;
+                }
+                if (r == 0) {
                     st = bn_error_set(err, BN_EINPUT,
                                       "%s:%u: vertex index '%s' is out of range (%zu vertices defined so far)",
                                       path, line, t, s->nverts);

@@ -447,7 +447,7 @@ bn_status bn__scene_build(const char *path, const bn__soup *s, const bn_load_opt
             sc->stats.nonplanar_split++;
             if (n == 4) {
                 bn_logf(&o->log, BN_LOG_WARN,
-                        "%s:%u: quad is non-planar by %.3g (%.2g of its size); split into two triangles along the "
+                        "%s:%u: quad is non-planar (a vertex is %.3g off its mean plane, %.2g of its size); split into two triangles along the "
                         "diagonal from its 1st to its 3rd vertex",
                         path, line, dev, dev / diam);
                 st = bn__emit_triangle(&b, s, v[0], v[1], v[2], mat, p, line, area_eps, &degenerate);
