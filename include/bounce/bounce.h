@@ -1,0 +1,13 @@
+/* bounce: the whole public API (one header per module, all C with extern "C" guards). */
+#ifndef BOUNCE_BOUNCE_H
+#define BOUNCE_BOUNCE_H
+
+#include "bounce/status.h"
+#include "bounce/scene.h"
+#include "bounce/rt.h"
+#include "bounce/transport.h"
+#include "bounce/formfactor.h"
+#include "bounce/solve.h"
+#include "bounce/image.h"
+
+#endif
