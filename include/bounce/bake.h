@@ -1,0 +1,63 @@
+/* bounce: baking per-patch radiance to vertex colours, split at creases and material seams;
+ * written as PLY and OM (through OpenMesh) or OBJ with `v x y z r g b`. */
+#ifndef BOUNCE_BAKE_H
+#define BOUNCE_BAKE_H
+
+#include <stddef.h>
+#include "bounce/scene.h"
+#include "bounce/image.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct bn_bake bn_bake;   /* opaque: the output vertices and their patch groups */
+
+#define BN_BAKE_DEFAULT_CREASE 30.0
+/* Builds the baking mesh of `scene`'s patches (borrowed: it must outlive *out and not be
+ * re-meshed). Patch vertices at the same position (within a tolerance scaled to the scene) are
+ * one point; at each point the patches touching it are grouped into smooth surfaces: two
+ * patches join when they have the same material and their normals differ by less than
+ * crease_deg (transitively within the point's fan). Each group is one output vertex, so
+ * vertices are split at creases and material seams. */
+bn_status bn_bake_create(const bn_scene *scene, double crease_deg, bn_bake **out, bn_error *err);
+void bn_bake_destroy(bn_bake *b);   /* NULL is a no-op */
+
+size_t bn_bake_vertex_count(const bn_bake *b);
+const double *bn_bake_vertex_positions(const bn_bake *b);   /* xyz per output vertex (borrowed) */
+/* The output vertex of corner c of patch p (faces of the baked mesh are the patches). */
+size_t bn_bake_corner_vertex(const bn_bake *b, size_t patch, unsigned corner);
+
+/* Vertex value = area-weighted mean of the per-patch values (N*3) of its group's patches:
+ * sum_p A_p x_p / sum_p A_p. vertex_values: bn_bake_vertex_count()*3, caller-allocated. */
+void bn_bake_vertex_values(const bn_bake *b, const double *patch_values, double *vertex_values);
+/* The value at point p on patch `patch` interpolated from its corners' vertex values:
+ * barycentric on triangles, inverse bilinear on quads. Unchecked per-sample call. */
+void bn_bake_interpolate(const bn_bake *b, const double *vertex_values, size_t patch, const double p[3],
+                         double out[3]);
+
+/* A named per-patch value set to write (name used for extra PLY properties: <name>_red...). */
+typedef struct bn_bake_layer {
+    const char *name;
+    const double *patch_values;   /* N*3 (borrowed) */
+} bn_bake_layer;
+
+typedef struct bn_bake_write_opts {
+    int    ldr;          /* 1: 8-bit sRGB colours at `exposure_ev` instead of float radiance */
+    double exposure_ev;  /* for ldr */
+    const bn_attr *attrs;   /* provenance: PLY/OBJ comments, OM mesh property */
+    size_t nattrs;
+    const bn_log *log;
+} bn_bake_write_opts;
+
+/* Writes the baked mesh by extension: .ply (binary, through OpenMesh; comments added to its
+ * header), .om (OpenMesh), .obj (`v x y z r g b`, written directly). The vertex colour is
+ * layers[0] (normally L); layers[1..] are written as extra float vertex properties
+ * <name>_red/_green/_blue (PLY and OM only; BN_EUSAGE for OBJ). Atomic. */
+bn_status bn_bake_write(const bn_bake *b, const char *path, const bn_bake_layer *layers, size_t nlayers,
+                        const bn_bake_write_opts *o, bn_error *err);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,269 @@
+/* Baking per-patch values to vertices: weld patch vertices across faces, split each point's fan
+ * into smooth surfaces (same material, normals within the crease angle), and average the
+ * patches of each surface by area:  x_v = sum_{p in g(v)} A_p x_p / sum_{p in g(v)} A_p. */
+#include "bounce/bake.h"
+#include "base/internal.h"
+#include "base/vec.h"
+
+#include <math.h>
+#include <string.h>
+
+struct bn_bake {
+    const bn_scene *scene;
+    size_t  nverts;
+    double *pos;        /* nverts*3 */
+    size_t *corner_v;   /* npatches*4: output vertex of each corner (unused corners = SIZE_MAX) */
+    size_t *vstart;     /* nverts+1: CSR of the patches of each vertex's group */
+    size_t *vpatch;
+};
+
+static size_t bn__find(size_t *parent, size_t i)
+{
+    while (parent[i] != i) {
+        parent[i] = parent[parent[i]];
+        i = parent[i];
+    }
+    return i;
+}
+
+static void bn__union(size_t *parent, size_t a, size_t b)
+{
+    a = bn__find(parent, a);
+    b = bn__find(parent, b);
+    if (a == b)
+        return;
+    if (a < b)
+        parent[b] = a;   /* the smaller index is the root: deterministic representatives */
+    else
+        parent[a] = b;
+}
+
+typedef struct bn__xkey {
+    double x;
+    size_t i;
+} bn__xkey;
+static int bn__cmp_x(const void *a, const void *b)
+{
+    const bn__xkey *p = a, *q = b;
+    if (p->x != q->x)
+        return p->x < q->x ? -1 : 1;
+    return p->i < q->i ? -1 : (p->i > q->i);
+}
+
+bn_status bn_bake_create(const bn_scene *scene, double crease_deg, bn_bake **out, bn_error *err)
+{
+    size_t np, npv, ninc = 0, nout = 0;
+    const bn_patch *patches = bn_scene_patches(scene, &np);
+    const double *pv = bn_scene_patch_vertices(scene, &npv);
+    double lo[3], hi[3], d[3], eps, cos_crease;
+    bn__xkey *order = NULL;
+    size_t *weld = NULL, *inc_start = NULL, *inc = NULL, *fill = NULL, *local = NULL, *gid = NULL;
+    bn_bake *b = NULL;
+    bn_status st = BN_ENOMEM;
+
+    *out = NULL;
+    if (!(crease_deg >= 0 && crease_deg <= 180))
+        return bn_error_set(err, BN_EINPUT, "crease angle %g is not within [0, 180] degrees", crease_deg);
+    if (np == 0)
+        return bn_error_set(err, BN_EINPUT, "%s: the scene has no patches to bake", bn_scene_path(scene));
+    cos_crease = cos(crease_deg * BN_PI / 180.0);
+    bn_scene_bounds(scene, lo, hi);
+    bn_v3_sub(hi, lo, d);
+    /* Points computed from two faces' grids agree to rounding (~1e-16 relative); genuinely distinct
+     * points are a patch edge apart. 1e-9 of the scene's diameter sits safely between. */
+    eps = 1e-9 * bn_v3_len(d);
+
+    b = calloc(1, sizeof *b);
+    order = bn__malloc_array(npv, sizeof *order);
+    weld = bn__malloc_array(npv, sizeof *weld);
+    inc_start = bn__calloc(npv + 1, sizeof *inc_start);
+    if (!b || !order || !weld || !inc_start)
+        goto fail;
+    b->scene = scene;
+
+    /* 1. Weld: sort by x, sweep a window of width eps, union points within eps. */
+    for (size_t i = 0; i < npv; i++) {
+        order[i].x = pv[3 * i];
+        order[i].i = weld[i] = i;
+    }
+    qsort(order, npv, sizeof *order, bn__cmp_x);
+    for (size_t a = 0; a < npv; a++)
+        for (size_t c = a + 1; c < npv && order[c].x - order[a].x <= eps; c++)
+            if (bn_v3_dist(pv + 3 * order[a].i, pv + 3 * order[c].i) <= eps)
+                bn__union(weld, order[a].i, order[c].i);
+    for (size_t i = 0; i < npv; i++)
+        weld[i] = bn__find(weld, i);
+
+    /* 2. Incidences (patch, corner) per welded point, CSR keyed by the point's root. */
+    for (size_t p = 0; p < np; p++)
+        for (unsigned c = 0; c < patches[p].ncorners; c++) {
+            inc_start[weld[patches[p].corner[c]] + 1]++;
+            ninc++;
+        }
+    for (size_t i = 0; i < npv; i++)
+        inc_start[i + 1] += inc_start[i];
+    inc = bn__malloc_array(ninc, sizeof *inc);
+    fill = bn__malloc_array(npv, sizeof *fill);
+    local = bn__malloc_array(ninc, sizeof *local);
+    gid = bn__malloc_array(ninc, sizeof *gid);
+    b->corner_v = bn__malloc_array(np * 4, sizeof(size_t));
+    if (!inc || !fill || !local || !gid || !b->corner_v)
+        goto fail;
+    memcpy(fill, inc_start, npv * sizeof *fill);
+    for (size_t p = 0; p < np; p++) {
+        for (unsigned c = 0; c < 4; c++)
+            b->corner_v[4 * p + c] = SIZE_MAX;
+        for (unsigned c = 0; c < patches[p].ncorners; c++)
+            inc[fill[weld[patches[p].corner[c]]]++] = 4 * p + c;
+    }
+
+    /* 3. Groups per point: union incident patches of one material with normals within the crease. */
+    for (size_t w = 0; w < npv; w++) {
+        size_t s = inc_start[w], e = inc_start[w + 1];
+        for (size_t i = s; i < e; i++)
+            local[i] = i - s;
+        for (size_t i = s; i < e; i++)
+            for (size_t j = i + 1; j < e; j++) {
+                const bn_patch *pi = &patches[inc[i] / 4], *pj = &patches[inc[j] / 4];
+                if (pi->material == pj->material && bn_v3_dot(pi->normal, pj->normal) >= cos_crease - 1e-12)
+                    bn__union(local + s, i - s, j - s);
+            }
+        for (size_t i = s; i < e; i++) {
+            size_t r = bn__find(local + s, i - s);
+            if (r == i - s)
+                gid[i] = nout++;
+            else
+                gid[i] = gid[s + r];   /* the root comes first: already numbered */
+        }
+    }
+    b->nverts = nout;
+    b->pos = bn__malloc_array(nout, 3 * sizeof(double));
+    b->vstart = bn__calloc(nout + 1, sizeof(size_t));
+    b->vpatch = bn__malloc_array(ninc, sizeof(size_t));
+    if (!b->pos || !b->vstart || !b->vpatch)
+        goto fail;
+    for (size_t w = 0; w < npv; w++)
+        for (size_t i = inc_start[w]; i < inc_start[w + 1]; i++) {
+            memcpy(b->pos + 3 * gid[i], pv + 3 * w, 3 * sizeof(double));
+            b->corner_v[inc[i]] = gid[i];
+            b->vstart[gid[i] + 1]++;
+        }
+    for (size_t v = 0; v < nout; v++)
+        b->vstart[v + 1] += b->vstart[v];
+    free(fill);
+    fill = bn__malloc_array(nout, sizeof *fill);
+    if (!fill)
+        goto fail;
+    memcpy(fill, b->vstart, nout * sizeof *fill);
+    for (size_t w = 0; w < npv; w++)
+        for (size_t i = inc_start[w]; i < inc_start[w + 1]; i++)
+            b->vpatch[fill[gid[i]]++] = inc[i] / 4;
+    st = BN_OK;
+    *out = b;
+    b = NULL;
+fail:
+    if (st != BN_OK)
+        bn_error_set(err, st, "out of memory baking %zu patches", np);
+    bn_bake_destroy(b);
+    free(order);
+    free(weld);
+    free(inc_start);
+    free(inc);
+    free(fill);
+    free(local);
+    free(gid);
+    return st;
+}
+
+void bn_bake_destroy(bn_bake *b)
+{
+    if (!b)
+        return;
+    free(b->pos);
+    free(b->corner_v);
+    free(b->vstart);
+    free(b->vpatch);
+    free(b);
+}
+
+size_t bn_bake_vertex_count(const bn_bake *b) { return b->nverts; }
+const double *bn_bake_vertex_positions(const bn_bake *b) { return b->pos; }
+size_t bn_bake_corner_vertex(const bn_bake *b, size_t patch, unsigned corner) { return b->corner_v[4 * patch + corner]; }
+
+void bn_bake_vertex_values(const bn_bake *b, const double *x, double *out)
+{
+    const bn_patch *patches = bn_scene_patches(b->scene, NULL);
+    for (size_t v = 0; v < b->nverts; v++) {
+        double s[3] = {0, 0, 0}, a = 0;
+        for (size_t i = b->vstart[v]; i < b->vstart[v + 1]; i++) {
+            size_t p = b->vpatch[i];
+            a += patches[p].area;
+            for (int c = 0; c < 3; c++)
+                s[c] += patches[p].area * x[3 * p + c];
+        }
+        for (int c = 0; c < 3; c++)
+            out[3 * v + c] = a > 0 ? s[c] / a : 0;
+    }
+}
+
+void bn_bake_interpolate(const bn_bake *b, const double *vv, size_t patch, const double p[3], double out[3])
+{
+    const bn_patch *pa = &bn_scene_patches(b->scene, NULL)[patch];
+    const double *pv = bn_scene_patch_vertices(b->scene, NULL);
+    const double *A = pv + 3 * pa->corner[0], *B = pv + 3 * pa->corner[1], *C = pv + 3 * pa->corner[2];
+    const double *val[4];
+    double w[4] = {0, 0, 0, 0};
+    for (unsigned c = 0; c < pa->ncorners; c++)
+        val[c] = vv + 3 * b->corner_v[4 * patch + c];
+    if (pa->ncorners == 3) {
+        /* Barycentric: sub-triangle areas along the normal. */
+        double e1[3], e2[3], q1[3], q2[3], cr[3], tot;
+        bn_v3_sub(B, A, e1);
+        bn_v3_sub(C, A, e2);
+        bn_v3_cross(e1, e2, cr);
+        tot = bn_v3_dot(cr, pa->normal);
+        bn_v3_sub(B, p, q1);
+        bn_v3_sub(C, p, q2);
+        bn_v3_cross(q1, q2, cr);
+        w[0] = tot != 0 ? bn_v3_dot(cr, pa->normal) / tot : 1.0 / 3;
+        bn_v3_sub(C, p, q1);
+        bn_v3_sub(A, p, q2);
+        bn_v3_cross(q1, q2, cr);
+        w[1] = tot != 0 ? bn_v3_dot(cr, pa->normal) / tot : 1.0 / 3;
+        w[0] = bn_clamp(w[0], 0, 1);
+        w[1] = bn_clamp(w[1], 0, 1 - w[0]);
+        w[2] = 1 - w[0] - w[1];
+    } else {
+        /* Inverse bilinear by Gauss-Newton on P(u,v) = (1-u)(1-v)A + u(1-v)B + uvC + (1-u)vD. */
+        const double *D = pv + 3 * pa->corner[3];
+        double u = 0.5, v = 0.5;
+        for (int it = 0; it < 12; it++) {
+            double P[3], Pu[3], Pv[3], r[3], a11, a12, a22, b1, b2, det;
+            for (int k = 0; k < 3; k++) {
+                P[k] = (1 - u) * (1 - v) * A[k] + u * (1 - v) * B[k] + u * v * C[k] + (1 - u) * v * D[k];
+                Pu[k] = (1 - v) * (B[k] - A[k]) + v * (C[k] - D[k]);
+                Pv[k] = (1 - u) * (D[k] - A[k]) + u * (C[k] - B[k]);
+                r[k] = p[k] - P[k];
+            }
+            a11 = bn_v3_dot(Pu, Pu);
+            a12 = bn_v3_dot(Pu, Pv);
+            a22 = bn_v3_dot(Pv, Pv);
+            b1 = bn_v3_dot(Pu, r);
+            b2 = bn_v3_dot(Pv, r);
+            det = a11 * a22 - a12 * a12;
+            if (!(det > 0))
+                break;
+            u = bn_clamp(u + (a22 * b1 - a12 * b2) / det, 0, 1);
+            v = bn_clamp(v + (a11 * b2 - a12 * b1) / det, 0, 1);
+        }
+        w[0] = (1 - u) * (1 - v);
+        w[1] = u * (1 - v);
+        w[2] = u * v;
+        w[3] = (1 - u) * v;
+    }
+    for (int c = 0; c < 3; c++) {
+        out[c] = 0;
+        for (unsigned k = 0; k < pa->ncorners; k++)
+            out[c] += w[k] * val[k][c];
+    }
+}

@@ -1,0 +1,192 @@
+/* Previews a person looks at first: 8-bit sRGB PNGs at an exposure, and the labelled contact
+ * sheet (row 1 one exposure for all layers, row 2 each layer normalised on its own). */
+#include "bounce/image.h"
+#include "adapters/adapters.h"
+#include "base/internal.h"
+
+#include <math.h>
+#include <string.h>
+
+#ifndef BN_FONT_DIR
+#define BN_FONT_DIR "/usr/share/fonts/truetype/dejavu"
+#endif
+
+unsigned char bn_tonemap_srgb8(double v, double ev)
+{
+    double x = v * exp2(ev), s;
+    if (!(x > 0))
+        return 0;   /* also NaN */
+    if (x >= 1)
+        return 255;
+    s = x <= 0.0031308 ? 12.92 * x : 1.055 * pow(x, 1 / 2.4) - 0.055;
+    return (unsigned char)floor(s * 255 + 0.5);
+}
+
+static int bn__cmp_float(const void *a, const void *b)
+{
+    float x = *(const float *)a, y = *(const float *)b;
+    return (x > y) - (x < y);
+}
+
+double bn_image_auto_exposure(const bn_image *img)
+{
+    size_t n = (size_t)img->width * img->height, m = 0;
+    float *lum = bn__malloc_array(n ? n : 1, sizeof(float));
+    double p, ev = 0;
+    if (!lum)
+        return 0;
+    for (size_t i = 0; i < n; i++) {
+        const float *c = img->rgb + 3 * i;
+        float y = 0.2126f * c[0] + 0.7152f * c[1] + 0.0722f * c[2];
+        if (y > 0 && isfinite(y))
+            lum[m++] = y;
+    }
+    if (m > 0) {
+        qsort(lum, m, sizeof *lum, bn__cmp_float);
+        p = lum[(size_t)floor(0.99 * (double)(m - 1))];
+        ev = p > 0 ? log2(0.9 / p) : 0;
+    }
+    free(lum);
+    return ev;
+}
+
+static void bn__to_rgb8(const bn_image *img, double ev, unsigned char *out)
+{
+    size_t n = (size_t)img->width * img->height * 3;
+    for (size_t i = 0; i < n; i++)
+        out[i] = bn_tonemap_srgb8(img->rgb[i], ev);
+}
+
+static bn_status bn__write_rgb8(const char *path, int w, int h, const unsigned char *rgb, const bn__label *labels,
+                                size_t nlabels, const bn_attr *attrs, size_t nattrs, int *labels_ok, bn_error *err)
+{
+    char *tmp = NULL;
+    bn_status st = bn__tmpname_reserve(path, &tmp, err);
+    if (st != BN_OK)
+        return st;
+    st = bn__oiio_write_rgb8(tmp, w, h, rgb, labels, nlabels, BN_FONT_DIR "/DejaVuSans.ttf", attrs, nattrs,
+                             labels_ok, err);
+    if (st != BN_OK) {
+        bn__tmpname_abort(tmp);
+        /* Messages name the file the user asked for, not the temporary one. */
+        if (err)
+            bn_error_set(err, st, "%s: cannot write the image (%s)", path, err->msg);
+        return st;
+    }
+    return bn__tmpname_commit(path, tmp, err);
+}
+
+bn_status bn_png_write(const char *path, const bn_image *img, double ev, const bn_attr *attrs, size_t nattrs,
+                       bn_error *err)
+{
+    unsigned char *rgb = bn__malloc_array((size_t)img->width * img->height, 3);
+    bn_status st;
+    int ok;
+    if (!rgb)
+        return bn_error_set(err, BN_ENOMEM, "out of memory");
+    bn__to_rgb8(img, ev, rgb);
+    st = bn__write_rgb8(path, img->width, img->height, rgb, NULL, 0, attrs, nattrs, &ok, err);
+    free(rgb);
+    return st;
+}
+
+/* Box-downsamples img by an integer factor k into a (ceil(w/k) x ceil(h/k)) linear image. */
+static bn_status bn__downsample(const bn_image *img, int k, bn_image *out, bn_error *err)
+{
+    int tw = (img->width + k - 1) / k, th = (img->height + k - 1) / k;
+    bn_status st = bn_image_alloc(out, tw, th, err);
+    if (st != BN_OK)
+        return st;
+    for (int ty = 0; ty < th; ty++)
+        for (int tx = 0; tx < tw; tx++) {
+            double s[3] = {0, 0, 0};
+            int n = 0;
+            for (int y = ty * k; y < ty * k + k && y < img->height; y++)
+                for (int x = tx * k; x < tx * k + k && x < img->width; x++, n++)
+                    for (int c = 0; c < 3; c++)
+                        s[c] += img->rgb[3 * ((size_t)y * img->width + x) + c];
+            for (int c = 0; c < 3; c++)
+                out->rgb[3 * ((size_t)ty * tw + tx) + c] = (float)(s[c] / n);
+        }
+    return BN_OK;
+}
+
+bn_status bn_contact_sheet_write(const char *path, const bn_layer *layers, size_t nlayers, double ev, int tile,
+                                 const bn_attr *attrs, size_t nattrs, const bn_log *log, bn_error *err)
+{
+    enum { MARGIN = 10, TITLE = 34, LABEL = 30, FONT = 20 };
+    int w, h, k, tw, th, sw, sh, ok = 1;
+    unsigned char *sheet = NULL;
+    bn__label *labels = NULL;
+    char (*text)[96] = NULL;
+    size_t nl = 0;
+    bn_status st = BN_OK;
+
+    if (nlayers == 0)
+        return bn_error_set(err, BN_EINTERNAL, "%s: no layers", path);
+    if (tile <= 0)
+        tile = 320;
+    w = layers[0].img->width;
+    h = layers[0].img->height;
+    k = (w + tile - 1) / tile;
+    tw = (w + k - 1) / k;
+    th = (h + k - 1) / k;
+    sw = MARGIN + (int)nlayers * (tw + MARGIN);
+    sh = TITLE + 2 * (LABEL + th + MARGIN);
+    sheet = bn__malloc_array((size_t)sw * sh, 3);
+    labels = bn__calloc(2 * nlayers + 2, sizeof *labels);
+    text = bn__calloc(2 * nlayers + 2, sizeof *text);
+    if (!sheet || !labels || !text) {
+        st = bn_error_set(err, BN_ENOMEM, "out of memory for the contact sheet");
+        goto done;
+    }
+    memset(sheet, 24, (size_t)sw * sh * 3);
+    snprintf(text[nl], sizeof text[nl], "row 1: every layer at %+.2f EV", ev);
+    labels[nl] = (bn__label){MARGIN, 24, 18, text[nl]};
+    nl++;
+    snprintf(text[nl], sizeof text[nl], "row 2: each layer normalised on its own");
+    labels[nl] = (bn__label){MARGIN + sw / 2, 24, 18, text[nl]};
+    nl++;
+    for (size_t l = 0; l < nlayers; l++) {
+        bn_image small;
+        unsigned char *rgb;
+        double own;
+        if (layers[l].img->width != w || layers[l].img->height != h) {
+            st = bn_error_set(err, BN_EINTERNAL, "%s: layers differ in size", path);
+            goto done;
+        }
+        st = bn__downsample(layers[l].img, k, &small, err);
+        if (st != BN_OK)
+            goto done;
+        rgb = bn__malloc_array((size_t)tw * th, 3);
+        if (!rgb) {
+            bn_image_free(&small);
+            st = bn_error_set(err, BN_ENOMEM, "out of memory");
+            goto done;
+        }
+        own = bn_image_auto_exposure(&small);
+        for (int row = 0; row < 2; row++) {
+            int x0 = MARGIN + (int)l * (tw + MARGIN), y0 = TITLE + row * (LABEL + th + MARGIN) + LABEL;
+            bn__to_rgb8(&small, row == 0 ? ev : own, rgb);
+            for (int y = 0; y < th; y++)
+                memcpy(sheet + 3 * ((size_t)(y0 + y) * sw + x0), rgb + 3 * (size_t)y * tw, 3 * (size_t)tw);
+            if (row == 0)
+                snprintf(text[nl], sizeof text[nl], "%s", layers[l].name);
+            else
+                snprintf(text[nl], sizeof text[nl], "%s %+.1f EV", layers[l].name, own);
+            labels[nl] = (bn__label){x0 + 2, y0 - 8, FONT, text[nl]};
+            nl++;
+        }
+        free(rgb);
+        bn_image_free(&small);
+    }
+    st = bn__write_rgb8(path, sw, sh, sheet, labels, nl, attrs, nattrs, &ok, err);
+    if (st == BN_OK && !ok)
+        bn_logf(log, BN_LOG_WARN, "%s: labels could not be drawn (font %s/DejaVuSans.ttf missing?); the sheet is "
+                "unlabelled", path, BN_FONT_DIR);
+done:
+    free(sheet);
+    free(labels);
+    free(text);
+    return st;
+}
