@@ -1,0 +1,166 @@
+/* bounce: a Monte Carlo path tracer over the scene's patches (Lambertian, one-sided), with every
+ * contribution binned by path length, and its statistical cross-check against radiosity.
+ *
+ * The tracer shares only the scene (geometry, materials) and the ray caster (rt.h) with the
+ * radiosity side: no form factors, no K, no solver. That independence is what makes it a check.
+ *
+ * Path length = the number of reflections. Bin k collects the paths with k reflections between
+ * the emitter and the point seen (camera) or estimated (patch), i.e. the term K^k E: bin 0 is the
+ * emission seen directly (E), bin 1 direct light (KE), bin 2 the first indirect bounce (K2E).
+ * A renderer whose "max depth" counts path segments from the eye renders bins 0 .. depth-1. */
+#ifndef BOUNCE_TRACE_H
+#define BOUNCE_TRACE_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+#include "bounce/scene.h"
+#include "bounce/rt.h"
+#include "bounce/image.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* How each reflection gathers emitted light. MIS (the default) is next-event estimation and
+ * cosine (BSDF) sampling combined by the power heuristic; the other two are single strategies,
+ * kept because all three must agree in expectation (the suite checks it). */
+typedef enum bn_trace_strategy { BN_TRACE_MIS, BN_TRACE_BSDF, BN_TRACE_NEE } bn_trace_strategy;
+const char *bn_trace_strategy_name(bn_trace_strategy s);   /* "mis", "bsdf", "nee" */
+
+typedef struct bn_trace_opts {
+    size_t   spp;          /* independent samples per pixel or per patch (default 64) */
+    int      bounces;      /* bins K^0 E .. K^bounces E kept separately (default 3, >= 0); longer paths go to `rest` */
+    int      rr_depth;     /* reflections before Russian roulette starts (default 3) */
+    int      max_depth;    /* safety cap on reflections (default 100000; with roulette's survival
+                              probability <= 0.95 a path reaches it with probability < 1e-2000) */
+    bn_trace_strategy strategy;  /* default MIS */
+    uint64_t seed;         /* streams are keyed by (seed, pixel or patch, sample index) */
+    int      quiet;        /* no progress bar */
+} bn_trace_opts;
+void bn_trace_opts_default(bn_trace_opts *o);
+
+/* Layers of a result: K^0 E .. K^bounces E (index k), then rest (bounces + 1), then L
+ * (bounces + 2). nlayers = bounces + 3. Names as `bounce bounces`: "E", "KE", "K2E", ... */
+int bn_trace_nlayers(int bounces);
+/* Writes the name of layer `layer` into buf ("E", "KE", "K3E", "rest", "L"); returns buf. */
+const char *bn_trace_layer_name(int layer, int bounces, char *buf, size_t size);
+
+/* Per-patch estimates of the patch-averaged outgoing radiance (W m^-2 sr^-1): points uniform on
+ * each patch, directions cosine-distributed, L_o = Le + rho E_irr / pi. Each patch's `spp`
+ * samples are independent, so se is the standard error of its mean from the samples themselves. */
+typedef struct bn_trace_patches {
+    size_t n;          /* patches */
+    int    bounces;
+    int    nlayers;    /* bounces + 3 */
+    size_t spp;
+    double *mean;      /* nlayers * n * 3: mean[(layer * n + i) * 3 + c] (owned) */
+    double *se;        /* same layout: standard error of the mean (owned) */
+    unsigned long long rays;   /* rays cast (intersection + shadow) */
+    double seconds;
+} bn_trace_patches;
+
+/* Estimates every patch of rt's scene (borrowed). Bit-identical for any thread count. Returns
+ * BN_ENOMEM, BN_ENUMERIC (a non-finite estimate, naming the patch), BN_EINTR/BN_ETERM. */
+bn_status bn_trace_patches_run(const bn_rt *rt, const bn_trace_opts *o, bn_trace_patches *out, bn_error *err);
+void bn_trace_patches_free(bn_trace_patches *r);   /* NULL or zeroed is a no-op */
+
+/* Power of one layer: watts[c] = pi * sum_i A_i mean_i (A in m^2 from the scene's unit), and its
+ * standard error se[c] = pi * sqrt(sum_i (A_i se_i)^2) (patches are independent). */
+void bn_trace_patches_power(const bn_scene *s, const bn_trace_patches *r, int layer, double watts[3], double se[3]);
+
+/* Camera images: per pixel the mean over `spp` independent jittered samples of the radiance leaving
+ * the surface seen, per layer, and the variance of that mean (unbiased sample variance / spp). */
+typedef struct bn_trace_image {
+    int width, height;
+    int bounces, nlayers;
+    size_t spp;
+    float *mean;   /* nlayers * width * height * 3, row 0 at the top (owned) */
+    float *var;    /* same layout (owned) */
+    unsigned long long rays;
+    double seconds;
+} bn_trace_image;
+/* Bytes the image buffers will take (checked before allocating). */
+size_t bn_trace_image_bytes(const bn_camera *cam, int bounces);
+bn_status bn_trace_image_run(const bn_rt *rt, const bn_camera *cam, const bn_trace_opts *o, bn_trace_image *out,
+                             bn_error *err);
+void bn_trace_image_free(bn_trace_image *r);
+
+/* ---- the cross-check: radiosity against the per-patch tracer ---- */
+
+/* Radiosity's terms in the tracer's layer layout: out[(l * n + i) * 3 + c] for l = 0 .. bounces
+ * (terms[l]), rest = L - sum of the terms, and L. terms: bounces + 1 arrays of N*3 (borrowed);
+ * out: nlayers * N * 3 (caller-allocated). */
+void bn_crosscheck_layers(const double *const *terms, const double *L, size_t n, int bounces, double *out);
+
+/* Discretisation tolerance from a second mesh level of the same scene (same faces, another patch
+ * size): for patch i of `fine` in face f, tol = |R_i - R'_m(i)| per layer and channel, with m(i) the
+ * patch of `other` in face f that contains i's centroid; power_tol = |P - P'| (watts) per layer and
+ * channel. Layers as bn_crosscheck_layers for both. Either level may be the finer one. */
+bn_status bn_crosscheck_mesh_tolerance(const bn_scene *fine, const double *fine_layers, const bn_scene *other,
+                                       const double *other_layers, int bounces, double *tol, double *power_tol,
+                                       bn_error *err);
+
+typedef struct bn_crosscheck_input {
+    const bn_scene *scene;             /* borrowed, meshed like the tracer's */
+    const bn_trace_patches *trace;     /* borrowed */
+    const double *rad;                 /* radiosity layers, nlayers * N * 3 (bn_crosscheck_layers) */
+    const double *tol;                 /* discretisation tolerance, same layout, or NULL for none */
+    const double *power_tol;           /* nlayers * 3 watts, or NULL */
+    double tol_scale;                  /* multiplies tol and power_tol (default 1) */
+    double rtol;                       /* a further relative allowance, |R| * rtol (default 0) */
+    double alpha;                      /* family-wise false-failure rate (default 0.01) */
+    int    worst;                      /* how many worst entries to keep (default 10) */
+} bn_crosscheck_input;
+void bn_crosscheck_input_default(bn_crosscheck_input *in);
+
+typedef struct bn_crosscheck_entry {
+    size_t patch;
+    int    layer, channel;
+    double radiosity, trace, se, tol;
+    double z;          /* (radiosity - trace) / se (raw) */
+    double z_excess;   /* max(0, |radiosity - trace| - tol) / se: what the verdict tests */
+} bn_crosscheck_entry;
+
+typedef struct bn_crosscheck_result {
+    size_t family;           /* tests: patches x layers x channels */
+    double alpha, alpha_each;   /* family-wise and per test (Sidak: 1 - (1 - alpha)^(1/family)) */
+    double crit;             /* two-sided Student-t bound at alpha_each, dof spp - 1 */
+    size_t within;           /* tests with z_excess <= crit */
+    size_t within_raw;       /* tests with |z| <= crit (no discretisation allowance) */
+    double worst_z;          /* largest z_excess */
+    double worst_z_raw;      /* largest |z| */
+    int    nworst;
+    bn_crosscheck_entry *worst;   /* nworst entries, largest z_excess first (owned) */
+    int    nlayers;
+    size_t *layer_within;    /* nlayers: tests within per layer (owned) */
+    double *layer_worst_z;   /* nlayers: largest z_excess per layer (owned) */
+    /* Power per layer (watts, per channel), both methods, and the test on it. */
+    double *power_rad, *power_pt, *power_se, *power_tol;   /* nlayers * 3 each (owned) */
+    size_t power_family;     /* layers x channels */
+    double power_crit;       /* two-sided normal bound, Sidak over power_family */
+    double power_worst_z;    /* largest max(0, |dP| - tol) / se */
+    /* Per surface (material): area-weighted L of both methods, and the tracer's standard error. */
+    size_t nsurfaces;
+    double *surf_area;                  /* nsurfaces, m^2 (owned) */
+    double *surf_rad, *surf_pt, *surf_se;   /* nsurfaces * 3 (owned) */
+    int    pass;
+} bn_crosscheck_result;
+
+/* Compares; fills *out (free with bn_crosscheck_result_free). */
+bn_status bn_crosscheck_compare(const bn_crosscheck_input *in, bn_crosscheck_result *out, bn_error *err);
+void bn_crosscheck_result_free(bn_crosscheck_result *r);
+/* Prints the report: per-layer shares, worst entries, power and per-surface tables, and the
+ * machine-readable verdict line, last:
+ * `verdict: pass|fail alpha=A family=F crit=C within=W/F worst_z=Z ... power_worst_z=P`. */
+void bn_crosscheck_print(const bn_crosscheck_input *in, const bn_crosscheck_result *r, FILE *fp);
+
+/* Statistics helpers (exposed for tests): the upper-tail quantile of the standard normal and of
+ * Student's t with `dof` degrees of freedom: returns x with P(X > x) = p, for p in (0, 0.5]. */
+double bn_normal_quantile_upper(double p);
+double bn_student_t_quantile_upper(double p, double dof);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

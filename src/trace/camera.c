@@ -1,0 +1,155 @@
+/* Camera images from the path tracer: per pixel and layer, the mean of `spp` independent samples
+ * (uniform jitter inside the pixel) of the radiance leaving the surface seen, and its variance. */
+#include "trace/trace_internal.h"
+#include "base/vec.h"
+
+#include <math.h>
+#include <omp.h>
+#include <string.h>
+
+size_t bn_trace_image_bytes(const bn_camera *cam, int bounces)
+{
+    size_t px, b;
+    if (cam->width <= 0 || cam->height <= 0 || bounces < 0)
+        return 0;
+    if (!bn__mul_size((size_t)cam->width, (size_t)cam->height, &px) ||
+        !bn__mul_size(px, (size_t)bn_trace_nlayers(bounces) * 3 * 2 * sizeof(float), &b))
+        return (size_t)-1;
+    return b;
+}
+
+bn_status bn_trace_image_run(const bn_rt *rt, const bn_camera *cam, const bn_trace_opts *o, bn_trace_image *out,
+                             bn_error *err)
+{
+    bn__tracer t;
+    bn_status st;
+    size_t npx, nl, bytes, done = 0;
+    unsigned long long rays = 0;
+    int stop = 0;
+    bn__progress prog;
+    double t0 = bn__now();
+    const int W = cam->width, H = cam->height;
+
+    memset(out, 0, sizeof *out);
+    bytes = bn_trace_image_bytes(cam, o->bounces);
+    if (bytes == 0)
+        return bn_error_set(err, BN_EUSAGE, "trace: image size %dx%d and %d bounces", W, H, o->bounces);
+    if (bytes == (size_t)-1 || bytes > bn__physical_memory() / 5 * 4)
+        return bn_error_set(err, BN_ENOMEM, "trace: %dx%d pixels x %d layers x (mean, variance) need %.3g GiB, more "
+                            "than 80%% of memory; use a smaller --size or fewer bounces (-n)", W, H,
+                            bn_trace_nlayers(o->bounces), (double)bytes / 1073741824.0);
+    st = bn__tracer_init(&t, rt, o, err);
+    if (st != BN_OK)
+        return st;
+    npx = (size_t)W * (size_t)H;
+    nl = (size_t)bn_trace_nlayers(o->bounces);
+    out->width = W;
+    out->height = H;
+    out->bounces = o->bounces;
+    out->nlayers = (int)nl;
+    out->spp = o->spp;
+    out->mean = bn__calloc(npx * nl * 3, sizeof(float));
+    out->var = bn__calloc(npx * nl * 3, sizeof(float));
+    if (!out->mean || !out->var) {
+        bn__tracer_free(&t);
+        bn_trace_image_free(out);
+        return bn_error_set(err, BN_ENOMEM, "trace: out of memory for %zu bytes of image layers", bytes);
+    }
+    bn__progress_begin(&prog, "path tracing", (size_t)H, o->quiet);
+
+#pragma omp parallel reduction(+ : rays)
+    {
+        size_t m = nl * 3;
+        double *sample = malloc(m * sizeof(double)), *mean = malloc(m * sizeof(double)),
+               *m2 = malloc(m * sizeof(double));
+        if (!sample || !mean || !m2) {
+#pragma omp atomic write
+            stop = 2;
+        }
+#pragma omp for schedule(dynamic, 1)
+        for (int row = 0; row < H; row++) {
+            int halt;
+#pragma omp atomic read
+            halt = stop;
+            if (!halt && bn_interrupted() != BN_OK) {
+#pragma omp atomic write
+                stop = 1;
+                halt = 1;
+            }
+            if (halt || !sample || !mean || !m2)
+                continue;
+            for (int col = 0; col < W; col++) {
+                size_t px = (size_t)row * (size_t)W + (size_t)col;
+                memset(mean, 0, m * sizeof(double));
+                memset(m2, 0, m * sizeof(double));
+                for (size_t s = 0; s < o->spp; s++) {
+                    bn__rng rng = bn__rng_make(o->seed ^ BN__TRACE_TAG_PIXEL, px, s);
+                    double org[3], dir[3], *L = sample + 3 * (nl - 1);
+                    double jx = o->spp == 1 ? 0.5 : bn__rng_uniform(&rng), jy = o->spp == 1 ? 0.5 : bn__rng_uniform(&rng);
+                    bn_hit h;
+                    memset(sample, 0, m * sizeof(double));
+                    bn_camera_ray(cam, col + jx, row + jy, org, dir);
+                    rays++;
+                    if (bn_rt_intersect(rt, org, dir, 0, INFINITY, &h) && h.front) {
+                        for (int c = 0; c < 3; c++)
+                            sample[c] = t.Le[3 * h.patch + c];
+                        bn__tracer_path(&t, h.p, h.patch, &rng, sample, &rays);
+                    }
+                    for (size_t l = 0; l + 1 < nl; l++)
+                        for (int c = 0; c < 3; c++)
+                            L[c] += sample[3 * l + c];
+                    bn__welford_add(mean, m2, sample, m, s + 1);
+                }
+                for (size_t l = 0; l < nl; l++)
+                    for (int c = 0; c < 3; c++) {
+                        size_t k = (l * npx + px) * 3 + (size_t)c, j = 3 * l + (size_t)c;
+                        double var = o->spp > 1 ? m2[j] / (double)(o->spp - 1) / (double)o->spp : 0;
+                        out->mean[k] = (float)mean[j];
+                        out->var[k] = (float)fmax(var, 0.0);
+                    }
+            }
+#pragma omp atomic
+            done++;
+            if (omp_get_thread_num() == 0) {
+                size_t d;
+#pragma omp atomic read
+                d = done;
+                bn__progress_update(&prog, d);
+            }
+        }
+        free(sample);
+        free(mean);
+        free(m2);
+    }
+    bn__progress_end(&prog);
+    bn__tracer_free(&t);
+    out->rays = rays;
+    out->seconds = bn__now() - t0;
+    if (stop) {
+        bn_status s = bn_interrupted();
+        bn_trace_image_free(out);
+        if (s != BN_OK)
+            return bn_error_set(err, s, "trace: interrupted");
+        return bn_error_set(err, BN_ENOMEM, "trace: out of memory for per-thread sample buffers");
+    }
+    for (size_t k = 0; k < npx * nl * 3; k++)
+        if (!isfinite(out->mean[k]) || !isfinite(out->var[k])) {
+            size_t l = k / (npx * 3), px = (k / 3) % npx;
+            char name[16];
+            bn_error_set(err, BN_ENUMERIC, "trace: non-finite value %g (variance %g) at pixel (%zu, %zu), layer %s",
+                         (double)out->mean[k], (double)out->var[k], px % (size_t)W, px / (size_t)W,
+                         bn_trace_layer_name((int)l, o->bounces, name, sizeof name));
+            bn_trace_image_free(out);
+            return BN_ENUMERIC;
+        }
+    return BN_OK;
+}
+
+void bn_trace_image_free(bn_trace_image *r)
+{
+    if (!r)
+        return;
+    free(r->mean);
+    free(r->var);
+    r->mean = r->var = NULL;
+}

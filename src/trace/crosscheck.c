@@ -1,0 +1,385 @@
+/* The cross-check of radiosity against the per-patch path tracer (Mitsuba 3's statistical tests).
+ *
+ * For patch i, layer l (E, KE, ..., rest, L) and channel c, with R the radiosity value, T +- s the
+ * tracer's mean and standard error and tau the discretisation tolerance (from a second mesh level):
+ *   z = (R - T) / s,   z_excess = max(0, |R - T| - tau) / s.
+ * The family of m = patches x layers x channels tests passes at family-wise level alpha when every
+ * z_excess <= t_{nu}(alpha_1 / 2), alpha_1 = 1 - (1 - alpha)^(1/m) (Sidak), nu = spp - 1. Because tau
+ * absorbs radiosity's own (deterministic) error, the verdict converges as spp grows instead of
+ * failing once the noise falls below the discretisation error. Powers per layer are tested the
+ * same way with the normal bound (they sum N independent patches). */
+#include "bounce/trace.h"
+#include "base/internal.h"
+#include "base/vec.h"
+
+#include <math.h>
+#include <string.h>
+
+/* A standard error of exactly 0 (the E layer is exact in both methods) becomes this share of the
+ * values compared: far below anything the methods resolve (form factors are checked to 1e-9). */
+#define BN__SE_FLOOR_REL 1e-9
+
+void bn_crosscheck_input_default(bn_crosscheck_input *in)
+{
+    memset(in, 0, sizeof *in);
+    in->tol_scale = 1;
+    in->alpha = 0.01;
+    in->worst = 10;
+}
+
+void bn_crosscheck_layers(const double *const *terms, const double *L, size_t n, int bounces, double *out)
+{
+    size_t nl = (size_t)bn_trace_nlayers(bounces);
+    double *rest = out + (size_t)(bounces + 1) * n * 3, *all = out + (nl - 1) * n * 3;
+    for (int k = 0; k <= bounces; k++)
+        memcpy(out + (size_t)k * n * 3, terms[k], n * 3 * sizeof(double));
+    for (size_t j = 0; j < n * 3; j++) {
+        double partial = 0;
+        for (int k = 0; k <= bounces; k++)
+            partial += terms[k][j];
+        rest[j] = L[j] - partial;   /* rest <- L - sum_{k<=n} K^k E */
+        all[j] = L[j];
+    }
+}
+
+/* Is point x inside convex patch p (in its plane), with a tolerance of `eps` scene units? */
+static int bn__inside(const bn_patch *p, const double *pv, const double x[3], double eps)
+{
+    for (unsigned k = 0; k < p->ncorners; k++) {
+        const double *a = pv + 3 * p->corner[k], *b = pv + 3 * p->corner[(k + 1) % p->ncorners];
+        double e[3], v[3], cr[3], len;
+        bn_v3_sub(b, a, e);
+        bn_v3_sub(x, a, v);
+        bn_v3_cross(e, v, cr);
+        len = bn_v3_len(e);
+        if (len > 0 && bn_v3_dot(cr, p->normal) / len < -eps)
+            return 0;
+    }
+    return 1;
+}
+
+static void bn__layer_power(const bn_scene *s, const double *layers, size_t n, size_t l, double w[3])
+{
+    size_t np;
+    const bn_patch *p = bn_scene_patches(s, &np);
+    double m = bn_unit_to_metres(bn_scene_unit(s));
+    w[0] = w[1] = w[2] = 0;
+    for (size_t i = 0; i < n; i++)
+        for (int c = 0; c < 3; c++)
+            w[c] += p[i].area * m * m * layers[(l * n + i) * 3 + (size_t)c];
+    for (int c = 0; c < 3; c++)
+        w[c] *= BN_PI;
+}
+
+bn_status bn_crosscheck_mesh_tolerance(const bn_scene *fine, const double *fine_layers, const bn_scene *other,
+                                       const double *other_layers, int bounces, double *tol, double *power_tol,
+                                       bn_error *err)
+{
+    size_t nf, nf2, n, n2, npv2;
+    const bn_patch *p = bn_scene_patches(fine, &n), *q = bn_scene_patches(other, &n2);
+    const double *qv = bn_scene_patch_vertices(other, &npv2);
+    size_t *start, *order, nl = (size_t)bn_trace_nlayers(bounces);
+    double lo[3], hi[3], eps;
+    bn_scene_faces(fine, &nf);
+    bn_scene_faces(other, &nf2);
+    if (nf != nf2)
+        return bn_error_set(err, BN_EINPUT, "crosscheck: the two mesh levels have different faces (%zu and %zu)", nf,
+                            nf2);
+    bn_scene_bounds(fine, lo, hi);
+    eps = 1e-9 * fmax(bn_v3_dist(lo, hi), 1e-300);   /* containment slack: rounding, far below any patch */
+    /* Bucket the other level's patches by face (counting sort). */
+    start = bn__calloc(nf + 1, sizeof(size_t));
+    order = bn__malloc_array(n2 ? n2 : 1, sizeof(size_t));
+    if (!start || !order) {
+        free(start);
+        free(order);
+        return bn_error_set(err, BN_ENOMEM, "crosscheck: out of memory mapping %zu patches", n2);
+    }
+    for (size_t j = 0; j < n2; j++)
+        start[q[j].face + 1]++;
+    for (size_t f = 0; f < nf; f++)
+        start[f + 1] += start[f];
+    {
+        size_t *fill = bn__malloc_array(nf ? nf : 1, sizeof(size_t));
+        if (!fill) {
+            free(start);
+            free(order);
+            return bn_error_set(err, BN_ENOMEM, "crosscheck: out of memory");
+        }
+        memcpy(fill, start, nf * sizeof(size_t));
+        for (size_t j = 0; j < n2; j++)
+            order[fill[q[j].face]++] = j;
+        free(fill);
+    }
+    for (size_t i = 0; i < n; i++) {
+        size_t f = p[i].face, best = (size_t)-1;
+        double bestd = INFINITY;
+        for (size_t k = start[f]; k < start[f + 1]; k++) {
+            size_t j = order[k];
+            double d;
+            if (bn__inside(&q[j], qv, p[i].centroid, eps)) {
+                best = j;
+                break;
+            }
+            d = bn_v3_dist(q[j].centroid, p[i].centroid);   /* fallback: nearest centroid in the face */
+            if (d < bestd) {
+                bestd = d;
+                best = j;
+            }
+        }
+        if (best == (size_t)-1) {
+            free(start);
+            free(order);
+            return bn_error_set(err, BN_EINPUT, "crosscheck: face %zu has no patch on the second mesh level", f);
+        }
+        for (size_t l = 0; l < nl; l++)
+            for (int c = 0; c < 3; c++)
+                tol[(l * n + i) * 3 + (size_t)c] =
+                    fabs(fine_layers[(l * n + i) * 3 + (size_t)c] - other_layers[(l * n2 + best) * 3 + (size_t)c]);
+    }
+    free(start);
+    free(order);
+    if (power_tol)
+        for (size_t l = 0; l < nl; l++) {
+            double a[3], b[3];
+            bn__layer_power(fine, fine_layers, n, l, a);
+            bn__layer_power(other, other_layers, n2, l, b);
+            for (int c = 0; c < 3; c++)
+                power_tol[3 * l + (size_t)c] = fabs(a[c] - b[c]);
+        }
+    return BN_OK;
+}
+
+static int bn__entry_cmp(const void *a, const void *b)
+{
+    const bn_crosscheck_entry *x = a, *y = b;
+    if (x->z_excess != y->z_excess)
+        return x->z_excess < y->z_excess ? 1 : -1;
+    if (fabs(x->z) != fabs(y->z))
+        return fabs(x->z) < fabs(y->z) ? 1 : -1;
+    if (x->patch != y->patch)
+        return x->patch < y->patch ? -1 : 1;
+    if (x->layer != y->layer)
+        return x->layer < y->layer ? -1 : 1;
+    return x->channel - y->channel;
+}
+
+/* z and z_excess of one comparison; se 0 is floored (see BN__SE_FLOOR_REL). */
+static void bn__ztest(double R, double T, double se, double tol, double *z, double *zx)
+{
+    double floor_ = BN__SE_FLOOR_REL * fmax(fabs(R), fabs(T));
+    double s = fmax(se, floor_), d = R - T;
+    if (s > 0) {
+        *z = d / s;
+        *zx = fmax(0.0, fabs(d) - tol) / s;
+    } else {   /* both values exactly 0 */
+        *z = 0;
+        *zx = 0;
+    }
+}
+
+bn_status bn_crosscheck_compare(const bn_crosscheck_input *in, bn_crosscheck_result *out, bn_error *err)
+{
+    const bn_trace_patches *tr = in->trace;
+    size_t n = tr->n, nl = (size_t)tr->nlayers, np, nmat, m;
+    const bn_patch *patches = bn_scene_patches(in->scene, &np);
+    double unit = bn_unit_to_metres(bn_scene_unit(in->scene));
+    bn_crosscheck_entry *all;
+    double scale = in->tol_scale > 0 ? in->tol_scale : 1;
+
+    memset(out, 0, sizeof *out);
+    bn_scene_materials(in->scene, &nmat);
+    if (np != n)
+        return bn_error_set(err, BN_EINPUT, "crosscheck: the tracer has %zu patches, the scene %zu", n, np);
+    if (!(in->alpha > 0 && in->alpha < 1))
+        return bn_error_set(err, BN_EUSAGE, "crosscheck: alpha %g is not in (0, 1)", in->alpha);
+    m = n * nl * 3;
+    all = bn__malloc_array(m ? m : 1, sizeof *all);
+    out->nlayers = (int)nl;
+    out->layer_within = bn__calloc(nl, sizeof(size_t));
+    out->layer_worst_z = bn__calloc(nl, sizeof(double));
+    out->power_rad = bn__calloc(nl * 3, sizeof(double));
+    out->power_pt = bn__calloc(nl * 3, sizeof(double));
+    out->power_se = bn__calloc(nl * 3, sizeof(double));
+    out->power_tol = bn__calloc(nl * 3, sizeof(double));
+    out->nsurfaces = nmat;
+    out->surf_area = bn__calloc(nmat ? nmat : 1, sizeof(double));
+    out->surf_rad = bn__calloc(nmat ? nmat * 3 : 1, sizeof(double));
+    out->surf_pt = bn__calloc(nmat ? nmat * 3 : 1, sizeof(double));
+    out->surf_se = bn__calloc(nmat ? nmat * 3 : 1, sizeof(double));
+    if (!all || !out->layer_within || !out->layer_worst_z || !out->power_rad || !out->power_pt || !out->power_se ||
+        !out->power_tol || !out->surf_area || !out->surf_rad || !out->surf_pt || !out->surf_se) {
+        free(all);
+        bn_crosscheck_result_free(out);
+        return bn_error_set(err, BN_ENOMEM, "crosscheck: out of memory for %zu comparisons", m);
+    }
+    out->family = m;
+    out->alpha = in->alpha;
+    /* alpha_1 = 1 - (1 - alpha)^(1/m), by expm1/log1p to keep its digits when it is tiny. */
+    out->alpha_each = -expm1(log1p(-in->alpha) / (double)(m ? m : 1));
+    out->crit = bn_student_t_quantile_upper(out->alpha_each / 2, tr->spp > 1 ? (double)(tr->spp - 1) : 1);
+    for (size_t l = 0; l < nl; l++)
+        for (size_t i = 0; i < n; i++)
+            for (int c = 0; c < 3; c++) {
+                size_t k = (l * n + i) * 3 + (size_t)c;
+                bn_crosscheck_entry *e = &all[k];
+                double R = in->rad[k], T = tr->mean[k];
+                e->patch = i;
+                e->layer = (int)l;
+                e->channel = c;
+                e->radiosity = R;
+                e->trace = T;
+                e->se = tr->se[k];
+                e->tol = (in->tol ? scale * in->tol[k] : 0) + in->rtol * fabs(R);
+                bn__ztest(R, T, e->se, e->tol, &e->z, &e->z_excess);
+                if (!isfinite(R) || !isfinite(T)) {
+                    e->z = e->z_excess = INFINITY;
+                }
+                if (e->z_excess <= out->crit) {
+                    out->within++;
+                    out->layer_within[l]++;
+                }
+                if (fabs(e->z) <= out->crit)
+                    out->within_raw++;
+                out->worst_z = fmax(out->worst_z, e->z_excess);
+                out->worst_z_raw = fmax(out->worst_z_raw, fabs(e->z));
+                out->layer_worst_z[l] = fmax(out->layer_worst_z[l], e->z_excess);
+            }
+    qsort(all, m, sizeof *all, bn__entry_cmp);
+    out->nworst = in->worst < 0 ? 0 : (in->worst > (int)m ? (int)m : in->worst);
+    out->worst = bn__malloc_array(out->nworst ? (size_t)out->nworst : 1, sizeof *all);
+    if (!out->worst) {
+        free(all);
+        bn_crosscheck_result_free(out);
+        return bn_error_set(err, BN_ENOMEM, "crosscheck: out of memory");
+    }
+    memcpy(out->worst, all, (size_t)out->nworst * sizeof *all);
+    free(all);
+
+    /* Powers. */
+    out->power_family = nl * 3;
+    out->power_crit = bn_normal_quantile_upper(-expm1(log1p(-in->alpha) / (double)out->power_family) / 2);
+    for (size_t l = 0; l < nl; l++) {
+        double w[3], se[3];
+        bn__layer_power(in->scene, in->rad, n, l, out->power_rad + 3 * l);
+        bn_trace_patches_power(in->scene, tr, (int)l, w, se);
+        for (int c = 0; c < 3; c++) {
+            size_t k = 3 * l + (size_t)c;
+            double z, zx;
+            out->power_pt[k] = w[c];
+            out->power_se[k] = se[c];
+            out->power_tol[k] = (in->power_tol ? scale * in->power_tol[k] : 0) + in->rtol * fabs(out->power_rad[k]);
+            bn__ztest(out->power_rad[k], w[c], se[c], out->power_tol[k], &z, &zx);
+            if (!isfinite(out->power_rad[k]) || !isfinite(w[c]))
+                zx = INFINITY;
+            out->power_worst_z = fmax(out->power_worst_z, zx);
+        }
+    }
+    /* Per surface: area-weighted L (the last layer). */
+    {
+        size_t l = nl - 1;
+        for (size_t i = 0; i < n; i++) {
+            size_t s = patches[i].material;
+            double a = patches[i].area * unit * unit;
+            out->surf_area[s] += a;
+            for (int c = 0; c < 3; c++) {
+                size_t k = (l * n + i) * 3 + (size_t)c;
+                out->surf_rad[3 * s + (size_t)c] += a * in->rad[k];
+                out->surf_pt[3 * s + (size_t)c] += a * tr->mean[k];
+                out->surf_se[3 * s + (size_t)c] += (a * tr->se[k]) * (a * tr->se[k]);
+            }
+        }
+        for (size_t s = 0; s < nmat; s++)
+            for (int c = 0; c < 3; c++) {
+                double a = out->surf_area[s];
+                size_t k = 3 * s + (size_t)c;
+                out->surf_rad[k] = a > 0 ? out->surf_rad[k] / a : 0;
+                out->surf_pt[k] = a > 0 ? out->surf_pt[k] / a : 0;
+                out->surf_se[k] = a > 0 ? sqrt(out->surf_se[k]) / a : 0;
+            }
+    }
+    out->pass = out->within == out->family && out->power_worst_z <= out->power_crit;
+    return BN_OK;
+}
+
+void bn_crosscheck_result_free(bn_crosscheck_result *r)
+{
+    if (!r)
+        return;
+    free(r->worst);
+    free(r->layer_within);
+    free(r->layer_worst_z);
+    free(r->power_rad);
+    free(r->power_pt);
+    free(r->power_se);
+    free(r->power_tol);
+    free(r->surf_area);
+    free(r->surf_rad);
+    free(r->surf_pt);
+    free(r->surf_se);
+    memset(r, 0, sizeof *r);
+}
+
+static const char bn__ch[3] = {'R', 'G', 'B'};
+
+void bn_crosscheck_print(const bn_crosscheck_input *in, const bn_crosscheck_result *r, FILE *fp)
+{
+    const bn_trace_patches *tr = in->trace;
+    int bounces = tr->bounces;
+    size_t n = tr->n, nmat;
+    const bn_material *mats = bn_scene_materials(in->scene, &nmat);
+    const bn_patch *patches = bn_scene_patches(in->scene, &n);
+    char name[16];
+
+    fprintf(fp, "\nper-patch test: %zu patches x %d layers x 3 channels = %zu tests; alpha %g (family-wise), "
+                "Sidak per test %.3g, bound |z| <= %.3f (Student t, %zu dof)\n",
+            n, r->nlayers, r->family, r->alpha, r->alpha_each, r->crit, tr->spp - 1);
+    fprintf(fp, "  z = (radiosity - trace) / se;  z_excess = max(0, |radiosity - trace| - tol) / se,  tol = "
+                "%g x discretisation estimate%s\n",
+            in->tol_scale, in->rtol > 0 ? " + rtol |radiosity|" : "");
+    fprintf(fp, "  %-6s %12s %12s\n", "layer", "within", "worst z_exc");
+    for (int l = 0; l < r->nlayers; l++)
+        fprintf(fp, "  %-6s %11.2f%% %12.3f\n", bn_trace_layer_name(l, bounces, name, sizeof name),
+                100.0 * (double)r->layer_within[l] / (double)(n * 3), r->layer_worst_z[l]);
+    fprintf(fp, "  all    %11.2f%% %12.3f   (without the discretisation allowance: %.2f%% within, worst |z| %.3f)\n",
+            100.0 * (double)r->within / (double)r->family, r->worst_z, 100.0 * (double)r->within_raw / (double)r->family,
+            r->worst_z_raw);
+    if (r->nworst > 0) {
+        fprintf(fp, "\nworst entries:\n  %7s %6s %-6s %2s %13s %13s %11s %11s %9s %9s\n", "patch", "face", "layer", "ch",
+                "radiosity", "trace", "se", "tol", "z", "z_excess");
+        for (int k = 0; k < r->nworst; k++) {
+            const bn_crosscheck_entry *e = &r->worst[k];
+            fprintf(fp, "  %7zu %6zu %-6s %2c %13.6g %13.6g %11.4g %11.4g %9.3f %9.3f\n", e->patch,
+                    patches[e->patch].face, bn_trace_layer_name(e->layer, bounces, name, sizeof name),
+                    bn__ch[e->channel], e->radiosity, e->trace, e->se, e->tol, e->z, e->z_excess);
+        }
+    }
+    fprintf(fp, "\npower per layer, pi sum_i A_i L_i (W; R G B), radiosity | trace +- se | (rad - trace)/se | tol:\n");
+    for (int l = 0; l < r->nlayers; l++) {
+        const double *a = r->power_rad + 3 * l, *b = r->power_pt + 3 * l, *s = r->power_se + 3 * l,
+                     *t = r->power_tol + 3 * l;
+        fprintf(fp, "  %-5s %11.5g %11.5g %11.5g | %11.5g %11.5g %11.5g +- %9.3g %9.3g %9.3g | %7.2f %7.2f %7.2f | "
+                    "%8.3g %8.3g %8.3g\n",
+                bn_trace_layer_name(l, bounces, name, sizeof name), a[0], a[1], a[2], b[0], b[1], b[2], s[0], s[1],
+                s[2], s[0] > 0 ? (a[0] - b[0]) / s[0] : 0.0, s[1] > 0 ? (a[1] - b[1]) / s[1] : 0.0,
+                s[2] > 0 ? (a[2] - b[2]) / s[2] : 0.0, t[0], t[1], t[2]);
+    }
+    fprintf(fp, "  power test: %zu tests, bound %.3f (normal, Sidak), worst z_excess %.3f\n", r->power_family,
+            r->power_crit, r->power_worst_z);
+    fprintf(fp, "\nper surface (material), area-weighted L (W m^-2 sr^-1; R G B), radiosity | trace +- se | "
+                "relative difference:\n");
+    for (size_t s = 0; s < r->nsurfaces; s++) {
+        const double *a = r->surf_rad + 3 * s, *b = r->surf_pt + 3 * s, *e = r->surf_se + 3 * s;
+        if (r->surf_area[s] <= 0)
+            continue;
+        fprintf(fp, "  %-12s %9.4g m2 | %10.5g %10.5g %10.5g | %10.5g %10.5g %10.5g +- %8.2g %8.2g %8.2g | %+7.3f%% "
+                    "%+7.3f%% %+7.3f%%\n",
+                mats[s].name, r->surf_area[s], a[0], a[1], a[2], b[0], b[1], b[2], e[0], e[1], e[2],
+                b[0] != 0 ? 100 * (a[0] - b[0]) / b[0] : 0.0, b[1] != 0 ? 100 * (a[1] - b[1]) / b[1] : 0.0,
+                b[2] != 0 ? 100 * (a[2] - b[2]) / b[2] : 0.0);
+    }
+    fprintf(fp, "\nverdict: %s alpha=%g family=%zu crit=%.4f within=%zu/%zu worst_z=%.4f worst_z_raw=%.4f "
+                "tol_scale=%g rtol=%g power_family=%zu power_crit=%.4f power_worst_z=%.4f spp=%zu bounces=%d\n",
+            r->pass ? "pass" : "fail", r->alpha, r->family, r->crit, r->within, r->family, r->worst_z, r->worst_z_raw,
+            in->tol_scale, in->rtol, r->power_family, r->power_crit, r->power_worst_z, tr->spp, bounces);
+}

@@ -1,0 +1,159 @@
+/* Per-patch estimates of the patch-averaged outgoing radiance, binned by path length.
+ *
+ * For patch i: L_i = (1/A_i) integral over A_i of L_o(x) dx, L_o = Le + rho/pi * integral L_in cos dw.
+ * Each sample draws x uniform on the patch and one path from it (path.c); samples are independent
+ * (stream keyed by (seed, patch, sample)), so the standard error comes from the samples alone. */
+#include "trace/trace_internal.h"
+#include "base/vec.h"
+
+#include <math.h>
+#include <omp.h>
+#include <string.h>
+
+bn_status bn_trace_patches_run(const bn_rt *rt, const bn_trace_opts *o, bn_trace_patches *out, bn_error *err)
+{
+    bn__tracer t;
+    bn_status st;
+    size_t n, nl, bytes;
+    unsigned long long rays = 0;
+    size_t done = 0;
+    int stop = 0;
+    bn__progress prog;
+    double t0 = bn__now();
+
+    memset(out, 0, sizeof *out);
+    st = bn__tracer_init(&t, rt, o, err);
+    if (st != BN_OK)
+        return st;
+    n = t.np;
+    nl = (size_t)bn_trace_nlayers(o->bounces);
+    if (!bn__mul_size(n, nl * 3 * sizeof(double), &bytes)) {
+        bn__tracer_free(&t);
+        return bn_error_set(err, BN_ENOMEM, "trace: %zu patches x %zu layers overflows", n, nl);
+    }
+    out->n = n;
+    out->bounces = o->bounces;
+    out->nlayers = (int)nl;
+    out->spp = o->spp;
+    out->mean = bn__calloc(n * nl * 3, sizeof(double));
+    out->se = bn__calloc(n * nl * 3, sizeof(double));
+    if (!out->mean || !out->se) {
+        bn__tracer_free(&t);
+        bn_trace_patches_free(out);
+        return bn_error_set(err, BN_ENOMEM, "trace: out of memory for 2 x %zu bytes of per-patch estimates", bytes);
+    }
+    bn__progress_begin(&prog, "path tracing", n, o->quiet);
+
+#pragma omp parallel reduction(+ : rays)
+    {
+        size_t m = nl * 3;
+        double *sample = malloc(m * sizeof(double)), *mean = malloc(m * sizeof(double)),
+               *m2 = malloc(m * sizeof(double));
+        if (!sample || !mean || !m2) {
+#pragma omp atomic write
+            stop = 2;
+        }
+#pragma omp for schedule(dynamic, 1)
+        for (size_t i = 0; i < n; i++) {
+            int halt;
+#pragma omp atomic read
+            halt = stop;
+            if (!halt && bn_interrupted() != BN_OK) {
+#pragma omp atomic write
+                stop = 1;
+                halt = 1;
+            }
+            if (halt || !sample || !mean || !m2)
+                continue;
+            memset(mean, 0, m * sizeof(double));
+            memset(m2, 0, m * sizeof(double));
+            for (size_t s = 0; s < o->spp; s++) {
+                bn__rng rng = bn__rng_make(o->seed ^ BN__TRACE_TAG_PATCH, i, s);
+                double x[3], u1 = bn__rng_uniform(&rng), u2 = bn__rng_uniform(&rng), u3 = bn__rng_uniform(&rng);
+                double *L = sample + 3 * (nl - 1);
+                memset(sample, 0, m * sizeof(double));
+                bn__tracer_patch_point(&t, i, u1, u2, u3, x);
+                /* Bin 0: the patch's own emission, seen directly. */
+                for (int c = 0; c < 3; c++)
+                    sample[c] = t.Le[3 * i + c];
+                bn__tracer_path(&t, x, i, &rng, sample, &rays);
+                for (size_t l = 0; l + 1 < nl; l++)
+                    for (int c = 0; c < 3; c++)
+                        L[c] += sample[3 * l + c];
+                bn__welford_add(mean, m2, sample, m, s + 1);
+            }
+            for (size_t l = 0; l < nl; l++)
+                for (int c = 0; c < 3; c++) {
+                    size_t k = (l * n + i) * 3 + (size_t)c, j = 3 * l + (size_t)c;
+                    double var = o->spp > 1 ? m2[j] / (double)(o->spp - 1) : 0;
+                    out->mean[k] = mean[j];
+                    out->se[k] = sqrt(fmax(var, 0.0) / (double)o->spp);
+                }
+#pragma omp atomic
+            done++;
+            if (omp_get_thread_num() == 0) {
+                size_t d;
+#pragma omp atomic read
+                d = done;
+                bn__progress_update(&prog, d);
+            }
+        }
+        free(sample);
+        free(mean);
+        free(m2);
+    }
+    bn__progress_end(&prog);
+    bn__tracer_free(&t);
+    out->rays = rays;
+    out->seconds = bn__now() - t0;
+    if (stop) {
+        bn_status s = bn_interrupted();
+        bn_trace_patches_free(out);
+        if (s != BN_OK)
+            return bn_error_set(err, s, "trace: interrupted");
+        return bn_error_set(err, BN_ENOMEM, "trace: out of memory for per-thread sample buffers");
+    }
+    for (size_t l = 0; l < nl; l++)
+        for (size_t i = 0; i < n; i++)
+            for (int c = 0; c < 3; c++) {
+                size_t k = (l * n + i) * 3 + (size_t)c;
+                if (!isfinite(out->mean[k]) || !isfinite(out->se[k])) {
+                    char name[16];
+                    bn_error_set(err, BN_ENUMERIC, "trace: non-finite estimate %g (se %g) for patch %zu, layer %s, "
+                                 "channel %d", out->mean[k], out->se[k], i,
+                                 bn_trace_layer_name((int)l, o->bounces, name, sizeof name), c);
+                    bn_trace_patches_free(out);
+                    return BN_ENUMERIC;
+                }
+            }
+    return BN_OK;
+}
+
+void bn_trace_patches_free(bn_trace_patches *r)
+{
+    if (!r)
+        return;
+    free(r->mean);
+    free(r->se);
+    r->mean = r->se = NULL;
+}
+
+void bn_trace_patches_power(const bn_scene *s, const bn_trace_patches *r, int layer, double watts[3], double se[3])
+{
+    size_t np;
+    const bn_patch *p = bn_scene_patches(s, &np);
+    double m = bn_unit_to_metres(bn_scene_unit(s)), m2 = m * m;
+    double v[3] = {0, 0, 0};
+    watts[0] = watts[1] = watts[2] = 0;
+    for (size_t i = 0; i < r->n && i < np; i++)
+        for (int c = 0; c < 3; c++) {
+            size_t k = ((size_t)layer * r->n + i) * 3 + (size_t)c;
+            double a = p[i].area * m2;
+            watts[c] += a * r->mean[k];
+            v[c] += (a * r->se[k]) * (a * r->se[k]);
+        }
+    for (int c = 0; c < 3; c++) {
+        watts[c] *= BN_PI;
+        se[c] = BN_PI * sqrt(v[c]);
+    }
+}

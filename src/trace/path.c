@@ -1,0 +1,272 @@
+/* One path through the patches, binned by its number of reflections.
+ *
+ * L_o(x) = Le(x) + rho(x)/pi * integral over the hemisphere of L_i(x, w) cos(theta) dw. A path with
+ * k reflections between the emitter and the first vertex contributes to the term K^k E. Each
+ * reflection gathers emission by next-event estimation (a point on an emitter, chosen by power)
+ * and by cosine sampling, combined with the power heuristic (Veach 1997, ch. 9):
+ *   w_nee = p_nee^2 / (p_nee^2 + p_bsdf^2),  p_nee = P(j) / A_j * d^2 / cos_y,  p_bsdf = cos_x / pi.
+ * For a Lambertian surface both weighted contributions are bounded by rho Le / 2, so sample means
+ * are close to normal. Russian roulette after rr_depth reflections survives with probability
+ * min(0.95, max_c rho_c) and divides the throughput by it (unbiased; pbrt-v4 8.2). */
+#include "trace/trace_internal.h"
+#include "base/vec.h"
+
+#include <math.h>
+#include <string.h>
+
+const char *bn_trace_strategy_name(bn_trace_strategy s)
+{
+    switch (s) {
+    case BN_TRACE_MIS: return "mis";
+    case BN_TRACE_BSDF: return "bsdf";
+    case BN_TRACE_NEE: return "nee";
+    }
+    return "?";
+}
+
+void bn_trace_opts_default(bn_trace_opts *o)
+{
+    memset(o, 0, sizeof *o);
+    o->spp = 64;
+    o->bounces = 3;
+    o->rr_depth = 3;
+    o->max_depth = 100000;
+    o->strategy = BN_TRACE_MIS;
+    o->seed = 1;
+}
+
+int bn_trace_nlayers(int bounces) { return bounces + 3; }
+
+const char *bn_trace_layer_name(int layer, int bounces, char *buf, size_t size)
+{
+    if (layer == bounces + 1)
+        snprintf(buf, size, "rest");
+    else if (layer > bounces + 1)
+        snprintf(buf, size, "L");
+    else if (layer == 0)
+        snprintf(buf, size, "E");
+    else if (layer == 1)
+        snprintf(buf, size, "KE");
+    else
+        snprintf(buf, size, "K%dE", layer);
+    return buf;
+}
+
+static double bn__tri_area(const double *a, const double *b, const double *c)
+{
+    double e1[3], e2[3], n[3];
+    bn_v3_sub(b, a, e1);
+    bn_v3_sub(c, a, e2);
+    bn_v3_cross(e1, e2, n);
+    return 0.5 * bn_v3_len(n);
+}
+
+bn_status bn__tracer_init(bn__tracer *t, const bn_rt *rt, const bn_trace_opts *o, bn_error *err)
+{
+    size_t npv;
+    double W = 0;
+    memset(t, 0, sizeof *t);
+    t->rt = rt;
+    t->scene = bn_rt_scene(rt);
+    t->patches = bn_scene_patches(t->scene, &t->np);
+    t->pv = bn_scene_patch_vertices(t->scene, &npv);
+    t->o = *o;
+    t->nbins = o->bounces + 2;
+    t->eps = bn_rt_epsilon(rt);
+    if (o->spp < 1 || o->bounces < 0 || o->rr_depth < 1 || o->max_depth < 1)
+        return bn_error_set(err, BN_EUSAGE, "trace: spp %zu, bounces %d, rr_depth %d, max_depth %d: each must be >= 1 "
+                            "(bounces >= 0)", o->spp, o->bounces, o->rr_depth, o->max_depth);
+    t->rho = bn__malloc_array(t->np, 3 * sizeof(double));
+    t->Le = bn__malloc_array(t->np, 3 * sizeof(double));
+    t->tri0 = bn__malloc_array(t->np, sizeof(double));
+    t->pdf_area = bn__calloc(t->np, sizeof(double));
+    t->em_patch = bn__malloc_array(t->np, sizeof(size_t));
+    t->em_cdf = bn__malloc_array(t->np, sizeof(double));
+    if (!t->rho || !t->Le || !t->tri0 || !t->pdf_area || !t->em_patch || !t->em_cdf) {
+        bn__tracer_free(t);
+        return bn_error_set(err, BN_ENOMEM, "trace: out of memory for the tables of %zu patches", t->np);
+    }
+    bn_scene_patch_reflectance(t->scene, t->rho);
+    bn_scene_patch_emission(t->scene, t->Le);
+    for (size_t i = 0; i < t->np; i++) {
+        const bn_patch *p = &t->patches[i];
+        const double *a = t->pv + 3 * p->corner[0], *b = t->pv + 3 * p->corner[1], *c = t->pv + 3 * p->corner[2];
+        double w;
+        if (p->ncorners == 4) {
+            double a0 = bn__tri_area(a, b, c), a1 = bn__tri_area(a, c, t->pv + 3 * p->corner[3]);
+            t->tri0[i] = a0 + a1 > 0 ? a0 / (a0 + a1) : 1;
+        } else {
+            t->tri0[i] = 1;
+        }
+        w = p->area * (t->Le[3 * i] + t->Le[3 * i + 1] + t->Le[3 * i + 2]);
+        if (w > 0) {
+            t->em_patch[t->nem] = i;
+            W += w;
+            t->em_cdf[t->nem++] = W;
+        }
+    }
+    for (size_t e = 0; e < t->nem; e++) {
+        size_t i = t->em_patch[e];
+        double w = t->patches[i].area * (t->Le[3 * i] + t->Le[3 * i + 1] + t->Le[3 * i + 2]);
+        t->em_cdf[e] /= W;
+        t->pdf_area[i] = (w / W) / t->patches[i].area;
+    }
+    if (t->nem)
+        t->em_cdf[t->nem - 1] = 1;
+    return BN_OK;
+}
+
+void bn__tracer_free(bn__tracer *t)
+{
+    free(t->rho);
+    free(t->Le);
+    free(t->tri0);
+    free(t->pdf_area);
+    free(t->em_patch);
+    free(t->em_cdf);
+    memset(t, 0, sizeof *t);
+}
+
+void bn__tracer_patch_point(const bn__tracer *t, size_t p, double u1, double u2, double u3, double x[3])
+{
+    const bn_patch *pa = &t->patches[p];
+    const double *a = t->pv + 3 * pa->corner[0], *b, *c;
+    double s, wa, wb, wc;
+    if (pa->ncorners == 4 && u3 >= t->tri0[p]) {
+        b = t->pv + 3 * pa->corner[2];
+        c = t->pv + 3 * pa->corner[3];
+    } else {
+        b = t->pv + 3 * pa->corner[1];
+        c = t->pv + 3 * pa->corner[2];
+    }
+    /* Uniform on a triangle: s = sqrt(u1) (Shirley and Chiu). */
+    s = sqrt(u1);
+    wa = 1 - s;
+    wb = s * (1 - u2);
+    wc = s * u2;
+    for (int k = 0; k < 3; k++)
+        x[k] = wa * a[k] + wb * b[k] + wc * c[k];
+}
+
+/* Orthonormal basis around a unit n (Duff et al. 2017). */
+static void bn__onb(const double n[3], double t1[3], double t2[3])
+{
+    double sign = copysign(1.0, n[2]);
+    double a = -1.0 / (sign + n[2]);
+    double b = n[0] * n[1] * a;
+    t1[0] = 1 + sign * n[0] * n[0] * a;
+    t1[1] = sign * b;
+    t1[2] = -sign * n[0];
+    t2[0] = b;
+    t2[1] = sign + n[1] * n[1] * a;
+    t2[2] = -n[1];
+}
+
+static size_t bn__pick_emitter(const bn__tracer *t, double u)
+{
+    size_t lo = 0, hi = t->nem - 1;
+    while (lo < hi) {
+        size_t mid = lo + (hi - lo) / 2;
+        if (u < t->em_cdf[mid])
+            hi = mid;
+        else
+            lo = mid + 1;
+    }
+    return t->em_patch[lo];
+}
+
+static double bn__max3(const double *v) { return fmax(v[0], fmax(v[1], v[2])); }
+
+void bn__tracer_path(const bn__tracer *t, const double x0[3], size_t p0, bn__rng *rng, double *bins,
+                     unsigned long long *rays)
+{
+    double beta[3] = {1, 1, 1}, x[3];
+    size_t p = p0;
+    const int use_nee = t->o.strategy != BN_TRACE_BSDF && t->nem > 0;
+    const int use_hit = t->o.strategy != BN_TRACE_NEE;
+    const int mis = t->o.strategy == BN_TRACE_MIS;
+    memcpy(x, x0, sizeof x);
+    for (int r = 1;; r++) {
+        const double *rho = t->rho + 3 * p, *n = t->patches[p].normal;
+        double bx[3], o[3], t1[3], t2[3], w[3], u1, u2, cz, rr = bn__max3(rho);
+        int bin = r <= t->o.bounces ? r : t->o.bounces + 1;
+        bn_hit h;
+        if (rr <= 0 || r > t->o.max_depth)
+            break;
+        if (r > t->o.rr_depth) {
+            double q = fmin(0.95, rr);
+            if (bn__rng_uniform(rng) >= q)
+                break;
+            bn_v3_scale(beta, 1.0 / q, beta);
+        }
+        /* bx: throughput after the reflection at x (f cos / p_bsdf = rho for cosine sampling). */
+        for (int c = 0; c < 3; c++)
+            bx[c] = beta[c] * rho[c];
+        bn_v3_madd(x, t->eps, n, o);
+        if (use_nee) {
+            /* Next-event estimation: a point y on emitter j. */
+            double ua = bn__rng_uniform(rng), ub = bn__rng_uniform(rng), uc = bn__rng_uniform(rng),
+                   ud = bn__rng_uniform(rng);
+            size_t j = bn__pick_emitter(t, ua);
+            double y[3], d[3], dist2, dist, cx, cy;
+            bn__tracer_patch_point(t, j, ub, uc, ud, y);
+            bn_v3_sub(y, x, d);
+            dist2 = bn_v3_dot(d, d);
+            dist = sqrt(dist2);
+            if (dist > 0) {
+                bn_v3_scale(d, 1.0 / dist, d);
+                cx = bn_v3_dot(n, d);
+                cy = -bn_v3_dot(t->patches[j].normal, d);
+                if (cx > 0 && cy > 0) {
+                    double pl = t->pdf_area[j] * dist2 / cy, pb = cx / BN_PI;
+                    double wgt = mis ? pl * pl / (pl * pl + pb * pb) : 1.0;
+                    double ye[3], sd[3], len;
+                    /* Shadow ray between offset end points, stopping short by eps. */
+                    bn_v3_madd(y, t->eps, t->patches[j].normal, ye);
+                    bn_v3_sub(ye, o, sd);
+                    len = bn_v3_len(sd);
+                    (*rays)++;
+                    if (len > 2 * t->eps) {
+                        bn_v3_scale(sd, 1.0 / len, sd);
+                        if (!bn_rt_occluded(t->rt, o, sd, 0, len - t->eps)) {
+                            double g = wgt * cx / (BN_PI * pl);
+                            for (int c = 0; c < 3; c++)
+                                bins[3 * bin + c] += bx[c] * t->Le[3 * j + c] * g;
+                        }
+                    }
+                }
+            }
+        }
+        /* Cosine sampling: w = (r cos phi, r sin phi, sqrt(1 - u1)) around n. */
+        u1 = bn__rng_uniform(rng);
+        u2 = bn__rng_uniform(rng);
+        {
+            double rad = sqrt(u1), phi = 2 * BN_PI * u2;
+            double lx = rad * cos(phi), ly = rad * sin(phi);
+            cz = sqrt(fmax(0.0, 1 - u1));
+            bn__onb(n, t1, t2);
+            for (int k = 0; k < 3; k++)
+                w[k] = lx * t1[k] + ly * t2[k] + cz * n[k];
+        }
+        (*rays)++;
+        if (cz <= 0 || !bn_rt_intersect(t->rt, o, w, 0, INFINITY, &h) || !h.front)
+            break;   /* escaped, grazing, or the black back of a surface */
+        if (use_hit) {
+            const double *le = t->Le + 3 * h.patch;
+            if (le[0] > 0 || le[1] > 0 || le[2] > 0) {
+                double wgt = 1.0;
+                if (mis && t->pdf_area[h.patch] > 0) {
+                    double cy = -bn_v3_dot(t->patches[h.patch].normal, w);
+                    double dd = bn_v3_dist(h.p, x);
+                    double pb = cz / BN_PI, pl = cy > 0 ? t->pdf_area[h.patch] * dd * dd / cy : INFINITY;
+                    wgt = isinf(pl) ? 0.0 : pb * pb / (pb * pb + pl * pl);
+                }
+                for (int c = 0; c < 3; c++)
+                    bins[3 * bin + c] += bx[c] * le[c] * wgt;
+            }
+        }
+        memcpy(beta, bx, sizeof beta);
+        memcpy(x, h.p, sizeof x);
+        p = h.patch;
+    }
+}

@@ -1,0 +1,54 @@
+/* The path tracer's shared core: sampling tables over the patches and one path, binned by length. */
+#ifndef BOUNCE_TRACE_INTERNAL_H
+#define BOUNCE_TRACE_INTERNAL_H
+
+#include "bounce/trace.h"
+#include "base/internal.h"
+
+/* What a path needs of the scene, in double, built once per run. */
+typedef struct bn__tracer {
+    const bn_rt    *rt;
+    const bn_scene *scene;
+    const bn_patch *patches;
+    size_t          np;
+    const double   *pv;          /* patch vertices, xyz */
+    double         *rho, *Le;    /* N*3 each */
+    double         *tri0;        /* per patch: share of its area in the first triangle (1 for triangles) */
+    /* Emitter sampling: patch j chosen with probability A_j sum_c Le_jc / W, then a uniform point. */
+    size_t          nem;
+    size_t         *em_patch;    /* nem */
+    double         *em_cdf;      /* nem, last = 1 */
+    double         *pdf_area;    /* N: P(choose j) / A_j, 0 for non-emitters (area density of NEE points) */
+    double          eps;         /* ray offset, scene units */
+    bn_trace_opts   o;
+    int             nbins;       /* bounces + 2: K^0 E .. K^bounces E, rest */
+} bn__tracer;
+
+bn_status bn__tracer_init(bn__tracer *t, const bn_rt *rt, const bn_trace_opts *o, bn_error *err);
+void bn__tracer_free(bn__tracer *t);
+
+/* A uniform point on patch p from two uniforms. */
+void bn__tracer_patch_point(const bn__tracer *t, size_t p, double u1, double u2, double u3, double x[3]);
+
+/* Radiance reflected at x (on the front of patch p) towards any direction, for a Lambertian
+ * surface: one path starting with the reflection at x (reflection 1), with NEE/BSDF/MIS at each
+ * vertex and Russian roulette after rr_depth. Adds each contribution (already weighted) to
+ * bins[3 * min(k, bounces + 1) + c], k = reflections. *rays counts rays cast. */
+void bn__tracer_path(const bn__tracer *t, const double x[3], size_t p, bn__rng *rng, double *bins,
+                     unsigned long long *rays);
+
+/* Running mean and M2 (Welford) of one sample vector of `m` doubles. */
+static inline void bn__welford_add(double *mean, double *m2, const double *x, size_t m, size_t count_after)
+{
+    for (size_t j = 0; j < m; j++) {
+        double d = x[j] - mean[j];
+        mean[j] += d / (double)count_after;
+        m2[j] += d * (x[j] - mean[j]);
+    }
+}
+
+/* Stream tags, so the patch and camera estimators never share a stream. */
+#define BN__TRACE_TAG_PATCH 0x7061746368ULL   /* "patch" */
+#define BN__TRACE_TAG_PIXEL 0x706978656cULL   /* "pixel" */
+
+#endif
