@@ -27,6 +27,33 @@ typedef enum bn_stop_reason {
 } bn_stop_reason;
 const char *bn_stop_reason_name(bn_stop_reason r);
 
+/* What the stop test compares with tol * ||E||_inf (and atol). */
+typedef enum bn_solve_stop {
+    BN_SOLVE_STOP_DEFAULT,    /* residual for jacobi and gauss-seidel, bound for neumann */
+    BN_SOLVE_STOP_RESIDUAL,   /* ||E - (I - K) L||_inf */
+    BN_SOLVE_STOP_BOUND       /* the a posteriori error bound ||r||_inf / (1 - ||K||_inf): a guarantee
+                                 on ||L - L*||_inf (the series' tail bound); falls back to the residual
+                                 when ||K||_inf >= 1 */
+} bn_solve_stop;
+const char *bn_solve_stop_name(bn_solve_stop s);   /* "default", "residual", "bound" */
+
+/* One row of the convergence table, handed to the monitor after every iteration (row 0 is the
+ * initial guess L0 = E, before any sweep). Norms are infinity norms over patches. */
+typedef struct bn_solve_row {
+    size_t iteration;
+    double residual_max;      /* ||E - (I - K) L||_inf over all channels */
+    double residual_rms;      /* RMS over all N*3 entries */
+    double residual_ch[3];    /* per channel max */
+    double change;            /* ||L_k - L_(k-1)||_inf (0 at row 0) */
+    double bound;             /* a priori ||K||^(s k + 1) / (1 - ||K||) ||E|| (s sweeps per iteration);
+                                 inf when ||K||_inf >= 1 */
+    double error_bound;       /* a posteriori ||r||_inf / (1 - ||K||_inf) >= ||L - L*||_inf; inf if ||K|| >= 1 */
+    double seconds;           /* since the solve started */
+} bn_solve_row;
+/* Called after every row; L (N*3) is borrowed for the call only. A nonzero return stops the
+ * solve (reason BN_STOP_NONE, status BN_EINTR). */
+typedef int (*bn_solve_monitor_fn)(void *user, const bn_solve_row *row, const double *L);
+
 typedef struct bn_solve_opts {
     bn_solve_method method;   /* default gauss-seidel */
     double tol;               /* relative to ||E||_inf over all channels (default 1e-6) */
@@ -37,6 +64,19 @@ typedef struct bn_solve_opts {
     FILE  *log;               /* convergence table (CSV), NULL for none */
     const char *log_header;   /* `# key=value` lines written before the table (provenance) */
     int    quiet;
+    /* Added by the solver issue: */
+    bn_solve_stop stop;       /* default BN_SOLVE_STOP_DEFAULT */
+    double singular_threshold;/* refuse when the spectral radius (lower bound) or ||K||_inf with it
+                                 is >= 1 - threshold (default 1e-6: above the row-sum error of F
+                                 stored in float, 2^-24 per entry, ~6e-8 per row; raise it to the
+                                 row-sum error delta of F when F is less accurate: a solve with
+                                 1 - ||K|| < delta has an error bound delta / (1 - ||K||) above 100%) */
+    double divergence;        /* diverged (growth) when residual > divergence * initial (default 1e5) */
+    size_t power_iter;        /* power-iteration steps for the spectral radius, at most (default 100) */
+    size_t max_memory;        /* direct: bytes allowed for the dense copy; 0 = 80% of physical memory */
+    bn_solve_monitor_fn monitor;  /* NULL: none (the CSV log is written anyway when log is set) */
+    void  *monitor_user;
+    bn_log log_sink;          /* notes (prediction, warnings); NULL fn: warnings to stderr */
 } bn_solve_opts;
 void bn_solve_opts_default(bn_solve_opts *o);
 
@@ -53,6 +93,17 @@ typedef struct bn_solve_result {
     double spectral_radius;   /* power-iteration estimate of rho(K) */
     size_t predicted_iterations;  /* from the spectral radius, before iterating */
     double seconds;
+    /* Added by the solver issue: */
+    bn_solve_method method;
+    double spectral_radius_lower; /* Collatz-Wielandt lower bound from the power iteration (rigorous) */
+    size_t power_iterations;      /* steps the estimate took */
+    double residual_ch[3];        /* final per-channel max residual */
+    double change;                /* last ||L_k - L_(k-1)||_inf */
+    double error_bound;           /* a posteriori ||r|| / (1 - ||K||) (inf if ||K||_inf >= 1) */
+    double seconds_analyse;       /* norms, power iteration, checks */
+    double seconds_iterate;       /* the iterations (or the factorisation for direct) */
+    double seconds_terms;         /* the per-bounce terms K^k E */
+    size_t bad_patch;             /* NaN/Inf: the first patch where it appeared (else SIZE_MAX) */
 } bn_solve_result;
 
 /* Solves (I - K) L = E. E: N*3 (borrowed). Fills *res (free with bn_solve_result_free). Returns
@@ -61,6 +112,21 @@ typedef struct bn_solve_result {
 bn_status bn_solve(const bn_transport *k, const double *E, const bn_solve_opts *o, bn_solve_result *res,
                    bn_error *err);
 void bn_solve_result_free(bn_solve_result *res);
+
+/* Bytes the direct solve needs for its dense double copy of I - K (N^2 * 8 + pivots). */
+size_t bn_solve_direct_bytes(size_t n);
+
+/* Power iteration on each channel's K_c = diag(rho_c) F from x = 1: *estimate = the largest
+ * ||K_c x||/||x|| once it settles (|change| <= 1e-3 (1 - estimate)) or after max_steps, *lower
+ * = the Collatz-Wielandt bound max_c min_i (K_c x)_i / x_i <= spectral radius (x >= 0). */
+bn_status bn_solve_spectral_radius(const bn_transport *k, size_t max_steps, double *estimate, double *lower,
+                                   size_t *steps, bn_error *err);
+
+/* Fills terms[k] = K^k E for k = 0..nterms-1 (caller-allocated, N*3 each). */
+void bn_solve_terms(const bn_transport *k, const double *E, int nterms, double **terms);
+
+/* The column names of the convergence table. */
+#define BN_SOLVE_LOG_COLUMNS "iteration,residual_max,residual_rms,residual_max_R,residual_max_G,residual_max_B,change,bound,error_bound,seconds"
 
 #ifdef __cplusplus
 }

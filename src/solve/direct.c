@@ -1,0 +1,104 @@
+/* The reference solve: (I - diag(rho_c) F) L_c = E_c per channel by LU with partial pivoting
+ * (LAPACK dgesv through LAPACKE) on a dense double copy, column-major. When every patch is grey
+ * (rho_R = rho_G = rho_B) one factorisation serves all three channels. Memory: N^2 doubles,
+ * estimated and checked before allocating. Anderson et al., LAPACK Users' Guide, 3rd ed. */
+#include "solve/solve_internal.h"
+#include "base/internal.h"
+
+#include <lapacke.h>
+#include <string.h>
+
+size_t bn_solve_direct_bytes(size_t n)
+{
+    size_t nn, a;
+    if (!bn__mul_size(n, n, &nn) || !bn__mul_size(nn, sizeof(double), &a))
+        return SIZE_MAX;
+    return a + n * (sizeof(lapack_int) + 3 * sizeof(double));
+}
+
+/* A <- I - diag(rho_c) F in column-major order (A[j n + i] = delta_ij - rho_ic F_ij), by tiles so
+ * that reads of F's rows and writes of A's columns both stay in cache. */
+static void bn__direct_fill(const bn_transport *k, const double *rho, int c, size_t n, double *A)
+{
+    const size_t B = 64;
+    long nt = (long)((n + B - 1) / B);
+#pragma omp parallel for schedule(static)
+    for (long ti = 0; ti < nt; ti++) {
+        size_t i0 = (size_t)ti * B, i1 = i0 + B < n ? i0 + B : n;
+        for (size_t j0 = 0; j0 < n; j0 += B) {
+            size_t j1 = j0 + B < n ? j0 + B : n;
+            for (size_t i = i0; i < i1; i++)
+                for (size_t j = j0; j < j1; j++)
+                    A[j * n + i] = (i == j ? 1.0 : 0.0) - rho[3 * i + (size_t)c] * bn_transport_F(k, i, j);
+        }
+    }
+}
+
+static bn_status bn__direct_solve(const bn__solve_ctx *ctx, double *L, int *singular, bn_error *err)
+{
+    size_t n = ctx->n, need = bn_solve_direct_bytes(n), limit = ctx->o->max_memory;
+    const double *rho = bn_transport_rho(ctx->k);
+    double *A, *b;
+    lapack_int *ipiv, info;
+    int grey = 1;
+    bn_status st = BN_OK;
+    *singular = 0;
+    if (limit == 0)
+        limit = bn__physical_memory() / 10 * 8;
+    if (n > (size_t)INT32_MAX)
+        return bn_error_set(err, BN_ENOMEM, "direct solve: %zu patches exceed LAPACK's 32-bit index", n);
+    if (need == SIZE_MAX || (limit && need > limit))
+        return bn_error_set(err, BN_ENOMEM,
+                            "direct solve: %zu patches need %.3g GiB for the dense double copy of I - K "
+                            "(N^2 x 8 bytes), above the limit of %.3g GiB; use an iterative --method "
+                            "(jacobi, gauss-seidel, neumann) or fewer patches",
+                            n, (double)need / 1073741824.0, (double)limit / 1073741824.0);
+    if (n == 0)
+        return BN_OK;
+    A = bn__malloc_array(n * n, sizeof(double));
+    b = bn__malloc_array(3 * n, sizeof(double));
+    ipiv = bn__malloc_array(n, sizeof(lapack_int));
+    if (!A || !b || !ipiv) {
+        st = bn_error_set(err, BN_ENOMEM, "direct solve: cannot allocate %.3g GiB for %zu patches",
+                          (double)need / 1073741824.0, n);
+        goto done;
+    }
+    for (size_t i = 0; i < n && grey; i++)
+        grey = rho[3 * i] == rho[3 * i + 1] && rho[3 * i] == rho[3 * i + 2];
+    for (int c = 0; c < 3; c++) {
+        int nrhs = grey ? 3 : 1;
+        bn__direct_fill(ctx->k, rho, c, n, A);
+        /* b <- E_c (column-major n x nrhs) */
+        for (size_t i = 0; i < n; i++)
+            for (int q = 0; q < nrhs; q++)
+                b[(size_t)q * n + i] = ctx->E[3 * i + (size_t)(c + q)];
+        info = LAPACKE_dgesv(LAPACK_COL_MAJOR, (lapack_int)n, nrhs, A, (lapack_int)n, ipiv, b, (lapack_int)n);
+        if (info > 0) {
+            *singular = 1;
+            st = bn_error_set(err, BN_ENUMERIC,
+                              "direct solve: I - K is singular (channel %c: U(%d,%d) = 0 in the LU factorisation)",
+                              "RGB"[c], (int)info, (int)info);
+            goto done;
+        }
+        if (info < 0) {
+            st = bn_error_set(err, BN_EINTERNAL, "direct solve: LAPACKE_dgesv argument %d is invalid", (int)-info);
+            goto done;
+        }
+        for (size_t i = 0; i < n; i++)
+            for (int q = 0; q < nrhs; q++)
+                L[3 * i + (size_t)(c + q)] = b[(size_t)q * n + i];
+        if (grey)
+            break;
+        if (bn_interrupted() != BN_OK) {
+            st = bn_error_set(err, bn_interrupted(), "direct solve interrupted");
+            goto done;
+        }
+    }
+done:
+    free(A);
+    free(b);
+    free(ipiv);
+    return st;
+}
+
+const bn_solver_type bn__solver_direct = {"direct", 0, 0, NULL, NULL, NULL, bn__direct_solve};
