@@ -220,6 +220,16 @@ static int bn__resolve_index(const char *tok, size_t nverts, size_t *out)
 bn_status bn__read_obj(const char *path, bn__soup *s, const bn_log *log, bn_error *err)
 {
     FILE *fp = fopen(path, "rb");
+    bn_status st;
+    if (!fp)
+        return bn_error_set(err, BN_EIO, "%s: cannot open: %s", path, strerror(errno));
+    st = bn__read_obj_stream(fp, path, s, log, err);
+    fclose(fp);
+    return st;
+}
+
+bn_status bn__read_obj_stream(FILE *fp, const char *path, bn__soup *s, const bn_log *log, bn_error *err)
+{
     char *buf = NULL, *dir;
     size_t cap = 0, *fv = NULL, fv_cap = 0;
     unsigned line = 0;
@@ -227,14 +237,10 @@ bn_status bn__read_obj(const char *path, bn__soup *s, const bn_log *log, bn_erro
     bn_status st = BN_OK;
     const char *slash;
 
-    if (!fp)
-        return bn_error_set(err, BN_EIO, "%s: cannot open: %s", path, strerror(errno));
     slash = strrchr(path, '/');
     dir = bn__strdup(path);
-    if (!dir) {
-        fclose(fp);
+    if (!dir)
         return bn_error_set(err, BN_ENOMEM, "out of memory");
-    }
     dir[slash ? (size_t)(slash - path) + 1 : 0] = '\0';
 
     while (st == BN_OK && getline(&buf, &cap, fp) >= 0) {
@@ -357,6 +363,5 @@ bn_status bn__read_obj(const char *path, bn__soup *s, const bn_log *log, bn_erro
     free(buf);
     free(fv);
     free(dir);
-    fclose(fp);
     return st;
 }

@@ -30,6 +30,8 @@ int bn__soup_add_material(bn__soup *s, const bn_material *m);
 
 /* Readers. `path` is used in messages. */
 bn_status bn__read_obj(const char *path, bn__soup *out, const bn_log *log, bn_error *err);
+/* The same from an open stream (fuzzing reads from memory); mtllib names resolve beside `path`. */
+bn_status bn__read_obj_stream(FILE *fp, const char *path, bn__soup *out, const bn_log *log, bn_error *err);
 /* PLY and OFF through OpenMesh (src/adapters). */
 bn_status bn__read_openmesh(const char *path, bn__soup *out, const bn_log *log, bn_error *err);
 
