@@ -1,0 +1,274 @@
+/* Errors on common ground: per patch (same mesh, or the reference's patches by centroid lookup),
+ * per surface (area-weighted means per material) and in the total reflected power. */
+#include "study/study_internal.h"
+#include "base/internal.h"
+
+#include <math.h>
+#include <string.h>
+
+void bn__study_peak_reset(void)
+{
+    /* Writing 5 to clear_refs resets VmHWM to the current RSS (Linux >= 4.0). */
+    FILE *f = fopen("/proc/self/clear_refs", "w");
+    if (f) {
+        fputs("5", f);
+        fclose(f);
+    }
+}
+
+double bn__study_peak_mb(void)
+{
+    FILE *f = fopen("/proc/self/status", "r");
+    char line[256];
+    double kb = NAN;
+    if (!f)
+        return NAN;
+    while (fgets(line, sizeof line, f))
+        if (strncmp(line, "VmHWM:", 6) == 0) {
+            kb = strtod(line + 6, NULL);
+            break;
+        }
+    fclose(f);
+    return kb / 1024.0;
+}
+
+void bn__study_surface_means(const bn_scene *s, const double *L, size_t nsurf, double *out)
+{
+    size_t n;
+    const bn_patch *p = bn_scene_patches(s, &n);
+    double *area = bn__calloc(nsurf ? nsurf : 1, sizeof(double));
+    memset(out, 0, nsurf * 3 * sizeof(double));
+    if (!area)
+        return;
+    for (size_t i = 0; i < n; i++) {
+        size_t m = p[i].material;
+        if (m >= nsurf)
+            continue;
+        area[m] += p[i].area;
+        for (int c = 0; c < 3; c++)
+            out[3 * m + (size_t)c] += p[i].area * L[3 * i + (size_t)c];   /* sum A_i L_i */
+    }
+    for (size_t m = 0; m < nsurf; m++)
+        for (int c = 0; c < 3; c++)
+            out[3 * m + (size_t)c] = area[m] > 0 ? out[3 * m + (size_t)c] / area[m] : 0;
+    free(area);
+}
+
+void bn__study_reflected_power(const bn_scene *s, const double *L, const double *E, double out[3])
+{
+    size_t n;
+    const bn_patch *p = bn_scene_patches(s, &n);
+    double u = bn_unit_to_metres(bn_scene_unit(s));
+    out[0] = out[1] = out[2] = 0;
+    for (size_t i = 0; i < n; i++)
+        for (int c = 0; c < 3; c++)
+            out[c] += p[i].area * u * u * (L[3 * i + (size_t)c] - E[3 * i + (size_t)c]);
+    for (int c = 0; c < 3; c++)
+        out[c] *= 3.14159265358979323846;   /* P = pi sum_i A_i (L_i - E_i) */
+}
+
+bn_status bn__study_ref_init(bn__study_ref *r, const bn_scene *s, const double *L, size_t nsurf, bn_error *err)
+{
+    memset(r, 0, sizeof *r);
+    r->scene = s;
+    bn_scene_patches(s, &r->n);
+    r->nsurf = nsurf;
+    r->L = L;
+    r->E = bn__malloc_array(3 * r->n + 1, sizeof(double));
+    r->surf_mean = bn__malloc_array(3 * nsurf + 1, sizeof(double));
+    if (!r->E || !r->surf_mean) {
+        bn__study_ref_free(r);
+        return bn_error_set(err, BN_ENOMEM, "study: out of memory for the reference (%zu patches)", r->n);
+    }
+    bn_scene_patch_emission(s, r->E);
+    bn__study_surface_means(s, L, nsurf, r->surf_mean);
+    bn__study_reflected_power(s, L, r->E, r->power);
+    for (size_t i = 0; i < 3 * r->n; i++)
+        r->norm_L = fmax(r->norm_L, fabs(L[i]));
+    return BN_OK;
+}
+
+void bn__study_ref_free(bn__study_ref *r)
+{
+    free(r->E);
+    free(r->surf_mean);
+    memset(r, 0, sizeof *r);
+}
+
+/* Is x (in the patch's plane) inside the convex patch? Edges tested with a tolerance relative to
+ * the edge length, so centroids on a shared edge still find a patch. */
+static int bn__inside(const double *pv, const bn_patch *p, const double x[3])
+{
+    for (unsigned k = 0; k < p->ncorners; k++) {
+        const double *a = pv + 3 * p->corner[k], *b = pv + 3 * p->corner[(k + 1) % p->ncorners];
+        double e[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, d[3] = {x[0] - a[0], x[1] - a[1], x[2] - a[2]};
+        double cr[3] = {e[1] * d[2] - e[2] * d[1], e[2] * d[0] - e[0] * d[2], e[0] * d[1] - e[1] * d[0]};
+        double side = cr[0] * p->normal[0] + cr[1] * p->normal[1] + cr[2] * p->normal[2];
+        double len2 = e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
+        if (side < -1e-9 * len2)   /* (e x d) . n < 0: x is right of the edge, outside */
+            return 0;
+    }
+    return 1;
+}
+
+/* map[i] = the patch of s holding reference patch i's centroid (in the same face). */
+static bn_status bn__lookup(const bn_scene *ref, const bn_scene *s, size_t *map, bn_error *err)
+{
+    size_t nr, ns, nfr, nfs, nv;
+    const bn_patch *pr = bn_scene_patches(ref, &nr), *ps = bn_scene_patches(s, &ns);
+    const double *pv = bn_scene_patch_vertices(s, &nv);
+    size_t *start, *order;
+    bn_scene_faces(ref, &nfr);
+    bn_scene_faces(s, &nfs);
+    if (nfr != nfs)
+        return bn_error_set(err, BN_EINTERNAL, "study: the reference has %zu faces, the setting %zu", nfr, nfs);
+    start = bn__calloc(nfs + 1, sizeof(size_t));
+    order = bn__malloc_array(ns + 1, sizeof(size_t));
+    if (!start || !order) {
+        free(start);
+        free(order);
+        return bn_error_set(err, BN_ENOMEM, "study: out of memory for the centroid lookup");
+    }
+    for (size_t j = 0; j < ns; j++)   /* patches bucketed by face (counting sort) */
+        start[ps[j].face + 1]++;
+    for (size_t f = 0; f < nfs; f++)
+        start[f + 1] += start[f];
+    {
+        size_t *fill = bn__calloc(nfs + 1, sizeof(size_t));
+        if (!fill) {
+            free(start);
+            free(order);
+            return bn_error_set(err, BN_ENOMEM, "study: out of memory for the centroid lookup");
+        }
+        for (size_t j = 0; j < ns; j++)
+            order[start[ps[j].face] + fill[ps[j].face]++] = j;
+        free(fill);
+    }
+    for (size_t i = 0; i < nr; i++) {
+        size_t f = pr[i].face, best = SIZE_MAX;
+        double bestd = INFINITY;
+        for (size_t q = start[f]; q < start[f + 1]; q++) {
+            size_t j = order[q];
+            double d2 = 0;
+            if (bn__inside(pv, &ps[j], pr[i].centroid)) {
+                best = j;
+                break;
+            }
+            for (int c = 0; c < 3; c++)
+                d2 += (ps[j].centroid[c] - pr[i].centroid[c]) * (ps[j].centroid[c] - pr[i].centroid[c]);
+            if (d2 < bestd) {   /* fallback: the nearest centroid in the face */
+                bestd = d2;
+                best = j;
+            }
+        }
+        if (best == SIZE_MAX) {
+            free(start);
+            free(order);
+            return bn_error_set(err, BN_EINTERNAL, "study: face %zu has no patch in the setting's mesh", f);
+        }
+        map[i] = best;
+    }
+    free(start);
+    free(order);
+    return BN_OK;
+}
+
+static int bn__same_mesh(const bn_scene *a, const bn_scene *b)
+{
+    size_t na, nb;
+    const bn_patch *pa = bn_scene_patches(a, &na), *pb = bn_scene_patches(b, &nb);
+    if (a == b)
+        return 1;
+    if (na != nb)
+        return 0;
+    for (size_t i = 0; i < na; i++)
+        if (pa[i].face != pb[i].face || memcmp(pa[i].centroid, pb[i].centroid, sizeof pa[i].centroid) != 0)
+            return 0;
+    return 1;
+}
+
+bn_status bn__study_compare(const bn__study_ref *ref, const bn_scene *s, const double *L, bn_study_row *row,
+                            bn_error *err)
+{
+    size_t ns, nr = ref->n;
+    const bn_patch *pr = bn_scene_patches(ref->scene, &nr);
+    size_t *map = NULL;
+    double *E = NULL, *means = NULL, power[3], floor_l, sum_a = 0, sum_e2 = 0;
+    int same = bn__same_mesh(ref->scene, s);
+    bn_scene_patches(s, &ns);
+    row->ground = same ? 0 : 1;
+    E = bn__malloc_array(3 * ns + 1, sizeof(double));
+    means = bn__malloc_array(3 * ref->nsurf + 1, sizeof(double));
+    if (!same)
+        map = bn__malloc_array(nr + 1, sizeof(size_t));
+    if (!E || !means || (!same && !map)) {
+        free(E);
+        free(means);
+        free(map);
+        return bn_error_set(err, BN_ENOMEM, "study: out of memory comparing %zu patches", ns);
+    }
+    if (!same) {
+        bn_status st = bn__lookup(ref->scene, s, map, err);
+        if (st != BN_OK) {
+            free(E);
+            free(means);
+            free(map);
+            return st;
+        }
+    }
+    /* Relative errors divide by L_ref, floored at 1e-9 ||L_ref||_inf so black patches do not divide
+     * by zero (nothing in a scene with rho > 0 and light reaching it comes near the floor). */
+    floor_l = 1e-9 * ref->norm_L;
+    row->err_inf = row->err_max_rel = 0;
+    for (size_t i = 0; i < nr; i++) {
+        size_t j = same ? i : map[i];
+        for (int c = 0; c < 3; c++) {
+            double lr = ref->L[3 * i + (size_t)c], d = fabs(L[3 * j + (size_t)c] - lr);
+            double rel = d / fmax(fabs(lr), floor_l);
+            row->err_inf = fmax(row->err_inf, d);
+            row->err_max_rel = fmax(row->err_max_rel, rel);
+            sum_e2 += pr[i].area * rel * rel;
+        }
+        sum_a += 3 * pr[i].area;
+    }
+    row->err_inf_rel = ref->norm_L > 0 ? row->err_inf / ref->norm_L : row->err_inf;
+    row->err_rms_rel = sum_a > 0 ? sqrt(sum_e2 / sum_a) : 0;
+
+    bn_scene_patch_emission(s, E);
+    bn__study_reflected_power(s, L, E, power);
+    row->err_energy_rel = 0;
+    for (int c = 0; c < 3; c++)
+        if (ref->power[c] > 0)
+            row->err_energy_rel = fmax(row->err_energy_rel, fabs(power[c] - ref->power[c]) / ref->power[c]);
+
+    bn__study_surface_means(s, L, ref->nsurf, means);
+    row->err_surface_max = 0;
+    row->err_surface_mean = 0;
+    {
+        size_t counted = 0;
+        for (size_t m = 0; m < ref->nsurf; m++) {
+            double e = 0, top = 0;
+            for (int c = 0; c < 3; c++)
+                top = fmax(top, ref->surf_mean[3 * m + (size_t)c]);
+            if (top <= 0) {   /* a material no patch uses */
+                if (row->err_surface)
+                    row->err_surface[m] = NAN;
+                continue;
+            }
+            for (int c = 0; c < 3; c++) {
+                double r = ref->surf_mean[3 * m + (size_t)c];
+                e = fmax(e, fabs(means[3 * m + (size_t)c] - r) / fmax(r, 1e-6 * top));
+            }
+            if (row->err_surface)
+                row->err_surface[m] = e;
+            row->err_surface_max = fmax(row->err_surface_max, e);
+            row->err_surface_mean += e;
+            counted++;
+        }
+        row->err_surface_mean = counted ? row->err_surface_mean / (double)counted : 0;
+    }
+    free(E);
+    free(means);
+    free(map);
+    return BN_OK;
+}

@@ -1,0 +1,144 @@
+/* The study's CSV (with its provenance) and its readable summary. */
+#include "study/study_internal.h"
+#include "base/internal.h"
+
+#include <math.h>
+#include <string.h>
+
+static void bn__num(FILE *fp, double v)
+{
+    if (isnan(v))
+        fputs("nan", fp);
+    else if (isinf(v))
+        fputs(v > 0 ? "inf" : "-inf", fp);
+    else
+        fprintf(fp, "%.9g", v);
+}
+
+/* Column names keep [A-Za-z0-9_] only. */
+static void bn__colname(FILE *fp, const char *s)
+{
+    for (; *s; s++)
+        fputc((*s >= 'a' && *s <= 'z') || (*s >= 'A' && *s <= 'Z') || (*s >= '0' && *s <= '9') ? *s : '_', fp);
+}
+
+bn_status bn_study_write_csv(const bn_study_result *r, const char *path, const char *provenance, bn_error *err)
+{
+    bn__outfile f;
+    bn_status st = bn__outfile_open(&f, path, "w", err);
+    FILE *fp;
+    if (st != BN_OK)
+        return st;
+    fp = f.fp;
+    if (provenance && *provenance) {
+        fputs(provenance, fp);
+        if (provenance[strlen(provenance) - 1] != '\n')
+            fputc('\n', fp);
+    }
+    fprintf(fp, "# study=%s\n# reference=%s\n# reference_patches=%zu\n# reference_seconds=%.6g\n", bn_study_param_name(r->param),
+            r->reference, r->ref_patches, r->ref_seconds);
+    fprintf(fp, "# reference_error=%.6g\n# reference_error_patch=%.6g\n# reference_error_how=%s\n", r->ref_error,
+            r->ref_error_patch, r->ref_error_how);
+    fprintf(fp, "# norm_E=%.9g\n# norm_L=%.9g\n", r->norm_E, r->norm_L);
+    if (r->param == BN_STUDY_BOUNCES || r->param == BN_STUDY_MAX_ITER || r->param == BN_STUDY_TOL)
+        fprintf(fp, "# k_norm_inf=%.9g\n# spectral_radius=%.9g\n", r->k_norm, r->spectral_radius);
+    if (!isnan(r->t_radiosity) || !isnan(r->t_trace) || !isnan(r->best_trace))
+        fprintf(fp, "# target=%.6g\n# seconds_radiosity=%.6g\n# seconds_trace=%.6g\n# ratio_trace_over_radiosity=%.6g\n",
+                r->target, r->t_radiosity, r->t_trace, r->ratio);
+    fprintf(fp, "# units: err_inf W m^-2 sr^-1; err_* relative; bound and estimate W m^-2 sr^-1; t_* seconds; "
+                "peak_mb MiB; ground 0 same mesh, 1 reference patches by centroid\n");
+    fputs(BN_STUDY_CSV_COLUMNS, fp);
+    for (size_t s = 0; s < r->nsurfaces; s++) {
+        fputs(",err_surf_", fp);
+        bn__colname(fp, r->surface[s]);
+    }
+    fputc('\n', fp);
+    for (size_t i = 0; i < r->nrows; i++) {
+        const bn_study_row *w = &r->rows[i];
+        const double v[] = {w->err_inf, w->err_inf_rel, w->err_max_rel, w->err_rms_rel, w->err_energy_rel,
+                            w->err_surface_max, w->err_surface_mean, w->bound, w->bound_ke, w->estimate, w->t_mesh, w->t_ff,
+                            w->t_solve, w->t_output, w->t_total, w->peak_mb, w->k_norm, w->se_surface_max};
+        fprintf(fp, "%s,%s,%s,", bn_study_param_name(r->param), w->method, w->value);
+        bn__num(fp, w->x);
+        fprintf(fp, ",%zu,", w->patches);
+        if (w->iterations == SIZE_MAX)
+            fputs("nan", fp);
+        else
+            fprintf(fp, "%zu", w->iterations);
+        fprintf(fp, ",%d", w->ground);
+        for (size_t k = 0; k < sizeof v / sizeof v[0]; k++) {
+            fputc(',', fp);
+            bn__num(fp, v[k]);
+        }
+        for (size_t s = 0; s < r->nsurfaces; s++) {
+            fputc(',', fp);
+            bn__num(fp, w->err_surface[s]);
+        }
+        fputc('\n', fp);
+    }
+    return bn__outfile_commit(&f, err);
+}
+
+void bn_study_print(const bn_study_result *r, FILE *fp)
+{
+    int bounces = r->param == BN_STUDY_BOUNCES;
+    double lo = INFINITY, hi = 0, lo2 = INFINITY, hi2 = 0;
+    fprintf(fp, "study        %s\n", bn_study_param_name(r->param));
+    fprintf(fp, "reference    %s (%.3g s)\n", r->reference, r->ref_seconds);
+    fprintf(fp, "ref. error   %.3g per surface, %.3g per patch (relative): %s\n", r->ref_error, r->ref_error_patch,
+            r->ref_error_how);
+    if (r->param == BN_STUDY_BOUNCES || r->param == BN_STUDY_MAX_ITER || r->param == BN_STUDY_TOL)
+        fprintf(fp, "operator     ||K||_inf = %.6g, spectral radius ~ %.6g, ||E||_inf = %.6g, ||L||_inf = %.6g\n",
+                r->k_norm, r->spectral_radius, r->norm_E, r->norm_L);
+    fprintf(fp, "\n%-13s %-10s %7s %6s %10s %10s %10s %10s %10s %10s", "method", "value", "patches", "iter", "err_surf",
+            "err_patch", "err_rms", "err_power", "t_solve_s", "t_total_s");
+    if (bounces || r->param == BN_STUDY_MAX_ITER)
+        fprintf(fp, " %10s %10s %9s %9s %9s", "err_inf", "bound", "bound/err", "bKE/err", "est/err");
+    else
+        fprintf(fp, " %8s", "peak_MiB");
+    fputc('\n', fp);
+    for (size_t i = 0; i < r->nrows; i++) {
+        const bn_study_row *w = &r->rows[i];
+        char it[24];
+        if (w->iterations == SIZE_MAX)
+            snprintf(it, sizeof it, "-");
+        else
+            snprintf(it, sizeof it, "%zu", w->iterations);
+        fprintf(fp, "%-13s %-10s %7zu %6s %10.3g %10.3g %10.3g %10.3g %10.4g %10.4g", w->method, w->value, w->patches,
+                it, w->err_surface_max, w->err_max_rel, w->err_rms_rel, w->err_energy_rel, w->t_solve, w->t_total);
+        if (bounces || r->param == BN_STUDY_MAX_ITER) {
+            double ratio = w->err_inf > 0 ? w->bound / w->err_inf : NAN;
+            double r2 = w->err_inf > 0 ? w->bound_ke / w->err_inf : NAN;
+            fprintf(fp, " %10.3g %10.3g %9.3g %9.3g %9.3g", w->err_inf, w->bound, ratio, r2,
+                    w->err_inf > 0 ? w->estimate / w->err_inf : NAN);
+            if (isfinite(ratio) && strcmp(w->method, "truncated") == 0) {
+                lo = fmin(lo, ratio);
+                hi = fmax(hi, ratio);
+                lo2 = fmin(lo2, r2);
+                hi2 = fmax(hi2, r2);
+            }
+        } else
+            fprintf(fp, " %8.1f", w->peak_mb);
+        fputc('\n', fp);
+    }
+    if (bounces && hi > 0)
+        fprintf(fp, "\nbound        the a priori bound ||K||^(n+1)/(1-||K||) ||E|| is %.3g to %.3g times the measured "
+                    "||L - S_n||_inf (>= 1 everywhere means it held)\n", lo, hi);
+    if (bounces && hi2 > 0)
+        fprintf(fp, "             from the first reflection, ||K||^n/(1-||K||) ||KE||, it is %.3g to %.3g times; the "
+                    "looseness grows like (||K||_inf / rho(K))^n = (%.4g / %.4g)^n\n", lo2, hi2, r->k_norm, r->spectral_radius);
+    if (!isnan(r->best_trace) || !isnan(r->best_radiosity)) {
+        fprintf(fp, "\nequal error  target %.3g per-surface relative error (reference's own ~%.3g)\n", r->target,
+                r->ref_error);
+        if (isnan(r->t_radiosity))
+            fprintf(fp, "  radiosity  not reached (best %.3g)\n", r->best_radiosity);
+        else
+            fprintf(fp, "  radiosity  %.4g s (best %.3g)\n", r->t_radiosity, r->best_radiosity);
+        if (isnan(r->t_trace))
+            fprintf(fp, "  tracer     not reached (best %.3g)\n", r->best_trace);
+        else
+            fprintf(fp, "  tracer     %.4g s (best %.3g)\n", r->t_trace, r->best_trace);
+        if (!isnan(r->ratio))
+            fprintf(fp, "  ratio      the tracer takes %.3g times as long as radiosity\n", r->ratio);
+    }
+}

@@ -1,0 +1,387 @@
+/* Study plots through PLplot's C API: two panels (error against time, error against the varied
+ * parameter), written as PNG (pngcairo) and SVG, each to a temporary name renamed into place.
+ * Colours are set explicitly (PLplot's default palette is white on black) and the device is always
+ * named, so PLplot never prompts for one. */
+#include "study/study_internal.h"
+#include "base/internal.h"
+
+#include <math.h>
+#include <string.h>
+#include <plplot/plplot.h>
+
+#define BN__MAXSER 16
+#define BN__MAXPTS 4096
+
+typedef struct bn__series {
+    char label[64];
+    int n;
+    double x[BN__MAXPTS], y[BN__MAXPTS];   /* data units (logs taken when drawn) */
+    int color, style, symbol;              /* symbol: 0 none */
+    int vline;                             /* draw x[0] as a vertical line across the panel */
+} bn__series;
+
+typedef struct bn__panel {
+    char xlab[96], ylab[96], title[128];
+    int xlog, ylog;
+    int nser;
+    bn__series ser[BN__MAXSER];
+    char notes[8][48];   /* text beside points (categorical axes) */
+    double nx[8], ny[8];
+    int nnotes;
+    int legend_low;      /* legend at the bottom left (error falling with time leaves it free) */
+} bn__panel;
+
+static bn__series *bn__add(bn__panel *p, const char *label, int style, int symbol)
+{
+    bn__series *s;
+    if (p->nser >= BN__MAXSER)
+        return NULL;
+    s = &p->ser[p->nser];
+    memset(s, 0, sizeof *s);
+    snprintf(s->label, sizeof s->label, "%s", label);
+    s->color = 2 + p->nser % 8;
+    s->style = style;
+    s->symbol = symbol;
+    p->nser++;
+    return s;
+}
+
+static void bn__pt(bn__series *s, double x, double y)
+{
+    if (s && s->n < BN__MAXPTS && isfinite(x) && isfinite(y)) {
+        s->x[s->n] = x;
+        s->y[s->n] = y;
+        s->n++;
+    }
+}
+
+static double bn__tr(double v, int lg) { return lg ? log10(v) : v; }
+static int bn__ok(double v, int lg) { return isfinite(v) && (!lg || v > 0); }
+
+static void bn__draw(const bn__panel *p)
+{
+    double x0 = INFINITY, x1 = -INFINITY, y0 = INFINITY, y1 = -INFINITY;
+    PLINT opts[BN__MAXSER], colors[BN__MAXSER], styles[BN__MAXSER], snum[BN__MAXSER];
+    PLFLT widths[BN__MAXSER], sscale[BN__MAXSER];
+    const char *text[BN__MAXSER], *syms[BN__MAXSER];
+    int nleg = 0;
+    for (int i = 0; i < p->nser; i++)
+        for (int k = 0; k < p->ser[i].n; k++) {
+            double x = p->ser[i].x[k], y = p->ser[i].y[k];
+            if (!bn__ok(x, p->xlog) || !bn__ok(y, p->ylog))
+                continue;
+            if (p->ser[i].vline) {
+                x0 = fmin(x0, bn__tr(x, p->xlog));
+                x1 = fmax(x1, bn__tr(x, p->xlog));
+                continue;
+            }
+            x0 = fmin(x0, bn__tr(x, p->xlog));
+            x1 = fmax(x1, bn__tr(x, p->xlog));
+            y0 = fmin(y0, bn__tr(y, p->ylog));
+            y1 = fmax(y1, bn__tr(y, p->ylog));
+        }
+    if (!(x0 <= x1)) {
+        x0 = 0;
+        x1 = 1;
+    }
+    if (!(y0 <= y1)) {
+        y0 = 0;
+        y1 = 1;
+    }
+    {   /* margins: 5% (at least a unit's share when the range is flat) */
+        double dx = x1 - x0 > 0 ? 0.05 * (x1 - x0) : (p->xlog ? 0.5 : 0.5 + 0.05 * fabs(x0));
+        double dy = y1 - y0 > 0 ? 0.08 * (y1 - y0) : (p->ylog ? 0.5 : 0.5 + 0.05 * fabs(y0));
+        x0 -= dx;
+        x1 += dx;
+        y0 -= dy;
+        if (p->legend_low)
+            y0 -= dy * 3;   /* room for the legend */
+        else
+            y1 += dy * 3;
+    }
+    pladv(0);
+    plvpor(0.15, 0.97, 0.12, 0.90);
+    plwind(x0, x1, y0, y1);
+    plcol0(1);
+    plwidth(1.0);
+    pllsty(1);
+    plschr(0, 0.9);
+    {   /* log axes: a labelled tick every 1, 2, 3... decades so that at most ~8 labels show */
+        double xt = p->xlog ? ceil((x1 - x0) / 8) : 0, yt = p->ylog ? ceil((y1 - y0) / 8) : 0;
+        plbox(p->xlog ? "bcgnstl" : "bcgnst", xt, 0, p->ylog ? "bcgnstvl" : "bcgnstv", yt, 0);
+    }
+    pllab(p->xlab, "", p->title);
+    plmtex("l", 5.2, 0.5, 0.5, p->ylab);
+    for (int i = 0; i < p->nser; i++) {
+        const bn__series *s = &p->ser[i];
+        PLFLT xs[BN__MAXPTS], ys[BN__MAXPTS];
+        int m = 0;
+        for (int k = 0; k < s->n; k++)
+            if (bn__ok(s->x[k], p->xlog) && bn__ok(s->y[k], p->ylog)) {
+                xs[m] = bn__tr(s->x[k], p->xlog);
+                ys[m] = bn__tr(s->y[k], p->ylog);
+                m++;
+            }
+        if (m == 0)
+            continue;
+        if (s->vline) {
+            xs[1] = xs[0];
+            ys[0] = y0;
+            ys[1] = y1;
+            m = 2;
+        }
+        plcol0(s->color);
+        pllsty(s->style);
+        plwidth(2.0);
+        if (m > 1 && s->style > 0)
+            plline(m, xs, ys);
+        if ((s->symbol || m == 1) && !s->vline)
+            plstring(m, xs, ys, "#(727)");   /* a filled circle */
+        opts[nleg] = (s->style > 0 ? PL_LEGEND_LINE : 0) | ((s->symbol || m == 1) && !s->vline ? PL_LEGEND_SYMBOL : 0);
+        colors[nleg] = s->color;
+        styles[nleg] = s->style > 0 ? s->style : 1;
+        widths[nleg] = 2.0;
+        sscale[nleg] = 1.0;
+        snum[nleg] = 3;
+        syms[nleg] = "#(727)";
+        text[nleg] = s->label;
+        nleg++;
+    }
+    pllsty(1);
+    plwidth(1.0);
+    plcol0(1);
+    for (int i = 0; i < p->nnotes; i++)
+        if (bn__ok(p->nx[i], p->xlog) && bn__ok(p->ny[i], p->ylog))
+            plptex(bn__tr(p->nx[i], p->xlog), bn__tr(p->ny[i], p->ylog), 1, 0, -0.15, p->notes[i]);
+    if (nleg > 0) {
+        PLFLT lw, lh;
+        PLINT tcol[BN__MAXSER];
+        for (int i = 0; i < nleg; i++)
+            tcol[i] = 1;
+        pllegend(&lw, &lh, PL_LEGEND_BACKGROUND | PL_LEGEND_BOUNDING_BOX, (p->legend_low ? PL_POSITION_BOTTOM | PL_POSITION_LEFT : PL_POSITION_TOP | PL_POSITION_RIGHT) | PL_POSITION_INSIDE,
+                 0.01, 0.01, 0.08, 0, 1, 1, 0, 0, nleg, opts, 0.8, 0.75, 1.8, 0.0, tcol, text, NULL, NULL, NULL, NULL,
+                 colors, styles, widths, colors, sscale, snum, syms);
+    }
+}
+
+static const char *bn__param_axis(bn_study_param p)
+{
+    switch (p) {
+    case BN_STUDY_BOUNCES: return "bounces n (terms K^0 E .. K^n E)";
+    case BN_STUDY_MAX_ITER: return "iteration limit (sweeps)";
+    case BN_STUDY_TOL: return "tolerance (||r||_inf / ||E||_inf)";
+    case BN_STUDY_PATCHES: return "patches (target count)";
+    case BN_STUDY_PATCH_SIZE: return "largest patch edge (scene units)";
+    case BN_STUDY_SAMPLES: return "form-factor samples per pair";
+    case BN_STUDY_FF: return "form-factor method";
+    case BN_STUDY_SPP: return "path-tracer samples per patch (spp)";
+    case BN_STUDY_PRECISION: return "storage precision of F";
+    }
+    return "";
+}
+
+/* Fills the two panels from the result. */
+static void bn__panels(const bn_study_result *r, bn__panel *a, bn__panel *b)
+{
+    const char *methods[BN__MAXSER];
+    int nm = 0;
+    int op = r->param == BN_STUDY_BOUNCES || r->param == BN_STUDY_MAX_ITER || r->param == BN_STUDY_TOL;
+    memset(a, 0, sizeof *a);
+    memset(b, 0, sizeof *b);
+    a->xlog = a->ylog = 1;
+    a->legend_low = 1;
+    snprintf(a->xlab, sizeof a->xlab, "time (s)");
+    for (size_t i = 0; i < r->nrows && nm < BN__MAXSER; i++) {
+        int seen = 0;
+        for (int k = 0; k < nm; k++)
+            seen |= strcmp(methods[k], r->rows[i].method) == 0;
+        if (!seen)
+            methods[nm++] = r->rows[i].method;
+    }
+    if (op) {
+        snprintf(a->ylab, sizeof a->ylab, "||L - L#dref#u||#d∞#u / ||L#dref#u||#d∞#u");
+        snprintf(a->title, sizeof a->title, "error against time (%zu patches)", r->ref_patches);
+        if (r->ncurves > 0)
+            for (size_t c = 0; c < r->ncurves; c++) {
+                int direct = strcmp(r->curves[c].label, "direct") == 0;
+                bn__series *s = bn__add(a, direct ? "direct (exact to rounding)" : r->curves[c].label, direct ? 2 : 1, 0);
+                if (s)
+                    s->vline = direct;
+                /* S_0 = E costs no time: the series is drawn from S_1 */
+                for (size_t k = strcmp(r->curves[c].label, "truncated series") == 0 ? 1 : 0; k < r->curves[c].n; k++)
+                    bn__pt(s, r->curves[c].t[k], r->curves[c].err[k]);
+            }
+        else
+            for (int k = 0; k < nm; k++) {
+                bn__series *s = bn__add(a, methods[k], 1, 1);
+                for (size_t i = 0; i < r->nrows; i++)
+                    if (strcmp(r->rows[i].method, methods[k]) == 0)
+                        bn__pt(s, r->rows[i].t_total, r->rows[i].err_inf_rel);
+            }
+    } else {
+        snprintf(a->ylab, sizeof a->ylab, "max per-surface relative error");
+        snprintf(a->title, sizeof a->title, "error against time (mesh + form factors + solve + output)");
+        for (int k = 0; k < nm; k++) {
+            bn__series *s = bn__add(a, methods[k], 1, 1);
+            for (size_t i = 0; i < r->nrows; i++)
+                if (strcmp(r->rows[i].method, methods[k]) == 0)
+                    bn__pt(s, r->rows[i].t_total, r->rows[i].err_surface_max);
+        }
+        if (!isnan(r->best_trace)) {
+            bn__series *s = bn__add(a, "target", 2, 0);
+            double t0 = INFINITY, t1 = 0;
+            for (size_t i = 0; i < r->nrows; i++) {
+                t0 = fmin(t0, r->rows[i].t_total);
+                t1 = fmax(t1, r->rows[i].t_total);
+            }
+            bn__pt(s, t0, r->target);
+            bn__pt(s, t1, r->target);
+        }
+    }
+
+    snprintf(b->xlab, sizeof b->xlab, "%s", bn__param_axis(r->param));
+    b->ylog = 1;
+    if (r->param == BN_STUDY_BOUNCES) {
+        bn__series *m = bn__add(b, "measured ||L - S#dn#u||#d∞#u", 1, 1);
+        bn__series *bd = bn__add(b, "bound ||K||#un+1#d/(1-||K||) ||E||", 2, 0);
+        bn__series *bk = bn__add(b, "bound ||K||#un#d/(1-||K||) ||KE||", 2, 0);
+        bn__series *es = bn__add(b, "estimate #gr/(1-#gr) ||K#un#d E||", 3, 0);
+        bn__series *fl = bn__add(b, "reference's own error", 4, 0);   /* drawn when within 1e3 of the data */
+        double n0 = INFINITY, n1 = -INFINITY, emin = INFINITY;
+        snprintf(b->ylab, sizeof b->ylab, "||L - S#dn#u||#d∞#u (W m#u-2#d sr#u-1#d)");
+        snprintf(b->title, sizeof b->title, "truncation error: ||K||#d∞#u = %.4g, #gr(K) ~ %.4g", r->k_norm,
+                 r->spectral_radius);
+        for (size_t i = 0; i < r->nrows; i++)
+            if (strcmp(r->rows[i].method, "truncated") == 0) {
+                bn__pt(m, r->rows[i].x, r->rows[i].err_inf);
+                bn__pt(bd, r->rows[i].x, r->rows[i].bound);
+                bn__pt(bk, r->rows[i].x, r->rows[i].bound_ke);
+                bn__pt(es, r->rows[i].x, r->rows[i].estimate);
+                n0 = fmin(n0, r->rows[i].x);
+                n1 = fmax(n1, r->rows[i].x);
+                if (r->rows[i].err_inf > 0)
+                    emin = fmin(emin, r->rows[i].err_inf);
+            }
+        if (r->ref_error > 0 && isfinite(n0) && r->ref_error * r->norm_L > 1e-3 * emin) {
+            bn__pt(fl, n0, r->ref_error * r->norm_L);
+            bn__pt(fl, n1, r->ref_error * r->norm_L);
+        }
+    } else if (r->param == BN_STUDY_MAX_ITER) {
+        b->xlog = 1;
+        snprintf(b->ylab, sizeof b->ylab, "||L - L#dk#u||#d∞#u (W m#u-2#d sr#u-1#d)");
+        snprintf(b->title, sizeof b->title, "error after k sweeps, and the a priori bound (dashed)");
+        for (int k = 0; k < nm; k++) {
+            bn__series *s = bn__add(b, methods[k], 1, 1);
+            char lab[64];
+            bn__series *bd;
+            snprintf(lab, sizeof lab, "%s bound", methods[k]);
+            bd = bn__add(b, lab, 2, 0);
+            if (bd)
+                bd->color = s ? s->color : 2;
+            for (size_t i = 0; i < r->nrows; i++)
+                if (strcmp(r->rows[i].method, methods[k]) == 0) {
+                    bn__pt(s, r->rows[i].x, r->rows[i].err_inf);
+                    bn__pt(bd, r->rows[i].x, r->rows[i].bound);
+                }
+        }
+    } else if (r->param == BN_STUDY_TOL || (op && r->param != BN_STUDY_BOUNCES)) {
+        b->xlog = 1;
+        snprintf(b->ylab, sizeof b->ylab, "time to tolerance (s)");
+        snprintf(b->title, sizeof b->title, "time to each tolerance, same K (%zu patches)", r->ref_patches);
+        for (int k = 0; k < nm; k++) {
+            bn__series *s = bn__add(b, methods[k], 1, 1);
+            for (size_t i = 0; i < r->nrows; i++)
+                if (strcmp(r->rows[i].method, methods[k]) == 0)
+                    bn__pt(s, r->rows[i].x, r->rows[i].t_solve);
+        }
+    } else {
+        int categorical = r->param == BN_STUDY_FF || r->param == BN_STUDY_PRECISION;
+        bn__series *sm = bn__add(b, "max per-surface", 1, 1), *pm = bn__add(b, "max per-patch", 1, 1);
+        bn__series *rm = bn__add(b, "RMS per-patch", 1, 1), *em = bn__add(b, "reflected power", 1, 1);
+        bn__series *fl = bn__add(b, "reference's own error (per surface)", 2, 0);
+        double x0 = INFINITY, x1 = -INFINITY;
+        int idx = 0;
+        b->xlog = !categorical;
+        snprintf(b->ylab, sizeof b->ylab, "relative error");
+        snprintf(b->title, sizeof b->title, "error against the %s (reference: %zu patches)", bn_study_param_name(r->param),
+                 r->ref_patches);
+        if (categorical)
+            snprintf(b->xlab, sizeof b->xlab, "%s (setting)", bn__param_axis(r->param));
+        for (size_t i = 0; i < r->nrows; i++) {
+            const bn_study_row *w = &r->rows[i];
+            double x;
+            if (strcmp(w->method, "trace") == 0 && r->param != BN_STUDY_SPP)
+                continue;   /* the tracer rows of an equal-error study are on the time panel */
+            x = categorical ? ++idx : (r->param == BN_STUDY_PATCHES ? (double)w->patches : w->x);
+            bn__pt(sm, x, w->err_surface_max);
+            bn__pt(pm, x, w->err_max_rel);
+            bn__pt(rm, x, w->err_rms_rel);
+            bn__pt(em, x, w->err_energy_rel);
+            x0 = fmin(x0, x);
+            x1 = fmax(x1, x);
+            if (categorical && b->nnotes < 8) {
+                snprintf(b->notes[b->nnotes], sizeof b->notes[0], "%s", w->value);
+                b->nx[b->nnotes] = x;
+                b->ny[b->nnotes] = w->err_surface_max;
+                b->nnotes++;
+            }
+        }
+        if (r->ref_error > 0 && isfinite(x0)) {
+            bn__pt(fl, x0, r->ref_error);
+            bn__pt(fl, x1, r->ref_error);
+        }
+    }
+}
+
+static void bn__palette(void)
+{
+    static const int pal[10][3] = {{255, 255, 255}, {0, 0, 0},     {31, 119, 180}, {214, 39, 40},  {44, 160, 44},
+                                   {148, 103, 189}, {255, 127, 14}, {140, 86, 75},  {227, 119, 194}, {23, 190, 207}};
+    plscolbg(255, 255, 255);
+    for (int i = 0; i < 10; i++)
+        plscol0(i, pal[i][0], pal[i][1], pal[i][2]);
+}
+
+static bn_status bn__plot_one(const bn__panel *a, const bn__panel *b, const char *title, const char *path,
+                              const char *device, bn_error *err)
+{
+    char *tmp = NULL;
+    bn_status st = bn__tmpname_reserve(path, &tmp, err);
+    if (st != BN_OK)
+        return st;
+    plsdev(device);
+    plsfnam(tmp);
+    plspage(0, 0, 1400, 560, 0, 0);
+    bn__palette();
+    plssub(2, 1);
+    plinit();
+    plfontld(1);
+    bn__draw(a);
+    bn__draw(b);
+    plend();
+    (void)title;
+    return bn__tmpname_commit(path, tmp, err);
+}
+
+bn_status bn_study_plot(const bn_study_result *r, const char *prefix, const char *title, bn_error *err)
+{
+    bn__panel *a = bn__calloc(2, sizeof *a);
+    char path[4096];
+    bn_status st;
+    if (!a)
+        return bn_error_set(err, BN_ENOMEM, "study plot: out of memory");
+    bn__panels(r, &a[0], &a[1]);
+    if (title && *title) {
+        char t[sizeof a[0].title];
+        snprintf(t, sizeof t, "%.40s: %.80s", title, a[0].title);
+        memcpy(a[0].title, t, sizeof t);
+    }
+    snprintf(path, sizeof path, "%s.png", prefix);
+    st = bn__plot_one(&a[0], &a[1], title, path, "pngcairo", err);
+    if (st == BN_OK) {
+        snprintf(path, sizeof path, "%s.svg", prefix);
+        st = bn__plot_one(&a[0], &a[1], title, path, "svg", err);
+    }
+    free(a);
+    return st;
+}

@@ -1,0 +1,1052 @@
+/* The study driver: for each setting of the varied parameter, mesh -> form factors -> solve (or
+ * trace) -> output, timed per phase, with its peak memory, compared against a reference that is
+ * more accurate by construction and whose own error is estimated here too.
+ *
+ * Truncation (bounces): S_n = sum_{k<=n} K^k E against L = (I - K)^-1 E by a direct solve of the
+ * identical K; L - S_n = sum_{k>n} K^k E, so ||L - S_n||_inf <= ||K||^(n+1) / (1 - ||K||) ||E||_inf
+ * (infinity norms; the geometric a priori bound), and ~ rho(K)^(n+1) / (1 - rho(K)) ||E||_inf. */
+#include "study/study_internal.h"
+#include "base/internal.h"
+
+#include <float.h>
+#include <math.h>
+#include <stdarg.h>
+#include <string.h>
+#include <strings.h>
+
+static const char *const bn__param_names[BN_STUDY_PARAM_COUNT] = {
+    "bounces", "max-iter", "tol", "patches", "patch-size", "samples", "ff", "spp", "precision"};
+
+const char *bn_study_param_name(bn_study_param p)
+{
+    return (unsigned)p < BN_STUDY_PARAM_COUNT ? bn__param_names[p] : "?";
+}
+
+int bn_study_param_parse(const char *s, bn_study_param *out)
+{
+    for (int i = 0; i < BN_STUDY_PARAM_COUNT; i++)
+        if (strcmp(s, bn__param_names[i]) == 0) {
+            *out = (bn_study_param)i;
+            return 0;
+        }
+    return -1;
+}
+
+void bn_study_opts_default(bn_study_opts *o)
+{
+    memset(o, 0, sizeof *o);
+    o->param = BN_STUDY_BOUNCES;
+    bn_load_opts_default(&o->load);
+    bn_mesh_opts_default(&o->mesh);
+    bn_formfactor_opts_default(&o->ff);
+    o->ff.quiet = 1;
+    bn_solve_opts_default(&o->solve);
+    o->solve.method = BN_SOLVE_DIRECT;
+    o->solve.quiet = 1;
+    bn_trace_opts_default(&o->trace);
+    o->trace.quiet = 1;
+    o->methods = BN_STUDY_ALL_METHODS;
+    o->target = 0.01;
+}
+
+/* ---- the run's state ---- */
+
+typedef struct bn__study {
+    const bn_study_opts *o;
+    const char *path;
+    bn_load_opts load;   /* o->load without its log: the probe load has shown the scene's warnings once */
+    bn_study_result *res;
+    size_t cap;
+} bn__study;
+
+static void bn__note(const bn__study *S, const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 2, 3)))
+#endif
+    ;
+static void bn__note(const bn__study *S, const char *fmt, ...)
+{
+    char buf[512];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(buf, sizeof buf, fmt, ap);
+    va_end(ap);
+    bn_logf(&S->o->log, BN_LOG_INFO, "%s", buf);
+}
+
+static void bn__drop_log(void *user, bn_log_level level, const char *msg)
+{
+    (void)user;
+    (void)level;
+    (void)msg;
+}
+
+static bn_study_row *bn__row_new(bn__study *S, const char *method, const char *value, double x, bn_error *err)
+{
+    bn_study_result *r = S->res;
+    bn_study_row *row;
+    if (r->nrows == S->cap) {
+        size_t cap = S->cap ? 2 * S->cap : 16;
+        bn_study_row *p = bn__realloc_array(r->rows, cap, sizeof *p);
+        if (!p) {
+            bn_error_set(err, BN_ENOMEM, "study: out of memory for %zu rows", cap);
+            return NULL;
+        }
+        r->rows = p;
+        S->cap = cap;
+    }
+    row = &r->rows[r->nrows];
+    memset(row, 0, sizeof *row);
+    row->err_surface = bn__calloc(r->nsurfaces + 1, sizeof(double));
+    if (!row->err_surface) {
+        bn_error_set(err, BN_ENOMEM, "study: out of memory for a row");
+        return NULL;
+    }
+    r->nrows++;
+    snprintf(row->method, sizeof row->method, "%s", method);
+    snprintf(row->value, sizeof row->value, "%s", value);
+    row->x = x;
+    row->bound = row->bound_ke = row->estimate = NAN;
+    row->t_mesh = row->t_ff = row->t_solve = row->t_output = 0;
+    row->k_norm = NAN;
+    row->se_surface_max = NAN;
+    return row;
+}
+
+static void bn__row_total(bn_study_row *row)
+{
+    row->t_total = row->t_mesh + row->t_ff + row->t_solve + row->t_output;
+}
+
+static bn_study_curve *bn__curve_new(bn__study *S, const char *label, size_t cap, bn_error *err)
+{
+    bn_study_result *r = S->res;
+    bn_study_curve *p = bn__realloc_array(r->curves, r->ncurves + 1, sizeof *p), *c;
+    if (!p) {
+        bn_error_set(err, BN_ENOMEM, "study: out of memory for a curve");
+        return NULL;
+    }
+    r->curves = p;
+    c = &r->curves[r->ncurves];
+    memset(c, 0, sizeof *c);
+    c->t = bn__malloc_array(cap + 1, sizeof(double));
+    c->err = bn__malloc_array(cap + 1, sizeof(double));
+    if (!c->t || !c->err) {
+        free(c->t);
+        free(c->err);
+        bn_error_set(err, BN_ENOMEM, "study: out of memory for a curve of %zu points", cap);
+        return NULL;
+    }
+    r->ncurves++;
+    snprintf(c->label, sizeof c->label, "%s", label);
+    return c;
+}
+
+/* Loads the scene file (no patches yet). */
+static bn_status bn__load(bn__study *S, bn_scene **out, bn_error *err)
+{
+    return bn_scene_load(S->path, &S->load, out, err);
+}
+
+static bn_status bn__mesh(bn_scene *s, const bn_mesh_opts *m, double *seconds, bn_error *err)
+{
+    double t0 = bn__now();
+    bn_status st = bn_scene_mesh(s, m, err);
+    *seconds = bn__now() - t0;
+    return st;
+}
+
+/* K for the meshed scene: the ray caster is built for the assembly and released after it (its
+ * time counts as form-factor time). */
+static bn_status bn__build_k(const bn_scene *s, const bn_formfactor_opts *ffo, bn_transport **K, double *seconds,
+                             bn_error *err)
+{
+    bn_rt *rt = NULL;
+    bn_ff_diagnostics d;
+    double t0 = bn__now();
+    bn_status st = bn_rt_create(s, bn_threads_get(), &rt, err);
+    if (st == BN_OK)
+        st = bn_formfactor_build(s, rt, ffo, K, &d, err);
+    bn_rt_destroy(rt);
+    *seconds = bn__now() - t0;
+    return st;
+}
+
+/* Solves with method opts; *L is malloc'd (N*3). A solve that stops at the iteration limit is a
+ * result (the max-iter study asks for it), not an error. */
+static bn_status bn__solve(const bn_transport *K, const double *E, const bn_solve_opts *so, double **L,
+                           bn_solve_result *info, double *seconds, bn_error *err)
+{
+    bn_solve_opts o = *so;
+    bn_solve_result res;
+    bn_status st;
+    double t0 = bn__now();
+    memset(&res, 0, sizeof res);
+    o.bounces = -1;
+    o.quiet = 1;
+    o.log = NULL;
+    o.log_sink.fn = bn__drop_log;
+    st = bn_solve(K, E, &o, &res, err);
+    *seconds = bn__now() - t0;
+    if (st == BN_ENOTCONV && res.L) {
+        bn_error_clear(err);
+        st = BN_OK;
+    }
+    if (st != BN_OK) {
+        bn_solve_result_free(&res);
+        return st;
+    }
+    *L = res.L;
+    res.L = NULL;
+    if (info)
+        *info = res;
+    bn_solve_result_free(&res);
+    return BN_OK;
+}
+
+/* The output phase: the per-patch table `bounce solve` writes (patch,face,material,area,L_R,L_G,L_B),
+ * formatted into memory so the figure is the formatting cost and not the disk's. */
+static double bn__output_time(const bn_scene *s, const double *L)
+{
+    size_t n, len = 0;
+    const bn_patch *p = bn_scene_patches(s, &n);
+    char *buf = NULL;
+    double t0 = bn__now();
+    FILE *fp = open_memstream(&buf, &len);
+    if (!fp)
+        return NAN;
+    fputs("patch,face,material,area,L_R,L_G,L_B\n", fp);
+    for (size_t i = 0; i < n; i++)
+        fprintf(fp, "%zu,%zu,%u,%.9g,%.9g,%.9g,%.9g\n", i, p[i].face, p[i].material, p[i].area, L[3 * i],
+                L[3 * i + 1], L[3 * i + 2]);
+    fclose(fp);
+    free(buf);
+    return bn__now() - t0;
+}
+
+static double bn__geom(double q, int n, double normE)
+{
+    /* q^(n+1) / (1 - q) ||E||: the geometric tail sum_{k>n} q^k ||E|| */
+    if (!(q < 1))
+        return INFINITY;
+    return pow(q, n + 1) / (1 - q) * normE;
+}
+
+/* ---- a reference solution: a direct solve (or the configured method) at a finer setting ---- */
+
+typedef struct bn__sol {
+    bn_scene *scene;
+    double *L;
+    size_t n;
+    double seconds;
+} bn__sol;
+
+static void bn__sol_free(bn__sol *s)
+{
+    bn_scene_destroy(s->scene);
+    free(s->L);
+    memset(s, 0, sizeof *s);
+}
+
+/* Mesh with m, assemble with ffo, solve with the study's method (direct by default). */
+static bn_status bn__radiosity(bn__study *S, const bn_mesh_opts *m, const bn_formfactor_opts *ffo, bn__sol *out,
+                               bn_study_row *row, bn_error *err)
+{
+    bn_transport *K = NULL;
+    double *E = NULL, tm = 0, tf = 0, ts = 0;
+    bn_solve_result info;
+    bn_status st;
+    memset(out, 0, sizeof *out);
+    if (row)
+        bn__study_peak_reset();
+    st = bn__load(S, &out->scene, err);
+    if (st == BN_OK)
+        st = bn__mesh(out->scene, m, &tm, err);
+    if (st == BN_OK)
+        st = bn__build_k(out->scene, ffo, &K, &tf, err);
+    if (st == BN_OK) {
+        bn_scene_patches(out->scene, &out->n);
+        E = bn__malloc_array(3 * out->n + 1, sizeof(double));
+        if (!E)
+            st = bn_error_set(err, BN_ENOMEM, "study: out of memory for E");
+    }
+    if (st == BN_OK) {
+        bn_scene_patch_emission(out->scene, E);
+        memset(&info, 0, sizeof info);
+        st = bn__solve(K, E, &S->o->solve, &out->L, &info, &ts, err);
+    }
+    if (st == BN_OK && row) {
+        row->patches = out->n;
+        row->iterations = info.iterations;
+        row->k_norm = info.k_norm_inf;
+        row->t_mesh = tm;
+        row->t_ff = tf;
+        row->t_solve = ts;
+        row->t_output = bn__output_time(out->scene, out->L);
+        bn__row_total(row);
+        row->peak_mb = bn__study_peak_mb();
+    }
+    out->seconds = tm + tf + ts;
+    bn_transport_destroy(K);
+    free(E);
+    if (st != BN_OK)
+        bn__sol_free(out);
+    return st;
+}
+
+/* The reference error: the same reference method one level coarser (or with a quarter of the
+ * samples), compared to the reference in the study's own metrics. For patch-constant radiosity
+ * (first order in h) halving h halves the error, so |ref - coarser| ~ error(ref): an estimate
+ * that is conservative for higher orders; for sampled form factors (1/sqrt(N)) it overestimates
+ * the reference's error about twofold. */
+static bn_status bn__ref_error(bn__study *S, const bn__study_ref *ref, const bn_mesh_opts *m,
+                               const bn_formfactor_opts *ffo, const char *how, bn_error *err)
+{
+    bn__sol c;
+    bn_study_row row;
+    bn_status st;
+    memset(&row, 0, sizeof row);
+    row.err_surface = bn__calloc(ref->nsurf + 1, sizeof(double));
+    if (!row.err_surface)
+        return bn_error_set(err, BN_ENOMEM, "study: out of memory");
+    st = bn__radiosity(S, m, ffo, &c, NULL, err);
+    if (st == BN_OK)
+        st = bn__study_compare(ref, c.scene, c.L, &row, err);
+    if (st == BN_OK) {
+        S->res->ref_error = row.err_surface_max;
+        S->res->ref_error_patch = row.err_max_rel;
+        snprintf(S->res->ref_error_how, sizeof S->res->ref_error_how, "%s (%zu patches): per-surface %.3g, per-patch %.3g",
+                 how, c.n, row.err_surface_max, row.err_max_rel);
+    }
+    free(row.err_surface);
+    bn__sol_free(&c);
+    return st;
+}
+
+/* ---- bounces, max-iter, tol: one mesh, one K, the direct solve of that K as reference ---- */
+
+typedef struct bn__mon {
+    const double *Lref;
+    double normL, normE;
+    size_t m;
+    bn_study_curve *curve;
+    size_t cap;
+    const double *tols;   /* sorted descending */
+    size_t ntols, next;
+    double **Lat;         /* L at the first iterate meeting tols[t] */
+    size_t *it_at;
+    double *t_at;
+    double last_bound;
+} bn__mon;
+
+static int bn__monitor(void *user, const bn_solve_row *r, const double *L)
+{
+    bn__mon *M = user;
+    double e = 0;
+    for (size_t q = 0; q < M->m; q++)
+        e = fmax(e, fabs(L[q] - M->Lref[q]));
+    if (M->curve && M->curve->n < M->cap) {
+        M->curve->t[M->curve->n] = r->seconds;
+        M->curve->err[M->curve->n] = M->normL > 0 ? e / M->normL : e;
+        M->curve->n++;
+    }
+    /* The solver's own stop test: ||r||_inf <= tol ||E||_inf. */
+    while (M->next < M->ntols && r->residual_max <= M->tols[M->next] * M->normE) {
+        memcpy(M->Lat[M->next], L, M->m * sizeof(double));
+        M->it_at[M->next] = r->iteration;
+        M->t_at[M->next] = r->seconds;
+        M->next++;
+    }
+    M->last_bound = r->bound;
+    return 0;
+}
+
+static int bn__cmp_desc(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x < y) - (x > y);
+}
+
+static bn_status bn__methods(bn__study *S, const bn__study_ref *ref, const bn_transport *K, const double *E,
+                             const double *tols_in, size_t ntols, double t_mesh, double t_ff, double t_direct,
+                             bn_error *err)
+{
+    const bn_study_opts *o = S->o;
+    size_t m = 3 * ref->n;
+    double *tols = bn__malloc_array(ntols + 1, sizeof(double));
+    bn__mon M;
+    bn_status st = BN_OK;
+    static const bn_solve_method iters[3] = {BN_SOLVE_JACOBI, BN_SOLVE_GAUSS_SEIDEL, BN_SOLVE_NEUMANN};
+    memset(&M, 0, sizeof M);
+    if (!tols)
+        return bn_error_set(err, BN_ENOMEM, "study: out of memory");
+    memcpy(tols, tols_in, ntols * sizeof(double));
+    qsort(tols, ntols, sizeof(double), bn__cmp_desc);
+    M.Lref = ref->L;
+    M.normL = ref->norm_L;
+    M.normE = S->res->norm_E;
+    M.m = m;
+    M.tols = tols;
+    M.ntols = ntols;
+    M.Lat = bn__calloc(ntols + 1, sizeof(double *));
+    M.it_at = bn__calloc(ntols + 1, sizeof(size_t));
+    M.t_at = bn__calloc(ntols + 1, sizeof(double));
+    if (!M.Lat || !M.it_at || !M.t_at)
+        st = bn_error_set(err, BN_ENOMEM, "study: out of memory");
+    for (size_t t = 0; st == BN_OK && t < ntols; t++)
+        if (!(M.Lat[t] = bn__malloc_array(m + 1, sizeof(double))))
+            st = bn_error_set(err, BN_ENOMEM, "study: out of memory");
+    for (int q = 0; st == BN_OK && q < 3; q++) {
+        bn_solve_method meth = iters[q];
+        bn_solve_opts so = o->solve;
+        double *L = NULL, ts;
+        const char *name = bn_solve_method_name(meth);
+        if (!(o->methods & (1u << meth)))
+            continue;
+        M.cap = so.max_iter + 1 < 200000 ? so.max_iter + 1 : 200000;
+        M.curve = bn__curve_new(S, name, M.cap, err);
+        if (!M.curve) {
+            st = err ? err->status : BN_ENOMEM;
+            break;
+        }
+        M.next = 0;
+        so.method = meth;
+        so.stop = BN_SOLVE_STOP_RESIDUAL;   /* one criterion for every method: ||r|| <= tol ||E|| */
+        so.tol = tols[ntols - 1];
+        so.monitor = bn__monitor;
+        so.monitor_user = &M;
+        bn__study_peak_reset();
+        st = bn__solve(K, E, &so, &L, NULL, &ts, err);
+        if (st != BN_OK)
+            break;
+        for (size_t t = 0; t < ntols && st == BN_OK; t++) {
+            char v[32];
+            bn_study_row *row;
+            snprintf(v, sizeof v, "%g", tols[t]);
+            if (!(row = bn__row_new(S, name, v, tols[t], err))) {
+                st = err ? err->status : BN_ENOMEM;
+                break;
+            }
+            row->patches = ref->n;
+            row->k_norm = S->res->k_norm;
+            row->t_mesh = t_mesh;
+            row->t_ff = t_ff;
+            if (t < M.next) {
+                row->iterations = M.it_at[t];
+                row->t_solve = M.t_at[t];
+                st = bn__study_compare(ref, ref->scene, M.Lat[t], row, err);
+            } else {   /* never reached within max-iter */
+                row->iterations = SIZE_MAX;
+                row->t_solve = row->err_inf = row->err_inf_rel = row->err_max_rel = row->err_rms_rel = NAN;
+                row->err_energy_rel = row->err_surface_max = row->err_surface_mean = NAN;
+            }
+            row->peak_mb = bn__study_peak_mb();
+            bn__row_total(row);
+        }
+        free(L);
+    }
+    if (st == BN_OK && (o->methods & (1u << BN_SOLVE_DIRECT))) {
+        bn_study_curve *c = bn__curve_new(S, "direct", 1, err);
+        for (size_t t = 0; c && t < ntols && st == BN_OK; t++) {
+            char v[32];
+            bn_study_row *row;
+            snprintf(v, sizeof v, "%g", tols[t]);
+            if (!(row = bn__row_new(S, "direct", v, tols[t], err))) {
+                st = err ? err->status : BN_ENOMEM;
+                break;
+            }
+            row->patches = ref->n;
+            row->k_norm = S->res->k_norm;
+            row->t_mesh = t_mesh;
+            row->t_ff = t_ff;
+            row->t_solve = t_direct;
+            row->peak_mb = NAN;
+            /* The direct solve is the reference: its error is not measured against itself but
+             * bounded a posteriori, ||r||_inf / (1 - ||K||_inf). */
+            row->err_inf_rel = S->res->ref_error;
+            row->err_inf = S->res->ref_error * ref->norm_L;
+            row->err_max_rel = row->err_rms_rel = row->err_energy_rel = NAN;
+            row->err_surface_max = row->err_surface_mean = NAN;
+            for (size_t q = 0; q < ref->nsurf; q++)
+                row->err_surface[q] = NAN;
+            bn__row_total(row);
+        }
+        if (!c)
+            st = err ? err->status : BN_ENOMEM;
+        else {
+            c->t[0] = t_direct;
+            c->err[0] = S->res->ref_error > 0 ? S->res->ref_error : DBL_EPSILON;
+            c->n = 1;
+        }
+    }
+    if (M.Lat)
+        for (size_t t = 0; t < ntols; t++)
+            free(M.Lat[t]);
+    free(M.Lat);
+    free(M.it_at);
+    free(M.t_at);
+    free(tols);
+    return st;
+}
+
+static bn_status bn__study_operator(bn__study *S, bn_error *err)
+{
+    const bn_study_opts *o = S->o;
+    bn_study_result *R = S->res;
+    bn_scene *sc = NULL;
+    bn_transport *K = NULL;
+    double *E = NULL, *L = NULL, tm = 0, tf = 0, tdir = 0;
+    bn_solve_result info;
+    bn_solve_opts dso = o->solve;
+    bn__study_ref ref;
+    bn_status st;
+    size_t n = 0;
+    memset(&ref, 0, sizeof ref);
+    memset(&info, 0, sizeof info);
+
+    st = bn__load(S, &sc, err);
+    if (st == BN_OK)
+        st = bn__mesh(sc, &o->mesh, &tm, err);
+    if (st == BN_OK)
+        st = bn__build_k(sc, &o->ff, &K, &tf, err);
+    if (st != BN_OK)
+        goto done;
+    bn_scene_patches(sc, &n);
+    if (!(E = bn__malloc_array(3 * n + 1, sizeof(double)))) {
+        st = bn_error_set(err, BN_ENOMEM, "study: out of memory");
+        goto done;
+    }
+    bn_scene_patch_emission(sc, E);
+    dso.method = BN_SOLVE_DIRECT;
+    st = bn__solve(K, E, &dso, &L, &info, &tdir, err);
+    if (st != BN_OK)
+        goto done;
+    st = bn__study_ref_init(&ref, sc, L, R->nsurfaces, err);
+    if (st != BN_OK)
+        goto done;
+    R->ref_patches = n;
+    R->ref_seconds = tdir;
+    R->norm_E = info.norm_E;
+    R->norm_L = ref.norm_L;
+    R->k_norm = info.k_norm_inf;
+    R->spectral_radius = info.spectral_radius;
+    snprintf(R->reference, sizeof R->reference,
+             "direct LAPACK solve of the identical K (%zu patches, ff %s, %s storage)", n,
+             bn_ff_method_name(o->ff.method), o->ff.precision == BN_PRECISION_DOUBLE ? "double" : "float");
+    /* Its error: the a posteriori bound ||E - (I - K) L||_inf / (1 - ||K||_inf) >= ||L - L*||_inf. */
+    R->ref_error = ref.norm_L > 0 ? info.error_bound / ref.norm_L : info.error_bound;
+    R->ref_error_patch = R->ref_error;
+    snprintf(R->ref_error_how, sizeof R->ref_error_how,
+             "a posteriori bound ||r||_inf / (1 - ||K||_inf) = %.3g W m^-2 sr^-1 (residual %.3g)", info.error_bound,
+             info.residual_max);
+    bn__note(S, "reference: %s; ||K||_inf %.6g, spectral radius %.6g; its error <= %.3g (relative)", R->reference,
+             R->k_norm, R->spectral_radius, R->ref_error);
+
+    if (o->param == BN_STUDY_BOUNCES) {
+        /* S_n by repeated application, timed cumulatively: row n costs n applications of K. */
+        int nmax = 0;
+        size_t m = 3 * n;
+        double *x = bn__malloc_array(m + 1, sizeof(double)), *y = bn__malloc_array(m + 1, sizeof(double));
+        double *Sn = bn__malloc_array(m + 1, sizeof(double)), t_apply = 0, norm_ke = 0;
+        bn_study_curve *curve;
+        for (size_t v = 0; v < o->nvalues; v++)
+            nmax = (int)fmax(nmax, o->values[v]);
+        curve = bn__curve_new(S, "truncated series", (size_t)nmax + 1, err);
+        if (!x || !y || !Sn || !curve) {
+            free(x);
+            free(y);
+            free(Sn);
+            st = bn_error_set(err, BN_ENOMEM, "study: out of memory for the series");
+            goto done;
+        }
+        /* ||KE||_inf for the second bound (one application, not timed). */
+        bn_transport_apply(K, E, y);
+        for (size_t q = 0; q < m; q++)
+            norm_ke = fmax(norm_ke, fabs(y[q]));
+        memcpy(x, E, m * sizeof(double));
+        memcpy(Sn, E, m * sizeof(double));
+        for (int k = 0; k <= nmax && st == BN_OK; k++) {
+            bn_study_row tmp, *row = NULL;
+            double t0;
+            if (k > 0) {
+                t0 = bn__now();
+                bn_transport_apply(K, x, y);   /* K^k E <- K (K^(k-1) E) */
+                for (size_t q = 0; q < m; q++)
+                    Sn[q] += y[q];             /* S_k <- S_(k-1) + K^k E */
+                t_apply += bn__now() - t0;
+                memcpy(x, y, m * sizeof(double));
+            }
+            for (size_t v = 0; v < o->nvalues; v++)
+                if ((int)o->values[v] == k) {
+                    char val[32];
+                    snprintf(val, sizeof val, "%d", k);
+                    if (!(row = bn__row_new(S, "truncated", val, k, err))) {
+                        st = err ? err->status : BN_ENOMEM;
+                        break;
+                    }
+                    break;
+                }
+            if (st != BN_OK)
+                break;
+            memset(&tmp, 0, sizeof tmp);
+            if (!row)
+                row = &tmp;
+            row->patches = n;
+            row->iterations = (size_t)k;
+            row->k_norm = R->k_norm;
+            row->t_mesh = tm;
+            row->t_ff = tf;
+            row->t_solve = t_apply;
+            row->bound = bn__geom(R->k_norm, k, R->norm_E);
+            /* L - S_n = sum_{j>=0} K^j (K^(n+1) E) = sum_{j>=n} K^j (KE): <= ||K||^n / (1 - ||K||) ||KE||. */
+            row->bound_ke = bn__geom(R->k_norm, k - 1, norm_ke);
+            {   /* the tail ~ K^n E (rho + rho^2 + ...) once K^n E is along the dominant eigenvector */
+                double tn = 0, q = R->spectral_radius;
+                for (size_t i = 0; i < m; i++)
+                    tn = fmax(tn, fabs(x[i]));
+                row->estimate = q < 1 ? tn * q / (1 - q) : INFINITY;
+            }
+            st = bn__study_compare(&ref, sc, Sn, row, err);
+            if (row != &tmp) {
+                row->t_output = bn__output_time(sc, Sn);
+                row->peak_mb = bn__study_peak_mb();
+                bn__row_total(row);
+            }
+            curve->t[curve->n] = fmax(t_apply, 1e-7);   /* S_0 = E costs nothing: drawn at 0.1 us */
+            curve->err[curve->n] = row->err_inf_rel;
+            curve->n++;
+        }
+        free(x);
+        free(y);
+        free(Sn);
+        if (st == BN_OK && o->methods) {
+            static const double deftols[] = {1e-2, 1e-4, 1e-6, 1e-8};
+            st = bn__methods(S, &ref, K, E, o->ntols ? o->tols : deftols, o->ntols ? o->ntols : 4, tm, tf, tdir, err);
+        }
+    } else if (o->param == BN_STUDY_TOL) {
+        st = bn__methods(S, &ref, K, E, o->values, o->nvalues, tm, tf, tdir, err);
+    } else {   /* max-iter: each iterative method stopped at each limit */
+        static const bn_solve_method iters[3] = {BN_SOLVE_JACOBI, BN_SOLVE_GAUSS_SEIDEL, BN_SOLVE_NEUMANN};
+        for (int q = 0; q < 3 && st == BN_OK; q++) {
+            if (!(o->methods & (1u << iters[q])))
+                continue;
+            for (size_t v = 0; v < o->nvalues && st == BN_OK; v++) {
+                bn_solve_opts so = o->solve;
+                bn__mon M;
+                double *Lk = NULL, ts;
+                char val[32];
+                bn_study_row *row;
+                memset(&M, 0, sizeof M);
+                M.Lref = ref.L;
+                M.normL = ref.norm_L;
+                M.m = 3 * n;
+                M.last_bound = NAN;
+                so.method = iters[q];
+                so.stop = BN_SOLVE_STOP_RESIDUAL;
+                so.tol = 0;   /* run to the limit */
+                so.max_iter = (size_t)o->values[v];
+                so.monitor = bn__monitor;
+                so.monitor_user = &M;
+                snprintf(val, sizeof val, "%zu", so.max_iter);
+                if (!(row = bn__row_new(S, bn_solve_method_name(iters[q]), val, o->values[v], err))) {
+                    st = err ? err->status : BN_ENOMEM;
+                    break;
+                }
+                bn__study_peak_reset();
+                st = bn__solve(K, E, &so, &Lk, &info, &ts, err);
+                if (st != BN_OK)
+                    break;
+                row->patches = n;
+                row->iterations = info.iterations;
+                row->k_norm = R->k_norm;
+                row->t_mesh = tm;
+                row->t_ff = tf;
+                row->t_solve = ts;
+                row->bound = M.last_bound;   /* the solver's a priori bound after these sweeps */
+                row->estimate = bn__geom(R->spectral_radius, (int)info.iterations *
+                                         (iters[q] == BN_SOLVE_GAUSS_SEIDEL && so.symmetric ? 2 : 1), R->norm_E);
+                st = bn__study_compare(&ref, sc, Lk, row, err);
+                row->t_output = bn__output_time(sc, Lk);
+                row->peak_mb = bn__study_peak_mb();
+                bn__row_total(row);
+                free(Lk);
+            }
+        }
+    }
+done:
+    bn__study_ref_free(&ref);
+    free(L);
+    free(E);
+    bn_transport_destroy(K);
+    bn_scene_destroy(sc);
+    return st;
+}
+
+/* ---- patches, patch-size, samples, ff, precision, spp ---- */
+
+static bn_status bn__trace_row(bn__study *S, const bn__study_ref *ref, const bn_mesh_opts *m, size_t spp,
+                               bn_error *err)
+{
+    bn_scene *sc = NULL;
+    bn_rt *rt = NULL;
+    bn_trace_patches tp;
+    bn_trace_opts to = S->o->trace;
+    bn_study_row *row;
+    double tm = 0, *L = NULL;
+    char val[32];
+    bn_status st;
+    memset(&tp, 0, sizeof tp);
+    snprintf(val, sizeof val, "%zu", spp);
+    if (!(row = bn__row_new(S, "trace", val, (double)spp, err)))
+        return err ? err->status : BN_ENOMEM;
+    bn__study_peak_reset();
+    st = bn__load(S, &sc, err);
+    if (st == BN_OK)
+        st = bn__mesh(sc, m, &tm, err);
+    if (st == BN_OK) {
+        double t0 = bn__now();
+        st = bn_rt_create(sc, bn_threads_get(), &rt, err);
+        to.spp = spp;
+        to.quiet = 1;
+        if (st == BN_OK)
+            st = bn_trace_patches_run(rt, &to, &tp, err);
+        row->t_solve = bn__now() - t0;   /* ray-caster build + tracing */
+    }
+    if (st == BN_OK) {
+        size_t n = tp.n, li = (size_t)tp.nlayers - 1;   /* the last layer is L */
+        const bn_patch *p = bn_scene_patches(sc, &n);
+        double *sa = bn__calloc(ref->nsurf + 1, sizeof(double)), *sv = bn__calloc(3 * ref->nsurf + 1, sizeof(double));
+        double *sm = bn__calloc(3 * ref->nsurf + 1, sizeof(double));
+        L = bn__malloc_array(3 * n + 1, sizeof(double));
+        if (!L || !sa || !sv || !sm)
+            st = bn_error_set(err, BN_ENOMEM, "study: out of memory for the tracer's estimates");
+        else {
+            memcpy(L, tp.mean + li * n * 3, 3 * n * sizeof(double));
+            row->patches = n;
+            row->iterations = spp;
+            row->t_mesh = tm;
+            st = bn__study_compare(ref, sc, L, row, err);
+            row->t_output = bn__output_time(sc, L);
+            /* Per-surface standard error of the area-weighted mean: sqrt(sum (A_i se_i)^2) / sum A_i. */
+            for (size_t i = 0; i < n; i++) {
+                size_t s = p[i].material;
+                if (s >= ref->nsurf)
+                    continue;
+                sa[s] += p[i].area;
+                for (int c = 0; c < 3; c++) {
+                    double e = p[i].area * tp.se[(li * n + i) * 3 + (size_t)c];
+                    sv[3 * s + (size_t)c] += e * e;
+                    sm[3 * s + (size_t)c] += p[i].area * L[3 * i + (size_t)c];
+                }
+            }
+            row->se_surface_max = 0;
+            for (size_t s = 0; s < ref->nsurf; s++)
+                for (int c = 0; c < 3; c++)
+                    if (sa[s] > 0 && sm[3 * s + (size_t)c] > 0)
+                        row->se_surface_max = fmax(row->se_surface_max, sqrt(sv[3 * s + (size_t)c]) / sm[3 * s + (size_t)c]);
+        }
+        free(sa);
+        free(sv);
+        free(sm);
+    }
+    row->peak_mb = bn__study_peak_mb();
+    bn__row_total(row);
+    bn_trace_patches_free(&tp);
+    bn_rt_destroy(rt);
+    bn_scene_destroy(sc);
+    free(L);
+    return st;
+}
+
+/* log-log interpolation of the time at which err falls to target along rows of one method
+ * (in the order of increasing time); NAN if never. */
+static double bn__time_to(const bn_study_result *R, const char *method, double target, double *best)
+{
+    double tprev = NAN, eprev = NAN, found = NAN;
+    size_t idx[256], k = 0;
+    *best = INFINITY;
+    for (size_t i = 0; i < R->nrows && k < 256; i++)
+        if (strcmp(R->rows[i].method, method) == 0 && isfinite(R->rows[i].err_surface_max))
+            idx[k++] = i;
+    for (size_t a = 1; a < k; a++)   /* insertion sort by time */
+        for (size_t b = a; b > 0 && R->rows[idx[b]].t_total < R->rows[idx[b - 1]].t_total; b--) {
+            size_t t = idx[b];
+            idx[b] = idx[b - 1];
+            idx[b - 1] = t;
+        }
+    for (size_t a = 0; a < k; a++) {
+        const bn_study_row *r = &R->rows[idx[a]];
+        double e = r->err_surface_max, t = r->t_total;
+        *best = fmin(*best, e);
+        if (isnan(found) && e <= target) {
+            if (a == 0 || !(eprev > target) || !(e > 0) || !(tprev > 0))
+                found = t;
+            else   /* straight line in log-log between the last point above and the first below */
+                found = exp(log(tprev) + (log(target) - log(eprev)) * (log(t) - log(tprev)) / (log(e) - log(eprev)));
+        }
+        tprev = t;
+        eprev = e;
+    }
+    return found;
+}
+
+static bn_status bn__study_settings(bn__study *S, bn_error *err)
+{
+    const bn_study_opts *o = S->o;
+    bn_study_result *R = S->res;
+    bn_mesh_opts mref = o->mesh, mcoarse;
+    bn_formfactor_opts fref = o->ff, fcoarse;
+    bn__sol ref;
+    bn__study_ref rr;
+    bn_status st;
+    int mesh_study = o->param == BN_STUDY_PATCHES || o->param == BN_STUDY_PATCH_SIZE;
+    memset(&ref, 0, sizeof ref);
+    memset(&rr, 0, sizeof rr);
+
+    /* The reference and the level below it, from which its error is estimated. */
+    if (o->param == BN_STUDY_PATCHES || o->param == BN_STUDY_SPP) {
+        size_t top = o->mesh.target_patches;
+        if (o->param == BN_STUDY_PATCHES)
+            for (size_t v = 0; v < o->nvalues; v++)
+                top = v == 0 ? (size_t)o->values[v] : (size_t)fmax((double)top, o->values[v]);
+        mref.patch_size = 0;
+        mref.no_subdivide = 0;
+        mref.target_patches = o->ref_patches ? o->ref_patches : 4 * top;
+        mcoarse = mref;
+        mcoarse.target_patches = mref.target_patches / 4 > 0 ? mref.target_patches / 4 : 1;
+        fcoarse = fref;
+    } else if (o->param == BN_STUDY_PATCH_SIZE) {
+        double lo = INFINITY;
+        for (size_t v = 0; v < o->nvalues; v++)
+            lo = fmin(lo, o->values[v]);
+        mref.target_patches = 0;
+        mref.no_subdivide = 0;
+        mref.patch_size = lo / 2;
+        mcoarse = mref;
+        mcoarse.patch_size = lo;
+        fcoarse = fref;
+    } else if (o->param == BN_STUDY_SAMPLES || o->param == BN_STUDY_FF) {
+        int top = 0;
+        for (size_t v = 0; o->param == BN_STUDY_SAMPLES && v < o->nvalues; v++)
+            top = (int)fmax(top, o->values[v]);
+        fref.method = BN_FF_ANALYTIC;
+        fref.samples = o->ref_samples ? o->ref_samples : (8 * top > 256 ? 8 * top : 256);
+        mcoarse = mref;
+        fcoarse = fref;
+        fcoarse.samples = fref.samples / 4 > 0 ? fref.samples / 4 : 1;
+    } else {   /* precision */
+        fref.precision = BN_PRECISION_DOUBLE;
+        mcoarse = mref;
+        fcoarse = fref;
+    }
+    bn__note(S, "study %s: building the reference", bn_study_param_name(o->param));
+    st = bn__radiosity(S, &mref, &fref, &ref, NULL, err);
+    if (st != BN_OK)
+        return st;
+    st = bn__study_ref_init(&rr, ref.scene, ref.L, R->nsurfaces, err);
+    if (st != BN_OK) {
+        bn__sol_free(&ref);
+        return st;
+    }
+    R->ref_patches = ref.n;
+    R->ref_seconds = ref.seconds;
+    R->norm_L = rr.norm_L;
+    {
+        double e = 0;
+        for (size_t i = 0; i < 3 * ref.n; i++)
+            e = fmax(e, fabs(rr.E[i]));
+        R->norm_E = e;
+    }
+    snprintf(R->reference, sizeof R->reference, "%s solve, %zu patches (edge %.4g), ff %s with %d samples, %s storage",
+             bn_solve_method_name(o->solve.method), ref.n, bn_scene_patch_size(ref.scene), bn_ff_method_name(fref.method),
+             fref.samples ? fref.samples : bn_formfactor_default_samples(fref.method),
+             fref.precision == BN_PRECISION_DOUBLE ? "double" : "float");
+    if (o->param == BN_STUDY_PRECISION) {
+        R->ref_error = R->ref_error_patch = 0;
+        snprintf(R->ref_error_how, sizeof R->ref_error_how,
+                 "same mesh and form factors in double: rounding only (~1e-15 relative per operation)");
+    } else {
+        const char *how = mesh_study || o->param == BN_STUDY_SPP
+                              ? "|reference - the same at half the patch density per axis| (first order in h: ~ its own error)"
+                              : "|reference - the same with a quarter of the shadow rays| (1/sqrt(N): ~2x its own error)";
+        st = bn__ref_error(S, &rr, &mcoarse, &fcoarse, how, err);
+    }
+    if (st == BN_OK)
+        bn__note(S, "reference: %s (%.2f s); its error ~ %.3g per surface (%s)", R->reference, ref.seconds, R->ref_error,
+                 R->ref_error_how);
+
+    for (size_t v = 0; v < o->nvalues && st == BN_OK; v++) {
+        bn_mesh_opts m = o->mesh;
+        bn_formfactor_opts f = o->ff;
+        char val[BN_STUDY_LABEL];
+        const char *method = "radiosity";
+        bn_study_row *row;
+        bn__sol sol;
+        if (o->param == BN_STUDY_SPP) {
+            st = bn__trace_row(S, &rr, &o->mesh, (size_t)o->values[v], err);
+            continue;
+        }
+        switch (o->param) {
+        case BN_STUDY_PATCHES:
+            m.patch_size = 0;
+            m.no_subdivide = 0;
+            m.target_patches = (size_t)o->values[v];
+            snprintf(val, sizeof val, "%zu", m.target_patches);
+            break;
+        case BN_STUDY_PATCH_SIZE:
+            m.target_patches = 0;
+            m.no_subdivide = 0;
+            m.patch_size = o->values[v];
+            snprintf(val, sizeof val, "%g", m.patch_size);
+            break;
+        case BN_STUDY_SAMPLES:
+            f.samples = (int)o->values[v];
+            snprintf(val, sizeof val, "%d", f.samples);
+            method = bn_ff_method_name(f.method);
+            break;
+        case BN_STUDY_FF:
+            f.method = (bn_ff_method)(int)o->values[v];
+            snprintf(val, sizeof val, "%s", bn_ff_method_name(f.method));
+            method = val;
+            break;
+        default:   /* precision */
+            f.precision = (bn_precision)(int)o->values[v];
+            snprintf(val, sizeof val, "%s", f.precision == BN_PRECISION_DOUBLE ? "double" : "float");
+            break;
+        }
+        if (!(row = bn__row_new(S, method, val, o->values[v], err))) {
+            st = err ? err->status : BN_ENOMEM;
+            break;
+        }
+        bn__note(S, "setting %s=%s", bn_study_param_name(o->param), val);
+        st = bn__radiosity(S, &m, &f, &sol, row, err);
+        if (st == BN_OK)
+            st = bn__study_compare(&rr, sol.scene, sol.L, row, err);
+        bn__sol_free(&sol);
+    }
+    /* The equal-error comparison: the tracer on the first setting's mesh. */
+    if (st == BN_OK && mesh_study && o->nagainst > 0) {
+        bn_mesh_opts m = o->mesh;
+        if (o->param == BN_STUDY_PATCHES) {
+            m.patch_size = 0;
+            m.target_patches = (size_t)o->values[0];
+        } else {
+            m.target_patches = 0;
+            m.patch_size = o->values[0];
+        }
+        for (size_t a = 0; a < o->nagainst && st == BN_OK; a++) {
+            bn__note(S, "equal-error: path tracer at %zu spp", o->against_spp[a]);
+            st = bn__trace_row(S, &rr, &m, o->against_spp[a], err);
+        }
+        if (st == BN_OK) {
+            R->t_radiosity = bn__time_to(R, "radiosity", R->target, &R->best_radiosity);
+            R->t_trace = bn__time_to(R, "trace", R->target, &R->best_trace);
+            R->ratio = R->t_trace / R->t_radiosity;
+        }
+    }
+    bn__study_ref_free(&rr);
+    bn__sol_free(&ref);
+    return st;
+}
+
+bn_status bn_study_run(const char *path, const bn_study_opts *o, bn_study_result *res, bn_error *err)
+{
+    bn__study S;
+    bn_scene *probe = NULL;
+    const bn_material *mats;
+    size_t nm;
+    bn_status st;
+    memset(res, 0, sizeof *res);
+    memset(&S, 0, sizeof S);
+    S.o = o;
+    S.path = path;
+    S.res = res;
+    S.load = o->load;
+    S.load.log.fn = bn__drop_log;
+    res->param = o->param;
+    res->target = o->target > 0 ? o->target : 0.01;
+    res->t_radiosity = res->t_trace = res->ratio = res->best_radiosity = res->best_trace = NAN;
+    res->ref_error = res->ref_error_patch = NAN;
+    if (!o->values || o->nvalues == 0)
+        return bn_error_set(err, BN_EUSAGE, "study: --vary needs at least one value");
+    for (size_t v = 0; v < o->nvalues; v++) {
+        double x = o->values[v];
+        int whole = x == floor(x);
+        switch (o->param) {
+        case BN_STUDY_BOUNCES:
+            if (!whole || x < 0 || x > 100000)
+                return bn_error_set(err, BN_EUSAGE, "study: bounces must be whole numbers in [0, 100000] (got %g)", x);
+            break;
+        case BN_STUDY_MAX_ITER: case BN_STUDY_PATCHES: case BN_STUDY_SAMPLES: case BN_STUDY_SPP:
+            if (!whole || x < 1 || x > 1e9)
+                return bn_error_set(err, BN_EUSAGE, "study: %s must be whole numbers >= 1 (got %g)",
+                                    bn_study_param_name(o->param), x);
+            break;
+        case BN_STUDY_TOL:
+            if (!(x > 0 && x < 1))
+                return bn_error_set(err, BN_EUSAGE, "study: tol must be in (0, 1) (got %g)", x);
+            break;
+        case BN_STUDY_PATCH_SIZE:
+            if (!(x > 0) || !isfinite(x))
+                return bn_error_set(err, BN_EUSAGE, "study: patch-size must be > 0 (got %g)", x);
+            break;
+        case BN_STUDY_FF:
+            if (!whole || x < 0 || x > 2)
+                return bn_error_set(err, BN_EUSAGE, "study: bad form-factor method index %g", x);
+            break;
+        case BN_STUDY_PRECISION:
+            if (!whole || x < 0 || x > 1)
+                return bn_error_set(err, BN_EUSAGE, "study: bad precision index %g", x);
+            break;
+        }
+    }
+    /* Surfaces are the scene's materials. */
+    st = bn_scene_load(path, &o->load, &probe, err);
+    if (st != BN_OK)
+        return st;
+    mats = bn_scene_materials(probe, &nm);
+    res->nsurfaces = nm;
+    res->surface = bn__calloc(nm + 1, sizeof *res->surface);
+    res->surface_area = bn__calloc(nm + 1, sizeof(double));
+    if (!res->surface || !res->surface_area) {
+        bn_scene_destroy(probe);
+        bn_study_result_free(res);
+        return bn_error_set(err, BN_ENOMEM, "study: out of memory");
+    }
+    {
+        size_t nf;
+        const bn_face *f = bn_scene_faces(probe, &nf);
+        double u = bn_unit_to_metres(bn_scene_unit(probe));
+        for (size_t m = 0; m < nm; m++)
+            snprintf(res->surface[m], BN_NAME_MAX, "%s", mats[m].name);
+        for (size_t i = 0; i < nf; i++)
+            if (f[i].material < nm)
+                res->surface_area[f[i].material] += f[i].area * u * u;
+    }
+    bn_scene_destroy(probe);
+
+    if (o->param == BN_STUDY_BOUNCES || o->param == BN_STUDY_MAX_ITER || o->param == BN_STUDY_TOL)
+        st = bn__study_operator(&S, err);
+    else
+        st = bn__study_settings(&S, err);
+    if (st != BN_OK)
+        bn_study_result_free(res);
+    return st;
+}
+
+void bn_study_result_free(bn_study_result *res)
+{
+    if (!res)
+        return;
+    for (size_t i = 0; i < res->nrows; i++)
+        free(res->rows[i].err_surface);
+    free(res->rows);
+    for (size_t i = 0; i < res->ncurves; i++) {
+        free(res->curves[i].t);
+        free(res->curves[i].err);
+    }
+    free(res->curves);
+    free(res->surface);
+    free(res->surface_area);
+    memset(res, 0, sizeof *res);
+}

@@ -1,0 +1,36 @@
+/* Internals of the study module: the reference solution and the common-ground comparison. */
+#ifndef BOUNCE_STUDY_INTERNAL_H
+#define BOUNCE_STUDY_INTERNAL_H
+
+#include "bounce/study.h"
+
+/* A solution on one mesh, with what the comparison needs precomputed. */
+typedef struct bn__study_ref {
+    const bn_scene *scene;   /* borrowed */
+    size_t n, nsurf;
+    const double *L;         /* N*3, borrowed */
+    double *E;               /* N*3 (owned) */
+    double *surf_mean;       /* nsurf*3 area-weighted means (owned) */
+    double power[3];         /* reflected power pi sum A (L - E), W */
+    double norm_L;           /* ||L||_inf */
+} bn__study_ref;
+
+bn_status bn__study_ref_init(bn__study_ref *r, const bn_scene *s, const double *L, size_t nsurf, bn_error *err);
+void bn__study_ref_free(bn__study_ref *r);
+
+/* Area-weighted mean of L per surface (material): out nsurf*3. */
+void bn__study_surface_means(const bn_scene *s, const double *L, size_t nsurf, double *out);
+/* pi sum_i A_i (L_i - E_i) per channel, A in m^2. */
+void bn__study_reflected_power(const bn_scene *s, const double *L, const double *E, double out[3]);
+
+/* Fills the err_* fields of row (err_surface must hold ref->nsurf doubles) for the solution L on
+ * scene s against the reference. Same mesh (ground 0) when s has the reference's patches, else each
+ * reference patch takes the value of the patch of s in its face containing its centroid (ground 1). */
+bn_status bn__study_compare(const bn__study_ref *ref, const bn_scene *s, const double *L, bn_study_row *row,
+                            bn_error *err);
+
+/* Peak resident memory: reset the high-water mark (Linux clear_refs; no-op elsewhere), read it in MiB. */
+void bn__study_peak_reset(void);
+double bn__study_peak_mb(void);
+
+#endif
