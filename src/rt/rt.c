@@ -29,7 +29,7 @@ bn_status bn_rt_create(const bn_scene *scene, int threads, bn_rt **out, bn_error
     const bn_patch *patches = bn_scene_patches(scene, &np);
     const double *pv = bn_scene_patch_vertices(scene, &npv);
     bn_rt *rt;
-    char cfg[64];
+    char cfg[256];
     RTCGeometry geom;
     float *vb;
     unsigned *ib;
@@ -53,8 +53,12 @@ bn_status bn_rt_create(const bn_scene *scene, int threads, bn_rt **out, bn_error
         return bn_error_set(err, BN_ENOMEM, "out of memory for %zu triangles", ntri);
     }
     bn_error_clear(&local);
-    snprintf(cfg, sizeof cfg, "threads=%d", threads > 0 ? threads : 0);
-    rt->device = rtcNewDevice(threads > 0 ? cfg : NULL);
+    /* BOUNCE_EMBREE_CONFIG adds Embree device settings, e.g. "isa=sse4.2" under valgrind. */
+    {
+        const char *extra = getenv("BOUNCE_EMBREE_CONFIG");
+        snprintf(cfg, sizeof cfg, "threads=%d%s%s", threads > 0 ? threads : 0, extra ? "," : "", extra ? extra : "");
+    }
+    rt->device = rtcNewDevice(cfg);
     if (!rt->device) {
         free(rt->prim_patch);
         free(rt);
