@@ -36,6 +36,15 @@ typedef enum bn_study_param {
 const char *bn_study_param_name(bn_study_param p);        /* "bounces", "max-iter", ... */
 int bn_study_param_parse(const char *s, bn_study_param *out);   /* 0 on success */
 
+/* What the patches, patch-size and spp studies compare with. */
+typedef enum bn_study_ref {
+    BN_STUDY_REF_AUTO,       /* the tracer when the equal-error comparison runs, else radiosity */
+    BN_STUDY_REF_RADIOSITY,  /* a direct solve on a finer mesh (ref_patches) */
+    BN_STUDY_REF_TRACE       /* the path tracer at ref_spp with an independent seed: unbiased for the
+                                per-surface means, its error = 2 standard errors (~95%) */
+} bn_study_ref;
+const char *bn_study_ref_name(bn_study_ref r);   /* "auto", "radiosity", "trace" */
+
 /* Method bits for the solver comparisons (bit = 1 << bn_solve_method). */
 #define BN_STUDY_ALL_METHODS 0xF
 
@@ -54,6 +63,9 @@ typedef struct bn_study_opts {
     size_t ntols;
     size_t ref_patches;          /* patches, patch-size, spp: reference mesh (0: 4x the finest setting's
                                     patch count, or 4x the fixed mesh's for spp) */
+    bn_study_ref ref;            /* default auto */
+    size_t ref_spp;              /* trace reference: spp (0: a 64-spp pilot, scaled so that the largest
+                                    per-surface standard error is target / 8, at most 65536) */
     int    ref_samples;          /* samples, ff: shadow rays of the analytic reference (0: 8x the largest
                                     setting, at least 256) */
     const size_t *against_spp;   /* patches, patch-size: path-tracer runs for the equal-error comparison */

@@ -91,7 +91,8 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
     const char *pos[1], *vary = NULL, *out = "study.csv", *plot = NULL, *methods = NULL, *tols = NULL, *against = NULL;
     const char *title = NULL;
     size_t npos, max_iter = 0, ref_patches = 0, spp = 0;
-    int help, method = 3, ref_samples = 0, rr_depth = -1;
+    int help, method = 3, ref_samples = 0, rr_depth = -1, refkind = 0;
+    size_t ref_spp = 0;
     double target = 0.01, values[BN__MAXV], tolv[BN__MAXV], againstv[BN__MAXV];
     size_t against_spp[BN__MAXV];
     bn_error err;
@@ -134,6 +135,11 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
                                  "iteration limit of the methods table (default 100000)"});
     bn_optset_add(&set, (bn_opt){"ref-patches", 0, BN_OPT_SIZE, &ref_patches, NULL, 1, 1e9, "N",
                                  "patches of the reference mesh (default 4x the finest setting, or 4x --patches)"});
+    bn_optset_add(&set, (bn_opt){"ref", 0, BN_OPT_CHOICE, &refkind, "auto|radiosity|trace", 0, 0, "KIND",
+                                 "patches, patch-size, spp: the reference: radiosity on a finer mesh, or the path "
+                                 "tracer at --ref-spp (default auto: trace with --against-spp, else radiosity)"});
+    bn_optset_add(&set, (bn_opt){"ref-spp", 0, BN_OPT_SIZE, &ref_spp, NULL, 1, 1e9, "N",
+                                 "trace reference: spp (default from a 64-spp pilot: per-surface SE = target / 8)"});
     bn_optset_add(&set, (bn_opt){"ref-samples", 0, BN_OPT_INT, &ref_samples, NULL, 1, 1 << 24, "N",
                                  "shadow rays of the analytic reference (default 8x the largest setting, >= 256)"});
     bn_optset_add(&set, (bn_opt){"spp", 0, BN_OPT_SIZE, &spp, NULL, 1, 1e9, "N",
@@ -235,6 +241,8 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
     o.ntols = (size_t)nt;
     o.ref_patches = ref_patches;
     o.ref_samples = ref_samples;
+    o.ref = (bn_study_ref)refkind;
+    o.ref_spp = ref_spp;
     o.against_spp = na ? against_spp : NULL;
     o.nagainst = (size_t)na;
     o.target = target;
@@ -249,10 +257,10 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
     bn_formfactor_opts_describe(&o.ff, ffdesc, sizeof ffdesc);
     snprintf(prov, sizeof prov,
              "# command=%s\n# version=%s\n# scene=%s\n# unit=%s\n# vary=%s\n# solver=%s\n# tolerance=%.9g\n"
-             "# max_iter=%zu\n# formfactors=%s\n# seed=%llu\n# threads=%d\n# spp=%zu\n",
+             "# max_iter=%zu\n# formfactors=%s\n# seed=%llu\n# threads=%d\n# spp=%zu\n# ref=%s\n",
              c->cmdline ? c->cmdline : "bounce study", bn_version(), pos[0], bn_unit_name(o.load.unit), vary,
              bn_solve_method_name(o.solve.method), o.solve.tol, o.solve.max_iter, ffdesc,
-             (unsigned long long)c->seed, bn_threads_get(), o.trace.spp);
+             (unsigned long long)c->seed, bn_threads_get(), o.trace.spp, bn_study_ref_name(o.ref));
     st = bn_study_write_csv(&res, out, prov, &err);
     if (st == BN_OK && plot)
         st = bn_study_plot(&res, plot, title, &err);

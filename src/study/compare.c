@@ -85,6 +85,17 @@ bn_status bn__study_ref_init(bn__study_ref *r, const bn_scene *s, const double *
     bn__study_reflected_power(s, L, r->E, r->power);
     for (size_t i = 0; i < 3 * r->n; i++)
         r->norm_L = fmax(r->norm_L, fabs(L[i]));
+    {
+        const bn_patch *p = bn_scene_patches(s, &r->n);
+        double a = 0, m[3] = {0, 0, 0};
+        for (size_t i = 0; i < r->n; i++) {
+            a += p[i].area;
+            for (int c = 0; c < 3; c++)
+                m[c] += p[i].area * fabs(L[3 * i + (size_t)c]);
+        }
+        for (int c = 0; c < 3; c++)
+            r->floor[c] = a > 0 && m[c] > 0 ? 0.01 * m[c] / a : 1e-300;
+    }
     return BN_OK;
 }
 
@@ -193,7 +204,7 @@ bn_status bn__study_compare(const bn__study_ref *ref, const bn_scene *s, const d
     size_t ns, nr = ref->n;
     const bn_patch *pr = bn_scene_patches(ref->scene, &nr);
     size_t *map = NULL;
-    double *E = NULL, *means = NULL, power[3], floor_l, sum_a = 0, sum_e2 = 0;
+    double *E = NULL, *means = NULL, power[3], sum_a = 0, sum_e2 = 0;
     int same = bn__same_mesh(ref->scene, s);
     bn_scene_patches(s, &ns);
     row->ground = same ? 0 : 1;
@@ -216,15 +227,15 @@ bn_status bn__study_compare(const bn__study_ref *ref, const bn_scene *s, const d
             return st;
         }
     }
-    /* Relative errors divide by L_ref, floored at 1e-9 ||L_ref||_inf so black patches do not divide
-     * by zero (nothing in a scene with rho > 0 and light reaching it comes near the floor). */
-    floor_l = 1e-9 * ref->norm_L;
+    /* Relative errors divide by L_ref, floored at 1% of the scene's area-weighted mean radiance in
+     * that channel: patches that see no light (under a block) have L_ref ~ 0, and a relative error
+     * there says nothing; their absolute error still shows in err_inf. */
     row->err_inf = row->err_max_rel = 0;
     for (size_t i = 0; i < nr; i++) {
         size_t j = same ? i : map[i];
         for (int c = 0; c < 3; c++) {
             double lr = ref->L[3 * i + (size_t)c], d = fabs(L[3 * j + (size_t)c] - lr);
-            double rel = d / fmax(fabs(lr), floor_l);
+            double rel = d / fmax(fabs(lr), ref->floor[c]);
             row->err_inf = fmax(row->err_inf, d);
             row->err_max_rel = fmax(row->err_max_rel, rel);
             sum_e2 += pr[i].area * rel * rel;

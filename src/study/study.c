@@ -32,6 +32,11 @@ int bn_study_param_parse(const char *s, bn_study_param *out)
     return -1;
 }
 
+const char *bn_study_ref_name(bn_study_ref r)
+{
+    return r == BN_STUDY_REF_RADIOSITY ? "radiosity" : r == BN_STUDY_REF_TRACE ? "trace" : "auto";
+}
+
 void bn_study_opts_default(bn_study_opts *o)
 {
     memset(o, 0, sizeof *o);
@@ -684,80 +689,6 @@ done:
 
 /* ---- patches, patch-size, samples, ff, precision, spp ---- */
 
-static bn_status bn__trace_row(bn__study *S, const bn__study_ref *ref, const bn_mesh_opts *m, size_t spp,
-                               bn_error *err)
-{
-    bn_scene *sc = NULL;
-    bn_rt *rt = NULL;
-    bn_trace_patches tp;
-    bn_trace_opts to = S->o->trace;
-    bn_study_row *row;
-    double tm = 0, *L = NULL;
-    char val[32];
-    bn_status st;
-    memset(&tp, 0, sizeof tp);
-    snprintf(val, sizeof val, "%zu", spp);
-    if (!(row = bn__row_new(S, "trace", val, (double)spp, err)))
-        return err ? err->status : BN_ENOMEM;
-    bn__study_peak_reset();
-    st = bn__load(S, &sc, err);
-    if (st == BN_OK)
-        st = bn__mesh(sc, m, &tm, err);
-    if (st == BN_OK) {
-        double t0 = bn__now();
-        st = bn_rt_create(sc, bn_threads_get(), &rt, err);
-        to.spp = spp;
-        to.quiet = 1;
-        if (st == BN_OK)
-            st = bn_trace_patches_run(rt, &to, &tp, err);
-        row->t_solve = bn__now() - t0;   /* ray-caster build + tracing */
-    }
-    if (st == BN_OK) {
-        size_t n = tp.n, li = (size_t)tp.nlayers - 1;   /* the last layer is L */
-        const bn_patch *p = bn_scene_patches(sc, &n);
-        double *sa = bn__calloc(ref->nsurf + 1, sizeof(double)), *sv = bn__calloc(3 * ref->nsurf + 1, sizeof(double));
-        double *sm = bn__calloc(3 * ref->nsurf + 1, sizeof(double));
-        L = bn__malloc_array(3 * n + 1, sizeof(double));
-        if (!L || !sa || !sv || !sm)
-            st = bn_error_set(err, BN_ENOMEM, "study: out of memory for the tracer's estimates");
-        else {
-            memcpy(L, tp.mean + li * n * 3, 3 * n * sizeof(double));
-            row->patches = n;
-            row->iterations = spp;
-            row->t_mesh = tm;
-            st = bn__study_compare(ref, sc, L, row, err);
-            row->t_output = bn__output_time(sc, L);
-            /* Per-surface standard error of the area-weighted mean: sqrt(sum (A_i se_i)^2) / sum A_i. */
-            for (size_t i = 0; i < n; i++) {
-                size_t s = p[i].material;
-                if (s >= ref->nsurf)
-                    continue;
-                sa[s] += p[i].area;
-                for (int c = 0; c < 3; c++) {
-                    double e = p[i].area * tp.se[(li * n + i) * 3 + (size_t)c];
-                    sv[3 * s + (size_t)c] += e * e;
-                    sm[3 * s + (size_t)c] += p[i].area * L[3 * i + (size_t)c];
-                }
-            }
-            row->se_surface_max = 0;
-            for (size_t s = 0; s < ref->nsurf; s++)
-                for (int c = 0; c < 3; c++)
-                    if (sa[s] > 0 && sm[3 * s + (size_t)c] > 0)
-                        row->se_surface_max = fmax(row->se_surface_max, sqrt(sv[3 * s + (size_t)c]) / sm[3 * s + (size_t)c]);
-        }
-        free(sa);
-        free(sv);
-        free(sm);
-    }
-    row->peak_mb = bn__study_peak_mb();
-    bn__row_total(row);
-    bn_trace_patches_free(&tp);
-    bn_rt_destroy(rt);
-    bn_scene_destroy(sc);
-    free(L);
-    return st;
-}
-
 /* log-log interpolation of the time at which err falls to target along rows of one method
  * (in the order of increasing time); NAN if never. */
 static double bn__time_to(const bn_study_result *R, const char *method, double target, double *best)
@@ -790,6 +721,154 @@ static double bn__time_to(const bn_study_result *R, const char *method, double t
     return found;
 }
 
+/* Runs the tracer on scene sc (meshed) at spp with seed; *L receives the L layer (N*3, malloc'd);
+ * rel_se_surf / rel_se_patch: the largest relative standard error per surface and per patch
+ * (per patch floored like the comparison: 1% of the mean radiance). */
+static bn_status bn__trace_solution(const bn_scene *sc, const bn_trace_opts *base, size_t spp, uint64_t seed, double **L,
+                                    double *rel_se_surf, double *rel_se_patch, double *seconds, bn_error *err)
+{
+    bn_rt *rt = NULL;
+    bn_trace_patches tp;
+    bn_trace_opts to = *base;
+    size_t n, nm;
+    const bn_patch *p = bn_scene_patches(sc, &n);
+    double t0 = bn__now();
+    bn_status st;
+    bn_scene_materials(sc, &nm);
+    memset(&tp, 0, sizeof tp);
+    to.spp = spp;
+    to.seed = seed;
+    to.quiet = 1;
+    st = bn_rt_create(sc, bn_threads_get(), &rt, err);
+    if (st == BN_OK)
+        st = bn_trace_patches_run(rt, &to, &tp, err);
+    *seconds = bn__now() - t0;
+    if (st == BN_OK) {
+        size_t li = (size_t)tp.nlayers - 1;
+        double *sa = bn__calloc(nm + 1, sizeof(double)), *sv = bn__calloc(3 * nm + 1, sizeof(double));
+        double *sm = bn__calloc(3 * nm + 1, sizeof(double)), a = 0, mean[3] = {0, 0, 0};
+        *L = bn__malloc_array(3 * n + 1, sizeof(double));
+        if (!*L || !sa || !sv || !sm)
+            st = bn_error_set(err, BN_ENOMEM, "study: out of memory for the tracer's estimates");
+        else {
+            memcpy(*L, tp.mean + li * n * 3, 3 * n * sizeof(double));
+            *rel_se_surf = *rel_se_patch = 0;
+            for (size_t i = 0; i < n; i++) {
+                size_t s = p[i].material;
+                a += p[i].area;
+                for (int c = 0; c < 3; c++) {
+                    double e = p[i].area * tp.se[(li * n + i) * 3 + (size_t)c];
+                    mean[c] += p[i].area * (*L)[3 * i + (size_t)c];
+                    if (s < nm) {
+                        sv[3 * s + (size_t)c] += e * e;   /* patches are independent */
+                        sm[3 * s + (size_t)c] += p[i].area * (*L)[3 * i + (size_t)c];
+                    }
+                }
+                if (s < nm)
+                    sa[s] += p[i].area;
+            }
+            for (size_t i = 0; i < n; i++)
+                for (int c = 0; c < 3; c++)
+                    *rel_se_patch = fmax(*rel_se_patch, tp.se[(li * n + i) * 3 + (size_t)c] /
+                                                            fmax((*L)[3 * i + (size_t)c], 0.01 * mean[c] / a));
+            for (size_t s = 0; s < nm; s++)
+                for (int c = 0; c < 3; c++)
+                    if (sa[s] > 0 && sm[3 * s + (size_t)c] > 0)
+                        *rel_se_surf = fmax(*rel_se_surf, sqrt(sv[3 * s + (size_t)c]) / sm[3 * s + (size_t)c]);
+        }
+        free(sa);
+        free(sv);
+        free(sm);
+    }
+    if (st != BN_OK) {
+        free(*L);
+        *L = NULL;
+    }
+    bn_trace_patches_free(&tp);
+    bn_rt_destroy(rt);
+    return st;
+}
+
+/* The tracer reference on mesh m: spp from a pilot unless given; a seed independent of the settings'. */
+static bn_status bn__trace_reference(bn__study *S, const bn_mesh_opts *m, bn__sol *out, bn_error *err)
+{
+    const bn_study_opts *o = S->o;
+    bn_study_result *R = S->res;
+    uint64_t seed = bn__hash64(o->trace.seed ^ 0x5eed5eed5eedULL);   /* not any setting's stream */
+    double se_s = 0, se_p = 0, t = 0, tm = 0, target = R->target;
+    size_t spp = o->ref_spp;
+    bn_status st;
+    memset(out, 0, sizeof *out);
+    st = bn__load(S, &out->scene, err);
+    if (st == BN_OK)
+        st = bn__mesh(out->scene, m, &tm, err);
+    if (st != BN_OK) {
+        bn__sol_free(out);
+        return st;
+    }
+    bn_scene_patches(out->scene, &out->n);
+    if (spp == 0) {   /* pilot: SE ~ 1/sqrt(spp), so spp = 64 (se / (target / 8))^2 */
+        double tp = 0;
+        st = bn__trace_solution(out->scene, &o->trace, 64, seed + 1, &out->L, &se_s, &se_p, &tp, err);
+        free(out->L);
+        out->L = NULL;
+        if (st != BN_OK) {
+            bn__sol_free(out);
+            return st;
+        }
+        spp = (size_t)ceil(64.0 * (se_s / (target / 8)) * (se_s / (target / 8)));
+        spp = spp < 64 ? 64 : spp > 65536 ? 65536 : spp;
+        bn__note(S, "reference: a 64-spp pilot gives a per-surface standard error of %.3g: %zu spp for %.3g", se_s,
+                 spp, target / 8);
+    }
+    st = bn__trace_solution(out->scene, &o->trace, spp, seed, &out->L, &se_s, &se_p, &t, err);
+    if (st != BN_OK) {
+        bn__sol_free(out);
+        return st;
+    }
+    out->seconds = tm + t;
+    R->ref_error = 2 * se_s;
+    R->ref_error_patch = 2 * se_p;
+    snprintf(R->reference, sizeof R->reference, "path tracer, %zu spp per patch on %zu patches (edge %.4g), independent seed",
+             spp, out->n, bn_scene_patch_size(out->scene));
+    snprintf(R->ref_error_how, sizeof R->ref_error_how,
+             "2 standard errors of its own samples (unbiased estimator): per-surface %.3g, per-patch %.3g", 2 * se_s,
+             2 * se_p);
+    return BN_OK;
+}
+
+static bn_status bn__trace_row(bn__study *S, const bn__study_ref *ref, const bn_mesh_opts *m, size_t spp,
+                               bn_error *err)
+{
+    bn_scene *sc = NULL;
+    bn_study_row *row;
+    double tm = 0, *L = NULL, se_p = 0;
+    char val[32];
+    bn_status st;
+    snprintf(val, sizeof val, "%zu", spp);
+    if (!(row = bn__row_new(S, "trace", val, (double)spp, err)))
+        return err ? err->status : BN_ENOMEM;
+    bn__study_peak_reset();
+    st = bn__load(S, &sc, err);
+    if (st == BN_OK)
+        st = bn__mesh(sc, m, &tm, err);
+    if (st == BN_OK)   /* t_solve: ray-caster build + tracing */
+        st = bn__trace_solution(sc, &S->o->trace, spp, S->o->trace.seed, &L, &row->se_surface_max, &se_p,
+                                &row->t_solve, err);
+    if (st == BN_OK) {
+        bn_scene_patches(sc, &row->patches);
+        row->iterations = spp;
+        row->t_mesh = tm;
+        st = bn__study_compare(ref, sc, L, row, err);
+        row->t_output = bn__output_time(sc, L);
+    }
+    row->peak_mb = bn__study_peak_mb();
+    bn__row_total(row);
+    bn_scene_destroy(sc);
+    free(L);
+    return st;
+}
+
 static bn_status bn__study_settings(bn__study *S, bn_error *err)
 {
     const bn_study_opts *o = S->o;
@@ -799,7 +878,7 @@ static bn_status bn__study_settings(bn__study *S, bn_error *err)
     bn__sol ref;
     bn__study_ref rr;
     bn_status st;
-    int mesh_study = o->param == BN_STUDY_PATCHES || o->param == BN_STUDY_PATCH_SIZE;
+    int mesh_study = o->param == BN_STUDY_PATCHES || o->param == BN_STUDY_PATCH_SIZE, use_trace = 0;
     memset(&ref, 0, sizeof ref);
     memset(&rr, 0, sizeof rr);
 
@@ -839,8 +918,22 @@ static bn_status bn__study_settings(bn__study *S, bn_error *err)
         mcoarse = mref;
         fcoarse = fref;
     }
-    bn__note(S, "study %s: building the reference", bn_study_param_name(o->param));
-    st = bn__radiosity(S, &mref, &fref, &ref, NULL, err);
+    if (mesh_study || o->param == BN_STUDY_SPP) {
+        use_trace = o->ref == BN_STUDY_REF_TRACE || (o->ref == BN_STUDY_REF_AUTO && mesh_study && o->nagainst > 0);
+        if (use_trace && !o->ref_patches) {   /* the finest setting's mesh: its rows compare patch by patch */
+            mref = o->mesh;
+            if (o->param == BN_STUDY_PATCHES) {
+                mref.patch_size = 0;
+                mref.target_patches = (size_t)o->values[0];
+                for (size_t v = 1; v < o->nvalues; v++)
+                    mref.target_patches = (size_t)fmax((double)mref.target_patches, o->values[v]);
+            } else if (o->param == BN_STUDY_PATCH_SIZE)
+                mref.patch_size = mcoarse.patch_size;
+        }
+    }
+    bn__note(S, "study %s: building the reference (%s)", bn_study_param_name(o->param),
+             use_trace ? "path tracer" : "radiosity");
+    st = use_trace ? bn__trace_reference(S, &mref, &ref, err) : bn__radiosity(S, &mref, &fref, &ref, NULL, err);
     if (st != BN_OK)
         return st;
     st = bn__study_ref_init(&rr, ref.scene, ref.L, R->nsurfaces, err);
@@ -857,11 +950,14 @@ static bn_status bn__study_settings(bn__study *S, bn_error *err)
             e = fmax(e, fabs(rr.E[i]));
         R->norm_E = e;
     }
-    snprintf(R->reference, sizeof R->reference, "%s solve, %zu patches (edge %.4g), ff %s with %d samples, %s storage",
+    if (!use_trace)
+        snprintf(R->reference, sizeof R->reference, "%s solve, %zu patches (edge %.4g), ff %s with %d samples, %s storage",
              bn_solve_method_name(o->solve.method), ref.n, bn_scene_patch_size(ref.scene), bn_ff_method_name(fref.method),
              fref.samples ? fref.samples : bn_formfactor_default_samples(fref.method),
              fref.precision == BN_PRECISION_DOUBLE ? "double" : "float");
-    if (o->param == BN_STUDY_PRECISION) {
+    if (use_trace) {
+        /* its error was set from its standard errors */
+    } else if (o->param == BN_STUDY_PRECISION) {
         R->ref_error = R->ref_error_patch = 0;
         snprintf(R->ref_error_how, sizeof R->ref_error_how,
                  "same mesh and form factors in double: rounding only (~1e-15 relative per operation)");

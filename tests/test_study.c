@@ -1,0 +1,281 @@
+/* Tests of `bounce study`: the CSV and its provenance, the truncation bound row by row, the exact
+ * furnace answer, mesh-size convergence toward the reference, and the plot files.
+ *
+ * Tolerances, with their reasons:
+ *  - ROUND: measured ||L - S_n||_inf may exceed a tight bound by the double rounding of L and S_n
+ *    (a few ulps of ||L||); the test allows the reference's own a posteriori error bound plus 1e-12
+ *    relative, nothing more.
+ *  - FURNACE: with hemisphere form factors in a closed box every ray hits, so each row of F sums to 1
+ *    up to float storage (~6e-8 per row); over the <= 40 applications in the study that is below 1e-5
+ *    relative in K^k E = rho^k E. */
+#include "bn_test.h"
+#include "bounce/study.h"
+
+#include <stdint.h>
+
+#define ROUND 1e-12
+#define FURNACE 1e-5
+
+/* ---- a small CSV reader: '#' lines skipped (kept in *meta), header, rows of fields ---- */
+typedef struct csv {
+    char *text;
+    char *meta;          /* the '#' lines, concatenated */
+    int ncol, nrow;
+    char *col[128];
+    char *cell[512][128];
+} csv;
+
+static csv *csv_read(const char *path)
+{
+    size_t size;
+    char *t = bn_test_read_file(path, &size), *line, *save = NULL;
+    csv *c;
+    int header = 0;
+    if (!t)
+        BN_FAIL("cannot read %s", path);
+    c = calloc(1, sizeof *c);
+    c->text = t;
+    c->meta = calloc(size + 1, 1);
+    for (line = strtok_r(t, "\n", &save); line; line = strtok_r(NULL, "\n", &save)) {
+        char *f, *s2 = NULL;
+        int k = 0;
+        if (line[0] == '#') {
+            strcat(c->meta, line);
+            strcat(c->meta, "\n");
+            continue;
+        }
+        for (f = strtok_r(line, ",", &s2); f && k < 128; f = strtok_r(NULL, ",", &s2), k++) {
+            if (!header)
+                c->col[k] = f;
+            else
+                c->cell[c->nrow][k] = f;
+        }
+        if (!header) {
+            c->ncol = k;
+            header = 1;
+        } else {
+            BN_ASSERT_EQ(k, c->ncol);   /* every row has every column */
+            if (++c->nrow >= 512)
+                break;
+        }
+    }
+    return c;
+}
+
+static int csv_col(const csv *c, const char *name)
+{
+    for (int k = 0; k < c->ncol; k++)
+        if (strcmp(c->col[k], name) == 0)
+            return k;
+    BN_FAIL("column %s missing", name);
+    return -1;
+}
+
+static double csv_num(const csv *c, int row, const char *name) { return strtod(c->cell[row][csv_col(c, name)], NULL); }
+static const char *csv_str(const csv *c, int row, const char *name) { return c->cell[row][csv_col(c, name)]; }
+
+static double meta_num(const csv *c, const char *key)
+{
+    char pat[128];
+    const char *p;
+    snprintf(pat, sizeof pat, "# %s=", key);
+    p = strstr(c->meta, pat);
+    if (!p)
+        BN_FAIL("provenance line %s missing", key);
+    return strtod(p + strlen(pat), NULL);
+}
+
+static void csv_free(csv *c)
+{
+    free(c->text);
+    free(c->meta);
+    free(c);
+}
+
+/* The header is BN_STUDY_CSV_COLUMNS followed by one err_surf_<material> per material. */
+static void check_columns(const csv *c, const char *const *materials, int nmat)
+{
+    char expect[2048], got[2048] = "";
+    snprintf(expect, sizeof expect, "%s", BN_STUDY_CSV_COLUMNS);
+    for (int m = 0; m < nmat; m++) {
+        strcat(expect, ",err_surf_");
+        strcat(expect, materials[m]);
+    }
+    for (int k = 0; k < c->ncol; k++) {
+        if (k)
+            strcat(got, ",");
+        strcat(got, c->col[k]);
+    }
+    if (strcmp(expect, got) != 0)
+        BN_FAIL("header\n  %s\nexpected\n  %s", got, expect);
+}
+
+BN_TEST(study_truncation_bound_cornell)
+{
+    /* Hemisphere form factors: the bound is about the series of whatever K is used, so the cheapest
+     * valid K serves; the reference is the direct solve of that same K. */
+    char args[1024], *out = NULL;
+    const char *mats[] = {"white", "red", "green", "light"};
+    csv *c;
+    int rows = 0;
+    double prev = INFINITY, ref_abs, normL;
+    snprintf(args, sizeof args,
+             "study %s --unit mm --patches 150 --ff hemisphere --samples 2000 --vary bounces=0,1,2,3,4,5,6,7,8,9,10,11,"
+             "12,13,14,15,16,17,18,19,20 --methods gauss-seidel,direct --tols 1e-3,1e-6 -o %s --threads 2",
+             bn_test_path("meshes/cornell-box.obj"), bn_test_tmp("trunc.csv"));
+    if (bn_test_bounce(args, &out) != 0)
+        BN_FAIL("bounce study failed:\n%s", out ? out : "");
+    c = csv_read(bn_test_tmp("trunc.csv"));
+    check_columns(c, mats, 4);
+    /* provenance: how it was made */
+    BN_ASSERT(strstr(c->meta, "# command=") && strstr(c->meta, "# version=") && strstr(c->meta, "# seed=1"));
+    BN_ASSERT(strstr(c->meta, "# solver=") && strstr(c->meta, "# tolerance=") && strstr(c->meta, "# reference=direct"));
+    normL = meta_num(c, "norm_L");
+    ref_abs = meta_num(c, "reference_error") * normL;
+    BN_ASSERT_LT(ref_abs, 1e-9 * normL);   /* the reference is exact to rounding */
+    for (int r = 0; r < c->nrow; r++) {
+        double e, b, bk;
+        if (strcmp(csv_str(c, r, "method"), "truncated") != 0)
+            continue;
+        BN_ASSERT_EQ(csv_num(c, r, "x"), rows);
+        e = csv_num(c, r, "err_inf");
+        b = csv_num(c, r, "bound");
+        bk = csv_num(c, r, "bound_ke");
+        /* the a priori bounds hold, row by row */
+        BN_ASSERT_LE(e, b + ref_abs + ROUND * normL);
+        BN_ASSERT_LE(e, bk + ref_abs + ROUND * normL);
+        /* K >= 0 and E >= 0: S_n grows toward L entry by entry, so the error never grows */
+        BN_ASSERT_LE(e, prev);
+        BN_ASSERT_GT(e, 0);
+        prev = e;
+        rows++;
+    }
+    BN_ASSERT_EQ(rows, 21);
+    /* Gauss-Seidel reaches each tolerance: rows for both, and its error is below the bound of its
+     * residual (||L - L_k|| <= ||r|| / (1 - ||K||) <= tol ||E|| / (1 - ||K||)). */
+    {
+        int gs = 0;
+        double kn = meta_num(c, "k_norm_inf"), nE = meta_num(c, "norm_E");
+        for (int r = 0; r < c->nrow; r++)
+            if (strcmp(csv_str(c, r, "method"), "gauss-seidel") == 0) {
+                double tol = csv_num(c, r, "x");
+                BN_ASSERT_LE(csv_num(c, r, "err_inf"), tol * nE / (1 - kn) + ref_abs);
+                gs++;
+            }
+        BN_ASSERT_EQ(gs, 2);
+    }
+    csv_free(c);
+    free(out);
+}
+
+BN_TEST(study_truncation_furnace_exact)
+{
+    /* Closed furnace box, rho = 0.5, Le = 1: L = 2 and S_n = 2 - 0.5^n exactly, so ||L - S_n|| = 0.5^n,
+     * which is also the bound (||K|| = rho) and the spectral estimate: the bound is tight here. */
+    char args[1024], *out = NULL;
+    const char *mats[] = {"furnace"};
+    csv *c;
+    int rows = 0;
+    snprintf(args, sizeof args,
+             "study %s --patches 24 --ff hemisphere --vary bounces=0,1,2,5,10,20 --methods direct -o %s -q",
+             bn_test_path("meshes/furnace-box.obj"), bn_test_tmp("furnace.csv"));
+    if (bn_test_bounce(args, &out) != 0)
+        BN_FAIL("bounce study failed:\n%s", out ? out : "");
+    c = csv_read(bn_test_tmp("furnace.csv"));
+    check_columns(c, mats, 1);
+    BN_ASSERT_REL(meta_num(c, "norm_L"), 2.0, FURNACE);
+    BN_ASSERT_REL(meta_num(c, "k_norm_inf"), 0.5, FURNACE);
+    for (int r = 0; r < c->nrow; r++) {
+        double n, exact;
+        if (strcmp(csv_str(c, r, "method"), "truncated") != 0)
+            continue;
+        n = csv_num(c, r, "x");
+        exact = pow(0.5, n);
+        BN_ASSERT_REL(csv_num(c, r, "err_inf"), exact, FURNACE);
+        BN_ASSERT_REL(csv_num(c, r, "bound"), exact, FURNACE);
+        BN_ASSERT_REL(csv_num(c, r, "estimate"), exact, FURNACE);
+        /* every surface mean is off by the same 0.5^n / 2 */
+        BN_ASSERT_REL(csv_num(c, r, "err_surface_max"), exact / 2, FURNACE);
+        rows++;
+    }
+    BN_ASSERT_EQ(rows, 6);
+    csv_free(c);
+    free(out);
+}
+
+BN_TEST(study_mesh_converges)
+{
+    /* Mesh-size study on coarse settings against a finer radiosity reference: the per-surface and
+     * per-patch errors shrink as the mesh is refined, and the reference's estimated error is below
+     * the errors it measures (otherwise the study would compare against noise). */
+    char args[1024], *out = NULL;
+    csv *c;
+    double prev_s = INFINITY, prev_r = INFINITY, ref_err;
+    int rows = 0;
+    snprintf(args, sizeof args,
+             "study %s --unit mm --vary patches=20,80 --ref-patches 320 --samples 8 -o %s -q",
+             bn_test_path("meshes/cornell-box.obj"), bn_test_tmp("mesh.csv"));
+    if (bn_test_bounce(args, &out) != 0)
+        BN_FAIL("bounce study failed:\n%s", out ? out : "");
+    c = csv_read(bn_test_tmp("mesh.csv"));
+    ref_err = meta_num(c, "reference_error");
+    for (int r = 0; r < c->nrow; r++) {
+        double es = csv_num(c, r, "err_surface_max"), er = csv_num(c, r, "err_rms_rel");
+        BN_ASSERT_EQ(csv_num(c, r, "ground"), 1);   /* compared on the reference's patches */
+        BN_ASSERT_LT(es, prev_s);
+        BN_ASSERT_LT(er, prev_r);
+        BN_ASSERT_LT(ref_err, es);
+        BN_ASSERT_GT(csv_num(c, r, "t_ff"), 0);
+        BN_ASSERT_GT(csv_num(c, r, "peak_mb"), 0);
+        prev_s = es;
+        prev_r = er;
+        rows++;
+    }
+    BN_ASSERT_EQ(rows, 2);
+    csv_free(c);
+    free(out);
+}
+
+BN_TEST(study_plot_files)
+{
+    char args[1024], *out = NULL, *png, *svg;
+    size_t npng, nsvg;
+    static const unsigned char magic[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+    snprintf(args, sizeof args,
+             "study %s --patches 24 --ff hemisphere --vary bounces=0,1,2,3,4 --methods jacobi,direct -o %s --plot %s -q",
+             bn_test_path("meshes/furnace-box.obj"), bn_test_tmp("plot.csv"), bn_test_tmp("plot"));
+    if (bn_test_bounce(args, &out) != 0)
+        BN_FAIL("bounce study failed:\n%s", out ? out : "");
+    png = bn_test_read_file(bn_test_tmp("plot.png"), &npng);
+    svg = bn_test_read_file(bn_test_tmp("plot.svg"), &nsvg);
+    BN_ASSERT(png && svg);
+    BN_ASSERT_GT(npng, 1000);
+    BN_ASSERT(memcmp(png, magic, 8) == 0);
+    BN_ASSERT(strstr(svg, "<svg") != NULL && strstr(svg, "</svg>") != NULL);
+    BN_ASSERT(strncmp(svg, "<?xml", 5) == 0 || strncmp(svg, "<svg", 4) == 0);
+    /* no temporary left behind (atomic writes go to a ".NAME.tmpPID" beside the target, then rename) */
+    snprintf(args, sizeof args, "ls -a '%s' | grep -q '\\.tmp'", bn_test_tmpdir());
+    BN_ASSERT(bn_test_run(args, NULL) != 0);
+    free(png);
+    free(svg);
+    free(out);
+}
+
+BN_TEST(study_usage_errors)
+{
+    char args[512], *out = NULL;
+    snprintf(args, sizeof args, "study %s --vary colour=1,2 -o %s", bn_test_path("meshes/furnace-box.obj"),
+             bn_test_tmp("x.csv"));
+    BN_ASSERT_EQ(bn_test_bounce(args, &out), 2);
+    BN_ASSERT(out && strstr(out, "unknown parameter 'colour'"));
+    free(out);
+    snprintf(args, sizeof args, "study %s --vary bounces=1,x -o %s", bn_test_path("meshes/furnace-box.obj"),
+             bn_test_tmp("x.csv"));
+    BN_ASSERT_EQ(bn_test_bounce(args, &out), 2);
+    free(out);
+    snprintf(args, sizeof args, "study %s --vary bounces=-1 -o %s", bn_test_path("meshes/furnace-box.obj"),
+             bn_test_tmp("x.csv"));
+    BN_ASSERT_EQ(bn_test_bounce(args, &out), 2);
+    BN_ASSERT(!bn_test_file_exists(bn_test_tmp("x.csv")));
+    free(out);
+}
