@@ -23,6 +23,7 @@ typedef struct bn_bake bn_bake;   /* opaque: the output vertices and their patch
 bn_status bn_bake_create(const bn_scene *scene, double crease_deg, bn_bake **out, bn_error *err);
 void bn_bake_destroy(bn_bake *b);   /* NULL is a no-op */
 
+const bn_scene *bn_bake_scene(const bn_bake *b);   /* the scene it was built from (borrowed) */
 size_t bn_bake_vertex_count(const bn_bake *b);
 const double *bn_bake_vertex_positions(const bn_bake *b);   /* xyz per output vertex (borrowed) */
 /* The output vertex of corner c of patch p (faces of the baked mesh are the patches). */

@@ -186,6 +186,7 @@ void bn_bake_destroy(bn_bake *b)
     free(b);
 }
 
+const bn_scene *bn_bake_scene(const bn_bake *b) { return b->scene; }
 size_t bn_bake_vertex_count(const bn_bake *b) { return b->nverts; }
 const double *bn_bake_vertex_positions(const bn_bake *b) { return b->pos; }
 size_t bn_bake_corner_vertex(const bn_bake *b, size_t patch, unsigned corner) { return b->corner_v[4 * patch + corner]; }

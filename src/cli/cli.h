@@ -79,6 +79,57 @@ int bn_cli_interrupted(void);
 /* The exit-code table, for --help. */
 extern const char bn_cli_exit_codes[];
 
+/* Form-factor options (src/cli/ff_options.c), shared by formfactors, solve, bounces, study. */
+#include "bounce/formfactor.h"
+typedef struct bn_cli_ff {
+    int    method;            /* index into "analytic|montecarlo|hemisphere" */
+    int    samples;           /* 0 = the method's default */
+    int    precision;         /* index into "float|double" */
+    int    storage;           /* index into "dense|sparse" */
+    double sparse_threshold;
+    size_t max_memory;        /* bytes, 0 = 80% of physical memory */
+    double tolerance;         /* 0 = default */
+    const char *cache;        /* NULL: no cache */
+} bn_cli_ff;
+void bn_cli_add_ff(bn_optset *s, bn_cli_ff *o);
+/* Fills library options from the CLI groups. */
+void bn_cli_ff_opts(const bn_cli_ff *o, const bn_cli_common *c, bn_formfactor_opts *out);
+/* Builds the ray-casting structure and F (K = diag(rho) F) for a meshed scene; prints the
+ * diagnostics to diag_fp (may be NULL) and any error to stderr. *rt may be left NULL when F
+ * came from the cache. Returns the status (bn_status_exit_code gives the exit code). */
+bn_status bn_cli_build_ff(const bn_scene *scene, const bn_cli_ff *o, const bn_cli_common *c, bn_rt **rt,
+                          bn_transport **k, bn_ff_diagnostics *diag, FILE *diag_fp);
+
+/* Camera options (src/cli/camera_options.c), shared by bounces and trace: defaults from the
+ * scene's box, then its NAME.camera sidecar, then these flags. */
+#include "bounce/image.h"
+typedef struct bn_cli_camera {
+    double eye[3], look[3], up[3], fov;
+    int    size[2];
+    int    spp;
+} bn_cli_camera;
+void bn_cli_add_camera(bn_optset *s, bn_cli_camera *o);
+bn_status bn_cli_make_camera(const bn_optset *s, const bn_cli_camera *o, const char *scene_path, const bn_scene *scene,
+                             bn_camera *cam, bn_error *err);
+/* Camera as one provenance line: "eye x,y,z look x,y,z up x,y,z fov F size WxH spp N". */
+void bn_cli_camera_describe(const bn_camera *cam, char *buf, size_t n);
+
+/* Solver options for the image and bake commands (src/cli/camera_options.c) and the helper
+ * running form factors + solve with the bounce terms kept. */
+#include "bounce/solve.h"
+typedef struct bn_cli_solution {
+    int    method;     /* index into "jacobi|gauss-seidel|neumann|direct" (default gauss-seidel) */
+    double tol;        /* 0 = default 1e-6 */
+    size_t max_iter;   /* 0 = default */
+} bn_cli_solution;
+void bn_cli_add_solution(bn_optset *s, bn_cli_solution *o);
+/* Builds rt + K from the form-factor options, solves (I - K) L = E keeping K^0 E .. K^bounces E.
+ * On success *rt, *k and *res are the caller's; describe (may be NULL) receives the solver line
+ * for provenance. Prints errors; returns the status. */
+bn_status bn_cli_run_solution(const bn_scene *scene, const bn_cli_ff *ff, const bn_cli_solution *so,
+                              const bn_cli_common *c, int bounces, bn_rt **rt, bn_transport **k,
+                              bn_solve_result *res, char *describe, size_t ndescribe);
+
 /* Subcommands: each takes argv from the subcommand's name on. */
 int bn_cmd_info(int argc, char **argv, bn_cli_common *c);
 int bn_cmd_formfactors(int argc, char **argv, bn_cli_common *c);

@@ -1,0 +1,247 @@
+/* Writing baked meshes: PLY (binary, through OpenMesh, provenance added as header comments),
+ * OM (OpenMesh), OBJ with `v x y z r g b` written directly (OpenMesh's OBJ writer refuses
+ * vertex colours). Colours are radiance in W m^-2 sr^-1 as float, or 8-bit sRGB with --ldr. */
+#include "bounce/bake.h"
+#include "adapters/adapters.h"
+#include "base/internal.h"
+
+#include <math.h>
+#include <string.h>
+#include <strings.h>
+
+static const char *bn__ext(const char *path)
+{
+    const char *slash = strrchr(path, '/'), *dot = strrchr(path, '.');
+    if (!dot || (slash && dot < slash))
+        return "";
+    return dot + 1;
+}
+
+/* One line, no control characters: safe inside a PLY or OBJ comment. */
+static void bn__comment_text(const char *s, char *out, size_t n)
+{
+    size_t i = 0;
+    for (; *s && i + 1 < n; s++)
+        out[i++] = ((unsigned char)*s < 32) ? ' ' : *s;
+    out[i] = '\0';
+}
+
+/* Copies the PLY at `src` to `dst`, adding `comment KEY: VALUE` lines after its format line. */
+static bn_status bn__ply_add_comments(const char *src, const char *dst, const bn_bake_write_opts *o, bn_error *err)
+{
+    FILE *in = fopen(src, "rb");
+    bn__outfile out;
+    char line[4096], text[2048];
+    bn_status st;
+    int header = 1;
+    size_t n;
+    if (!in)
+        return bn_error_set(err, BN_EIO, "%s: cannot reopen the file OpenMesh wrote", dst);
+    st = bn__outfile_open(&out, dst, "wb", err);
+    if (st != BN_OK) {
+        fclose(in);
+        return st;
+    }
+    while (header && fgets(line, sizeof line, in)) {
+        fputs(line, out.fp);
+        if (strncmp(line, "format ", 7) == 0) {
+            fprintf(out.fp, "comment bounce %s: per-vertex radiance baked from the patch solution\n", bn_version());
+            for (size_t a = 0; a < o->nattrs; a++) {
+                bn__comment_text(o->attrs[a].value, text, sizeof text);
+                fprintf(out.fp, "comment %s: %s\n", o->attrs[a].key, text);
+            }
+        }
+        if (strcmp(line, "end_header\n") == 0)
+            header = 0;
+    }
+    while ((n = fread(line, 1, sizeof line, in)) > 0)
+        fwrite(line, 1, n, out.fp);
+    if (header || ferror(in)) {
+        fclose(in);
+        bn__outfile_abort(&out);
+        return bn_error_set(err, BN_EIO, "%s: the PLY OpenMesh wrote has no complete header", dst);
+    }
+    fclose(in);
+    return bn__outfile_commit(&out, err);
+}
+
+static bn_status bn__write_obj(const bn_bake *b, const char *path, const float *colour, const unsigned char *c8,
+                               const bn_bake_write_opts *o, bn_error *err)
+{
+    bn__outfile f;
+    size_t np, nv = bn_bake_vertex_count(b);
+    const bn_patch *patches = bn_scene_patches(bn_bake_scene(b), &np);
+    const double *pos = bn_bake_vertex_positions(b);
+    char text[2048];
+    bn_status st = bn__outfile_open(&f, path, "w", err);
+    if (st != BN_OK)
+        return st;
+    fprintf(f.fp, "# bounce %s: per-vertex radiance baked from the patch solution\n", bn_version());
+    fprintf(f.fp, "# vertex colours: `v x y z r g b`, %s\n",
+            c8 ? "8-bit sRGB at the exposure, written as value/255" : "linear radiance, W m^-2 sr^-1 (not clamped)");
+    for (size_t a = 0; a < o->nattrs; a++) {
+        bn__comment_text(o->attrs[a].value, text, sizeof text);
+        fprintf(f.fp, "# %s: %s\n", o->attrs[a].key, text);
+    }
+    for (size_t v = 0; v < nv; v++) {
+        if (c8)
+            fprintf(f.fp, "v %.17g %.17g %.17g %.6g %.6g %.6g\n", pos[3 * v], pos[3 * v + 1], pos[3 * v + 2],
+                    c8[3 * v] / 255.0, c8[3 * v + 1] / 255.0, c8[3 * v + 2] / 255.0);
+        else
+            fprintf(f.fp, "v %.17g %.17g %.17g %.9g %.9g %.9g\n", pos[3 * v], pos[3 * v + 1], pos[3 * v + 2],
+                    (double)colour[3 * v], (double)colour[3 * v + 1], (double)colour[3 * v + 2]);
+    }
+    for (size_t p = 0; p < np; p++) {
+        fputc('f', f.fp);
+        for (unsigned c = 0; c < patches[p].ncorners; c++)
+            fprintf(f.fp, " %zu", bn_bake_corner_vertex(b, p, c) + 1);
+        fputc('\n', f.fp);
+    }
+    return bn__outfile_commit(&f, err);
+}
+
+bn_status bn_bake_write(const bn_bake *b, const char *path, const bn_bake_layer *layers, size_t nlayers,
+                        const bn_bake_write_opts *o, bn_error *err)
+{
+    const char *ext = bn__ext(path);
+    size_t nv = bn_bake_vertex_count(b), np, nbad = 0;
+    const bn_patch *patches = bn_scene_patches(bn_bake_scene(b), &np);
+    double *vv = NULL;
+    float **vals = NULL;
+    unsigned char *c8 = NULL;
+    unsigned *face_n = NULL;
+    size_t *face_idx = NULL;
+    char **names = NULL;
+    char *tmp = NULL, *prov = NULL;
+    bn_status st = BN_OK;
+    int is_ply = strcasecmp(ext, "ply") == 0, is_om = strcasecmp(ext, "om") == 0, is_obj = strcasecmp(ext, "obj") == 0;
+
+    if (!is_ply && !is_om && !is_obj)
+        return bn_error_set(err, BN_EUSAGE, "%s: unknown mesh format '.%s' (bake writes .ply, .om and .obj)", path, ext);
+    if (nlayers == 0)
+        return bn_error_set(err, BN_EINTERNAL, "%s: nothing to bake", path);
+    if (is_obj && nlayers > 1)
+        return bn_error_set(err, BN_EUSAGE, "%s: per-bounce colour sets need .ply or .om (OBJ has one colour per vertex)",
+                            path);
+    vv = bn__malloc_array(nv, 3 * sizeof(double));
+    vals = bn__calloc(nlayers, sizeof *vals);
+    names = bn__calloc(3 * nlayers, sizeof *names);
+    face_n = bn__malloc_array(np, sizeof *face_n);
+    face_idx = bn__malloc_array(np, 4 * sizeof *face_idx);
+    if (!vv || !vals || !names || !face_n || !face_idx)
+        goto oom;
+    for (size_t l = 0; l < nlayers; l++) {
+        vals[l] = bn__malloc_array(nv, 3 * sizeof(float));
+        if (!vals[l])
+            goto oom;
+        bn_bake_vertex_values(b, layers[l].patch_values, vv);
+        for (size_t i = 0; i < 3 * nv; i++) {
+            vals[l][i] = (float)vv[i];
+            nbad += !isfinite(vals[l][i]);
+        }
+    }
+    if (nbad) {
+        st = bn_error_set(err, BN_ENUMERIC, "%s: %zu baked values are not finite; nothing was written", path, nbad);
+        goto done;
+    }
+    if (o->ldr) {
+        c8 = bn__malloc_array(nv, 3);
+        if (!c8)
+            goto oom;
+        for (size_t i = 0; i < 3 * nv; i++)
+            c8[i] = bn_tonemap_srgb8(vals[0][i], o->exposure_ev);
+    }
+    if (is_obj) {
+        st = bn__write_obj(b, path, vals[0], c8, o, err);
+        goto done;
+    }
+    for (size_t p = 0; p < np; p++) {
+        face_n[p] = patches[p].ncorners;
+        for (unsigned c = 0; c < 4; c++)
+            face_idx[4 * p + c] = c < patches[p].ncorners ? bn_bake_corner_vertex(b, p, c) : 0;
+    }
+    {
+        const char *suffix[3] = {"red", "green", "blue"};
+        float **extra = bn__calloc(3 * nlayers, sizeof *extra);
+        size_t nextra = 0, dup = 0, plen = 64;
+        bn__bake_mesh m;
+        if (!extra)
+            goto oom;
+        for (size_t l = 1; l < nlayers; l++)
+            for (int c = 0; c < 3; c++) {
+                size_t len = strlen(layers[l].name) + 8;
+                names[nextra] = malloc(len);
+                extra[nextra] = bn__malloc_array(nv, sizeof(float));
+                if (!names[nextra] || !extra[nextra]) {
+                    free(names[nextra]);
+                    free(extra[nextra]);
+                    names[nextra] = NULL;
+                    for (size_t e = 0; e < nextra; e++)
+                        free(extra[e]);
+                    free(extra);
+                    goto oom;
+                }
+                snprintf(names[nextra], len, "%s_%s", layers[l].name, suffix[c]);
+                for (size_t v = 0; v < nv; v++)
+                    extra[nextra][v] = vals[l][3 * v + c];
+                nextra++;
+            }
+        for (size_t a = 0; a < o->nattrs; a++)
+            plen += strlen(o->attrs[a].key) + strlen(o->attrs[a].value) + 4;
+        prov = malloc(plen);
+        if (prov) {
+            size_t k = (size_t)snprintf(prov, plen, "bounce %s\n", bn_version());
+            for (size_t a = 0; a < o->nattrs && k < plen; a++)
+                k += (size_t)snprintf(prov + k, plen - k, "%s: %s\n", o->attrs[a].key, o->attrs[a].value);
+        }
+        memset(&m, 0, sizeof m);
+        m.nverts = nv;
+        m.pos = bn_bake_vertex_positions(b);
+        m.nfaces = np;
+        m.face_n = face_n;
+        m.face_idx = face_idx;
+        m.colour = c8 ? NULL : vals[0];
+        m.colour8 = c8;
+        m.nextra = nextra;
+        m.extra_name = (const char *const *)names;
+        m.extra = (const float *const *)extra;
+        m.provenance = is_om ? prov : NULL;
+        st = bn__tmpname_reserve(path, &tmp, err);
+        if (st == BN_OK)
+            st = bn__openmesh_write(tmp, &m, &dup, err);
+        for (size_t e = 0; e < nextra; e++)
+            free(extra[e]);
+        free(extra);
+        if (st == BN_OK && dup)
+            bn_logf(o->log, BN_LOG_WARN,
+                    "%s: %zu vertices were duplicated for faces OpenMesh's half-edge mesh cannot share (non-manifold)",
+                    path, dup);
+        if (st == BN_OK && is_ply) {
+            st = bn__ply_add_comments(tmp, path, o, err);
+            bn__tmpname_abort(tmp);
+        } else if (st == BN_OK) {
+            st = bn__tmpname_commit(path, tmp, err);
+        } else {
+            bn__tmpname_abort(tmp);
+        }
+        tmp = NULL;
+    }
+    goto done;
+oom:
+    st = bn_error_set(err, BN_ENOMEM, "out of memory baking %zu vertices", nv);
+done:
+    if (vals)
+        for (size_t l = 0; l < nlayers; l++)
+            free(vals[l]);
+    if (names)
+        for (size_t i = 0; i < 3 * nlayers; i++)
+            free(names[i]);
+    free(vals);
+    free(names);
+    free(vv);
+    free(c8);
+    free(face_n);
+    free(face_idx);
+    free(prov);
+    return st;
+}

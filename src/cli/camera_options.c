@@ -1,0 +1,124 @@
+/* The camera option group (shared by `bounce bounces` and `bounce trace`) and the solver group
+ * plus the form factors + solve helper used by `bounces` and `bake`. */
+#include "cli/cli.h"
+#include "base/internal.h"
+
+#include <string.h>
+
+void bn_cli_add_camera(bn_optset *s, bn_cli_camera *o)
+{
+    bn_optset_add(s, (bn_opt){"eye", 0, BN_OPT_VEC3, o->eye, NULL, 0, 0, "X,Y,Z",
+                              "camera position, scene units (default: sidecar NAME.camera, else in front of the box)"});
+    bn_optset_add(s, (bn_opt){"look", 0, BN_OPT_VEC3, o->look, NULL, 0, 0, "X,Y,Z",
+                              "point looked at (default: the bounding box's centre)"});
+    bn_optset_add(s, (bn_opt){"up", 0, BN_OPT_VEC3, o->up, NULL, 0, 0, "X,Y,Z", "up direction (default 0,1,0)"});
+    bn_optset_add(s, (bn_opt){"fov", 0, BN_OPT_DOUBLE, &o->fov, NULL, 1e-3, 179.999, "DEG",
+                              "vertical field of view, degrees (default 40)"});
+    bn_optset_add(s, (bn_opt){"size", 0, BN_OPT_WXH, o->size, NULL, 1, 32768, "WxH", "image size (default 512x512)"});
+    bn_optset_add(s, (bn_opt){"spp", 0, BN_OPT_INT, &o->spp, NULL, 1, 65536, "N",
+                              "samples per pixel, stratified and jittered (default 1: pixel centres)"});
+}
+
+bn_status bn_cli_make_camera(const bn_optset *s, const bn_cli_camera *o, const char *scene_path, const bn_scene *scene,
+                             bn_camera *cam, bn_error *err)
+{
+    bn_status st;
+    bn_camera_default(scene, cam);
+    st = bn_camera_load_sidecar(scene_path, cam, NULL, err);
+    if (st != BN_OK)
+        return st;
+    if (bn_cli_given(s, "eye"))
+        memcpy(cam->eye, o->eye, sizeof cam->eye);
+    if (bn_cli_given(s, "look"))
+        memcpy(cam->look, o->look, sizeof cam->look);
+    if (bn_cli_given(s, "up"))
+        memcpy(cam->up, o->up, sizeof cam->up);
+    if (bn_cli_given(s, "fov"))
+        cam->fov_deg = o->fov;
+    if (bn_cli_given(s, "size")) {
+        cam->width = o->size[0];
+        cam->height = o->size[1];
+    }
+    if (bn_cli_given(s, "spp"))
+        cam->spp = o->spp;
+    return bn_camera_validate(cam, err);
+}
+
+void bn_cli_camera_describe(const bn_camera *c, char *buf, size_t n)
+{
+    snprintf(buf, n, "eye %.9g,%.9g,%.9g look %.9g,%.9g,%.9g up %.9g,%.9g,%.9g fov %.9g size %dx%d spp %d", c->eye[0],
+             c->eye[1], c->eye[2], c->look[0], c->look[1], c->look[2], c->up[0], c->up[1], c->up[2], c->fov_deg,
+             c->width, c->height, c->spp);
+}
+
+void bn_cli_add_solution(bn_optset *s, bn_cli_solution *o)
+{
+    o->method = 1;
+    bn_optset_add(s, (bn_opt){"solver", 0, BN_OPT_CHOICE, &o->method, "jacobi|gauss-seidel|neumann|direct", 0, 0,
+                              "METHOD", "jacobi, gauss-seidel (default), neumann or direct"});
+    bn_optset_add(s, (bn_opt){"tol", 0, BN_OPT_DOUBLE, &o->tol, NULL, 1e-300, 1, "T",
+                              "stop when ||E - (I - K) L||_inf <= T ||E||_inf (default 1e-6)"});
+    bn_optset_add(s, (bn_opt){"max-iter", 0, BN_OPT_SIZE, &o->max_iter, NULL, 1, 1e12, "N",
+                              "iteration limit (default 100000)"});
+}
+
+bn_status bn_cli_run_solution(const bn_scene *scene, const bn_cli_ff *ff, const bn_cli_solution *so,
+                              const bn_cli_common *c, int bounces, bn_rt **rt, bn_transport **k,
+                              bn_solve_result *res, char *describe, size_t ndescribe)
+{
+    bn_solve_opts sopt;
+    bn_error err;
+    bn_status st;
+    double *E;
+    size_t np;
+
+    memset(res, 0, sizeof *res);
+    bn_error_clear(&err);
+    st = bn_cli_build_ff(scene, ff, c, rt, k, NULL, NULL);
+    if (st != BN_OK)
+        return st;
+    if (!*rt) {   /* F came from the cache: the camera still needs rays */
+        st = bn_rt_create(scene, c->threads, rt, &err);
+        if (st != BN_OK)
+            goto fail;
+    }
+    bn_scene_patches(scene, &np);
+    E = bn__malloc_array(np, 3 * sizeof(double));
+    if (!E) {
+        st = bn_error_set(&err, BN_ENOMEM, "out of memory");
+        goto fail;
+    }
+    bn_scene_patch_emission(scene, E);
+    bn_solve_opts_default(&sopt);
+    sopt.method = (bn_solve_method)so->method;
+    if (so->tol > 0)
+        sopt.tol = so->tol;
+    if (so->max_iter > 0)
+        sopt.max_iter = so->max_iter;
+    sopt.bounces = bounces;
+    sopt.quiet = c->quiet;
+    st = bn_solve(k ? *k : NULL, E, &sopt, res, &err);
+    free(E);
+    if (describe)
+        snprintf(describe, ndescribe, "%s tol=%g max_iter=%zu: %s after %zu iterations, residual %.3g",
+                 bn_solve_method_name(sopt.method), sopt.tol, sopt.max_iter, bn_stop_reason_name(res->reason),
+                 res->iterations, res->residual_max);
+    if (st != BN_OK) {
+        bn_solve_result_free(res);
+        goto fail;
+    }
+    if (res->nterms < bounces + 1) {
+        st = bn_error_set(&err, BN_EINTERNAL, "the solver kept %d bounce terms, %d were asked for", res->nterms,
+                          bounces + 1);
+        bn_solve_result_free(res);
+        goto fail;
+    }
+    return BN_OK;
+fail:
+    bn_cli_fail(&err);
+    bn_rt_destroy(*rt);
+    bn_transport_destroy(*k);
+    *rt = NULL;
+    *k = NULL;
+    return st;
+}
