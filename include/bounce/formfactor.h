@@ -22,8 +22,9 @@ const char *bn_ff_method_name(bn_ff_method m);   /* "analytic", "montecarlo", "h
 
 typedef struct bn_formfactor_opts {
     bn_ff_method method;      /* default analytic */
-    int          samples;     /* montecarlo: point pairs per patch pair; hemisphere: rays per patch;
-                                 analytic: visibility rays per partly occluded pair (default 16) */
+    int          samples;     /* montecarlo: point pairs per patch pair (default 64); hemisphere: rays
+                                 per patch (default 4096); analytic: shadow rays per pair that an
+                                 occluder may block (default 32). 0 = the method's default */
     bn_storage   storage;     /* default dense */
     bn_precision precision;   /* default float */
     double       sparse_threshold;  /* sparse: drop F_ij below it (default 0: exact zeros only) */
@@ -32,8 +33,14 @@ typedef struct bn_formfactor_opts {
     int          quiet;       /* no progress bar */
     const char  *cache_path;  /* NULL: no cache */
     bn_log       log;
+    double       tolerance;   /* analytic: relative quadrature tolerance per pair (default 1e-6) */
 } bn_formfactor_opts;
 void bn_formfactor_opts_default(bn_formfactor_opts *o);
+/* The samples a method uses when o->samples is 0. */
+int bn_formfactor_default_samples(bn_ff_method m);
+/* One line naming every option that changes F ("method=analytic samples=32 ..."), for
+ * provenance headers and cache keys. */
+void bn_formfactor_opts_describe(const bn_formfactor_opts *o, char *buf, size_t size);
 
 /* What every assembly reports. */
 typedef struct bn_ff_diagnostics {
@@ -50,6 +57,17 @@ typedef struct bn_ff_diagnostics {
     size_t bytes;                 /* storage of F */
     double seconds;
     int    from_cache;
+    /* Added with the assembly (issue 3). */
+    size_t pairs_nonzero;         /* unordered pairs that face each other (F_unoccluded > 0 possible) */
+    size_t pairs_culled;          /* of those, pairs whose shaft holds no occluder: no rays */
+    size_t pairs_blocked;         /* pairs with at least one blocked shadow ray */
+    size_t quad_evals;            /* analytic: point-to-polygon kernel evaluations */
+    size_t dropped_entries;       /* sparse threshold: entries dropped */
+    size_t rows_above_one;        /* rows with sum_j F_ij > 1 + row_sum_tol */
+    double row_sum_tol;           /* the method's allowance for row sums above 1 */
+    double rays_per_second;       /* rays / seconds of the whole assembly */
+    bn_ff_method method;
+    int    samples;
 } bn_ff_diagnostics;
 
 /* Bytes the assembly of `scene` with `o` will need (checked against max_memory before any work). */
@@ -61,6 +79,23 @@ size_t bn_formfactor_bytes_needed(const bn_scene *scene, const bn_formfactor_opt
  * is negative, above 1 or not finite, BN_EINTR/BN_ETERM when interrupted. */
 bn_status bn_formfactor_build(const bn_scene *scene, const bn_rt *rt, const bn_formfactor_opts *o,
                               bn_transport **out, bn_ff_diagnostics *diag, bn_error *err);
+
+/* F from a differential area at x with unit normal n (pointing to the front) to the planar
+ * polygon v[0..nv) (xyz triples, counter-clockwise seen from its front), unoccluded, by
+ * Lambert's contour integral. Parts of the polygon behind x's tangent plane are clipped away.
+ * Dimensionless. */
+double bn_ff_point_to_polygon(const double x[3], const double n[3], const double *v, size_t nv);
+/* Unoccluded F_ij between two planar convex polygons (xyz triples, counter-clockwise seen from
+ * the front; surfaces one-sided): the contour integral integrated over polygon i by adaptive
+ * quadrature to relative tolerance rtol (<= 0: 1e-6). 0 if they do not face each other. */
+double bn_ff_polygon_pair(const double *vi, size_t ni, const double *vj, size_t nj, double rtol);
+
+/* Writes F: `.csv` (provenance lines starting with '#', then `patch,area,F0,...,F{N-1}` and one
+ * row per patch, areas in m^2) or `.bin` (the layout documented in doc/readme/formfactors.md:
+ * "BNFF", version 1, N, value bytes, layout dense|csr, nnz, provenance text, areas, F).
+ * provenance: '#'-prefixed lines (may be NULL). Atomic: written to a temporary and renamed. */
+bn_status bn_ff_write(const bn_transport *k, const bn_scene *scene, const char *path, const char *provenance,
+                      bn_error *err);
 
 /* Prints diagnostics as `key value` lines (for logs and `bounce formfactors`). */
 void bn_ff_diagnostics_print(const bn_ff_diagnostics *d, FILE *fp);

@@ -53,6 +53,10 @@ double bn_transport_norm_inf(const bn_transport *k, double per_channel[3]);
 /* Dense F from a row-major N*N double array (copied, stored in `prec`): tests, generators. */
 bn_status bn_transport_dense_from_array(size_t n, const double *F, const double *rho, bn_precision prec,
                                         bn_transport **out, bn_error *err);
+/* Sparse (CSR) F from a row-major N*N double array: exact zeros and entries below `threshold`
+ * are dropped; values stored in `prec`, columns as 32-bit indices (N < 2^32). */
+bn_status bn_transport_sparse_from_array(size_t n, const double *F, const double *rho, bn_precision prec,
+                                         double threshold, bn_transport **out, bn_error *err);
 /* Writes F as a row-major N*N double array (caller allocates N*N). */
 void bn_transport_to_dense(const bn_transport *k, double *F);
 

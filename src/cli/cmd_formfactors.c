@@ -1,11 +1,90 @@
-/* `bounce formfactors`: not implemented yet (placeholder until its issue lands). */
+/* `bounce formfactors SCENE -o F.csv|F.bin`: F with visibility, its diagnostics, and the file. */
 #include "cli/cli.h"
+#include "bounce/rt.h"
+#include "base/internal.h"
+
+#include <string.h>
 
 int bn_cmd_formfactors(int argc, char **argv, bn_cli_common *c)
 {
-    (void)argc;
-    (void)argv;
-    (void)c;
-    fprintf(stderr, "bounce: error: 'formfactors' is not implemented yet\n");
-    return 1;
+    bn_optset set;
+    bn_cli_scene so;
+    bn_cli_ff fo;
+    const char *pos[1], *output = NULL;
+    size_t npos;
+    int help;
+    bn_error err;
+    bn_scene *s = NULL;
+    bn_rt *rt = NULL;
+    bn_transport *k = NULL;
+    bn_ff_diagnostics d;
+    bn_formfactor_opts opts;
+    bn_status st;
+    char desc[512], *prov = NULL;
+    size_t plen;
+
+    memset(&set, 0, sizeof set);
+    memset(&so, 0, sizeof so);
+    memset(&fo, 0, sizeof fo);
+    set.usage = "bounce formfactors SCENE [meshing options] [form-factor options] -o F.csv|F.bin";
+    set.summary =
+        "Computes the form factors F_ij (the share of the light leaving patch i that arrives at patch j,\n"
+        "with visibility) for the meshed SCENE, prints the diagnostics (row sums, reciprocity, entries\n"
+        "outside [0, 1], occlusion, rays, ||K||_inf, bytes, time) and writes F: .csv with provenance\n"
+        "lines, a header `patch,area,F0,F1,...` and one row per patch, or .bin (BNFF, see the README).\n"
+        "An entry outside [0, 1] or not finite is an error (exit 5).";
+    bn_cli_add_scene(&set, &so);
+    bn_cli_add_ff(&set, &fo);
+    bn_optset_add(&set, (bn_opt){"output", 'o', BN_OPT_STRING, &output, NULL, 0, 0, "FILE",
+                                 "write F to FILE (.csv or .bin); without it only the diagnostics are printed"});
+    bn_cli_add_common(&set, c);
+    bn_error_clear(&err);
+    if (bn_cli_parse(&set, argc, argv, pos, 1, &npos, &help, &err) != BN_OK)
+        return bn_cli_fail(&err);
+    if (help) {
+        bn_cli_print_help(&set, stdout);
+        return 0;
+    }
+    if (npos != 1) {
+        bn_error_set(&err, BN_EUSAGE, "formfactors needs one SCENE argument (see --help)");
+        return bn_cli_fail(&err);
+    }
+    if (output) {
+        const char *dot = strrchr(output, '.');
+        if (!dot || (strcmp(dot, ".csv") != 0 && strcmp(dot, ".bin") != 0)) {
+            bn_error_set(&err, BN_EUSAGE, "-o %s: the output must end in .csv or .bin", output);
+            return bn_cli_fail(&err);
+        }
+    }
+    bn_cli_apply_threads(c);
+    st = bn_cli_load_scene(pos[0], &so, c, &s);
+    if (st != BN_OK)
+        return bn_status_exit_code(st);
+    st = bn_cli_build_ff(s, &fo, c, &rt, &k, &d, c->quiet ? NULL : stdout);
+    if (st == BN_OK && output) {
+        bn_cli_ff_opts(&fo, c, &opts);
+        bn_formfactor_opts_describe(&opts, desc, sizeof desc);
+        plen = strlen(c->cmdline) + strlen(desc) + 512;
+        prov = malloc(plen);
+        if (!prov) {
+            st = bn_error_set(&err, BN_ENOMEM, "out of memory");
+        } else {
+            snprintf(prov, plen,
+                     "# %s\n# bounce %s\n# %s\n# scene %s digest %016llx, %zu patches, unit %s\n"
+                     "# row sums min %.9g max %.9g; reciprocity residual %.3g; ||K||_inf %.9g\n",
+                     c->cmdline, bn_version(), desc, bn_scene_path(s), bn_scene_digest(s), d.n,
+                     bn_unit_name(bn_scene_unit(s)), d.row_sum_min, d.row_sum_max, d.reciprocity_residual,
+                     d.k_norm_inf);
+            st = bn_ff_write(k, s, output, prov, &err);
+        }
+        if (st != BN_OK)
+            bn_cli_fail(&err);
+        else if (!c->quiet)
+            printf("wrote                %s\n", output);
+    }
+    free(prov);
+    bn_transport_destroy(k);
+    bn_rt_destroy(rt);
+    bn_scene_destroy(s);
+    return bn_status_exit_code(st);
 }

@@ -1,5 +1,6 @@
 /* The transport operator K = diag(rho) F: the generic wrapper over a storage implementation. */
 #include "bounce/transport.h"
+#include "transport/transport_internal.h"
 #include "base/internal.h"
 
 #include <math.h>
@@ -46,6 +47,9 @@ void bn_transport_destroy(bn_transport *k)
     free(k->rho);
     free(k);
 }
+
+const bn_transport_ops *bn__transport_ops(const bn_transport *k) { return k->ops; }
+const void *bn__transport_impl(const bn_transport *k) { return k->impl; }
 
 size_t bn_transport_size(const bn_transport *k) { return k->n; }
 const double *bn_transport_rho(const bn_transport *k) { return k->rho; }

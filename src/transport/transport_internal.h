@@ -15,4 +15,8 @@ typedef struct bn__dense_view {
 bn_status bn__dense_alloc(size_t n, bn_precision prec, bn__dense_view *view, void **impl,
                           const bn_transport_ops **ops, bn_error *err);
 
+/* The storage behind a transport (borrowed): its ops table and implementation. */
+const bn_transport_ops *bn__transport_ops(const bn_transport *k);
+const void *bn__transport_impl(const bn_transport *k);
+
 #endif

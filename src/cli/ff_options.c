@@ -1,0 +1,81 @@
+/* The form-factor option group and the helper that builds rt + F from it (shared by every
+ * subcommand that needs K). */
+#include "cli/cli.h"
+#include "bounce/rt.h"
+
+#include <string.h>
+
+void bn_cli_add_ff(bn_optset *s, bn_cli_ff *o)
+{
+    bn_optset_add(s, (bn_opt){"ff", 0, BN_OPT_CHOICE, &o->method, "analytic|montecarlo|hemisphere", 0, 0,
+                              "METHOD", "form factors: analytic (default), montecarlo or hemisphere"});
+    bn_optset_add(s, (bn_opt){"samples", 0, BN_OPT_INT, &o->samples, NULL, 1, 1 << 24, "N",
+                              "analytic: shadow rays per pair an occluder may block (default 32); montecarlo: "
+                              "point pairs per pair (64); hemisphere: rays per patch (4096)"});
+    bn_optset_add(s, (bn_opt){"precision", 0, BN_OPT_CHOICE, &o->precision, "float|double", 0, 0, "float|double",
+                              "storage precision of F (default float; sums are always double)"});
+    bn_optset_add(s, (bn_opt){"storage", 0, BN_OPT_CHOICE, &o->storage, "dense|sparse", 0, 0, "dense|sparse",
+                              "F storage: dense N^2 (default) or sparse CSR without the exact zeros"});
+    bn_optset_add(s, (bn_opt){"sparse-threshold", 0, BN_OPT_DOUBLE, &o->sparse_threshold, NULL, 0, 0.999, "T",
+                              "sparse: also drop F_ij < T; the dropped mass per row is reported (default 0)"});
+    bn_optset_add(s, (bn_opt){"max-memory", 0, BN_OPT_SIZE, &o->max_memory, NULL, 1, 1e18, "BYTES",
+                              "limit for F's storage (default 80% of physical memory)"});
+    bn_optset_add(s, (bn_opt){"ff-tolerance", 0, BN_OPT_DOUBLE, &o->tolerance, NULL, 1e-12, 0.1, "T",
+                              "analytic: relative quadrature tolerance per pair (default 1e-6)"});
+    bn_optset_add(s, (bn_opt){"cache", 0, BN_OPT_STRING, &o->cache, NULL, 0, 0, "FILE",
+                              "reuse F from FILE when its key (scene, meshing, options) matches; else write it"});
+}
+
+static void bn__ff_log(void *user, bn_log_level level, const char *msg)
+{
+    const bn_cli_common *c = user;
+    if (level == BN_LOG_WARN)
+        fprintf(stderr, "bounce: warning: %s\n", msg);
+    else if (level == BN_LOG_INFO && !c->quiet)
+        fprintf(stderr, "bounce: %s\n", msg);
+}
+
+void bn_cli_ff_opts(const bn_cli_ff *o, const bn_cli_common *c, bn_formfactor_opts *out)
+{
+    bn_formfactor_opts_default(out);
+    out->method = (bn_ff_method)o->method;
+    out->samples = o->samples;
+    out->precision = o->precision ? BN_PRECISION_DOUBLE : BN_PRECISION_FLOAT;
+    out->storage = o->storage ? BN_STORAGE_SPARSE : BN_STORAGE_DENSE;
+    out->sparse_threshold = o->sparse_threshold;
+    out->max_memory = o->max_memory;
+    if (o->tolerance > 0)
+        out->tolerance = o->tolerance;
+    out->seed = c->seed;
+    out->quiet = c->quiet;
+    out->cache_path = o->cache;
+    out->log.fn = bn__ff_log;
+    out->log.user = (void *)c;
+    out->log.quiet = c->quiet;
+}
+
+bn_status bn_cli_build_ff(const bn_scene *scene, const bn_cli_ff *o, const bn_cli_common *c, bn_rt **rt,
+                          bn_transport **k, bn_ff_diagnostics *diag, FILE *diag_fp)
+{
+    bn_formfactor_opts fo;
+    bn_error err;
+    bn_status st;
+    bn_ff_diagnostics local;
+    bn_ff_diagnostics *d = diag ? diag : &local;
+    *rt = NULL;
+    *k = NULL;
+    bn_error_clear(&err);
+    bn_cli_ff_opts(o, c, &fo);
+    st = bn_rt_create(scene, c->threads, rt, &err);
+    if (st == BN_OK)
+        st = bn_formfactor_build(scene, *rt, &fo, k, d, &err);
+    if (st != BN_OK) {
+        bn_cli_fail(&err);
+        bn_rt_destroy(*rt);
+        *rt = NULL;
+        return st;
+    }
+    if (diag_fp)
+        bn_ff_diagnostics_print(d, diag_fp);
+    return BN_OK;
+}

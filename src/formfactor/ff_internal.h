@@ -1,0 +1,49 @@
+/* Form-factor internals: the point-to-polygon kernel, polygon clipping, adaptive quadrature,
+ * shaft culling and point sampling on convex polygons. Not installed. */
+#ifndef BOUNCE_FF_INTERNAL_H
+#define BOUNCE_FF_INTERNAL_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include "base/internal.h"
+
+/* Largest polygon the per-pair code handles: a quad clipped by one plane has at most 5
+ * corners; 8 leaves room. */
+#define BN__FF_POLY_MAX 8
+
+/* F from a differential area at x (unit normal n) to the polygon v[0..nv) (xyz triples,
+ * counter-clockwise seen from its front): Lambert's contour integral
+ *   F = -(1/2pi) sum_k gamma_k n . (R_k x R_k+1) / |R_k x R_k+1|,  R_k = v_k - x,
+ * gamma_k = atan2(|R_k x R_k+1|, R_k . R_k+1) (no acos, so no clamping is needed).
+ * The polygon must lie in x's front half-space (clip it first). */
+double bn__ff_point_polygon(const double x[3], const double n[3], const double *v, size_t nv);
+
+/* Clips the convex polygon v (nv corners) to the half-space n.(y - p) >= 0; corners within
+ * `tol` of the plane are snapped onto it. out needs room for nv + 1 corners. Returns the count
+ * (0 if nothing is left). */
+size_t bn__poly_clip(const double *v, size_t nv, const double n[3], const double p[3], double tol, double *out);
+/* Area of a planar polygon, and its (Newell) unit normal. */
+double bn__poly_area(const double *v, size_t nv, double n[3]);
+
+/* Quadrature statistics of one pair. */
+typedef struct bn__quad_stats {
+    size_t evals;       /* kernel evaluations */
+    size_t triangles;   /* triangles accepted */
+    int    max_depth;
+    int    capped;      /* the leaf limit stopped the refinement */
+} bn__quad_stats;
+
+/* Integral over the convex polygon pi (normal ni) of F(x -> pj) dA(x): A_i F_ij for the parts
+ * given. Adaptive: each triangle is accepted when a degree-5 (7-point) and a degree-2 (3-point)
+ * rule agree within its share of tol = max(rtol * |I|, atol), and it is no larger than kappa
+ * times its centroid's distance to pj (near pairs get small triangles; far ones one or two). */
+double bn__ff_polygon_integral(const double *pi, size_t ni, const double ni_n[3], const double *pj, size_t nj,
+                               double rtol, double atol, bn__quad_stats *st);
+
+/* Uniform point in a convex polygon from (u, v) in [0,1)^2 (fan triangles chosen by area). */
+void bn__poly_sample(const double *v, size_t nv, double u, double w, double out[3]);
+
+/* Distance from x to the convex polygon v with unit normal n. */
+double bn__point_polygon_dist(const double x[3], const double *v, size_t nv, const double n[3]);
+
+#endif

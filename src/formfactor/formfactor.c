@@ -1,0 +1,1092 @@
+/* Form-factor assembly: F_ij = (1/A_i) int_Ai int_Aj cos(ti) cos(tj) V / (pi r^2) dAj dAi,
+ * by three methods (analytic contour quadrature with shaft-culled shadow rays, stratified
+ * Monte Carlo point pairs, cosine-weighted hemisphere rays), stored dense or CSR, with the
+ * diagnostics every run reports. References: Cohen & Wallace, "Radiosity and Realistic Image
+ * Synthesis" (1993) ch. 4; Haines & Wallace, "Shaft culling for efficient ray-traced radiosity"
+ * (1991); Wallace, Elmquist & Haines, "A ray tracing algorithm for progressive radiosity" (1989). */
+#include "bounce/formfactor.h"
+#include "formfactor/ff_internal.h"
+#include "formfactor/ff_io.h"
+#include "transport/transport_internal.h"
+#include "transport/sparse_internal.h"
+#include "base/internal.h"
+#include "base/vec.h"
+
+#include <float.h>
+#include <math.h>
+#include <omp.h>
+#include <string.h>
+
+/* Entries above 1 by more than this are errors: room for the quadrature's rounding, far below
+ * anything a wrong visibility or kernel produces (View3D's 1.31). */
+#define BN__F_SLACK 1e-9
+/* Row sums: hemisphere counts cannot exceed 1 but by rounding, so any excess is an error. The
+ * analytic unoccluded part is exact to its tolerance but the visible fractions are sampled, so a
+ * row of a closed scene may exceed 1 by sampling noise (a warning); 5% above 1 is a wrong F, not
+ * noise, and an error. Monte Carlo rows are statistical: warnings only. */
+#define BN__ROWSUM_ERROR 0.05
+
+const char *bn_ff_method_name(bn_ff_method m)
+{
+    switch (m) {
+    case BN_FF_ANALYTIC: return "analytic";
+    case BN_FF_MONTECARLO: return "montecarlo";
+    case BN_FF_HEMISPHERE: return "hemisphere";
+    }
+    return "?";
+}
+
+int bn_formfactor_default_samples(bn_ff_method m)
+{
+    return m == BN_FF_ANALYTIC ? 32 : m == BN_FF_MONTECARLO ? 64 : 4096;
+}
+
+void bn_formfactor_opts_default(bn_formfactor_opts *o)
+{
+    memset(o, 0, sizeof *o);
+    o->method = BN_FF_ANALYTIC;
+    o->samples = 0;
+    o->storage = BN_STORAGE_DENSE;
+    o->precision = BN_PRECISION_FLOAT;
+    o->sparse_threshold = 0;
+    o->max_memory = 0;
+    o->seed = 1;
+    o->tolerance = 1e-5;
+}
+
+static int bn__samples(const bn_formfactor_opts *o)
+{
+    return o->samples > 0 ? o->samples : bn_formfactor_default_samples(o->method);
+}
+
+void bn_formfactor_opts_describe(const bn_formfactor_opts *o, char *buf, size_t size)
+{
+    snprintf(buf, size, "method=%s samples=%d seed=%llu precision=%s storage=%s sparse_threshold=%.17g tolerance=%.17g",
+             bn_ff_method_name(o->method), bn__samples(o), (unsigned long long)o->seed,
+             o->precision == BN_PRECISION_FLOAT ? "float" : "double",
+             o->storage == BN_STORAGE_DENSE ? "dense" : "sparse", o->sparse_threshold,
+             o->method == BN_FF_ANALYTIC ? (o->tolerance > 0 ? o->tolerance : 1e-5) : 0.0);
+}
+
+/* ---- geometry shared by every pair ---- */
+
+typedef struct bn__ffg {
+    size_t n, nf;
+    const bn_patch *patch;
+    double *pv;          /* n * 4 corners xyz */
+    double tol;          /* geometric tolerance: 1e-9 of the scene's diameter */
+    double eps;          /* ray offset (bn_rt_epsilon) */
+    double *fv;          /* nf * 4 corners */
+    unsigned *fnc;
+    double *fn, *flo, *fhi;
+} bn__ffg;
+
+static void bn__ffg_free(bn__ffg *g)
+{
+    free(g->pv);
+    free(g->fv);
+    free(g->fnc);
+    free(g->fn);
+    free(g->flo);
+    free(g->fhi);
+}
+
+static bn_status bn__ffg_init(bn__ffg *g, const bn_scene *s, double eps, bn_error *err)
+{
+    size_t npv, nv, nfi;
+    const double *pverts = bn_scene_patch_vertices(s, &npv), *verts = bn_scene_vertices(s, &nv);
+    const size_t *fidx = bn_scene_face_indices(s, &nfi);
+    const bn_face *faces;
+    double lo[3], hi[3];
+    memset(g, 0, sizeof *g);
+    g->patch = bn_scene_patches(s, &g->n);
+    faces = bn_scene_faces(s, &g->nf);
+    g->pv = bn__malloc_array(g->n * 12, sizeof(double));
+    g->fv = bn__malloc_array(g->nf * 12, sizeof(double));
+    g->fnc = bn__malloc_array(g->nf, sizeof(unsigned));
+    g->fn = bn__malloc_array(g->nf * 3, sizeof(double));
+    g->flo = bn__malloc_array(g->nf * 3, sizeof(double));
+    g->fhi = bn__malloc_array(g->nf * 3, sizeof(double));
+    if (!g->pv || !g->fv || !g->fnc || !g->fn || !g->flo || !g->fhi) {
+        bn__ffg_free(g);
+        return bn_error_set(err, BN_ENOMEM, "out of memory for the geometry of %zu patches", g->n);
+    }
+    for (size_t i = 0; i < g->n; i++)
+        for (unsigned k = 0; k < g->patch[i].ncorners; k++)
+            memcpy(g->pv + 12 * i + 3 * k, pverts + 3 * g->patch[i].corner[k], 3 * sizeof(double));
+    for (size_t f = 0; f < g->nf; f++) {
+        g->fnc[f] = faces[f].nverts;
+        memcpy(g->fn + 3 * f, faces[f].normal, 3 * sizeof(double));
+        for (int c = 0; c < 3; c++) {
+            g->flo[3 * f + c] = INFINITY;
+            g->fhi[3 * f + c] = -INFINITY;
+        }
+        for (unsigned k = 0; k < faces[f].nverts; k++) {
+            const double *v = verts + 3 * fidx[faces[f].first + k];
+            memcpy(g->fv + 12 * f + 3 * k, v, 3 * sizeof(double));
+            for (int c = 0; c < 3; c++) {
+                g->flo[3 * f + c] = fmin(g->flo[3 * f + c], v[c]);
+                g->fhi[3 * f + c] = fmax(g->fhi[3 * f + c], v[c]);
+            }
+        }
+    }
+    bn_scene_bounds(s, lo, hi);
+    g->tol = 1e-9 * fmax(bn_v3_dist(lo, hi), 1e-300);
+    g->eps = eps;
+    return BN_OK;
+}
+
+static const double *bn__pc(const bn__ffg *g, size_t i) { return g->pv + 12 * i; }
+
+/* Largest signed distance of polygon v's corners from the plane (n, p). */
+static double bn__max_height(const double *v, size_t nv, const double n[3], const double p[3])
+{
+    double m = -INFINITY;
+    for (size_t k = 0; k < nv; k++) {
+        double r[3];
+        bn_v3_sub(v + 3 * k, p, r);
+        m = fmax(m, bn_v3_dot(n, r));
+    }
+    return m;
+}
+
+/* Can i and j see each other's fronts at all? Coplanar and facing-away pairs cannot. */
+static int bn__facing(const bn__ffg *g, size_t i, size_t j)
+{
+    const bn_patch *a = &g->patch[i], *b = &g->patch[j];
+    if (i == j || a->face == b->face)
+        return 0;
+    return bn__max_height(bn__pc(g, j), b->ncorners, a->normal, bn__pc(g, i)) > g->tol &&
+           bn__max_height(bn__pc(g, i), a->ncorners, b->normal, bn__pc(g, j)) > g->tol;
+}
+
+/* The parts of i in front of j and of j in front of i: only they exchange light. */
+typedef struct bn__pair {
+    double a[3 * BN__FF_POLY_MAX], b[3 * BN__FF_POLY_MAX];
+    size_t na, nb;
+    double Aa, Ab;
+} bn__pair;
+
+static int bn__pair_prep(const bn__ffg *g, size_t i, size_t j, bn__pair *p)
+{
+    const bn_patch *a = &g->patch[i], *b = &g->patch[j];
+    if (!bn__facing(g, i, j))
+        return 0;
+    p->na = bn__poly_clip(bn__pc(g, i), a->ncorners, b->normal, bn__pc(g, j), g->tol, p->a);
+    p->nb = bn__poly_clip(bn__pc(g, j), b->ncorners, a->normal, bn__pc(g, i), g->tol, p->b);
+    if (!p->na || !p->nb)
+        return 0;
+    p->Aa = bn__poly_area(p->a, p->na, NULL);
+    p->Ab = bn__poly_area(p->b, p->nb, NULL);
+    return p->Aa > 0 && p->Ab > 0;
+}
+
+/* ---- shaft culling (Haines & Wallace 1991): can any face lie between the two polygons? ----
+ * The shaft is the convex hull of the clipped polygons. A face cannot block a segment between
+ * them if all its corners are outside (or on) one plane bounding the hull, or if the hull lies
+ * on one side of the face's own plane. The test is conservative: "maybe" casts rays. */
+#define BN__HULL_MAX (4 * BN__FF_POLY_MAX * BN__FF_POLY_MAX)
+
+typedef struct bn__shaft {
+    double s[6 * BN__FF_POLY_MAX];   /* hull points */
+    size_t ns;
+    double lo[3], hi[3];
+    double pl[BN__HULL_MAX][4];      /* outward normal, offset */
+    size_t npl;
+    int hull_done;
+} bn__shaft;
+
+static void bn__hull_planes(bn__shaft *sh, const double *e, size_t ne, const double *v, size_t nv, double tol)
+{
+    for (size_t k = 0; k < ne; k++) {
+        const double *a = e + 3 * k, *b = e + 3 * (k + 1 < ne ? k + 1 : 0);
+        double ab[3];
+        bn_v3_sub(b, a, ab);
+        for (size_t m = 0; m < nv; m++) {
+            double av[3], n[3], h, lo = INFINITY, hi = -INFINITY, len;
+            bn_v3_sub(v + 3 * m, a, av);
+            bn_v3_cross(ab, av, n);
+            len = bn_v3_len(n);
+            if (!(len > 1e-12 * bn_v3_dot(ab, ab) + 1e-300) || sh->npl >= BN__HULL_MAX)
+                continue;
+            bn_v3_scale(n, 1 / len, n);
+            h = bn_v3_dot(n, a);
+            for (size_t q = 0; q < sh->ns; q++) {
+                double d = bn_v3_dot(n, sh->s + 3 * q) - h;
+                lo = fmin(lo, d);
+                hi = fmax(hi, d);
+            }
+            if (hi <= tol) {
+                memcpy(sh->pl[sh->npl], n, sizeof n);
+                sh->pl[sh->npl++][3] = h;
+            } else if (lo >= -tol) {
+                sh->pl[sh->npl][0] = -n[0];
+                sh->pl[sh->npl][1] = -n[1];
+                sh->pl[sh->npl][2] = -n[2];
+                sh->pl[sh->npl++][3] = -h;
+            }
+        }
+    }
+}
+
+/* cand: faces partly in front of patch i (row candidates). */
+static int bn__shaft_maybe(const bn__ffg *g, const size_t *cand, size_t ncand, size_t i, size_t j, const bn__pair *p)
+{
+    bn__shaft sh;
+    const double *ni = g->patch[i].normal, *nj = g->patch[j].normal;
+    size_t fi = g->patch[i].face, fj = g->patch[j].face;
+    double tol = g->tol;
+    sh.ns = p->na + p->nb;
+    memcpy(sh.s, p->a, 3 * p->na * sizeof(double));
+    memcpy(sh.s + 3 * p->na, p->b, 3 * p->nb * sizeof(double));
+    for (int c = 0; c < 3; c++) {
+        sh.lo[c] = INFINITY;
+        sh.hi[c] = -INFINITY;
+    }
+    for (size_t q = 0; q < sh.ns; q++)
+        for (int c = 0; c < 3; c++) {
+            sh.lo[c] = fmin(sh.lo[c], sh.s[3 * q + c] - tol);
+            sh.hi[c] = fmax(sh.hi[c], sh.s[3 * q + c] + tol);
+        }
+    sh.npl = 0;
+    sh.hull_done = 0;
+    for (size_t ci = 0; ci < ncand; ci++) {
+        size_t f = cand[ci];
+        const double *fv = g->fv + 12 * f, *fn = g->fn + 3 * f;
+        unsigned nv = g->fnc[f];
+        int out = 0;
+        double lo = INFINITY, hi = -INFINITY;
+        if (f == fi || f == fj)
+            continue;
+        for (int c = 0; c < 3 && !out; c++)
+            out = g->fhi[3 * f + c] < sh.lo[c] || g->flo[3 * f + c] > sh.hi[c];
+        if (out)
+            continue;
+        /* the hull on one side of the face's plane */
+        for (size_t q = 0; q < sh.ns; q++) {
+            double r[3], d;
+            bn_v3_sub(sh.s + 3 * q, fv, r);
+            d = bn_v3_dot(fn, r);
+            lo = fmin(lo, d);
+            hi = fmax(hi, d);
+        }
+        if (lo >= -tol || hi <= tol)
+            continue;
+        /* the face behind plane j (plane i is the row's candidate test) */
+        if (bn__max_height(fv, nv, nj, p->b) <= tol || bn__max_height(fv, nv, ni, p->a) <= tol)
+            continue;
+        if (!sh.hull_done) {
+            bn__hull_planes(&sh, p->a, p->na, p->b, p->nb, tol);
+            bn__hull_planes(&sh, p->b, p->nb, p->a, p->na, tol);
+            sh.hull_done = 1;
+        }
+        for (size_t k = 0; k < sh.npl && !out; k++) {
+            double mn = INFINITY;
+            for (unsigned q = 0; q < nv; q++)
+                mn = fmin(mn, bn_v3_dot(sh.pl[k], fv + 3 * q) - sh.pl[k][3]);
+            out = mn >= -tol;
+        }
+        if (!out)
+            return 1;
+    }
+    return 0;
+}
+
+/* ---- storage sink ---- */
+
+typedef struct bn__sink {
+    size_t n;
+    float *f32;
+    double *f64;
+    bn__csr *csr;
+    size_t lost;   /* writes that found no slot in the CSR pattern (hemisphere grazing hits) */
+} bn__sink;
+
+static void bn__sink_put(bn__sink *s, size_t i, size_t j, double v)
+{
+    if (s->csr) {
+        size_t k = bn__csr_find(s->csr, i, j);
+        if (k != (size_t)-1)
+            bn__csr_set(s->csr, k, v);
+        else {
+#pragma omp atomic
+            s->lost++;
+        }
+    } else if (s->f32)
+        s->f32[i * s->n + j] = (float)v;
+    else
+        s->f64[i * s->n + j] = v;
+}
+
+/* ---- per-thread scratch for sampled pairs ---- */
+
+typedef struct bn__scratch {
+    size_t S;
+    unsigned *perm;        /* 3 * S */
+    double *x, *y, *w;     /* 3S, 3S, S */
+    float *org, *dir, *tfar;
+    unsigned char *blocked;
+    double *row;           /* hemisphere counts, n */
+} bn__scratch;
+
+static void bn__scratch_free(bn__scratch *s)
+{
+    free(s->perm);
+    free(s->x);
+    free(s->y);
+    free(s->w);
+    free(s->org);
+    free(s->dir);
+    free(s->tfar);
+    free(s->blocked);
+    free(s->row);
+}
+
+static int bn__scratch_init(bn__scratch *s, size_t S, size_t n)
+{
+    memset(s, 0, sizeof *s);
+    s->S = S;
+    s->perm = bn__malloc_array(3 * S, sizeof(unsigned));
+    s->x = bn__malloc_array(3 * S, sizeof(double));
+    s->y = bn__malloc_array(3 * S, sizeof(double));
+    s->w = bn__malloc_array(S, sizeof(double));
+    s->org = bn__malloc_array(3 * S, sizeof(float));
+    s->dir = bn__malloc_array(3 * S, sizeof(float));
+    s->tfar = bn__malloc_array(S, sizeof(float));
+    s->blocked = bn__malloc_array(S, 1);
+    s->row = n ? bn__calloc(n, sizeof(double)) : NULL;
+    return s->perm && s->x && s->y && s->w && s->org && s->dir && s->tfar && s->blocked && (!n || s->row);
+}
+
+/* Three random permutations of 0..S-1 (a 4-D Latin hypercube with the sample index). */
+static void bn__perms(bn__rng *r, unsigned *perm, size_t S)
+{
+    for (int d = 0; d < 3; d++) {
+        unsigned *p = perm + d * S;
+        for (size_t k = 0; k < S; k++)
+            p[k] = (unsigned)k;
+        for (size_t k = S; k > 1; k--) {
+            size_t m = (size_t)(bn__rng_uniform(r) * (double)k);
+            unsigned t = p[k - 1];
+            if (m >= k)
+                m = k - 1;
+            p[k - 1] = p[m];
+            p[m] = t;
+        }
+    }
+}
+
+/* Stratified point pairs x_k on a, y_k on b (Latin hypercube over the four coordinates). */
+static void bn__pair_points(bn__rng *r, const bn__pair *p, bn__scratch *s)
+{
+    size_t S = s->S;
+    double inv = 1.0 / (double)S;
+    bn__perms(r, s->perm, S);
+    for (size_t k = 0; k < S; k++) {
+        double u1 = ((double)k + bn__rng_uniform(r)) * inv, v1 = ((double)s->perm[k] + bn__rng_uniform(r)) * inv;
+        double u2 = ((double)s->perm[S + k] + bn__rng_uniform(r)) * inv;
+        double v2 = ((double)s->perm[2 * S + k] + bn__rng_uniform(r)) * inv;
+        bn__poly_sample(p->a, p->na, u1, v1, s->x + 3 * k);
+        bn__poly_sample(p->b, p->nb, u2, v2, s->y + 3 * k);
+    }
+}
+
+/* Shadow rays between the point pairs: origins offset off the surfaces, stopping short. */
+static size_t bn__pair_rays(const bn_rt *rt, const bn__ffg *g, const double ni[3], const double nj[3], bn__scratch *s)
+{
+    size_t m = 0;
+    for (size_t k = 0; k < s->S; k++) {
+        double o[3], t[3], d[3], len;
+        bn_v3_madd(s->x + 3 * k, g->eps, ni, o);
+        bn_v3_madd(s->y + 3 * k, g->eps, nj, t);
+        bn_v3_sub(t, o, d);
+        len = bn_v3_len(d);
+        s->blocked[k] = 0;
+        if (s->w[k] <= 0 || len <= 4 * g->eps)
+            continue;
+        for (int c = 0; c < 3; c++) {
+            s->org[3 * m + c] = (float)o[c];
+            s->dir[3 * m + c] = (float)d[c];
+        }
+        s->tfar[m] = (float)(1.0 - g->eps / len);
+        s->perm[m] = (unsigned)k;   /* reuse: ray -> sample */
+        m++;
+    }
+    if (m) {
+        bn_rt_occluded_batch(rt, s->org, s->dir, s->tfar, m, s->blocked);
+        /* blocked[0..m) is per ray; spread back to samples from the top down (ray r <= sample). */
+        for (size_t q = m; q-- > 0;) {
+            unsigned char v = s->blocked[q];
+            size_t k = s->perm[q];
+            s->blocked[q] = 0;
+            s->blocked[k] = v;
+        }
+    }
+    return m;
+}
+
+/* ---- the assembly ---- */
+
+typedef struct bn__counts {
+    size_t pairs_nonzero, pairs_culled, pairs_tested, pairs_blocked, rays, evals;
+} bn__counts;
+
+static void bn__analytic_or_mc_pair(const bn_rt *rt, const bn__ffg *g, const bn_formfactor_opts *o, double rtol,
+                                    const size_t *cand, size_t ncand, size_t i, size_t j, bn__scratch *s,
+                                    bn__sink *sink, bn__counts *cnt)
+{
+    bn__pair p;
+    const double *ni = g->patch[i].normal, *nj = g->patch[j].normal;
+    double I = 0, vis = 1;
+    int maybe;
+    if (!bn__pair_prep(g, i, j, &p))
+        return;   /* exactly 0: F is zeroed storage */
+    cnt->pairs_nonzero++;
+    maybe = bn__shaft_maybe(g, cand, ncand, i, j, &p);
+    if (!maybe)
+        cnt->pairs_culled++;
+    if (o->method == BN_FF_ANALYTIC) {
+        bn__quad_stats qs;
+        /* A_i F_ij to relative rtol; the absolute floor keeps F errors below 1e-6 rtol. */
+        I = bn__ff_polygon_integral(p.a, p.na, ni, p.b, p.nb, rtol, 1e-6 * rtol * fmin(p.Aa, p.Ab), &qs);
+        cnt->evals += qs.evals;
+        if (maybe) {
+            bn__rng r = bn__rng_make(o->seed, i, j);
+            double sw = 0, sv = 0;
+            bn__pair_points(&r, &p, s);
+            for (size_t k = 0; k < s->S; k++) {
+                double d[3], r2, ci, cj;
+                bn_v3_sub(s->y + 3 * k, s->x + 3 * k, d);
+                r2 = bn_v3_dot(d, d);
+                ci = bn_v3_dot(ni, d);
+                cj = -bn_v3_dot(nj, d);
+                s->w[k] = ci > 0 && cj > 0 && r2 > 0 ? ci * cj / (r2 * r2) : 0;   /* cos cos / r^2 */
+            }
+            cnt->rays += bn__pair_rays(rt, g, ni, nj, s);
+            cnt->pairs_tested++;
+            for (size_t k = 0; k < s->S; k++) {
+                sw += s->w[k];
+                if (!s->blocked[k])
+                    sv += s->w[k];
+            }
+            /* visible fraction in [0, 1] by construction, weighted by the kernel */
+            vis = sw > 0 ? sv / sw : 1;
+            if (vis < 1)
+                cnt->pairs_blocked++;
+        }
+        I *= vis;
+    } else {
+        /* Monte Carlo point pairs with Wallace's disk regulariser: each sample is the form
+         * factor of a disk of area max(Aa, Ab)/S, bounded where the 1/r^2 kernel is not. */
+        bn__rng r = bn__rng_make(o->seed, i, j);
+        double a_reg = fmax(p.Aa, p.Ab) / (double)s->S, sum = 0;
+        int any_blocked = 0;
+        bn__pair_points(&r, &p, s);
+        for (size_t k = 0; k < s->S; k++) {
+            double d[3], r2, ci, cj;
+            bn_v3_sub(s->y + 3 * k, s->x + 3 * k, d);
+            r2 = bn_v3_dot(d, d);
+            ci = bn_v3_dot(ni, d);
+            cj = -bn_v3_dot(nj, d);
+            s->w[k] = ci > 0 && cj > 0 && r2 > 0 ? (ci * cj / r2) / (BN_PI * r2 + a_reg) : 0;
+            s->blocked[k] = 0;
+        }
+        if (maybe) {
+            cnt->rays += bn__pair_rays(rt, g, ni, nj, s);
+            cnt->pairs_tested++;
+        }
+        for (size_t k = 0; k < s->S; k++) {
+            if (!s->blocked[k])
+                sum += s->w[k];
+            else
+                any_blocked = 1;
+        }
+        if (any_blocked)
+            cnt->pairs_blocked++;
+        I = p.Aa * p.Ab * sum / (double)s->S;
+    }
+    /* reciprocity: A_i F_ij = A_j F_ji = I */
+    bn__sink_put(sink, i, j, I / g->patch[i].area);
+    bn__sink_put(sink, j, i, I / g->patch[j].area);
+}
+
+static void bn__frame(const double n[3], double t[3], double b[3])
+{
+    double a[3] = {0, 0, 0};
+    a[fabs(n[0]) < 0.6 ? 0 : (fabs(n[1]) < 0.6 ? 1 : 2)] = 1;
+    bn_v3_cross(n, a, t);
+    bn_v3_normalize(t);
+    bn_v3_cross(n, t, b);
+}
+
+static void bn__hemisphere_row(const bn_rt *rt, const bn__ffg *g, const bn_formfactor_opts *o, size_t i,
+                               bn__scratch *s, bn__sink *sink, bn__counts *cnt)
+{
+    const bn_patch *pa = &g->patch[i];
+    const double *n = pa->normal;
+    double t[3], b[3], inv = 1.0 / (double)s->S;
+    bn__rng r = bn__rng_make(o->seed, i, 0x68656d69ULL);
+    bn__frame(n, t, b);
+    bn__perms(&r, s->perm, s->S);
+    for (size_t k = 0; k < s->S; k++) {
+        double u1 = ((double)k + bn__rng_uniform(&r)) * inv, v1 = ((double)s->perm[k] + bn__rng_uniform(&r)) * inv;
+        double u2 = ((double)s->perm[s->S + k] + bn__rng_uniform(&r)) * inv;
+        double v2 = ((double)s->perm[2 * s->S + k] + bn__rng_uniform(&r)) * inv;
+        double x[3], d[3], ct = sqrt(1 - u2), st = sqrt(u2), ph = 2 * BN_PI * v2;
+        bn_hit h;
+        bn__poly_sample(bn__pc(g, i), pa->ncorners, u1, v1, x);
+        /* cosine-weighted direction: sin^2(theta) = u2 */
+        for (int c = 0; c < 3; c++)
+            d[c] = st * cos(ph) * t[c] + st * sin(ph) * b[c] + ct * n[c];
+        bn_v3_madd(x, g->eps, n, x);
+        if (bn_rt_intersect(rt, x, d, 0, INFINITY, &h) && h.front && h.patch != i)
+            s->row[h.patch] += 1;
+    }
+    cnt->rays += s->S;
+    for (size_t j = 0; j < g->n; j++)
+        if (s->row[j] > 0) {
+            bn__sink_put(sink, i, j, s->row[j] * inv);
+            s->row[j] = 0;
+        }
+}
+
+/* Faces partly in front of patch i: the only possible occluders of its pairs. */
+static size_t bn__row_candidates(const bn__ffg *g, size_t i, size_t *cand)
+{
+    size_t m = 0;
+    for (size_t f = 0; f < g->nf; f++) {
+        if (f == g->patch[i].face)
+            continue;
+        if (bn__max_height(g->fv + 12 * f, g->fnc[f], g->patch[i].normal, bn__pc(g, i)) > g->tol)
+            cand[m++] = f;
+    }
+    return m;
+}
+
+/* ---- memory ---- */
+
+static size_t bn__limit(const bn_formfactor_opts *o)
+{
+    size_t phys;
+    if (o->max_memory)
+        return o->max_memory;
+    phys = bn__physical_memory();
+    return phys ? phys / 10 * 8 : (size_t)-1;
+}
+
+static void bn__gib(double b, char *buf, size_t n)
+{
+    const char *u[] = {"B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"};
+    int k = 0;
+    while (b >= 1024 && k < 6) {
+        b /= 1024;
+        k++;
+    }
+    snprintf(buf, n, "%.3g %s", b, u[k]);
+}
+
+/* Per-row counts of the facing pairs: the CSR pattern (an upper bound of its entries). */
+static size_t bn__pattern_counts(const bn__ffg *g, size_t *counts)
+{
+    long n = (long)g->n;
+    size_t total = 0;
+#pragma omp parallel for schedule(dynamic, 16) reduction(+ : total)
+    for (long i = 0; i < n; i++) {
+        size_t c = 0;
+        for (size_t j = 0; j < g->n; j++)
+            c += (size_t)bn__facing(g, (size_t)i, j);
+        if (counts)
+            counts[i] = c;
+        total += c;
+    }
+    return total;
+}
+
+static size_t bn__scratch_bytes(size_t S, size_t n, int threads)
+{
+    return (size_t)threads * (S * (3 * sizeof(unsigned) + 7 * sizeof(double) + 7 * sizeof(float) + 1) + n * 8);
+}
+
+static size_t bn__dense_bytes(size_t n, bn_precision prec)
+{
+    size_t nn, b;
+    if (!bn__mul_size(n, n, &nn) || !bn__mul_size(nn, prec == BN_PRECISION_FLOAT ? 4 : 8, &b))
+        return (size_t)-1;
+    return b;
+}
+
+size_t bn_formfactor_bytes_needed(const bn_scene *scene, const bn_formfactor_opts *o)
+{
+    size_t n, need;
+    bn_scene_patches(scene, &n);
+    if (o->storage == BN_STORAGE_DENSE) {
+        need = bn__dense_bytes(n, o->precision);
+    } else {
+        bn__ffg g;
+        if (bn__ffg_init(&g, scene, 0, NULL) != BN_OK)
+            return (size_t)-1;
+        need = bn__csr_bytes_for(n, bn__pattern_counts(&g, NULL), o->precision);
+        bn__ffg_free(&g);
+    }
+    if (need == (size_t)-1)
+        return need;
+    return need + bn__scratch_bytes((size_t)bn__samples(o), n, bn_threads_get()) + n * 64;
+}
+
+static bn_status bn__memory_error(size_t n, size_t need, size_t limit, const bn_formfactor_opts *o, bn_error *err)
+{
+    char a[32], b[32], c[32];
+    double ratio = need == (size_t)-1 ? 1e30 : (double)need / (double)limit;
+    bn__gib(need == (size_t)-1 ? 1.8e19 : (double)need, a, sizeof a);
+    bn__gib((double)limit, b, sizeof b);
+    bn__gib((double)n * (double)n * (o->precision == BN_PRECISION_FLOAT ? 4 : 8), c, sizeof c);
+    return bn_error_set(err, BN_ENOMEM,
+                        "%s F for %zu patches needs %s (dense N^2 alone is %s), above the limit of %s (--max-memory%s). "
+                        "Remedies: a coarser mesh (about %zu patches would fit: raise --patch-size by %.2gx or lower "
+                        "--patches), --storage sparse%s, or raise --max-memory",
+                        o->storage == BN_STORAGE_DENSE ? "dense" : "sparse", n, a, c, b,
+                        o->max_memory ? "" : "; default 80% of physical memory",
+                        (size_t)((double)n / sqrt(ratio) * 0.95), sqrt(sqrt(ratio)) * 1.05,
+                        o->precision == BN_PRECISION_DOUBLE ? ", --precision float" : "");
+}
+
+/* ---- diagnostics over the stored F ---- */
+
+static bn_status bn__diagnose(const bn_scene *scene, const bn__sink *s, const bn_formfactor_opts *o,
+                              bn_ff_diagnostics *d, bn_error *err)
+{
+    size_t n = s->n, np;
+    const bn_patch *patch = bn_scene_patches(scene, &np);
+    double *rho = bn__malloc_array(3 * (n ? n : 1), sizeof(double));
+    double sum_dev2 = 0, rec = 0;
+    size_t bad_i = (size_t)-1, bad_j = 0;
+    double bad_v = 0;
+    size_t worst_row = 0;
+    if (!rho)
+        return bn_error_set(err, BN_ENOMEM, "out of memory");
+    bn_scene_patch_reflectance(scene, rho);
+    d->n = n;
+    d->row_sum_min = n ? INFINITY : 0;
+    d->row_sum_max = n ? -INFINITY : 0;
+    d->negative_entries = d->above_one_entries = 0;
+    d->k_norm_inf = 0;
+    d->rows_above_one = 0;
+    d->nonzeros = 0;
+    for (size_t i = 0; i < n; i++) {
+        double rs = 0;
+        size_t b = s->csr ? s->csr->rowptr[i] : 0, e = s->csr ? s->csr->rowptr[i + 1] : n;
+        for (size_t k = b; k < e; k++) {
+            size_t j = s->csr ? s->csr->col[k] : k;
+            double v = s->csr ? bn__csr_value(s->csr, k) : s->f32 ? (double)s->f32[i * n + j] : s->f64[i * n + j];
+            int bad = 0;
+            if (v != 0)
+                d->nonzeros++;
+            if (!isfinite(v))
+                bad = 1, d->above_one_entries++;
+            else if (v < 0)
+                bad = 1, d->negative_entries++;
+            else if (v > 1 + BN__F_SLACK)
+                bad = 1, d->above_one_entries++;
+            if (bad && bad_i == (size_t)-1) {
+                bad_i = i;
+                bad_j = j;
+                bad_v = v;
+            }
+            rs += v;
+            /* reciprocity A_i F_ij = A_j F_ji, each stored pair seen once (j > i) */
+            if (j > i && v != 0) {
+                double w = s->csr ? (double)(bn__csr_find(s->csr, j, i) == (size_t)-1
+                                                 ? 0.0
+                                                 : bn__csr_value(s->csr, bn__csr_find(s->csr, j, i)))
+                                  : s->f32 ? (double)s->f32[j * n + i] : s->f64[j * n + i];
+                double a = patch[i].area * v, c = patch[j].area * w, m = fmax(fabs(a), fabs(c));
+                if (m > 0)
+                    rec = fmax(rec, fabs(a - c) / m);
+            } else if (j < i && v != 0 && s->csr && bn__csr_find(s->csr, j, i) == (size_t)-1) {
+                rec = 1;   /* F_ji dropped by the threshold, F_ij kept */
+            }
+        }
+        d->row_sum_min = fmin(d->row_sum_min, rs);
+        if (rs > d->row_sum_max)
+            worst_row = i;
+        d->row_sum_max = fmax(d->row_sum_max, rs);
+        sum_dev2 += (rs - 1) * (rs - 1);
+        if (rs > 1 + d->row_sum_tol)
+            d->rows_above_one++;
+        for (int c = 0; c < 3; c++)
+            d->k_norm_inf = fmax(d->k_norm_inf, rho[3 * i + c] * rs);
+    }
+    if (s->f32 || s->f64) {
+        /* dense: the pairs with j < i whose mirror is zero were not seen above */
+        for (size_t i = 0; i < n; i++)
+            for (size_t j = 0; j < i; j++) {
+                double v = s->f32 ? (double)s->f32[i * n + j] : s->f64[i * n + j];
+                double w = s->f32 ? (double)s->f32[j * n + i] : s->f64[j * n + i];
+                if (v != 0 && w == 0)
+                    rec = 1;
+            }
+    }
+    d->row_sum_rms_dev = n ? sqrt(sum_dev2 / (double)n) : 0;
+    d->reciprocity_residual = rec;
+    free(rho);
+    if (bad_i != (size_t)-1) {
+        const bn_face *faces;
+        size_t nf;
+        faces = bn_scene_faces(scene, &nf);
+        return bn_error_set(err, BN_ENUMERIC,
+                            "F[%zu][%zu] = %.9g between patch %zu (face %zu, line %u) and patch %zu (face %zu, line "
+                            "%u) is outside [0, 1] or not finite (%zu negative, %zu above 1 or non-finite entries; "
+                            "method %s): refusing to use it",
+                            bad_i, bad_j, bad_v, bad_i, patch[bad_i].face, faces[patch[bad_i].face].line, bad_j,
+                            patch[bad_j].face, faces[patch[bad_j].face].line, d->negative_entries,
+                            d->above_one_entries, bn_ff_method_name(o->method));
+    }
+    if ((o->method == BN_FF_HEMISPHERE && d->row_sum_max > 1 + d->row_sum_tol) ||
+        (o->method == BN_FF_ANALYTIC && d->row_sum_max > 1 + BN__ROWSUM_ERROR))
+        return bn_error_set(err, BN_ENUMERIC,
+                            "row %zu of F (patch %zu, face %zu) sums to %.9g, above 1 + %.3g (method %s): the form "
+                            "factors are wrong; refusing to use them",
+                            worst_row, worst_row, patch[worst_row].face, d->row_sum_max,
+                            o->method == BN_FF_HEMISPHERE ? d->row_sum_tol : BN__ROWSUM_ERROR,
+                            bn_ff_method_name(o->method));
+    return BN_OK;
+}
+
+static double bn__rowsum_tol(const bn_formfactor_opts *o)
+{
+    double round = o->precision == BN_PRECISION_FLOAT ? 1e-6 : 1e-12;   /* float: 2^-23 per entry */
+    if (o->method == BN_FF_ANALYTIC)   /* quadrature; sampled visibility may add noise */
+        return 10 * (o->tolerance > 0 ? o->tolerance : 1e-5) + round;
+    if (o->method == BN_FF_HEMISPHERE)
+        return round;
+    return 3.0 / sqrt((double)bn__samples(o));   /* montecarlo: statistical */
+}
+
+/* ---- the public entry ---- */
+
+static bn_status bn__build_from_cache(const bn_scene *scene, const bn_formfactor_opts *o, const char *key,
+                                      bn_transport **out, bn_ff_diagnostics *diag, int *hit, bn_error *err);
+
+bn_status bn_formfactor_build(const bn_scene *scene, const bn_rt *rt, const bn_formfactor_opts *o_in,
+                              bn_transport **out, bn_ff_diagnostics *diag, bn_error *err)
+{
+    bn_formfactor_opts o = *o_in;
+    bn_ff_diagnostics dlocal, *d = diag ? diag : &dlocal;
+    bn__ffg g;
+    bn__sink sink;
+    void *impl = NULL;
+    const bn_transport_ops *ops = NULL;
+    size_t n, S, limit, need, *counts = NULL;
+    double t0 = bn__now(), *rho = NULL;
+    bn_status st;
+    char key[512];
+    volatile int fail = 0;
+    bn__counts tot;
+    bn__progress prog;
+    size_t done = 0, total_work;
+    double rtol;
+
+    *out = NULL;
+    memset(d, 0, sizeof *d);
+    memset(&tot, 0, sizeof tot);
+    if (o.tolerance <= 0)
+        o.tolerance = 1e-5;
+    rtol = o.tolerance;
+    S = (size_t)bn__samples(&o);
+    d->method = o.method;
+    d->samples = (int)S;
+    d->row_sum_tol = bn__rowsum_tol(&o);
+    bn_scene_patches(scene, &n);
+    if (n == 0)
+        return bn_error_set(err, BN_EINPUT, "%s: no patches (mesh the scene first)", bn_scene_path(scene));
+    if (rt && bn_rt_scene(rt) != scene)
+        return bn_error_set(err, BN_EINTERNAL, "bn_formfactor_build: rt was built for another scene");
+    if (!(o.sparse_threshold >= 0 && o.sparse_threshold < 1))
+        return bn_error_set(err, BN_EINPUT, "sparse threshold %g is outside [0, 1)", o.sparse_threshold);
+    if (o.storage == BN_STORAGE_SPARSE && n > UINT32_MAX)
+        return bn_error_set(err, BN_ENOMEM, "sparse F: %zu patches exceed 32-bit column indices", n);
+
+    {
+        char desc[400];
+        bn_formfactor_opts_describe(&o, desc, sizeof desc);
+        snprintf(key, sizeof key, "bounce-ff-cache v1 bounce=%s scene=%016llx patches=%zu %s", bn_version(),
+                 bn_scene_digest(scene), n, desc);
+    }
+    if (o.cache_path) {
+        int hit = 0;
+        st = bn__build_from_cache(scene, &o, key, out, d, &hit, err);
+        if (st != BN_OK || hit) {
+            d->seconds = bn__now() - t0;
+            return st;
+        }
+    }
+    if (!rt)
+        return bn_error_set(err, BN_EINTERNAL, "bn_formfactor_build: no ray-casting structure (and no cache hit)");
+
+    st = bn__ffg_init(&g, scene, bn_rt_epsilon(rt), err);
+    if (st != BN_OK)
+        return st;
+    limit = bn__limit(&o);
+    memset(&sink, 0, sizeof sink);
+    sink.n = n;
+    if (o.storage == BN_STORAGE_DENSE) {
+        need = bn__dense_bytes(n, o.precision);
+    } else {
+        counts = bn__malloc_array(n, sizeof(size_t));
+        if (!counts) {
+            bn__ffg_free(&g);
+            return bn_error_set(err, BN_ENOMEM, "out of memory");
+        }
+        need = bn__csr_bytes_for(n, bn__pattern_counts(&g, counts), o.precision);
+    }
+    if (need != (size_t)-1)
+        need += bn__scratch_bytes(S, o.method == BN_FF_HEMISPHERE ? n : 0, bn_threads_get()) + n * 64;
+    if (need == (size_t)-1 || need > limit) {
+        free(counts);
+        bn__ffg_free(&g);
+        return bn__memory_error(n, need, limit, &o, err);
+    }
+    if (o.storage == BN_STORAGE_DENSE) {
+        bn__dense_view v;
+        st = bn__dense_alloc(n, o.precision, &v, &impl, &ops, err);
+        sink.f32 = v.f32;
+        sink.f64 = v.f64;
+    } else {
+        st = bn__csr_alloc(n, counts, o.precision, &sink.csr, err);
+        if (st == BN_OK) {
+            long ln = (long)n;
+#pragma omp parallel for schedule(dynamic, 16)
+            for (long i = 0; i < ln; i++) {
+                size_t k = sink.csr->rowptr[i];
+                for (size_t j = 0; j < n; j++)
+                    if (bn__facing(&g, (size_t)i, j))
+                        sink.csr->col[k++] = (uint32_t)j;
+            }
+            impl = sink.csr;
+            ops = bn__csr_ops(sink.csr);
+        }
+    }
+    free(counts);
+    if (st != BN_OK) {
+        bn__ffg_free(&g);
+        return st;
+    }
+
+    total_work = o.method == BN_FF_HEMISPHERE ? n : n * (n - 1) / 2;
+    bn__progress_begin(&prog, "form factors", total_work, o.quiet);
+#pragma omp parallel
+    {
+        bn__scratch s;
+        bn__counts c;
+        size_t *cand = bn__malloc_array(g.nf ? g.nf : 1, sizeof(size_t));
+        long ln = (long)n;
+        memset(&c, 0, sizeof c);
+        if (!bn__scratch_init(&s, S, o.method == BN_FF_HEMISPHERE ? n : 0) || !cand)
+            fail = 1;
+        /* Cyclic rows balance the triangle i < j; every pair is computed from its own seed, so
+         * the result does not depend on the schedule or the thread count. */
+#pragma omp for schedule(static, 1)
+        for (long li = 0; li < ln; li++) {
+            size_t i = (size_t)li, work;
+            if (fail || bn_interrupted() != BN_OK)
+                continue;
+            if (o.method == BN_FF_HEMISPHERE) {
+                bn__hemisphere_row(rt, &g, &o, i, &s, &sink, &c);
+                work = 1;
+            } else {
+                size_t ncand = bn__row_candidates(&g, i, cand);
+                for (size_t j = i + 1; j < n; j++)
+                    bn__analytic_or_mc_pair(rt, &g, &o, rtol, cand, ncand, i, j, &s, &sink, &c);
+                work = n - 1 - i;
+            }
+#pragma omp atomic
+            done += work;
+            if (omp_get_thread_num() == 0) {
+                size_t dn;
+#pragma omp atomic read
+                dn = done;
+                bn__progress_update(&prog, dn);
+            }
+        }
+#pragma omp critical(bn_ff_counts)
+        {
+            tot.pairs_nonzero += c.pairs_nonzero;
+            tot.pairs_culled += c.pairs_culled;
+            tot.pairs_tested += c.pairs_tested;
+            tot.pairs_blocked += c.pairs_blocked;
+            tot.rays += c.rays;
+            tot.evals += c.evals;
+        }
+        bn__scratch_free(&s);
+        free(cand);
+    }
+    bn__progress_end(&prog);
+    bn__ffg_free(&g);
+    if (bn_interrupted() != BN_OK || fail) {
+        ops->destroy(impl);
+        if (fail)
+            return bn_error_set(err, BN_ENOMEM, "out of memory for per-thread buffers (%zu samples)", S);
+        return bn_error_set(err, bn_interrupted(), "form-factor assembly interrupted");
+    }
+    if (sink.csr) {
+        double *dropped = bn__calloc(n, sizeof(double));
+        if (!dropped) {
+            ops->destroy(impl);
+            return bn_error_set(err, BN_ENOMEM, "out of memory");
+        }
+        d->dropped_entries = bn__csr_compact(sink.csr, o.sparse_threshold, dropped);
+        for (size_t i = 0; i < n; i++)
+            d->dropped_mass_max = fmax(d->dropped_mass_max, dropped[i]);
+        free(dropped);
+    }
+    d->pairs_nonzero = tot.pairs_nonzero;
+    d->pairs_culled = tot.pairs_culled;
+    d->pairs_tested = tot.pairs_tested;
+    d->pairs_blocked = tot.pairs_blocked;
+    d->rays = tot.rays;
+    d->quad_evals = tot.evals;
+    d->occluded_fraction = tot.pairs_nonzero ? (double)tot.pairs_blocked / (double)tot.pairs_nonzero : 0;
+    st = bn__diagnose(scene, &sink, &o, d, err);
+    if (st != BN_OK) {
+        ops->destroy(impl);
+        return st;
+    }
+    if (sink.lost)
+        bn_logf(&o.log, BN_LOG_WARN, "%zu hemisphere hits landed on patches outside the sparse pattern (grazing)",
+                sink.lost);
+    if (d->rows_above_one)
+        bn_logf(&o.log, BN_LOG_WARN, "%zu rows of F sum to more than 1 + %.3g (largest %.9g; method %s)",
+                d->rows_above_one, d->row_sum_tol, d->row_sum_max, bn_ff_method_name(o.method));
+    rho = bn__malloc_array(3 * n, sizeof(double));
+    if (!rho) {
+        ops->destroy(impl);
+        return bn_error_set(err, BN_ENOMEM, "out of memory");
+    }
+    bn_scene_patch_reflectance(scene, rho);
+    st = bn_transport_create(n, rho, ops, impl, out, err);
+    free(rho);
+    if (st != BN_OK)
+        return st;
+    d->bytes = bn_transport_bytes(*out);
+    d->seconds = bn__now() - t0;
+    d->rays_per_second = d->seconds > 0 ? (double)d->rays / d->seconds : 0;
+    if (o.cache_path) {
+        bn_error cerr;
+        bn_error_clear(&cerr);
+        if (bn__ff_write_file(*out, scene, o.cache_path, key, NULL, &cerr) != BN_OK)
+            bn_logf(&o.log, BN_LOG_WARN, "cannot write the form-factor cache: %s", cerr.msg);
+    }
+    return BN_OK;
+}
+
+static bn_status bn__build_from_cache(const bn_scene *scene, const bn_formfactor_opts *o, const char *key,
+                                      bn_transport **out, bn_ff_diagnostics *d, int *hit, bn_error *err)
+{
+    bn__sink sink;
+    void *impl = NULL;
+    const bn_transport_ops *ops = NULL;
+    size_t n;
+    double *rho;
+    bn_status st;
+    char why[256];
+    bn_scene_patches(scene, &n);
+    *hit = 0;
+    memset(&sink, 0, sizeof sink);
+    sink.n = n;
+    why[0] = '\0';
+    st = bn__ff_read_cache(o->cache_path, key, n, o->precision, o->storage, &sink.f32, &sink.f64, &sink.csr, &impl,
+                           &ops, why, sizeof why);
+    if (st != BN_OK) {
+        if (why[0])
+            bn_logf(&o->log, BN_LOG_INFO, "cache %s not used: %s", o->cache_path, why);
+        return BN_OK;   /* a miss: assemble and overwrite */
+    }
+    st = bn__diagnose(scene, &sink, o, d, err);
+    if (st != BN_OK) {
+        ops->destroy(impl);
+        return st;
+    }
+    rho = bn__malloc_array(3 * n, sizeof(double));
+    if (!rho) {
+        ops->destroy(impl);
+        return bn_error_set(err, BN_ENOMEM, "out of memory");
+    }
+    bn_scene_patch_reflectance(scene, rho);
+    st = bn_transport_create(n, rho, ops, impl, out, err);
+    free(rho);
+    if (st != BN_OK)
+        return st;
+    d->bytes = bn_transport_bytes(*out);
+    d->from_cache = 1;
+    *hit = 1;
+    bn_logf(&o->log, BN_LOG_INFO, "form factors read from cache %s", o->cache_path);
+    return BN_OK;
+}
+
+double bn_ff_point_to_polygon(const double x[3], const double n[3], const double *v, size_t nv)
+{
+    double *c = bn__malloc_array(3 * (nv + 1), sizeof(double));
+    size_t m;
+    double f;
+    if (!c)
+        return NAN;
+    m = bn__poly_clip(v, nv, n, x, 0, c);
+    f = m ? bn__ff_point_polygon(x, n, c, m) : 0;
+    free(c);
+    return f;
+}
+
+double bn_ff_polygon_pair(const double *vi, size_t ni, const double *vj, size_t nj, double rtol)
+{
+    double nni[3], nnj[3], Ai, *a, *b, f = 0, diam = 0;
+    size_t na, nb;
+    Ai = bn__poly_area(vi, ni, nni);
+    bn__poly_area(vj, nj, nnj);
+    if (!(Ai > 0) || ni < 3 || nj < 3)
+        return 0;
+    for (size_t k = 0; k < ni; k++)
+        for (size_t m = 0; m < nj; m++)
+            diam = fmax(diam, bn_v3_dist(vi + 3 * k, vj + 3 * m));
+    a = bn__malloc_array(3 * (ni + 1), sizeof(double));
+    b = bn__malloc_array(3 * (nj + 1), sizeof(double));
+    if (!a || !b) {
+        free(a);
+        free(b);
+        return NAN;
+    }
+    /* the part of i in front of j and of j in front of i */
+    na = bn__max_height(vj, nj, nni, vi) > 1e-12 * diam ? bn__poly_clip(vi, ni, nnj, vj, 1e-12 * diam, a) : 0;
+    nb = na && bn__max_height(vi, ni, nnj, vj) > 1e-12 * diam ? bn__poly_clip(vj, nj, nni, vi, 1e-12 * diam, b) : 0;
+    if (na && nb)
+        f = bn__ff_polygon_integral(a, na, nni, b, nb, rtol > 0 ? rtol : 1e-6, 0, NULL) / Ai;
+    free(a);
+    free(b);
+    return f;
+}
+
+void bn_ff_diagnostics_print(const bn_ff_diagnostics *d, FILE *fp)
+{
+    fprintf(fp, "patches              %zu\n", d->n);
+    fprintf(fp, "method               %s (%d samples)%s\n", bn_ff_method_name(d->method), d->samples,
+            d->from_cache ? ", read from the cache" : "");
+    fprintf(fp, "row sums             min %.9f  max %.9f  RMS(sum - 1) %.3g\n", d->row_sum_min, d->row_sum_max,
+            d->row_sum_rms_dev);
+    fprintf(fp, "rows above 1         %zu (allowance %.3g)\n", d->rows_above_one, d->row_sum_tol);
+    fprintf(fp, "reciprocity          max |A_i F_ij - A_j F_ji| / max = %.3g\n", d->reciprocity_residual);
+    fprintf(fp, "entries              %zu nonzero; %zu negative; %zu above 1 or not finite\n", d->nonzeros,
+            d->negative_entries, d->above_one_entries);
+    if (!d->from_cache) {
+        fprintf(fp, "pairs                %zu facing; %zu shaft-culled (no rays); %zu tested; %zu partly blocked "
+                    "(occluded fraction %.4f)\n",
+                d->pairs_nonzero, d->pairs_culled, d->pairs_tested, d->pairs_blocked, d->occluded_fraction);
+        fprintf(fp, "rays                 %zu (%.3g rays/s)\n", d->rays, d->rays_per_second);
+        if (d->quad_evals)
+            fprintf(fp, "kernel evaluations   %zu\n", d->quad_evals);
+    }
+    if (d->dropped_entries)
+        fprintf(fp, "sparse threshold     %zu entries dropped; largest dropped mass per row %.3g\n",
+                d->dropped_entries, d->dropped_mass_max);
+    fprintf(fp, "||K||_inf            %.9f (max_i rho_i sum_j F_ij)\n", d->k_norm_inf);
+    fprintf(fp, "bytes                %zu\n", d->bytes);
+    fprintf(fp, "seconds              %.3f\n", d->seconds);
+}

@@ -1,0 +1,393 @@
+/* The unoccluded form factor between planar polygons: Lambert's contour integral for a point
+ * and a polygon, integrated over the other polygon by adaptive triangle quadrature.
+ *   F_dA->P = -(1/2pi) sum_k gamma_k n . (R_k x R_k+1)/|R_k x R_k+1|   (Lambert 1760; Sparrow 1963)
+ *   A_i F_ij = int_{P_i} F_dA(x)->P_j dA(x)
+ * Rules: Strang-Fix degree 2 (3 points) and Radon's degree 5 (7 points) on triangles. */
+#include "formfactor/ff_internal.h"
+#include "base/vec.h"
+
+#include <float.h>
+#include <math.h>
+#include <string.h>
+
+double bn__ff_point_polygon(const double x[3], const double n[3], const double *v, size_t nv)
+{
+    double s = 0, r0[3], ra[3], rb[3];
+    if (nv < 3)
+        return 0;
+    bn_v3_sub(v, x, r0);
+    memcpy(ra, r0, sizeof ra);
+    for (size_t k = 0; k < nv; k++) {
+        double c[3], cl, g;
+        if (k + 1 < nv)
+            bn_v3_sub(v + 3 * (k + 1), x, rb);
+        else
+            memcpy(rb, r0, sizeof rb);
+        bn_v3_cross(ra, rb, c);
+        cl = bn_v3_len(c);
+        /* An edge through x (cl = 0) subtends no solid angle: skip it. */
+        if (cl > 0) {
+            g = atan2(cl, bn_v3_dot(ra, rb));
+            s += g * bn_v3_dot(n, c) / cl;
+        }
+        memcpy(ra, rb, sizeof ra);
+    }
+    return -s / (2 * BN_PI);
+}
+
+size_t bn__poly_clip(const double *v, size_t nv, const double n[3], const double p[3], double tol, double *out)
+{
+    double d[64];
+    size_t m = 0, inside = 0;
+    double *dist = nv <= 64 ? d : bn__malloc_array(nv, sizeof(double));
+    if (!dist)
+        return 0;
+    for (size_t k = 0; k < nv; k++) {
+        double r[3];
+        bn_v3_sub(v + 3 * k, p, r);
+        dist[k] = bn_v3_dot(n, r);
+        if (fabs(dist[k]) <= tol)
+            dist[k] = 0;
+        if (dist[k] >= 0)
+            inside++;
+    }
+    if (inside == nv) {
+        memcpy(out, v, 3 * nv * sizeof(double));
+        if (dist != d)
+            free(dist);
+        return nv;
+    }
+    for (size_t k = 0; k < nv; k++) {
+        size_t k1 = k + 1 < nv ? k + 1 : 0;
+        double da = dist[k], db = dist[k1];
+        if (da >= 0) {
+            memcpy(out + 3 * m, v + 3 * k, 3 * sizeof(double));
+            m++;
+        }
+        if ((da > 0 && db < 0) || (da < 0 && db > 0)) {
+            double t = da / (da - db);
+            for (int c = 0; c < 3; c++)
+                out[3 * m + c] = v[3 * k + c] + t * (v[3 * k1 + c] - v[3 * k + c]);
+            m++;
+        }
+    }
+    if (dist != d)
+        free(dist);
+    return m >= 3 ? m : 0;
+}
+
+double bn__poly_area(const double *v, size_t nv, double n[3])
+{
+    double s[3] = {0, 0, 0}, len;
+    for (size_t k = 0; k < nv; k++) {
+        const double *a = v + 3 * k, *b = v + 3 * (k + 1 < nv ? k + 1 : 0);
+        s[0] += (a[1] - b[1]) * (a[2] + b[2]);
+        s[1] += (a[2] - b[2]) * (a[0] + b[0]);
+        s[2] += (a[0] - b[0]) * (a[1] + b[1]);
+    }
+    len = bn_v3_len(s);
+    if (n) {
+        if (len > 0)
+            bn_v3_scale(s, 1 / len, n);
+        else
+            n[0] = n[1] = n[2] = 0;
+    }
+    return 0.5 * len;
+}
+
+static double bn__seg_dist(const double x[3], const double a[3], const double b[3])
+{
+    double ab[3], ax[3], t, q[3];
+    bn_v3_sub(b, a, ab);
+    bn_v3_sub(x, a, ax);
+    t = bn_v3_dot(ab, ab);
+    t = t > 0 ? bn_clamp(bn_v3_dot(ax, ab) / t, 0, 1) : 0;
+    bn_v3_madd(a, t, ab, q);
+    return bn_v3_dist(x, q);
+}
+
+double bn__point_polygon_dist(const double x[3], const double *v, size_t nv, const double n[3])
+{
+    double r[3], h, best = INFINITY;
+    int inside = 1;
+    bn_v3_sub(x, v, r);
+    h = bn_v3_dot(r, n);
+    for (size_t k = 0; k < nv; k++) {
+        const double *a = v + 3 * k, *b = v + 3 * (k + 1 < nv ? k + 1 : 0);
+        double e[3], ax[3], c[3];
+        bn_v3_sub(b, a, e);
+        bn_v3_sub(x, a, ax);
+        bn_v3_cross(e, ax, c);
+        if (bn_v3_dot(c, n) < 0)
+            inside = 0;
+    }
+    if (inside)
+        return fabs(h);
+    for (size_t k = 0; k < nv; k++)
+        best = fmin(best, bn__seg_dist(x, v + 3 * k, v + 3 * (k + 1 < nv ? k + 1 : 0)));
+    return best;
+}
+
+/* ---- adaptive quadrature over triangles ---- */
+
+typedef struct bn__qctx {
+    const double *pj;
+    size_t nj;
+    double nj_n[3];
+    double ni_n[3];
+    double tol_per_area;   /* tolerance per unit area of P_i */
+    bn__quad_stats *st;
+} bn__qctx;
+
+/* A triangle may be accepted only when its diameter is below KAPPA times the distance from its
+ * centroid to P_j: features of the integrand have the size of that distance, and the two rules
+ * could agree by chance on a triangle much larger than them. 5 leaves touching pairs (centroid
+ * at a third of the height from the shared edge) to the error test. */
+#define BN__KAPPA 5.0
+#define BN__MAX_DEPTH 60
+
+static double bn__eval(bn__qctx *q, const double a[3], const double b[3], const double c[3], double l0, double l1,
+                       double l2)
+{
+    double x[3];
+    for (int k = 0; k < 3; k++)
+        x[k] = l0 * a[k] + l1 * b[k] + l2 * c[k];
+    q->st->evals++;
+    return bn__ff_point_polygon(x, q->ni_n, q->pj, q->nj);
+}
+
+static void bn__rules(bn__qctx *q, const double a[3], const double b[3], const double c[3], double area, double *q2,
+                      double *q5)
+{
+    /* Radon's 7-point degree-5 rule: b1 = (6 + sqrt 15)/21, b2 = (6 - sqrt 15)/21,
+     * weights (155 +- sqrt 15)/1200 and 9/40 at the centroid. */
+    static const double b1 = 0.47014206410511508977, a1 = 0.05971587178976982045;
+    static const double b2 = 0.10128650732345633880, a2 = 0.79742698535308732240;
+    static const double w1 = 0.13239415278850618074, w2 = 0.12593918054482715260, w0 = 0.225;
+    double s5 = w0 * bn__eval(q, a, b, c, 1.0 / 3, 1.0 / 3, 1.0 / 3);
+    double s2 = 0;
+    s5 += w1 * (bn__eval(q, a, b, c, a1, b1, b1) + bn__eval(q, a, b, c, b1, a1, b1) + bn__eval(q, a, b, c, b1, b1, a1));
+    s5 += w2 * (bn__eval(q, a, b, c, a2, b2, b2) + bn__eval(q, a, b, c, b2, a2, b2) + bn__eval(q, a, b, c, b2, b2, a2));
+    s2 = (bn__eval(q, a, b, c, 2.0 / 3, 1.0 / 6, 1.0 / 6) + bn__eval(q, a, b, c, 1.0 / 6, 2.0 / 3, 1.0 / 6) +
+          bn__eval(q, a, b, c, 1.0 / 6, 1.0 / 6, 2.0 / 3)) /
+         3;
+    *q5 = s5 * area;
+    *q2 = s2 * area;
+}
+
+static double bn__tri_area(const double a[3], const double b[3], const double c[3])
+{
+    double e1[3], e2[3], x[3];
+    bn_v3_sub(b, a, e1);
+    bn_v3_sub(c, a, e2);
+    bn_v3_cross(e1, e2, x);
+    return 0.5 * bn_v3_len(x);
+}
+
+static double bn__tri_diam(const double a[3], const double b[3], const double c[3])
+{
+    return fmax(bn_v3_dist(a, b), fmax(bn_v3_dist(b, c), bn_v3_dist(c, a)));
+}
+
+/* A leaf of the refinement: a triangle with both rules evaluated. Priority: triangles larger
+ * than KAPPA times their distance to P_j first, then the largest error estimate |Q5 - Q2|. */
+typedef struct bn__leaf {
+    double v[3][3];
+    double area, q5, err, key;
+    int depth;
+} bn__leaf;
+
+typedef struct bn__heap {
+    bn__leaf *a;
+    size_t n, cap;
+    bn__leaf inline_[48];
+} bn__heap;
+
+static int bn__heap_push(bn__heap *h, const bn__leaf *l)
+{
+    size_t k;
+    if (h->n == h->cap) {
+        size_t cap = 4 * h->cap;
+        bn__leaf *na = bn__malloc_array(cap, sizeof *na);
+        if (!na)
+            return 0;
+        memcpy(na, h->a, h->n * sizeof *na);
+        if (h->a != h->inline_)
+            free(h->a);
+        h->a = na;
+        h->cap = cap;
+    }
+    k = h->n++;
+    while (k > 0) {
+        size_t parent = (k - 1) / 2;
+        if (h->a[parent].key >= l->key)
+            break;
+        h->a[k] = h->a[parent];
+        k = parent;
+    }
+    h->a[k] = *l;
+    return 1;
+}
+
+static bn__leaf bn__heap_pop(bn__heap *h)
+{
+    bn__leaf top = h->a[0], last = h->a[--h->n];
+    size_t k = 0;
+    for (;;) {
+        size_t c = 2 * k + 1;
+        if (c >= h->n)
+            break;
+        if (c + 1 < h->n && h->a[c + 1].key > h->a[c].key)
+            c++;
+        if (h->a[c].key <= last.key)
+            break;
+        h->a[k] = h->a[c];
+        k = c;
+    }
+    if (h->n)
+        h->a[k] = last;
+    return top;
+}
+
+static void bn__leaf_make(bn__qctx *q, bn__leaf *l, const double a[3], const double b[3], const double c[3],
+                          double area, int depth)
+{
+    double q2, g[3];
+    memcpy(l->v[0], a, 3 * sizeof(double));
+    memcpy(l->v[1], b, 3 * sizeof(double));
+    memcpy(l->v[2], c, 3 * sizeof(double));
+    l->area = area;
+    l->depth = depth;
+    bn__rules(q, a, b, c, area, &q2, &l->q5);
+    l->err = fabs(l->q5 - q2);
+    for (int k = 0; k < 3; k++)
+        g[k] = (a[k] + b[k] + c[k]) / 3;
+    l->key = l->err;
+    if (depth < BN__MAX_DEPTH) {
+        double diam = bn__tri_diam(a, b, c);
+        if (diam > BN__KAPPA * bn__point_polygon_dist(g, q->pj, q->nj, q->nj_n)) {
+            /* A triangle touching P_j (a shared edge or corner) has features at every scale down
+             * to the contact, which its rules see: leave it to the error test. */
+            double dv = fmin(bn__point_polygon_dist(a, q->pj, q->nj, q->nj_n),
+                             fmin(bn__point_polygon_dist(b, q->pj, q->nj, q->nj_n),
+                                  bn__point_polygon_dist(c, q->pj, q->nj, q->nj_n)));
+            if (dv > 1e-9 * diam)
+                l->key = INFINITY;
+        }
+    }
+    if (depth >= BN__MAX_DEPTH)
+        l->key = -1;   /* cannot be refined further */
+}
+
+/* Leaves kept at most: bounds the work of one pair (about 10 * 4 * BN__MAX_LEAVES / 3 kernel
+ * evaluations per leaf) whatever the tolerance asks. */
+#define BN__MAX_LEAVES 20000
+
+double bn__ff_polygon_integral(const double *pi, size_t ni, const double ni_n[3], const double *pj, size_t nj,
+                               double rtol, double atol, bn__quad_stats *st)
+{
+    bn__qctx q;
+    bn__quad_stats local;
+    bn__heap h;
+    double sum = 0, err = 0;
+    if (ni < 3 || nj < 3)
+        return 0;
+    if (!st)
+        st = &local;
+    memset(st, 0, sizeof *st);
+    q.pj = pj;
+    q.nj = nj;
+    bn__poly_area(pj, nj, q.nj_n);
+    memcpy(q.ni_n, ni_n, sizeof q.ni_n);
+    q.st = st;
+    h.a = h.inline_;
+    h.n = 0;
+    h.cap = sizeof h.inline_ / sizeof h.inline_[0];
+    for (size_t t = 0; t + 2 < ni; t++) {
+        bn__leaf l;
+        double area = bn__tri_area(pi, pi + 3 * (t + 1), pi + 3 * (t + 2));
+        if (!(area > 0))
+            continue;
+        bn__leaf_make(&q, &l, pi, pi + 3 * (t + 1), pi + 3 * (t + 2), area, 0);
+        sum += l.q5;
+        err += l.err;
+        if (!bn__heap_push(&h, &l)) {
+            sum = NAN;
+            goto done;
+        }
+    }
+    /* Global adaptivity: split the worst triangle until the summed estimate meets the tolerance
+     * (relative to the running integral, with an absolute floor) and every triangle is small
+     * against its distance to P_j. */
+    while (h.n > 0 && h.n < BN__MAX_LEAVES) {
+        bn__leaf l, kids[2];
+        double mid[3];
+        int e;
+        double tol = fmax(fmax(rtol * fabs(sum), atol), 64 * DBL_EPSILON * fabs(sum));
+        if (h.a[0].key < 0 || (h.a[0].key != INFINITY && err <= tol))
+            break;
+        l = bn__heap_pop(&h);
+        /* Bisect the longest edge (v[e], v[e+1]): thin triangles become rounder, where a
+         * four-way split would keep their shape. */
+        {
+            double l0 = bn_v3_dist(l.v[0], l.v[1]), l1 = bn_v3_dist(l.v[1], l.v[2]), l2 = bn_v3_dist(l.v[2], l.v[0]);
+            e = l0 >= l1 && l0 >= l2 ? 0 : (l1 >= l2 ? 1 : 2);
+        }
+        {
+            const double *a = l.v[e], *b = l.v[(e + 1) % 3], *c = l.v[(e + 2) % 3];
+            for (int k = 0; k < 3; k++)
+                mid[k] = 0.5 * (a[k] + b[k]);
+            bn__leaf_make(&q, &kids[0], a, mid, c, l.area / 2, l.depth + 1);
+            bn__leaf_make(&q, &kids[1], mid, b, c, l.area / 2, l.depth + 1);
+        }
+        sum -= l.q5;
+        err -= l.err;
+        for (int k = 0; k < 2; k++) {
+            sum += kids[k].q5;
+            err += kids[k].err;
+            if (!bn__heap_push(&h, &kids[k])) {
+                sum = NAN;
+                goto done;
+            }
+        }
+    }
+    /* The running sums drift by rounding: add the leaves afresh. */
+    sum = 0;
+    for (size_t k = 0; k < h.n; k++) {
+        sum += h.a[k].q5;
+        if (h.a[k].depth > st->max_depth)
+            st->max_depth = h.a[k].depth;
+    }
+    st->triangles = h.n;
+    st->capped = h.n >= BN__MAX_LEAVES;
+done:
+    if (h.a != h.inline_)
+        free(h.a);
+    return sum;
+}
+
+void bn__poly_sample(const double *v, size_t nv, double u, double w, double out[3])
+{
+    double areas[BN__FF_POLY_MAX], total = 0, acc = 0, s, b0, b1, b2;
+    size_t ntri = nv - 2, t;
+    if (ntri > BN__FF_POLY_MAX)
+        ntri = BN__FF_POLY_MAX;
+    for (t = 0; t < ntri; t++) {
+        areas[t] = bn__tri_area(v, v + 3 * (t + 1), v + 3 * (t + 2));
+        total += areas[t];
+    }
+    u *= total;
+    for (t = 0; t + 1 < ntri; t++) {
+        if (u < acc + areas[t])
+            break;
+        acc += areas[t];
+    }
+    u = areas[t] > 0 ? bn_clamp((u - acc) / areas[t], 0, 1) : 0.5;
+    /* Square to triangle (Shirley): b0 = 1 - sqrt(u), b1 = sqrt(u)(1 - w), b2 = sqrt(u) w. */
+    s = sqrt(u);
+    b0 = 1 - s;
+    b1 = s * (1 - w);
+    b2 = s * w;
+    for (int k = 0; k < 3; k++)
+        out[k] = b0 * v[k] + b1 * v[3 * (t + 1) + k] + b2 * v[3 * (t + 2) + k];
+}
