@@ -43,8 +43,10 @@ typedef OpenMesh::PolyMesh_ArrayKernelT<ByteTraits> ByteMesh;
 // Collects OpenMesh's messages (omerr/omlog) instead of letting them reach stderr.
 struct OmCapture {
     std::ostringstream text;
+    std::streambuf *clog_buf;   // the OM writer reports "#bytes written" on std::clog
     OmCapture()
     {
+        clog_buf = std::clog.rdbuf(text.rdbuf());
         ::omerr().disconnect(std::cerr);
         ::omlog().disconnect(std::cerr);
         ::omerr().connect(text);
@@ -52,6 +54,7 @@ struct OmCapture {
     }
     ~OmCapture()
     {
+        std::clog.rdbuf(clog_buf);
         ::omerr().disconnect(text);
         ::omlog().disconnect(text);
         ::omerr().connect(std::cerr);

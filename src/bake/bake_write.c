@@ -51,7 +51,7 @@ static bn_status bn__ply_add_comments(const char *src, const char *dst, const bn
                 fprintf(out.fp, "comment %s: %s\n", o->attrs[a].key, text);
             }
         }
-        if (strcmp(line, "end_header\n") == 0)
+        if (strncmp(line, "end_header", 10) == 0 && strspn(line + 10, "\r\n") == strlen(line + 10))
             header = 0;
     }
     while ((n = fread(line, 1, sizeof line, in)) > 0)
@@ -59,7 +59,7 @@ static bn_status bn__ply_add_comments(const char *src, const char *dst, const bn
     if (header || ferror(in)) {
         fclose(in);
         bn__outfile_abort(&out);
-        return bn_error_set(err, BN_EIO, "%s: the PLY OpenMesh wrote has no complete header", dst);
+        return bn_error_set(err, BN_EIO, "%s: the PLY OpenMesh wrote (%s) has no complete header", dst, src);
     }
     fclose(in);
     return bn__outfile_commit(&out, err);
@@ -206,7 +206,20 @@ bn_status bn_bake_write(const bn_bake *b, const char *path, const bn_bake_layer 
         m.extra_name = (const char *const *)names;
         m.extra = (const float *const *)extra;
         m.provenance = is_om ? prov : NULL;
-        st = bn__tmpname_reserve(path, &tmp, err);
+        /* PLY: OpenMesh writes a first temporary, which is copied with comments into the second
+         * (bn__outfile); both temporaries need distinct names, so the first is named after
+         * "<stem>.openmesh.ply". */
+        if (is_ply) {
+            size_t len = strlen(path) + 16;
+            char *alt = malloc(len);
+            if (!alt)
+                goto oom;
+            snprintf(alt, len, "%.*s.openmesh.ply", (int)(strlen(path) - 4), path);
+            st = bn__tmpname_reserve(alt, &tmp, err);
+            free(alt);
+        } else {
+            st = bn__tmpname_reserve(path, &tmp, err);
+        }
         if (st == BN_OK)
             st = bn__openmesh_write(tmp, &m, &dup, err);
         for (size_t e = 0; e < nextra; e++)
