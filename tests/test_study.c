@@ -213,7 +213,7 @@ BN_TEST(study_mesh_converges)
     double prev_s = INFINITY, prev_r = INFINITY, ref_err;
     int rows = 0;
     snprintf(args, sizeof args,
-             "study %s --unit mm --vary patches=20,80 --ref-patches 320 --samples 8 -o %s -q",
+             "study %s --unit mm --vary patches=20,80 --ref-patches 640 --samples 8 -o %s -q",
              bn_test_path("meshes/cornell-box.obj"), bn_test_tmp("mesh.csv"));
     if (bn_test_bounce(args, &out) != 0)
         BN_FAIL("bounce study failed:\n%s", out ? out : "");

@@ -88,6 +88,17 @@ static void bn__draw(const bn__panel *p)
         y0 = 0;
         y1 = 1;
     }
+    /* log axes span at least 1.2 decades, so a labelled decade always shows */
+    if (p->xlog && x1 - x0 < 1.2) {
+        double c = 0.5 * (x0 + x1);
+        x0 = c - 0.6;
+        x1 = c + 0.6;
+    }
+    if (p->ylog && y1 - y0 < 1.2) {
+        double c = 0.5 * (y0 + y1);
+        y0 = c - 0.6;
+        y1 = c + 0.6;
+    }
     {   /* margins: 5% (at least a unit's share when the range is flat) */
         double dx = x1 - x0 > 0 ? 0.05 * (x1 - x0) : (p->xlog ? 0.5 : 0.5 + 0.05 * fabs(x0));
         double dy = y1 - y0 > 0 ? 0.08 * (y1 - y0) : (p->ylog ? 0.5 : 0.5 + 0.05 * fabs(y0));
@@ -220,7 +231,7 @@ static void bn__panels(const bn_study_result *r, bn__panel *a, bn__panel *b)
             }
     } else {
         snprintf(a->ylab, sizeof a->ylab, "max per-surface relative error");
-        snprintf(a->title, sizeof a->title, "error against time (mesh + form factors + solve + output)");
+        snprintf(a->title, sizeof a->title, "error against time (all phases)");
         for (int k = 0; k < nm; k++) {
             bn__series *s = bn__add(a, methods[k], 1, 1);
             for (size_t i = 0; i < r->nrows; i++)

@@ -1020,6 +1020,18 @@ static bn_status bn__study_settings(bn__study *S, bn_error *err)
             st = bn__study_compare(&rr, sol.scene, sol.L, row, err);
         bn__sol_free(&sol);
     }
+    /* A reference is only useful well below what it measures: say so when it is not. */
+    if (st == BN_OK) {
+        double best = INFINITY;
+        for (size_t i = 0; i < R->nrows; i++)
+            if (isfinite(R->rows[i].err_surface_max))
+                best = fmin(best, R->rows[i].err_surface_max);
+        if (isfinite(best) && R->ref_error > best / 3)
+            bn_logf(&o->log, BN_LOG_WARN,
+                    "the reference's estimated error (%.3g per surface) is not well below the smallest error measured "
+                    "(%.3g): errors near it are uncertain; use a finer reference (--ref-patches, --ref-samples, --ref-spp)",
+                    R->ref_error, best);
+    }
     /* The equal-error comparison: the tracer on the first setting's mesh. */
     if (st == BN_OK && mesh_study && o->nagainst > 0) {
         bn_mesh_opts m = o->mesh;

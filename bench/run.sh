@@ -1,0 +1,246 @@
+#!/bin/sh
+# bench/run.sh: the one benchmark runner. Builds bounce (Release) and runs every benchmark in bench/
+# (form factors, K application and solves, path tracer, and the speed-accuracy study), then writes
+# one markdown report: the machine, each figure as a median of repeated runs with its spread, and
+# each figure's ratio to its limit (STREAM triad, raw Embree ray rate) or alternative (LAPACK direct
+# solve, path tracer at equal error), all measured in this run. Not part of the test suite.
+#
+# usage: bench/run.sh [-o FILE] [-b BUILD_DIR] [-r REPEATS] [--quick] [--no-build]
+#   -o FILE       report (default bench/results.md; written to a temporary and renamed)
+#   -b DIR        build directory (default build-bench; configured Release without tests)
+#   -r N          repeats of the study figures (default 3)
+#   --quick       smaller settings everywhere (a smoke run, ~2 minutes)
+#   --no-build    use the executables already in the build directory
+# Environment: BENCH_TIMEOUT (seconds per bench program, default 150), OMP_NUM_THREADS (default: all
+# cores). A bench that is missing, fails or times out is reported as such; the others still run.
+set -u
+
+root=$(cd "$(dirname "$0")/.." && pwd)
+out="$root/bench/results.md"
+build="$root/build-bench"
+reps=3
+quick=0
+dobuild=1
+while [ $# -gt 0 ]; do
+    case "$1" in
+    -o) out=$2; shift 2 ;;
+    -b) build=$2; shift 2 ;;
+    -r) reps=$2; shift 2 ;;
+    --quick) quick=1; shift ;;
+    --no-build) dobuild=0; shift ;;
+    -h|--help) sed -n '2,16p' "$0"; exit 0 ;;
+    *) echo "bench/run.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
+    esac
+done
+case "$out" in /*) ;; *) out="$PWD/$out" ;; esac
+timeout_s=${BENCH_TIMEOUT:-150}
+work=$(mktemp -d "${TMPDIR:-/tmp}/bounce-bench.XXXXXX")
+trap 'rm -rf "$work"' EXIT INT TERM
+report="$work/report.md"
+note() { echo "bench: $*" >&2; }
+
+# ---- build ----
+if [ "$dobuild" = 1 ]; then
+    note "building in $build (Release)"
+    gen=""
+    command -v ninja >/dev/null 2>&1 && gen="-G Ninja"
+    # shellcheck disable=SC2086
+    cmake -S "$root" -B "$build" $gen -DCMAKE_BUILD_TYPE=Release -DBOUNCE_BUILD_TESTS=OFF >"$work/cmake.log" 2>&1 &&
+        cmake --build "$build" -j 2 >"$work/build.log" 2>&1 || {
+        note "build failed; see the log below"
+        tail -30 "$work/cmake.log" "$work/build.log" >&2
+        exit 1
+    }
+fi
+start=$(date +%s)   # the build is not counted in the runner's time
+bounce="$build/bounce"
+[ -x "$bounce" ] || { note "no bounce executable in $build"; exit 1; }
+scene="$root/meshes/cornell-box.obj"
+
+# ---- statistics over repeated runs: median and spread (min-max) of a list of numbers ----
+stats() {   # stats FILE -> "median min max n"
+    sort -g "$1" | awk '{ v[NR] = $1 } END {
+        if (NR == 0) { print "nan nan nan 0"; exit }
+        m = (NR % 2) ? v[(NR + 1) / 2] : 0.5 * (v[NR / 2] + v[NR / 2 + 1]);
+        printf "%.6g %.6g %.6g %d\n", m, v[1], v[NR], NR }'
+}
+# csvget FILE METHOD VALUE COLUMN: the column of the first row with that method and value
+csvget() {
+    awk -F, -v m="$2" -v val="$3" -v col="$4" '
+        /^#/ { next }
+        !h { for (i = 1; i <= NF; i++) c[$i] = i; h = 1; next }
+        $(c["method"]) == m && $(c["value"]) == val { print $(c[col]); exit }' "$1"
+}
+metaget() { sed -n "s/^# $2=//p" "$1" | head -1; }
+
+# ---- the machine ----
+cpu=$(sed -n 's/^model name[[:space:]]*: //p' /proc/cpuinfo 2>/dev/null | head -1)
+[ -n "$cpu" ] || cpu=$(uname -m)
+cores=$(nproc 2>/dev/null || echo "?")
+mem=$(awk '/MemTotal/ { printf "%.1f GiB", $2 / 1048576 }' /proc/meminfo 2>/dev/null)
+load=$(cut -d' ' -f1-3 /proc/loadavg 2>/dev/null)
+cc=$(${CC:-cc} --version 2>/dev/null | head -1)
+commit=$(git -C "$root" rev-parse --short HEAD 2>/dev/null || echo "?")
+dirty=$(git -C "$root" status --porcelain 2>/dev/null | grep -q . && echo " (working tree modified)")
+{
+    echo "# bounce benchmarks"
+    echo
+    echo "Written by \`bench/run.sh$( [ "$quick" = 1 ] && echo " --quick")\` on $(date -u '+%Y-%m-%d %H:%M UTC'); commit $commit$dirty; $("$bounce" --version 2>/dev/null | head -1)."
+    echo
+    echo "| machine | |"
+    echo "|---|---|"
+    echo "| CPU | $cpu |"
+    echo "| cores | $cores (OMP_NUM_THREADS=${OMP_NUM_THREADS:-all}) |"
+    echo "| memory | $mem |"
+    echo "| compiler | $cc |"
+    echo "| load average at start | $load (a shared machine inflates times; ratios measured in one run are steadier) |"
+    echo
+} >"$report"
+
+# ---- the bench programs (each prints its own markdown, medians and limits measured in its run) ----
+run_prog() {   # run_prog NAME TITLE ARGS...
+    name=$1; title=$2; shift 2
+    exe="$build/bench/$name"
+    echo "## $title (\`$name\`)" >>"$report"
+    echo >>"$report"
+    if [ ! -f "$root/bench/$name.c" ] && [ ! -x "$exe" ]; then
+        echo "_not run: bench/$name.c does not exist yet._" >>"$report"
+        echo >>"$report"
+        note "$name: missing"
+        return
+    fi
+    if [ ! -x "$exe" ]; then
+        echo "_not run: bench/$name.c exists but $exe was not built (see bench/CMakeLists.txt)._" >>"$report"
+        echo >>"$report"
+        note "$name: not built"
+        return
+    fi
+    note "$name $*"
+    t0=$(date +%s)
+    timeout "$timeout_s" "$exe" "$@" >"$work/$name.out" 2>"$work/$name.err"
+    rc=$?
+    t1=$(date +%s)
+    cat "$work/$name.out" >>"$report"
+    echo >>"$report"
+    if [ "$rc" = 124 ]; then
+        echo "_$name timed out after ${timeout_s} s (BENCH_TIMEOUT); the output above is partial._" >>"$report"
+    elif [ "$rc" != 0 ]; then
+        echo "_$name failed (exit $rc):_ \`$(tail -1 "$work/$name.err")\`" >>"$report"
+    else
+        echo "_$name: $((t1 - t0)) s._" >>"$report"
+    fi
+    echo >>"$report"
+}
+if [ "$quick" = 1 ]; then
+    run_prog ff_bench "Form factors: assembly throughput against the raw Embree ray rate" --quick
+    run_prog solve_bench "Solves: K application against the STREAM triad; iterative against direct" --quick
+    run_prog trace_bench "Path tracer: rays/s against the raw Embree ray rate; equal error" --quick
+else
+    run_prog ff_bench "Form factors: assembly throughput against the raw Embree ray rate"
+    run_prog solve_bench "Solves: K application against the STREAM triad; iterative against direct"
+    run_prog trace_bench "Path tracer: rays/s against the raw Embree ray rate; equal error"
+fi
+# any other bench program someone adds later
+for src in "$root"/bench/*.c; do
+    [ -e "$src" ] || continue
+    name=$(basename "$src" .c)
+    case "$name" in ff_bench|solve_bench|trace_bench) continue ;; esac
+    run_prog "$name" "$name"
+done
+
+# ---- the study: medians over repeated runs of `bounce study` ----
+if [ "$quick" = 1 ]; then
+    np_ops=300; mesh="30,60,120"; spp="4,16,64"; ref_spp=4096
+else
+    np_ops=1200; mesh="50,100,200,400,800"; spp="16,64,256,1024,4096"; ref_spp=0
+fi
+note "study: methods on one K ($np_ops patches) and the equal-error comparison, $reps repeats"
+: >"$work/fail"
+i=1
+while [ "$i" -le "$reps" ]; do
+    timeout "$timeout_s" "$bounce" study "$scene" --unit mm --patches "$np_ops" --vary tol=1e-3,1e-6 \
+        -o "$work/tol_$i.csv" -q >/dev/null 2>"$work/tol_$i.err" || echo "tol run $i: $(tail -1 "$work/tol_$i.err")" >>"$work/fail"
+    refopt=""
+    [ "$ref_spp" != 0 ] && refopt="--ref-spp $ref_spp"
+    # shellcheck disable=SC2086
+    timeout "$timeout_s" "$bounce" study "$scene" --unit mm --vary patches="$mesh" --against-spp "$spp" $refopt \
+        --target 0.01 -o "$work/eq_$i.csv" -q >/dev/null 2>"$work/eq_$i.err" || echo "equal-error run $i: $(tail -1 "$work/eq_$i.err")" >>"$work/fail"
+    i=$((i + 1))
+done
+row() {   # row FIGURE UNIT VALUES_FILE ALT_LABEL ALT_FILE
+    set -- "$1" "$2" "$(stats "$3")" "$4" "$(stats "$5")"
+    med=${3%% *}; rest=${3#* }; lo=${rest%% *}; rest=${rest#* }; hi=${rest%% *}; n=${rest#* }
+    amed=${5%% *}
+    ratio=$(awk -v a="$med" -v b="$amed" 'BEGIN { if (b + 0 > 0 && a == a + 0) printf "%.3g", a / b; else print "n/a" }')
+    echo "| $1 | $med $2 | $lo - $hi ($n) | $4: $amed $2 | $ratio |" >>"$report"
+}
+{
+    echo "## Study: methods on the identical K, and radiosity against the path tracer at equal error"
+    echo
+    echo "Cornell box (meshes/cornell-box.obj, mm). Medians of $reps runs of \`bounce study\`, spread = min - max (runs)."
+    echo "Methods: \`--patches $np_ops --vary tol=1e-3,1e-6\`; iterative times include bn_solve's analysis (norm, power"
+    echo "iteration); the stop test is ||r||_inf <= tol ||E||_inf for all. Equal error: \`--vary patches=$mesh"
+    echo "--against-spp $spp --target 0.01\`: time to 1% in the largest per-surface (per material) error against the"
+    echo "stated reference, by log-log interpolation between settings; radiosity time = meshing + form factors + solve + output."
+    echo
+    echo "| figure | median | spread (runs) | alternative or limit | ratio |"
+    echo "|---|---|---|---|---|"
+} >>"$report"
+for m in jacobi gauss-seidel neumann; do
+    : >"$work/v"; : >"$work/d"; : >"$work/it"
+    i=1
+    while [ "$i" -le "$reps" ]; do
+        f="$work/tol_$i.csv"
+        if [ -s "$f" ]; then
+            csvget "$f" "$m" 1e-06 t_solve >>"$work/v"
+            csvget "$f" "$m" 1e-06 iterations >>"$work/it"
+            csvget "$f" direct 1e-06 t_solve >>"$work/d"
+        fi
+        i=$((i + 1))
+    done
+    its=$(stats "$work/it"); its=${its%% *}
+    row "$m to tol 1e-6 ($its sweeps, $np_ops patches)" s "$work/v" "LAPACK direct" "$work/d"
+done
+: >"$work/rad"; : >"$work/pt"; : >"$work/ref"
+i=1
+while [ "$i" -le "$reps" ]; do
+    f="$work/eq_$i.csv"
+    if [ -s "$f" ]; then
+        metaget "$f" seconds_radiosity >>"$work/rad"
+        metaget "$f" seconds_trace >>"$work/pt"
+        metaget "$f" reference_error >>"$work/ref"
+    fi
+    i=$((i + 1))
+done
+row "radiosity to 1% per-surface error" s "$work/rad" "path tracer at equal error" "$work/pt"
+row "path tracer to 1% per-surface error" s "$work/pt" "radiosity at equal error" "$work/rad"
+refe=$(stats "$work/ref")
+echo >>"$report"
+echo "The reference's own estimated error (median): ${refe%% *} per surface; \`nan\` times mean that method did not reach 1% within the settings (see the CSV columns below)." >>"$report"
+if [ -s "$work/eq_1.csv" ]; then
+    {
+        echo
+        echo "Equal-error run 1, per setting (err = largest per-surface relative error):"
+        echo
+        echo "| method | setting | patches | err | t_mesh s | t_ff s | t_solve s | t_total s | peak MiB |"
+        echo "|---|---|---|---|---|---|---|---|---|"
+        awk -F, '/^#/ { next } !h { for (i = 1; i <= NF; i++) c[$i] = i; h = 1; next }
+            { printf "| %s | %s | %s | %.3g | %.3g | %.3g | %.3g | %.3g | %.0f |\n", $(c["method"]), $(c["value"]),
+              $(c["patches"]), $(c["err_surface_max"]), $(c["t_mesh"]), $(c["t_ff"]), $(c["t_solve"]), $(c["t_total"]),
+              $(c["peak_mb"]) }' "$work/eq_1.csv"
+        echo
+        echo "Reference: $(metaget "$work/eq_1.csv" reference); its error: $(metaget "$work/eq_1.csv" reference_error_how)."
+    } >>"$report"
+fi
+if [ -s "$work/fail" ]; then
+    echo >>"$report"
+    echo "Failed study runs:" >>"$report"
+    sed 's/^/- /' "$work/fail" >>"$report"
+fi
+end=$(date +%s)
+echo >>"$report"
+echo "_Total: $((end - start)) s, the build excluded (bench/run.sh$( [ "$quick" = 1 ] && echo " --quick"))._" >>"$report"
+
+mkdir -p "$(dirname "$out")"
+cp "$report" "$out.tmp.$$" && mv "$out.tmp.$$" "$out"
+note "wrote $out ($((end - start)) s)"
