@@ -1,0 +1,15 @@
+# Image and bake tests that need more than the runner: the OpenEXR C API for read-back in
+# test_image, and C++ read-back through OpenImageIO and OpenMesh (tests/image_readback.cpp).
+if(TARGET test_image)
+  target_link_libraries(test_image PRIVATE OpenEXR::OpenEXRCore)
+endif()
+add_executable(test_image_readback ${CMAKE_CURRENT_SOURCE_DIR}/image_readback.cpp)
+target_include_directories(test_image_readback PRIVATE ${PROJECT_SOURCE_DIR}/src)
+target_include_directories(test_image_readback SYSTEM PRIVATE /usr/include/OpenMesh)
+target_compile_definitions(test_image_readback PRIVATE BN_TEST_SOURCE_DIR="${PROJECT_SOURCE_DIR}"
+  BN_TEST_BINARY_DIR="${CMAKE_CURRENT_BINARY_DIR}/tmp/test_image_readback")
+target_link_libraries(test_image_readback PRIVATE bounce OpenImageIO::OpenImageIO OpenMeshCore m)
+foreach(t exr_oiio baked_ply_openmesh)
+  add_test(NAME test_image_readback.${t} COMMAND test_image_readback ${t})
+  set_tests_properties(test_image_readback.${t} PROPERTIES TIMEOUT 600 LABELS test_image_readback)
+endforeach()
