@@ -955,8 +955,10 @@ bn_status bn_formfactor_build(const bn_scene *scene, const bn_rt *rt, const bn_f
         bn_logf(&o.log, BN_LOG_WARN, "%zu hemisphere hits landed on patches outside the sparse pattern (grazing)",
                 sink.lost);
     if (d->rows_above_one)
-        bn_logf(&o.log, BN_LOG_WARN, "%zu rows of F sum to more than 1 + %.3g (largest %.9g; method %s)",
-                d->rows_above_one, d->row_sum_tol, d->row_sum_max, bn_ff_method_name(o.method));
+        bn_logf(&o.log, BN_LOG_WARN, "%zu rows of F sum to more than 1 + %.3g (largest %.9g; method %s)%s",
+                d->rows_above_one, d->row_sum_tol, d->row_sum_max, bn_ff_method_name(o.method),
+                o.method == BN_FF_HEMISPHERE ? ""
+                                             : ": sampling noise of the visibility estimate; more --samples reduce it");
     rho = bn__malloc_array(3 * n, sizeof(double));
     if (!rho) {
         ops->destroy(impl);
