@@ -21,6 +21,7 @@
 #include <cstdint>
 #include <cstring>
 #include <fstream>
+#include <iterator>
 #include <map>
 #include <new>
 #include <sstream>
@@ -517,8 +518,41 @@ static bn_status read_openmesh(const char *path, bn__soup *out, const bn_log *lo
     if (!is_ply || S.face_colour)
         opt += OpenMesh::IO::Options::FaceColor;
     {
+        // OpenMesh's OFF reader stops at '#' comments (which OFF allows): give it a copy without
+        // them, under a registered temporary name removed afterwards.
+        std::string read_path = path;
+        char *tmp = nullptr;
+        if (!is_ply) {
+            std::ifstream in(path, std::ios::binary);
+            std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+            if (text.find('#') != std::string::npos && text.find("BINARY") == std::string::npos) {
+                std::string clean;
+                bool comment = false;
+                for (char ch : text) {
+                    if (ch == '#')
+                        comment = true;
+                    if (ch == '\n')
+                        comment = false;
+                    if (!comment)
+                        clean.push_back(ch);
+                }
+                std::string alt = std::string(path) + ".nocomments.off";
+                if (bn__tmpname_reserve(alt.c_str(), &tmp, err) != BN_OK)
+                    return err ? err->status : BN_ENOMEM;
+                std::ofstream o(tmp, std::ios::binary);
+                o << clean;
+                if (!o) {
+                    bn__tmpname_abort(tmp);
+                    return bn_error_set(err, BN_EIO, "%s: cannot write a temporary copy without comments", path);
+                }
+                read_path = tmp;
+            }
+        }
         OmCapture cap;
-        if (!OpenMesh::IO::read_mesh(mesh, path, opt))
+        bool ok = OpenMesh::IO::read_mesh(mesh, read_path, opt);
+        if (tmp)
+            bn__tmpname_abort(tmp);
+        if (!ok)
             return bn_error_set(err, BN_EINPUT, "%s: OpenMesh cannot read it: %s", path, cap.first_line().c_str());
     }
     // Which faces OpenMesh kept: it drops faces with a repeated vertex (and, for OFF, faces with

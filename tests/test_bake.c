@@ -1,0 +1,431 @@
+/* Baking: vertex splitting at creases and seams, colours equal to the area-weighted patch
+ * averages (checked through an independent PLY parser), OBJ output, and PLY/OFF scene input
+ * through OpenMesh with malformed files refused clearly. */
+#include "bn_test.h"
+#include "bounce/bake.h"
+
+/* Baked colours are stored as float32: 1e-6 relative covers the rounding of the average. */
+#define TOL_COLOUR 1e-6
+
+static bn_scene *scene_arrays(const double *v, size_t nv, const unsigned *polys, size_t np, const unsigned *pm,
+                              const bn_material *m, size_t nm, size_t patches)
+{
+    bn_load_opts lo;
+    bn_mesh_opts mo;
+    bn_error err;
+    bn_scene *s;
+    bn_load_opts_default(&lo);
+    lo.log.quiet = 1;
+    if (bn_scene_from_arrays("test", v, nv, polys, np, pm, m, nm, &lo, &s, &err) != BN_OK)
+        BN_FAIL("scene: %s", err.msg);
+    bn_mesh_opts_default(&mo);
+    if (patches)
+        mo.target_patches = patches;
+    else
+        mo.no_subdivide = 1;
+    if (bn_scene_mesh(s, &mo, &err) != BN_OK)
+        BN_FAIL("mesh: %s", err.msg);
+    return s;
+}
+
+static const bn_material white = {"white", {0.5, 0.5, 0.5}, {0, 0, 0}};
+static const bn_material red = {"red", {0.5, 0.1, 0.1}, {0, 0, 0}};
+
+static size_t baked_count(bn_scene *s, double crease)
+{
+    bn_bake *b;
+    bn_error err;
+    BN_ASSERT_STATUS(bn_bake_create(s, crease, &b, &err), BN_OK);
+    size_t n = bn_bake_vertex_count(b);
+    bn_bake_destroy(b);
+    return n;
+}
+
+BN_TEST(split_at_creases_and_seams)
+{
+    /* Floor (y = 0, facing +y) and a wall (z = 0, facing +z) sharing the edge x in [0,1]. */
+    double v[] = {0, 0, 0, 1, 0, 0, 1, 0, 1, 0, 0, 1, 0, 1, 0, 1, 1, 0};
+    unsigned polys[] = {4, 0, 3, 2, 1, 4, 0, 1, 5, 4};
+    unsigned same[] = {0, 0}, diff[] = {0, 1};
+    bn_material m[2] = {white, red};
+    bn_scene *s = scene_arrays(v, 6, polys, 2, same, m, 2, 0);
+    BN_ASSERT_EQ(baked_count(s, 30), 8);    /* 90 degrees > 30: split */
+    BN_ASSERT_EQ(baked_count(s, 100), 6);   /* within the crease: shared */
+    bn_scene_destroy(s);
+    s = scene_arrays(v, 6, polys, 2, diff, m, 2, 0);
+    BN_ASSERT_EQ(baked_count(s, 100), 8);   /* material seam: split even within the crease */
+    bn_scene_destroy(s);
+    /* Two coplanar quads of one material, each meshed 2x2: (3x5) grid points shared = 15. */
+    double w[] = {0, 0, 0, 0, 0, 1, 1, 0, 1, 1, 0, 0, 2, 0, 1, 2, 0, 0};
+    unsigned q[] = {4, 0, 1, 2, 3, 4, 3, 2, 4, 5};
+    s = scene_arrays(w, 6, q, 2, same, m, 2, 8);
+    BN_ASSERT_EQ(bn_scene_patches(s, NULL) ? 1 : 0, 1);
+    size_t np;
+    bn_scene_patches(s, &np);
+    BN_ASSERT_EQ(np, 8);
+    BN_ASSERT_EQ(baked_count(s, 30), 15);
+    bn_scene_destroy(s);
+}
+
+/* ---- an independent binary PLY parser (little endian, float/uchar/int, one list) ---- */
+typedef struct ply_data {
+    size_t nv, nf;
+    int nprops;
+    char prop[64][32];
+    float *v;          /* nv * nprops */
+    unsigned *fn;      /* corners per face */
+    unsigned *fi;      /* 4 per face */
+    int ncomments;
+} ply_data;
+
+static void ply_parse(const char *path, ply_data *d)
+{
+    size_t size;
+    char *buf = bn_test_read_file(path, &size), *p = buf, *end;
+    memset(d, 0, sizeof *d);
+    BN_ASSERT(buf != NULL);
+    BN_ASSERT(strncmp(p, "ply\n", 4) == 0);
+    end = strstr(buf, "end_header\n");
+    BN_ASSERT(end != NULL);
+    int in_vertex = 0;
+    for (char *line = p; line < end;) {
+        char *nl = strchr(line, '\n');
+        char tmp[256];
+        size_t n = (size_t)(nl - line) < sizeof tmp - 1 ? (size_t)(nl - line) : sizeof tmp - 1;
+        memcpy(tmp, line, n);
+        tmp[n] = '\0';
+        if (strncmp(tmp, "format ", 7) == 0)
+            BN_ASSERT(strcmp(tmp, "format binary_little_endian 1.0") == 0);
+        else if (strncmp(tmp, "comment ", 8) == 0)
+            d->ncomments++;
+        else if (sscanf(tmp, "element vertex %zu", &d->nv) == 1)
+            in_vertex = 1;
+        else if (sscanf(tmp, "element face %zu", &d->nf) == 1)
+            in_vertex = 0;
+        else if (strncmp(tmp, "property float ", 15) == 0 && in_vertex)
+            snprintf(d->prop[d->nprops++], 32, "%.31s", tmp + 15);
+        else if (strncmp(tmp, "property", 8) == 0)
+            BN_ASSERT(!in_vertex && strcmp(tmp, "property list uchar int vertex_indices") == 0);
+        line = nl + 1;
+    }
+    p = end + strlen("end_header\n");
+    d->v = malloc(d->nv * d->nprops * sizeof(float));
+    BN_ASSERT((size_t)(buf + size - p) >= d->nv * d->nprops * 4);
+    memcpy(d->v, p, d->nv * d->nprops * 4);
+    p += d->nv * d->nprops * 4;
+    d->fn = calloc(d->nf, sizeof(unsigned));
+    d->fi = calloc(d->nf * 4, sizeof(unsigned));
+    for (size_t f = 0; f < d->nf; f++) {
+        unsigned char k = (unsigned char)*p++;
+        BN_ASSERT(k == 3 || k == 4);
+        d->fn[f] = k;
+        for (unsigned c = 0; c < k; c++) {
+            int32_t idx;
+            memcpy(&idx, p, 4);
+            p += 4;
+            BN_ASSERT(idx >= 0 && (size_t)idx < d->nv);
+            d->fi[4 * f + c] = (unsigned)idx;
+        }
+    }
+    BN_ASSERT_EQ(p - buf, (long)size);
+    free(buf);
+}
+
+static int ply_prop(const ply_data *d, const char *name)
+{
+    for (int i = 0; i < d->nprops; i++)
+        if (strcmp(d->prop[i], name) == 0)
+            return i;
+    BN_FAIL("property %s missing", name);
+    return -1;
+}
+
+BN_TEST(ply_colours_are_patch_averages)
+{
+    bn_load_opts lo;
+    bn_mesh_opts mo;
+    bn_error err;
+    bn_scene *s;
+    bn_bake *b;
+    bn_load_opts_default(&lo);
+    lo.log.quiet = 1;
+    bn_mesh_opts_default(&mo);
+    mo.target_patches = 250;
+    BN_ASSERT_STATUS(bn_scene_load(bn_test_path("meshes/cornell-box.obj"), &lo, &s, &err), BN_OK);
+    BN_ASSERT_STATUS(bn_scene_mesh(s, &mo, &err), BN_OK);
+    BN_ASSERT_STATUS(bn_bake_create(s, 30, &b, &err), BN_OK);
+    size_t np, npv;
+    const bn_patch *p = bn_scene_patches(s, &np);
+    const double *pv = bn_scene_patch_vertices(s, &npv);
+    double *x = malloc(np * 3 * sizeof(double)), *x2 = malloc(np * 3 * sizeof(double));
+    for (size_t i = 0; i < np; i++)
+        for (int c = 0; c < 3; c++) {
+            x[3 * i + c] = 0.1 + 0.01 * (double)((i * 7 + c * 3) % 101);   /* distinct per patch */
+            x2[3 * i + c] = 2 * x[3 * i + c];
+        }
+    bn_bake_layer layers[2] = {{"L", x}, {"KE", x2}};
+    bn_attr attr = {"command line", "bounce bake test"};
+    bn_bake_write_opts wo;
+    memset(&wo, 0, sizeof wo);
+    wo.attrs = &attr;
+    wo.nattrs = 1;
+    const char *path = bn_test_tmp("b.ply");
+    BN_ASSERT_STATUS(bn_bake_write(b, path, layers, 2, &wo, &err), BN_OK);
+    ply_data d;
+    ply_parse(path, &d);
+    BN_ASSERT_EQ(d.nv, bn_bake_vertex_count(b));
+    BN_ASSERT_EQ(d.nf, np);
+    BN_ASSERT_GE(d.ncomments, 2);
+    int ix = ply_prop(&d, "x"), ir = ply_prop(&d, "red"), ike = ply_prop(&d, "KE_red");
+    double cos30 = cos(30 * 3.14159265358979 / 180);
+    /* Expected colour of vertex v: take a face (patch) f using it; average over every patch with a
+     * corner at v's position (brute force), the same material as f and a normal within 30 degrees. */
+    unsigned *owner = malloc(d.nv * sizeof(unsigned));
+    for (size_t f = 0; f < d.nf; f++)
+        for (unsigned c = 0; c < d.fn[f]; c++)
+            owner[d.fi[4 * f + c]] = (unsigned)f;
+    for (size_t v = 0; v < d.nv; v++) {
+        const float *row = d.v + v * d.nprops;
+        const bn_patch *pf = &p[owner[v]];
+        double sum[3] = {0, 0, 0}, area = 0;
+        for (int k = 0; k < d.nprops; k++)
+            BN_ASSERT(isfinite(row[k]));
+        for (size_t q = 0; q < np; q++) {
+            int at = 0;
+            for (unsigned c = 0; c < p[q].ncorners; c++) {
+                const double *a = pv + 3 * p[q].corner[c];
+                /* float32 positions of a 560 mm box: 1e-3 mm is far below a patch edge. */
+                if (fabs(a[0] - row[ix]) < 1e-3 && fabs(a[1] - row[ix + 1]) < 1e-3 && fabs(a[2] - row[ix + 2]) < 1e-3)
+                    at = 1;
+            }
+            if (!at || p[q].material != pf->material)
+                continue;
+            if (p[q].normal[0] * pf->normal[0] + p[q].normal[1] * pf->normal[1] + p[q].normal[2] * pf->normal[2] <
+                cos30)
+                continue;
+            area += p[q].area;
+            for (int c = 0; c < 3; c++)
+                sum[c] += p[q].area * x[3 * q + c];
+        }
+        BN_ASSERT_GT(area, 0);
+        for (int c = 0; c < 3; c++) {
+            BN_ASSERT_REL(row[ir + c], sum[c] / area, TOL_COLOUR);
+            BN_ASSERT_REL(row[ike + c], 2 * sum[c] / area, TOL_COLOUR);
+        }
+    }
+    free(owner);
+    free(d.v);
+    free(d.fn);
+    free(d.fi);
+    /* OBJ: v x y z r g b, one line per vertex, one f per patch. */
+    BN_ASSERT_STATUS(bn_bake_write(b, bn_test_tmp("b.obj"), layers, 1, &wo, &err), BN_OK);
+    char *obj = bn_test_read_file(bn_test_tmp("b.obj"), NULL);
+    size_t nvl = 0, nfl = 0;
+    for (char *l = obj; l && *l; l = strchr(l, '\n') ? strchr(l, '\n') + 1 : l + strlen(l)) {
+        double q[6];
+        if (strncmp(l, "v ", 2) == 0) {
+            BN_ASSERT_EQ(sscanf(l, "v %lf %lf %lf %lf %lf %lf", &q[0], &q[1], &q[2], &q[3], &q[4], &q[5]), 6);
+            nvl++;
+        }
+        nfl += strncmp(l, "f ", 2) == 0;
+    }
+    BN_ASSERT(strstr(obj, "# command line: bounce bake test") != NULL);
+    free(obj);
+    BN_ASSERT_EQ(nvl, bn_bake_vertex_count(b));
+    BN_ASSERT_EQ(nfl, np);
+    /* Per-bounce sets are refused for OBJ. */
+    BN_ASSERT_STATUS(bn_bake_write(b, bn_test_tmp("c.obj"), layers, 2, &wo, &err), BN_EUSAGE);
+    /* NaN: refused, nothing written. */
+    x[0] = NAN;
+    BN_ASSERT_STATUS(bn_bake_write(b, bn_test_tmp("nan.ply"), layers, 1, &wo, &err), BN_ENUMERIC);
+    BN_ASSERT(!bn_test_file_exists(bn_test_tmp("nan.ply")));
+    free(x);
+    free(x2);
+    bn_bake_destroy(b);
+    bn_scene_destroy(s);
+}
+
+/* ---- PLY and OFF scene input ---- */
+static void write_file(const char *name, const char *text, size_t n)
+{
+    FILE *f = fopen(bn_test_tmp(name), "wb");
+    fwrite(text, 1, n ? n : strlen(text), f);
+    fclose(f);
+}
+
+static bn_status load(const char *name, bn_scene **s, bn_error *err)
+{
+    bn_load_opts lo;
+    bn_load_opts_default(&lo);
+    lo.log.quiet = 1;
+    return bn_scene_load(bn_test_tmp(name), &lo, s, err);
+}
+
+static const char ply_head[] = "ply\nformat ascii 1.0\nelement vertex 8\nproperty float x\nproperty float y\n"
+                               "property float z\nelement face 2\nproperty list uchar int vertex_indices\n"
+                               "property uchar red\nproperty uchar green\nproperty uchar blue\n"
+                               "property float emission_red\nproperty float emission_green\n"
+                               "property float emission_blue\nend_header\n";
+static const char ply_verts[] = "0 0 0\n1 0 0\n1 1 0\n0 1 0\n0 0 1\n0 1 1\n1 1 1\n1 0 1\n";
+
+BN_TEST(ply_ascii_input)
+{
+    char text[2048];
+    bn_scene *s;
+    bn_error err;
+    snprintf(text, sizeof text, "%s%s4 0 1 2 3 255 51 0 0 0 0\n4 4 5 6 7 0 0 0 5 4 3\n", ply_head, ply_verts);
+    write_file("a.ply", text, 0);
+    BN_ASSERT_STATUS(load("a.ply", &s, &err), BN_OK);
+    size_t nf, nm;
+    const bn_face *f = bn_scene_faces(s, &nf);
+    const bn_material *m = bn_scene_materials(s, &nm);
+    BN_ASSERT_EQ(nf, 2);
+    BN_ASSERT_EQ(bn_scene_emitter_count(s), 1);
+    BN_ASSERT_NEAR(m[f[0].material].rho[0], 1, 1e-12);
+    BN_ASSERT_NEAR(m[f[0].material].rho[1], 0.2, 1e-7);   /* 51 / 255 */
+    BN_ASSERT_EQ(m[f[1].material].Le[0], 5);
+    BN_ASSERT_EQ(m[f[1].material].Le[2], 3);
+    BN_ASSERT_EQ(f[1].line, 25);
+    bn_scene_destroy(s);
+}
+
+BN_TEST(ply_binary_input)
+{
+    /* Binary little endian, double positions, float reflectance and emission per face. */
+    const char *head = "ply\nformat binary_little_endian 1.0\ncomment test\nelement vertex 4\nproperty double x\n"
+                       "property double y\nproperty double z\nelement face 1\nproperty list uchar uint vertex_indices\n"
+                       "property float reflectance_red\nproperty float reflectance_green\n"
+                       "property float reflectance_blue\nproperty float emission_red\nproperty float emission_green\n"
+                       "property float emission_blue\nend_header\n";
+    char buf[1024];
+    size_t n = strlen(head);
+    double v[12] = {0, 0, 0, 2, 0, 0, 2, 3, 0, 0, 3, 0};
+    unsigned char k = 4;
+    uint32_t idx[4] = {0, 1, 2, 3};
+    float props[6] = {0.25f, 0.5f, 0.75f, 1, 2, 3};
+    memcpy(buf, head, n);
+    memcpy(buf + n, v, sizeof v), n += sizeof v;
+    buf[n++] = (char)k;
+    memcpy(buf + n, idx, sizeof idx), n += sizeof idx;
+    memcpy(buf + n, props, sizeof props), n += sizeof props;
+    write_file("b.ply", buf, n);
+    bn_scene *s;
+    bn_error err;
+    BN_ASSERT_STATUS(load("b.ply", &s, &err), BN_OK);
+    size_t nf;
+    const bn_face *f = bn_scene_faces(s, &nf);
+    const bn_material *m = bn_scene_materials(s, NULL);
+    BN_ASSERT_EQ(nf, 1);
+    BN_ASSERT_NEAR(f[0].area, 6, 1e-12);
+    BN_ASSERT_EQ(m[f[0].material].rho[2], 0.75);
+    BN_ASSERT_EQ(m[f[0].material].Le[1], 2);
+    bn_scene_destroy(s);
+    /* Truncated: the same file without its last bytes. */
+    write_file("bt.ply", buf, n - 5);
+    BN_ASSERT_STATUS(load("bt.ply", &s, &err), BN_EINPUT);
+    BN_ASSERT(strstr(err.msg, "ends inside element 'face'") != NULL);
+}
+
+BN_TEST(off_input)
+{
+    bn_scene *s;
+    bn_error err;
+    write_file("a.off", "OFF\n# a comment\n4 1 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n", 0);
+    BN_ASSERT_STATUS(load("a.off", &s, &err), BN_OK);
+    size_t nf;
+    bn_scene_faces(s, &nf);
+    BN_ASSERT_EQ(nf, 1);
+    bn_scene_destroy(s);
+    write_file("bad.off", "OFF\n4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n3 0 1 7\n", 0);
+    BN_ASSERT_STATUS(load("bad.off", &s, &err), BN_EINPUT);
+    BN_ASSERT(strstr(err.msg, "bad.off") != NULL);
+}
+
+BN_TEST(ply_malformed)
+{
+    static const struct {
+        const char *name, *text, *expect;
+    } cases[] = {
+        {"m1.ply", "plx\n", "not a PLY file"},
+        {"m2.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n", "no end_header"},
+        {"m3.ply", "ply\nformat ascii 2.0\nend_header\n", "version"},
+        {"m4.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty quad x\nend_header\n", "unknown property type"},
+        {"m5.ply", "ply\nformat ascii 1.0\nelement vertex -3\nend_header\n", "bad element line"},
+        {"m6.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                   "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n",
+         "m6.ply:13: face 0: vertex index 3 is out of range"},
+        {"m7.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                   "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n",
+         "non-finite"},
+        {"m8.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                   "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1\n",
+         "ends inside element 'face'"},
+        {"m9.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                   "element face 1\nproperty list uchar int vertex_indices\nproperty float reflectance_red\n"
+                   "property float reflectance_green\nproperty float reflectance_blue\nend_header\n"
+                   "0 0 0\n1 0 0\n0 1 0\n3 0 1 2 1.5 0 0\n",
+         "reflectance 1.5 is outside [0, 1]"},
+        {"m10.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                    "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n",
+         "has 2 vertices"},
+        {"m11.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                    "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 zz\n3 0 1 2\n",
+         "'zz' is not a valid z value"},
+        {"m12.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float y\nend_header\n0\n", "lacks x, y or z"},
+        {"m13.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                    "element face 1\nproperty list uchar int vertex_indices\nproperty float emission_red\n"
+                    "end_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2 1\n",
+         "needs all of emission_red"},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        bn_scene *s = NULL;
+        bn_error err;
+        write_file(cases[i].name, cases[i].text, 0);
+        bn_status st = load(cases[i].name, &s, &err);
+        if (st != BN_EINPUT || !strstr(err.msg, cases[i].expect))
+            BN_FAIL("%s: status %d, message '%s', expected '%s'", cases[i].name, (int)st, err.msg, cases[i].expect);
+        BN_ASSERT(s == NULL);
+    }
+    /* Random bytes after a valid binary header: an error, not a crash. */
+    char junk[600];
+    const char *head = "ply\nformat binary_big_endian 1.0\nelement vertex 100\nproperty float x\nproperty float y\n"
+                       "property float z\nelement face 100\nproperty list uchar int vertex_indices\nend_header\n";
+    size_t n = strlen(head);
+    memcpy(junk, head, n);
+    for (size_t i = n; i < sizeof junk; i++)
+        junk[i] = (char)(i * 2654435761u >> 13);
+    write_file("junk.ply", junk, sizeof junk);
+    bn_scene *s = NULL;
+    bn_error err;
+    BN_ASSERT_STATUS(load("junk.ply", &s, &err), BN_EINPUT);
+}
+
+BN_TEST(cli_bake)
+{
+    char cmd[2048], *out = NULL;
+    snprintf(cmd, sizeof cmd,
+             "bake '%s' -o '%s' --per-bounce -n 2 --patches 150 --ff hemisphere --samples 256 --quiet",
+             bn_test_path("meshes/cornell-box.obj"), bn_test_tmp("cb.ply"));
+    int rc = bn_test_bounce(cmd, &out);
+    if (rc != 0)
+        BN_FAIL("bounce exited %d: %s", rc, out ? out : "");
+    free(out);
+    ply_data d;
+    ply_parse(bn_test_tmp("cb.ply"), &d);
+    BN_ASSERT_GT(d.nv, 0);
+    /* L = E + KE + K2E + rest per vertex (all float32 of double values). */
+    int ir = ply_prop(&d, "red"), ie = ply_prop(&d, "E_red"), ik = ply_prop(&d, "KE_red"),
+        ik2 = ply_prop(&d, "K2E_red"), irs = ply_prop(&d, "rest_red");
+    for (size_t v = 0; v < d.nv; v++)
+        for (int c = 0; c < 3; c++) {
+            const float *r = d.v + v * d.nprops;
+            double sum = (double)r[ie + c] + r[ik + c] + r[ik2 + c] + r[irs + c];
+            BN_ASSERT_LE(fabs(sum - r[ir + c]), 1e-5 * fabs(r[ir + c]) + 1e-30);
+        }
+    free(d.v);
+    free(d.fn);
+    free(d.fi);
+    snprintf(cmd, sizeof cmd, "bake '%s' -o '%s' --per-bounce", bn_test_path("meshes/cornell-box.obj"),
+             bn_test_tmp("x.obj"));
+    BN_ASSERT_EQ(bn_test_bounce(cmd, NULL), 2);
+}
