@@ -910,9 +910,13 @@ static bn_status bn__study_settings(bn__study *S, bn_error *err)
             top = (int)fmax(top, o->values[v]);
         fref.method = BN_FF_ANALYTIC;
         fref.samples = o->ref_samples ? o->ref_samples : (8 * top > 256 ? 8 * top : 256);
+        /* Independent streams: a reference sharing the settings' seed (and stratification) would agree
+         * with them by correlation, not accuracy. */
+        fref.seed = bn__hash64(o->ff.seed ^ 0x7265666572656e63ULL);
         mcoarse = mref;
         fcoarse = fref;
         fcoarse.samples = fref.samples / 4 > 0 ? fref.samples / 4 : 1;
+        fcoarse.seed = bn__hash64(fref.seed + 1);
     } else {   /* precision */
         fref.precision = BN_PRECISION_DOUBLE;
         mcoarse = mref;
