@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# The main job: install what is missing, build, and run bounce on the default scene
-# (the published Cornell box). Outputs go to out/ (override: OUT=dir scripts/run.sh).
+# The main job: install what is missing, build, and run bounce on the default scene (the
+# published Cornell box, millimetres): per-bounce EXR, PNG previews, contact sheet, baked PLY.
+# Outputs go to out/ (override: OUT=dir scripts/run.sh).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup.sh
@@ -9,5 +10,13 @@ cmake --build build -j "$(nproc)"
 OUT=${OUT:-out}
 mkdir -p "$OUT"
 SCENE=meshes/cornell-box.obj
-set -x
-./build/bounce info "$SCENE" --unit mm
+# One form-factor assembly, reused by both steps through the cache (keyed by scene and options).
+COMMON=(--unit mm --cache "$OUT/cornell-box.F")
+./build/bounce info "$SCENE" --unit mm -q | sed -n '1,9p'
+./build/bounce bounces "$SCENE" "${COMMON[@]}" -n 4 -o "$OUT/cornell-box.exr"
+./build/bounce bake "$SCENE" "${COMMON[@]}" -o "$OUT/cornell-box.ply"
+echo
+echo "bounce: outputs in $OUT/:"
+echo "  cornell-box.exr         layers E, KE, K2E, K3E, K4E, rest, L (radiance, W m^-2 sr^-1)"
+echo "  cornell-box.<layer>.png sRGB previews; cornell-box.sheet.png: all layers side by side"
+echo "  cornell-box.ply         baked per-vertex radiance (float colours)"
