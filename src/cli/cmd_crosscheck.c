@@ -83,9 +83,9 @@ int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c)
     bn_crosscheck_result cr;
     bn__level fine, other;
     const char *pos[1];
-    size_t npos, spp = 64;
+    size_t npos, spp = 1024;
     int help, bounces = 3, disc = 0, worst = 10, rc = 0, strategy = 0;
-    double alpha = 0.01, ratio = 2, tol_scale = 1, rtol = 0, solve_tol = 1e-10;
+    double alpha = 0.01, ratio = 2, tol_scale = 3, rtol = 0, solve_tol = 1e-10;
     double *tol = NULL, *power_tol = NULL;
     bn_error err;
     bn_status st;
@@ -108,7 +108,7 @@ int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c)
         "over the family patches x layers x channels. Per-layer powers pi sum A_i L_i are tested the same\n"
         "way. The last line is the machine-readable verdict; exit code 6 when it fails.";
     bn_optset_add(&set, (bn_opt){"spp", 0, BN_OPT_SIZE, &spp, NULL, 2, 1e9, "N",
-                                 "path-tracer samples per patch (default 64)"});
+                                 "path-tracer samples per patch (default 1024; fewer make skewed patches' t-tests unreliable)"});
     bn_optset_add(&set, (bn_opt){"bounces", 'n', BN_OPT_INT, &bounces, NULL, 0, 64, "K",
                                  "terms E .. K{K}E compared one by one, then rest and L (default 3)"});
     bn_optset_add(&set, (bn_opt){"alpha", 0, BN_OPT_DOUBLE, &alpha, NULL, 1e-12, 0.5, "A",
@@ -119,7 +119,7 @@ int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c)
     bn_optset_add(&set, (bn_opt){"disc-ratio", 0, BN_OPT_DOUBLE, &ratio, NULL, 1.01, 16, "R",
                                  "patch-size ratio between the two levels (default 2)"});
     bn_optset_add(&set, (bn_opt){"tol-scale", 0, BN_OPT_DOUBLE, &tol_scale, NULL, 0, 1e6, "S",
-                                 "multiplies the discretisation tolerance (default 1)"});
+                                 "safety factor Fs of the grid-convergence estimate (default 3, Roache's two-level GCI)"});
     bn_optset_add(&set, (bn_opt){"rtol", 0, BN_OPT_DOUBLE, &rtol, NULL, 0, 1, "R",
                                  "a further relative allowance, rtol |radiosity| (default 0)"});
     bn_optset_add(&set, (bn_opt){"worst", 0, BN_OPT_INT, &worst, NULL, 0, 100000, "N",
@@ -210,7 +210,10 @@ int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c)
     in.rad = fine.layers;
     in.tol = tol;
     in.power_tol = power_tol;
-    in.tol_scale = tol_scale;
+    /* Two-level grid-convergence estimate (Roache 1994, GCI) with order p = 1 (patch-constant radiosity):
+     * the error of the mesh asked is |R_h - R_other| / (r - 1) when the other level is coarser by r,
+     * and r |R_h - R_other| / (r - 1) when it is finer; times the safety factor Fs = --tol-scale. */
+    in.tol_scale = tol_scale * (disc == 0 ? 1 / (ratio - 1) : ratio / (ratio - 1));
     in.rtol = rtol;
     in.alpha = alpha;
     in.worst = worst;
@@ -225,10 +228,10 @@ int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c)
            fine.n, bn_scene_patch_size(fine.s), ffdesc, bn_solve_method_name(sopt.method), sopt.tol,
            bn_stop_reason_name(fine.res.reason), fine.res.iterations, fine.seconds);
     if (other.s)
-        printf("# discretisation: second level %zu patches (patch size %.6g, %s by %g), %.2f s; tolerance = %g x "
-               "|difference|\n",
+        printf("# discretisation: second level %zu patches (patch size %.6g, %s by r = %g), %.2f s; tolerance = "
+               "Fs %g x %s|difference| / (r - 1) = %g x |difference| (two-level GCI, order 1)\n",
                other.n, bn_scene_patch_size(other.s), disc == 0 ? "coarser" : "finer", ratio, other.seconds,
-               tol_scale);
+               tol_scale, disc == 0 ? "" : "r ", in.tol_scale);
     else
         printf("# discretisation: no allowance (--disc none)\n");
     printf("# path tracer: %zu samples per patch, %s, rr_depth %d, seed %llu, %.3g rays in %.2f s (%.3g rays/s)\n",

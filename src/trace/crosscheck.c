@@ -164,10 +164,11 @@ static int bn__entry_cmp(const void *a, const void *b)
     return x->channel - y->channel;
 }
 
-/* z and z_excess of one comparison; se 0 is floored (see BN__SE_FLOOR_REL). */
-static void bn__ztest(double R, double T, double se, double tol, double *z, double *zx)
+/* z and z_excess of one comparison; se is floored at BN__SE_FLOOR_REL x `scale`, the largest
+ * magnitude in the layer (so an exact 0 against a rounding-level value is not a failure). */
+static void bn__ztest(double R, double T, double se, double tol, double scale, double *z, double *zx)
 {
-    double floor_ = BN__SE_FLOOR_REL * fmax(fabs(R), fabs(T));
+    double floor_ = BN__SE_FLOOR_REL * fmax(scale, fmax(fabs(R), fabs(T)));
     double s = fmax(se, floor_), d = R - T;
     if (s > 0) {
         *z = d / s;
@@ -218,7 +219,11 @@ bn_status bn_crosscheck_compare(const bn_crosscheck_input *in, bn_crosscheck_res
     /* alpha_1 = 1 - (1 - alpha)^(1/m), by expm1/log1p to keep its digits when it is tiny. */
     out->alpha_each = -expm1(log1p(-in->alpha) / (double)(m ? m : 1));
     out->crit = bn_student_t_quantile_upper(out->alpha_each / 2, tr->spp > 1 ? (double)(tr->spp - 1) : 1);
-    for (size_t l = 0; l < nl; l++)
+    for (size_t l = 0; l < nl; l++) {
+        double lscale = 0;
+        for (size_t k = l * n * 3; k < (l + 1) * n * 3; k++)
+            if (isfinite(in->rad[k]) && isfinite(tr->mean[k]))
+                lscale = fmax(lscale, fmax(fabs(in->rad[k]), fabs(tr->mean[k])));
         for (size_t i = 0; i < n; i++)
             for (int c = 0; c < 3; c++) {
                 size_t k = (l * n + i) * 3 + (size_t)c;
@@ -231,7 +236,7 @@ bn_status bn_crosscheck_compare(const bn_crosscheck_input *in, bn_crosscheck_res
                 e->trace = T;
                 e->se = tr->se[k];
                 e->tol = (in->tol ? scale * in->tol[k] : 0) + in->rtol * fabs(R);
-                bn__ztest(R, T, e->se, e->tol, &e->z, &e->z_excess);
+                bn__ztest(R, T, e->se, e->tol, lscale, &e->z, &e->z_excess);
                 if (!isfinite(R) || !isfinite(T)) {
                     e->z = e->z_excess = INFINITY;
                 }
@@ -245,6 +250,7 @@ bn_status bn_crosscheck_compare(const bn_crosscheck_input *in, bn_crosscheck_res
                 out->worst_z_raw = fmax(out->worst_z_raw, fabs(e->z));
                 out->layer_worst_z[l] = fmax(out->layer_worst_z[l], e->z_excess);
             }
+    }
     qsort(all, m, sizeof *all, bn__entry_cmp);
     out->nworst = in->worst < 0 ? 0 : (in->worst > (int)m ? (int)m : in->worst);
     out->worst = bn__malloc_array(out->nworst ? (size_t)out->nworst : 1, sizeof *all);
@@ -269,7 +275,7 @@ bn_status bn_crosscheck_compare(const bn_crosscheck_input *in, bn_crosscheck_res
             out->power_pt[k] = w[c];
             out->power_se[k] = se[c];
             out->power_tol[k] = (in->power_tol ? scale * in->power_tol[k] : 0) + in->rtol * fabs(out->power_rad[k]);
-            bn__ztest(out->power_rad[k], w[c], se[c], out->power_tol[k], &z, &zx);
+            bn__ztest(out->power_rad[k], w[c], se[c], out->power_tol[k], 0, &z, &zx);
             if (!isfinite(out->power_rad[k]) || !isfinite(w[c]))
                 zx = INFINITY;
             out->power_worst_z = fmax(out->power_worst_z, zx);

@@ -1,0 +1,179 @@
+/* The cross-check: its statistics on known inputs, the mesh-level tolerance, and `bounce
+ * crosscheck` passing on the furnace box (radiosity exact) and failing on wrong form factors. */
+#include "bn_test.h"
+#include "bounce/scene.h"
+#include "bounce/rt.h"
+#include "bounce/trace.h"
+
+#include <math.h>
+
+#define ALPHA 0.01   /* family-wise false-failure rate */
+#define BN_TEST_PI 3.14159265358979323846
+
+static bn_scene *load(const char *rel, double patch_size, size_t patches)
+{
+    bn_scene *s = NULL;
+    bn_load_opts lo;
+    bn_mesh_opts mo;
+    bn_error err;
+    bn_load_opts_default(&lo);
+    if (bn_scene_load(bn_test_path(rel), &lo, &s, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    bn_mesh_opts_default(&mo);
+    mo.patch_size = patch_size;
+    mo.target_patches = patches;
+    if (bn_scene_mesh(s, &mo, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    return s;
+}
+
+/* The exact furnace answer passes; one patch's KE moved by 12 standard errors fails and is the
+ * worst entry; a tolerance covering the move passes again, with the raw z still reported. */
+BN_TEST(compare_detects_injected_error)
+{
+    bn_scene *s = load("meshes/furnace-box.obj", 0, 54);
+    bn_rt *rt = NULL;
+    bn_trace_opts o;
+    bn_trace_patches r;
+    bn_crosscheck_input in;
+    bn_crosscheck_result cr;
+    bn_error err;
+    const double exact[6] = {1, 0.5, 0.25, 0.125, 0.125, 2};
+    double *rad, *tol;
+    size_t n, m, k;
+    if (bn_rt_create(s, 1, &rt, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    bn_trace_opts_default(&o);
+    o.spp = 256;
+    o.quiet = 1;
+    if (bn_trace_patches_run(rt, &o, &r, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    n = r.n;
+    m = (size_t)r.nlayers * n * 3;
+    rad = malloc(m * sizeof(double));
+    tol = calloc(m, sizeof(double));
+    for (size_t i = 0; i < m; i++)
+        rad[i] = exact[i / (n * 3)];
+    bn_crosscheck_input_default(&in);
+    in.scene = s;
+    in.trace = &r;
+    in.rad = rad;
+    in.alpha = ALPHA;
+    if (bn_crosscheck_compare(&in, &cr, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    BN_ASSERT(cr.pass);
+    BN_ASSERT_EQ(cr.family, n * 6 * 3);
+    /* Sidak: 1 - (1 - alpha_each)^family = alpha. */
+    BN_ASSERT_REL(1 - pow(1 - cr.alpha_each, (double)cr.family), ALPHA, 1e-9);
+    bn_crosscheck_result_free(&cr);
+
+    k = (1 * n + 7) * 3 + 1;   /* KE, patch 7, G */
+    rad[k] = r.mean[k] + 12 * r.se[k];
+    if (bn_crosscheck_compare(&in, &cr, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    BN_ASSERT(!cr.pass);
+    BN_ASSERT_EQ(cr.within, cr.family - 1);
+    BN_ASSERT_EQ(cr.worst[0].patch, 7);
+    BN_ASSERT_EQ(cr.worst[0].layer, 1);
+    BN_ASSERT_EQ(cr.worst[0].channel, 1);
+    BN_ASSERT_NEAR(cr.worst[0].z, 12, 1e-9);
+    bn_crosscheck_result_free(&cr);
+
+    tol[k] = 12 * r.se[k];   /* the move is declared discretisation error, in the power too */
+    in.tol = tol;
+    {
+        static double ptol[6 * 3];
+        size_t np;
+        ptol[3 * 1 + 1] = BN_TEST_PI * bn_scene_patches(s, &np)[7].area * tol[k];
+        in.power_tol = ptol;
+    }
+    if (bn_crosscheck_compare(&in, &cr, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    BN_ASSERT(cr.pass);
+    BN_ASSERT_NEAR(cr.worst_z_raw, 12, 1e-9);
+    BN_ASSERT_EQ(cr.within_raw, cr.family - 1);
+    bn_crosscheck_result_free(&cr);
+
+    free(rad);
+    free(tol);
+    bn_trace_patches_free(&r);
+    bn_rt_destroy(rt);
+    bn_scene_destroy(s);
+}
+
+/* The tolerance from a second mesh level maps each patch to the other level's patch that holds
+ * its centroid: with x of the centroid as the "solution", the difference is below one coarse
+ * patch (0.5 m) and zero where the levels agree (the same mesh twice). */
+BN_TEST(mesh_tolerance_mapping)
+{
+    bn_scene *fine = load("meshes/furnace-box.obj", 0.25, 0), *coarse = load("meshes/furnace-box.obj", 0.5, 0);
+    int bounces = 0;
+    size_t nf, nc, nl = (size_t)bn_trace_nlayers(bounces);
+    const bn_patch *pf = bn_scene_patches(fine, &nf), *pc = bn_scene_patches(coarse, &nc);
+    double *lf = malloc(nl * nf * 3 * sizeof(double)), *lc = malloc(nl * nc * 3 * sizeof(double));
+    double *tol = malloc(nl * nf * 3 * sizeof(double)), ptol[3 * 2], worst = 0;
+    bn_error err;
+    BN_ASSERT_EQ(nf, 96);
+    BN_ASSERT_EQ(nc, 24);
+    for (size_t l = 0; l < nl; l++) {
+        for (size_t i = 0; i < nf * 3; i++)
+            lf[l * nf * 3 + i] = pf[i / 3].centroid[0];
+        for (size_t i = 0; i < nc * 3; i++)
+            lc[l * nc * 3 + i] = pc[i / 3].centroid[0];
+    }
+    if (bn_crosscheck_mesh_tolerance(fine, lf, coarse, lc, bounces, tol, ptol, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    for (size_t i = 0; i < nl * nf * 3; i++)
+        worst = fmax(worst, tol[i]);
+    /* A fine patch's centroid is 0.125 m from its coarse patch's centroid along x, or 0 for faces
+     * normal to x (constant x) and along y or z. */
+    BN_ASSERT_NEAR(worst, 0.125, 1e-12);
+    if (bn_crosscheck_mesh_tolerance(fine, lf, fine, lf, bounces, tol, ptol, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    for (size_t i = 0; i < nl * nf * 3; i++)
+        BN_ASSERT_EQ(tol[i], 0);
+    free(lf);
+    free(lc);
+    free(tol);
+    bn_scene_destroy(fine);
+    bn_scene_destroy(coarse);
+}
+
+static const char *verdict_line(const char *out)
+{
+    const char *v = out ? strstr(out, "\nverdict: ") : NULL;
+    return v ? v + 1 : "(no verdict line)";
+}
+
+/* The furnace: radiosity is exact at every mesh level, so the cross-check passes for every
+ * bounce at alpha = 0.01 (exit 0), powers included. Analytic form factors, 24 patches (a coarse
+ * level of 6 for the tolerance), 256 samples per patch. */
+BN_TEST(cli_furnace_passes)
+{
+    char cmd[1024], *out = NULL;
+    int rc;
+    snprintf(cmd, sizeof cmd, "crosscheck %s --patches 24 --spp 256 -n 3 --alpha 0.01 -q",
+             bn_test_path("meshes/furnace-box.obj"));
+    rc = bn_test_bounce(cmd, &out);
+    fprintf(stderr, "%s", verdict_line(out));
+    if (rc != 0)
+        BN_FAIL("bounce %s -> %d\n%s", cmd, rc, out ? out : "");
+    BN_ASSERT(strncmp(verdict_line(out), "verdict: pass alpha=0.01 family=432 ", 36) == 0);
+    BN_ASSERT(strstr(out, "within=432/432") != NULL);
+    free(out);
+}
+
+/* Wrong radiosity must fail: Monte Carlo form factors with 4 point pairs per patch pair have row
+ * sums far from 1, which no mesh-level tolerance explains. Exit 6, verdict fail. */
+BN_TEST(cli_wrong_form_factors_fail)
+{
+    char cmd[1024], *out = NULL;
+    int rc;
+    snprintf(cmd, sizeof cmd, "crosscheck %s --patches 24 --spp 256 --ff montecarlo --samples 4 -q",
+             bn_test_path("meshes/furnace-box.obj"));
+    rc = bn_test_bounce(cmd, &out);
+    fprintf(stderr, "%s", verdict_line(out));
+    BN_ASSERT_EQ(rc, 6);
+    BN_ASSERT(strncmp(verdict_line(out), "verdict: fail ", 14) == 0);
+    free(out);
+}
