@@ -279,3 +279,41 @@ BN_TEST(study_usage_errors)
     BN_ASSERT(!bn_test_file_exists(bn_test_tmp("x.csv")));
     free(out);
 }
+
+/* Every error column depends on the answers only, never on the thread count: the form factors, the
+ * solves and the tracer are bit-identical for any --threads (their streams are keyed by patch and
+ * sample), so the study's errors must be too. Times and memory are the only columns allowed to move. */
+static void errors_only(const char *path, char *buf, size_t size)
+{
+    csv *c = csv_read(path);
+    static const char *cols[] = {"err_inf", "err_max_rel", "err_rms_rel", "err_energy_rel", "err_surface_max",
+                                 "iterations", "se_surface_max"};
+    buf[0] = '\0';
+    for (int r = 0; r < c->nrow; r++)
+        for (size_t k = 0; k < sizeof cols / sizeof cols[0]; k++) {
+            strncat(buf, csv_str(c, r, cols[k]), size - strlen(buf) - 2);
+            strncat(buf, ",", size - strlen(buf) - 2);
+        }
+    csv_free(c);
+}
+
+BN_TEST(study_threads_identical)
+{
+    char args[1024], *out = NULL, a[8192], b[8192];
+    const char *study[2] = {"--ff hemisphere --samples 512 --vary bounces=0,3,9 --methods gauss-seidel,jacobi --tols 1e-4",
+                            "--vary spp=4,16 --ref-patches 60"};
+    for (int s = 0; s < 2; s++) {
+        for (int t = 1; t <= 2; t++) {
+            snprintf(args, sizeof args, "study %s --unit mm --patches 30 %s --threads %d -o %s -q",
+                     bn_test_path("meshes/cornell-box.obj"), study[s], t, bn_test_tmp(t == 1 ? "t1.csv" : "t2.csv"));
+            if (bn_test_bounce(args, &out) != 0)
+                BN_FAIL("bounce study failed:\n%s", out ? out : "");
+            free(out);
+            out = NULL;
+        }
+        errors_only(bn_test_tmp("t1.csv"), a, sizeof a);
+        errors_only(bn_test_tmp("t2.csv"), b, sizeof b);
+        if (strcmp(a, b) != 0)
+            BN_FAIL("errors differ between 1 and 2 threads:\n  %s\n  %s", a, b);
+    }
+}

@@ -94,7 +94,8 @@ typedef struct bn_study_row {
     double bound;                    /* a priori ||K||^(n+1) / (1 - ||K||) ||E||_inf (bounces, max-iter) */
     double bound_ke;                 /* the same bound from the first reflection, ||K||^n / (1 - ||K||) ||KE||_inf:
                                         also rigorous, and tighter when the emitters dominate ||E|| */
-    double estimate;                 /* rho(K) / (1 - rho(K)) ||K^n E||_inf: the spectral estimate (not a bound) */
+    double estimate;                 /* bounces: rho(K) / (1 - rho(K)) ||K^n E||_inf; max-iter: rho(K)^(k+1) /
+                                        (1 - rho(K)) ||E||_inf: spectral estimates (not bounds) */
     double t_mesh, t_ff, t_solve, t_output, t_total;   /* seconds */
     double peak_mb;                  /* peak resident memory during the setting, MiB */
     double k_norm;                   /* ||K||_inf of the setting's K (NAN for the tracer) */
