@@ -1059,8 +1059,24 @@ double bn_ff_polygon_pair(const double *vi, size_t ni, const double *vj, size_t 
     /* the part of i in front of j and of j in front of i */
     na = bn__max_height(vj, nj, nni, vi) > 1e-12 * diam ? bn__poly_clip(vi, ni, nnj, vj, 1e-12 * diam, a) : 0;
     nb = na && bn__max_height(vi, ni, nnj, vj) > 1e-12 * diam ? bn__poly_clip(vj, nj, nni, vi, 1e-12 * diam, b) : 0;
-    if (na && nb)
+    if (na && nb && na <= 4) {
         f = bn__ff_polygon_integral(a, na, nni, b, nb, rtol > 0 ? rtol : 1e-6, 0, NULL) / Ai;
+    } else if (na && nb) {
+        /* Many corners (a disk as a polygon): a fan from the centroid instead of the fan from the
+         * first corner, whose slivers span the polygon. The integrand is positive, so a relative
+         * tolerance per triangle bounds the sum's relative error. */
+        double c[3] = {0, 0, 0}, t[9];
+        for (size_t k = 0; k < na; k++)
+            for (int d = 0; d < 3; d++)
+                c[d] += a[3 * k + d] / (double)na;
+        for (size_t k = 0; k < na; k++) {
+            memcpy(t, c, sizeof c);
+            memcpy(t + 3, a + 3 * k, 3 * sizeof(double));
+            memcpy(t + 6, a + 3 * (k + 1 < na ? k + 1 : 0), 3 * sizeof(double));
+            f += bn__ff_polygon_integral(t, 3, nni, b, nb, rtol > 0 ? rtol : 1e-6, 0, NULL);
+        }
+        f /= Ai;
+    }
     free(a);
     free(b);
     return f;
