@@ -213,7 +213,7 @@ int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c)
     /* Two-level grid-convergence estimate (Roache 1994, GCI) with order p = 1 (patch-constant radiosity):
      * the error of the mesh asked is |R_h - R_other| / (r - 1) when the other level is coarser by r,
      * and r |R_h - R_other| / (r - 1) when it is finer; times the safety factor Fs = --tol-scale. */
-    in.tol_scale = tol_scale * (disc == 0 ? 1 / (ratio - 1) : ratio / (ratio - 1));
+    in.tol_scale = disc == 2 ? 0 : tol_scale * (disc == 0 ? 1 / (ratio - 1) : ratio / (ratio - 1));
     in.rtol = rtol;
     in.alpha = alpha;
     in.worst = worst;

@@ -186,7 +186,7 @@ bn_status bn_crosscheck_compare(const bn_crosscheck_input *in, bn_crosscheck_res
     const bn_patch *patches = bn_scene_patches(in->scene, &np);
     double unit = bn_unit_to_metres(bn_scene_unit(in->scene));
     bn_crosscheck_entry *all;
-    double scale = in->tol_scale > 0 ? in->tol_scale : 1;
+    double scale = in->tol_scale >= 0 ? in->tol_scale : 1;
 
     memset(out, 0, sizeof *out);
     bn_scene_materials(in->scene, &nmat);
