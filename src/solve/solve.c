@@ -221,6 +221,8 @@ static void bn__note(const bn_solve_opts *o, bn_log_level lv, const char *fmt, .
     va_start(ap, fmt);
     vsnprintf(buf, sizeof buf, fmt, ap);
     va_end(ap);
+    if (lv != BN_LOG_WARN && o->quiet)
+        return;
     bn_logf(&o->log_sink, lv, "%s", buf);
 }
 
