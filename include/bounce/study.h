@@ -100,6 +100,8 @@ typedef struct bn_study_row {
     double peak_mb;                  /* peak resident memory during the setting, MiB */
     double k_norm;                   /* ||K||_inf of the setting's K (NAN for the tracer) */
     double se_surface_max;           /* trace: largest per-surface standard error, relative */
+    double t_iterate;                /* the solver's sweeps (or factorisation) alone, without bn_solve's
+                                        analysis of K (norm, power iteration) that t_solve includes */
 } bn_study_row;
 
 /* An error history against time (a line of the error-vs-time plot). */
@@ -140,7 +142,7 @@ void bn_study_result_free(bn_study_result *res);   /* NULL or zeroed is a no-op 
 #define BN_STUDY_CSV_COLUMNS                                                                              \
     "param,method,value,x,patches,iterations,ground,err_inf,err_inf_rel,err_max_rel,err_rms_rel,"        \
     "err_energy_rel,err_surface_max,err_surface_mean,bound,bound_ke,estimate,t_mesh,t_ff,t_solve,t_output,"       \
-    "t_total,peak_mb,k_norm,se_surface_max"
+    "t_total,peak_mb,k_norm,se_surface_max,t_iterate"
 /* Writes the rows as CSV: `provenance` ('#'-prefixed `key=value` lines, may be NULL), then the
  * study's own `# key=value` lines (reference, its error, norms), then the header and rows. Atomic. */
 bn_status bn_study_write_csv(const bn_study_result *res, const char *path, const char *provenance, bn_error *err);

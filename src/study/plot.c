@@ -105,10 +105,14 @@ static void bn__draw(const bn__panel *p)
         x0 -= dx;
         x1 += dx;
         y0 -= dy;
+        /* room for the legend: about a tenth of the data's height per entry */
+        double room = 0;
+        for (int i = 0; i < p->nser; i++)
+            room += p->ser[i].n > 0 ? 0.11 * (y1 - y0 > 0 ? y1 - y0 : 1) : 0;
         if (p->legend_low)
-            y0 -= dy * 3;   /* room for the legend */
+            y0 -= dy + room;
         else
-            y1 += dy * 3;
+            y1 += dy + room;
     }
     pladv(0);
     plvpor(0.15, 0.97, 0.12, 0.90);
@@ -181,7 +185,7 @@ static const char *bn__param_axis(bn_study_param p)
     case BN_STUDY_BOUNCES: return "bounces n (terms K^0 E .. K^n E)";
     case BN_STUDY_MAX_ITER: return "iteration limit (sweeps)";
     case BN_STUDY_TOL: return "tolerance (||r||_inf / ||E||_inf)";
-    case BN_STUDY_PATCHES: return "patches (target count)";
+    case BN_STUDY_PATCHES: return "patches";
     case BN_STUDY_PATCH_SIZE: return "largest patch edge (scene units)";
     case BN_STUDY_SAMPLES: return "form-factor samples per pair";
     case BN_STUDY_FF: return "form-factor method";

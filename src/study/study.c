@@ -59,6 +59,7 @@ void bn_study_opts_default(bn_study_opts *o)
 typedef struct bn__study {
     const bn_study_opts *o;
     const char *path;
+    double direct_iterate;   /* the reference direct solve's factorisation and solve alone */
     bn_load_opts load;   /* o->load without its log: the probe load has shown the scene's warnings once */
     bn_study_result *res;
     size_t cap;
@@ -115,6 +116,7 @@ static bn_study_row *bn__row_new(bn__study *S, const char *method, const char *v
     row->t_mesh = row->t_ff = row->t_solve = row->t_output = 0;
     row->k_norm = NAN;
     row->se_surface_max = NAN;
+    row->t_iterate = NAN;
     return row;
 }
 
@@ -287,6 +289,7 @@ static bn_status bn__radiosity(bn__study *S, const bn_mesh_opts *m, const bn_for
         row->t_mesh = tm;
         row->t_ff = tf;
         row->t_solve = ts;
+        row->t_iterate = info.seconds_iterate;
         row->t_output = bn__output_time(out->scene, out->L);
         bn__row_total(row);
         row->peak_mb = bn__study_peak_mb();
@@ -341,6 +344,7 @@ typedef struct bn__mon {
     double **Lat;         /* L at the first iterate meeting tols[t] */
     size_t *it_at;
     double *t_at;
+    double t_row0;        /* seconds at row 0: the solver's analysis before the first sweep */
     double last_bound;
 } bn__mon;
 
@@ -348,6 +352,8 @@ static int bn__monitor(void *user, const bn_solve_row *r, const double *L)
 {
     bn__mon *M = user;
     double e = 0;
+    if (r->iteration == 0)
+        M->t_row0 = r->seconds;
     for (size_t q = 0; q < M->m; q++)
         e = fmax(e, fabs(L[q] - M->Lref[q]));
     if (M->curve && M->curve->n < M->cap) {
@@ -439,6 +445,7 @@ static bn_status bn__methods(bn__study *S, const bn__study_ref *ref, const bn_tr
             if (t < M.next) {
                 row->iterations = M.it_at[t];
                 row->t_solve = M.t_at[t];
+                row->t_iterate = M.t_at[t] - M.t_row0;
                 st = bn__study_compare(ref, ref->scene, M.Lat[t], row, err);
             } else {   /* never reached within max-iter */
                 row->iterations = SIZE_MAX;
@@ -465,6 +472,7 @@ static bn_status bn__methods(bn__study *S, const bn__study_ref *ref, const bn_tr
             row->t_mesh = t_mesh;
             row->t_ff = t_ff;
             row->t_solve = t_direct;
+            row->t_iterate = S->direct_iterate;
             row->peak_mb = NAN;
             /* The direct solve is the reference: its error is not measured against itself but
              * bounded a posteriori, ||r||_inf / (1 - ||K||_inf). */
@@ -531,6 +539,7 @@ static bn_status bn__study_operator(bn__study *S, bn_error *err)
         goto done;
     R->ref_patches = n;
     R->ref_seconds = tdir;
+    S->direct_iterate = info.seconds_iterate;
     R->norm_E = info.norm_E;
     R->norm_L = ref.norm_L;
     R->k_norm = info.k_norm_inf;
@@ -602,6 +611,7 @@ static bn_status bn__study_operator(bn__study *S, bn_error *err)
             row->t_mesh = tm;
             row->t_ff = tf;
             row->t_solve = t_apply;
+            row->t_iterate = t_apply;
             row->bound = bn__geom(R->k_norm, k, R->norm_E);
             /* L - S_n = sum_{j>=0} K^j (K^(n+1) E) = sum_{j>=n} K^j (KE): <= ||K||^n / (1 - ||K||) ||KE||. */
             row->bound_ke = bn__geom(R->k_norm, k - 1, norm_ke);
@@ -667,6 +677,7 @@ static bn_status bn__study_operator(bn__study *S, bn_error *err)
                 row->t_mesh = tm;
                 row->t_ff = tf;
                 row->t_solve = ts;
+                row->t_iterate = info.seconds_iterate;
                 row->bound = M.last_bound;   /* the solver's a priori bound after these sweeps */
                 row->estimate = bn__geom(R->spectral_radius, (int)info.iterations *
                                          (iters[q] == BN_SOLVE_GAUSS_SEIDEL && so.symmetric ? 2 : 1), R->norm_E);
