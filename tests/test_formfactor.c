@@ -530,6 +530,25 @@ BN_TEST(cli_outputs_cache_and_limits)
     BN_ASSERT_EQ(bn_test_bounce(cmd, &out), 0);
     BN_ASSERT(strstr(out, "read from the cache") == NULL);
     free(out);
+    /* a corrupted F (View3D's F = 1.31) is never let through, even from a cache */
+    {
+        FILE *fp;
+        uint64_t tlen;
+        float bad = 1.31f;
+        txt = bn_test_read_file(cache, &size);
+        BN_ASSERT(txt != NULL);
+        memcpy(&tlen, txt + 32, 8);
+        free(txt);
+        snprintf(cmd, sizeof cmd, "formfactors %s --no-subdivide --cache %s --samples 8", scene, cache);
+        fp = fopen(cache, "r+b");
+        BN_ASSERT(fp != NULL);
+        fseek(fp, (long)(40 + tlen + 2 * 8 + 4), SEEK_SET);   /* F_01, float32 */
+        fwrite(&bad, sizeof bad, 1, fp);
+        fclose(fp);
+        BN_ASSERT_EQ(bn_test_bounce(cmd, &out), 5);
+        BN_ASSERT(strstr(out, "F[0][1] = 1.3099999") != NULL && strstr(out, "outside [0, 1]") != NULL);
+        free(out);
+    }
     /* resource limit: exit 4 with the numbers and the remedies */
     snprintf(cmd, sizeof cmd, "formfactors %s --max-memory 100", scene);
     BN_ASSERT_EQ(bn_test_bounce(cmd, &out), 4);
