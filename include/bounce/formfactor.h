@@ -33,7 +33,7 @@ typedef struct bn_formfactor_opts {
     int          quiet;       /* no progress bar */
     const char  *cache_path;  /* NULL: no cache */
     bn_log       log;
-    double       tolerance;   /* analytic: relative quadrature tolerance per pair (default 1e-6) */
+    double       tolerance;   /* analytic: relative quadrature tolerance per pair (default 1e-5) */
 } bn_formfactor_opts;
 void bn_formfactor_opts_default(bn_formfactor_opts *o);
 /* The samples a method uses when o->samples is 0. */
