@@ -452,7 +452,7 @@ static void bn__analytic_or_mc_pair(const bn_rt *rt, const bn__ffg *g, const bn_
         cnt->evals += qs.evals;
         if (maybe) {
             bn__rng r = bn__rng_make(o->seed, i, j);
-            double sw = 0, sv = 0;
+            double sw = 0, sv = 0, a_reg = fmax(p.Aa, p.Ab) / (double)s->S;
             bn__pair_points(&r, &p, s);
             for (size_t k = 0; k < s->S; k++) {
                 double d[3], r2, ci, cj;
@@ -460,7 +460,9 @@ static void bn__analytic_or_mc_pair(const bn_rt *rt, const bn__ffg *g, const bn_
                 r2 = bn_v3_dot(d, d);
                 ci = bn_v3_dot(ni, d);
                 cj = -bn_v3_dot(nj, d);
-                s->w[k] = ci > 0 && cj > 0 && r2 > 0 ? ci * cj / (r2 * r2) : 0;   /* cos cos / r^2 */
+                /* the kernel cos cos / (pi r^2), regularised as Wallace's disks so that a near
+                 * pair of points (touching patches) cannot outweigh all the others */
+                s->w[k] = ci > 0 && cj > 0 && r2 > 0 ? (ci * cj / r2) / (BN_PI * r2 + a_reg) : 0;
             }
             cnt->rays += bn__pair_rays(rt, g, ni, nj, s);
             cnt->pairs_tested++;
