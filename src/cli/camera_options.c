@@ -54,7 +54,7 @@ void bn_cli_camera_describe(const bn_camera *c, char *buf, size_t n)
 void bn_cli_add_solution(bn_optset *s, bn_cli_solution *o)
 {
     o->method = 1;
-    bn_optset_add(s, (bn_opt){"solver", 0, BN_OPT_CHOICE, &o->method, "jacobi|gauss-seidel|neumann|direct", 0, 0,
+    bn_optset_add(s, (bn_opt){"method", 'm', BN_OPT_CHOICE, &o->method, "jacobi|gauss-seidel|neumann|direct", 0, 0,
                               "METHOD", "jacobi, gauss-seidel (default), neumann or direct"});
     bn_optset_add(s, (bn_opt){"tol", 0, BN_OPT_DOUBLE, &o->tol, NULL, 1e-300, 1, "T",
                               "stop when ||E - (I - K) L||_inf <= T ||E||_inf (default 1e-6)"});
