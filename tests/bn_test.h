@@ -68,6 +68,21 @@ void bn_test_register(const char *name, bn_test_fn fn);
             BN_FAIL("%s returned %d, expected %d", #expr, bn_s_, bn_e_);                       \
     } while (0)
 
+/* Skips the test (ctest reports it as skipped, not passed): exit code 77. */
+#define BN_SKIP(...)                                                                           \
+    do {                                                                                       \
+        fprintf(stderr, "skipped: ");                                                          \
+        fprintf(stderr, __VA_ARGS__);                                                          \
+        fprintf(stderr, "\n");                                                                 \
+        exit(77);                                                                              \
+    } while (0)
+/* Slow tests (marked BN_SLOW) skip themselves when BN_TEST_SKIP_SLOW is set: the sanitized run. */
+#define BN_SKIP_IF_SLOW_RUN()                                                                  \
+    do {                                                                                       \
+        if (getenv("BN_TEST_SKIP_SLOW"))                                                       \
+            BN_SKIP("slow test; BN_TEST_SKIP_SLOW is set (sanitized run)");                    \
+    } while (0)
+
 /* Paths configured by CMake. */
 const char *bn_test_source_dir(void);   /* the repository */
 const char *bn_test_bounce_exe(void);   /* the bounce command */

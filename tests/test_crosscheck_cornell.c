@@ -120,10 +120,7 @@ BN_TEST(cornell_per_surface) /* BN_SLOW */
     cornell c;
     size_t nm;
     const bn_material *m;
-    if (getenv("BN_TEST_SKIP_SLOW")) {
-        fprintf(stderr, "skipped: BN_TEST_SKIP_SLOW is set\n");
-        return;
-    }
+    BN_SKIP_IF_SLOW_RUN();
     cornell_run(&c, 1200, 2048, 3);
     m = bn_scene_materials(c.s, &nm);
     BN_ASSERT_EQ(bn_scene_patches(c.s, &nm) != NULL, 1);
