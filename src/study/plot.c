@@ -31,6 +31,16 @@ typedef struct bn__panel {
     int legend_low;      /* legend at the bottom left (error falling with time leaves it free) */
 } bn__panel;
 
+/* One colour per method in both panels; other series by position. */
+static int bn__color(const char *label, int index)
+{
+    static const char *const names[] = {"jacobi", "gauss-seidel", "neumann", "direct", "truncated", "radiosity", "trace"};
+    for (int i = 0; i < 7; i++)
+        if (strncmp(label, names[i], strlen(names[i])) == 0)
+            return 2 + i;
+    return 2 + index % 8;
+}
+
 static bn__series *bn__add(bn__panel *p, const char *label, int style, int symbol)
 {
     bn__series *s;
@@ -39,7 +49,7 @@ static bn__series *bn__add(bn__panel *p, const char *label, int style, int symbo
     s = &p->ser[p->nser];
     memset(s, 0, sizeof *s);
     snprintf(s->label, sizeof s->label, "%s", label);
-    s->color = 2 + p->nser % 8;
+    s->color = bn__color(label, p->nser);
     s->style = style;
     s->symbol = symbol;
     p->nser++;
@@ -53,6 +63,19 @@ static void bn__pt(bn__series *s, double x, double y)
         s->y[s->n] = y;
         s->n++;
     }
+}
+
+/* Log-axis labels every `step` decades (PLplot labels every decade on its own, which overlaps on
+ * wide ranges). The callback receives the exponent. */
+typedef struct bn__labstep { int x, y; } bn__labstep;
+static void bn__label(PLINT axis, PLFLT v, char *out, PLINT n, PLPointer data)
+{
+    const bn__labstep *st = data;
+    int step = axis == PL_X_AXIS ? st->x : st->y, e = (int)lround(v);
+    if (step > 1 && e % step != 0)
+        out[0] = '\0';
+    else
+        snprintf(out, (size_t)n, "10#u%d#d", e);
 }
 
 static double bn__tr(double v, int lg) { return lg ? log10(v) : v; }
@@ -121,9 +144,13 @@ static void bn__draw(const bn__panel *p)
     plwidth(1.0);
     pllsty(1);
     plschr(0, 0.9);
-    {   /* log axes: a labelled tick every 1, 2, 3... decades so that at most ~8 labels show */
-        double xt = p->xlog ? ceil((x1 - x0) / 8) : 0, yt = p->ylog ? ceil((y1 - y0) / 8) : 0;
-        plbox(p->xlog ? "bcgnstl" : "bcgnst", xt, 0, p->ylog ? "bcgnstvl" : "bcgnstv", yt, 0);
+    {   /* log axes: a labelled decade every 1, 2, 3... decades so that at most ~9 labels show */
+        static bn__labstep step;
+        step.x = p->xlog ? (int)ceil((x1 - x0) / 9) : 1;
+        step.y = p->ylog ? (int)ceil((y1 - y0) / 9) : 1;
+        plslabelfunc(bn__label, &step);
+        plbox(p->xlog ? "bcgnstlo" : "bcgnst", 0, 0, p->ylog ? "bcgnstvlo" : "bcgnstv", 0, 0);
+        plslabelfunc(NULL, NULL);
     }
     pllab(p->xlab, "", p->title);
     plmtex("l", 5.2, 0.5, 0.5, p->ylab);
@@ -230,8 +257,8 @@ static void bn__panels(const bn_study_result *r, bn__panel *a, bn__panel *b)
             for (int k = 0; k < nm; k++) {
                 bn__series *s = bn__add(a, methods[k], 1, 1);
                 for (size_t i = 0; i < r->nrows; i++)
-                    if (strcmp(r->rows[i].method, methods[k]) == 0)
-                        bn__pt(s, r->rows[i].t_total, r->rows[i].err_inf_rel);
+                    if (strcmp(r->rows[i].method, methods[k]) == 0)   /* the solve: K is shared */
+                        bn__pt(s, r->rows[i].t_solve, r->rows[i].err_inf_rel);
             }
     } else {
         snprintf(a->ylab, sizeof a->ylab, "max per-surface relative error");
