@@ -112,21 +112,21 @@ static void check_columns(const csv *c, const char *const *materials, int nmat)
 
 BN_TEST(study_truncation_bound_cornell)
 {
-    /* Hemisphere form factors: the bound is about the series of whatever K is used, so the cheapest
-     * valid K serves; the reference is the direct solve of that same K. */
+    /* The default (analytic) form factors; the reference is the direct solve of that same K. */
     char args[1024], *out = NULL;
     const char *mats[] = {"white", "red", "green", "light"};
     csv *c;
     int rows = 0;
     double prev = INFINITY, ref_abs, normL;
     snprintf(args, sizeof args,
-             "study %s --unit mm --patches 150 --ff hemisphere --samples 2000 --vary bounces=0,1,2,3,4,5,6,7,8,9,10,11,"
-             "12,13,14,15,16,17,18,19,20 --methods gauss-seidel,direct --tols 1e-3,1e-6 -o %s --threads 2",
-             bn_test_path("meshes/cornell-box.obj"), bn_test_tmp("trunc.csv"));
+             "study %s --unit mm --patches 150 --vary bounces=0,1,2,3,4,5,6,7,8,9,10,11,"
+             "12,13,14,15,16,17,18,19,20 --methods gauss-seidel,direct --tols 1e-3,1e-6 -o %s --plot %s --threads 2",
+             bn_test_path("meshes/cornell-box.obj"), bn_test_tmp("trunc.csv"), bn_test_tmp("trunc"));
     if (bn_test_bounce(args, &out) != 0)
         BN_FAIL("bounce study failed:\n%s", out ? out : "");
     c = csv_read(bn_test_tmp("trunc.csv"));
     check_columns(c, mats, 4);
+    BN_ASSERT(bn_test_file_exists(bn_test_tmp("trunc.png")) && bn_test_file_exists(bn_test_tmp("trunc.svg")));
     /* provenance: how it was made */
     BN_ASSERT(strstr(c->meta, "# command=") && strstr(c->meta, "# version=") && strstr(c->meta, "# seed=1"));
     BN_ASSERT(strstr(c->meta, "# solver=") && strstr(c->meta, "# tolerance=") && strstr(c->meta, "# reference=direct"));
