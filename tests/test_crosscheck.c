@@ -111,10 +111,11 @@ BN_TEST(mesh_tolerance_mapping)
     size_t nf, nc, nl = (size_t)bn_trace_nlayers(bounces);
     const bn_patch *pf = bn_scene_patches(fine, &nf), *pc = bn_scene_patches(coarse, &nc);
     double *lf = malloc(nl * nf * 3 * sizeof(double)), *lc = malloc(nl * nc * 3 * sizeof(double));
-    double *tol = malloc(nl * nf * 3 * sizeof(double)), ptol[3 * 2], worst = 0;
+    double *tol = malloc(nl * nf * 3 * sizeof(double)), ptol[3 * 16], worst = 0; /* nl <= 16 layers */
     bn_error err;
     BN_ASSERT_EQ(nf, 96);
     BN_ASSERT_EQ(nc, 24);
+    BN_ASSERT_LE(nl, 16);
     for (size_t l = 0; l < nl; l++) {
         for (size_t i = 0; i < nf * 3; i++)
             lf[l * nf * 3 + i] = pf[i / 3].centroid[0];
