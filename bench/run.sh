@@ -152,7 +152,7 @@ done
 if [ "$quick" = 1 ]; then
     np_ops=300; mesh="30,60,120"; spp="4,16,64"; ref_spp=4096
 else
-    np_ops=1200; mesh="50,100,200,400,800"; spp="16,64,256,1024,4096"; ref_spp=0
+    np_ops=1200; mesh="50,100,200,400,800,1600"; spp="16,64,256,1024,4096"; ref_spp=0
 fi
 note "study: methods on one K ($np_ops patches) and the equal-error comparison, $reps repeats"
 : >"$work/fail"
@@ -205,7 +205,7 @@ for m in jacobi gauss-seidel neumann; do
     row "$m to tol 1e-6 ($its sweeps, $np_ops patches), bn_solve total" s "$work/v" "LAPACK direct, bn_solve total" "$work/d"
     row "$m: the $its sweeps alone" s "$work/vi" "LAPACK factorisation + solve alone" "$work/di"
 done
-: >"$work/rad"; : >"$work/pt"; : >"$work/ref"
+: >"$work/rad"; : >"$work/pt"; : >"$work/ref"; : >"$work/radf"; : >"$work/ptf"; : >"$work/fine"
 i=1
 while [ "$i" -le "$reps" ]; do
     f="$work/eq_$i.csv"
@@ -213,11 +213,18 @@ while [ "$i" -le "$reps" ]; do
         metaget "$f" seconds_radiosity >>"$work/rad"
         metaget "$f" seconds_trace >>"$work/pt"
         metaget "$f" reference_error >>"$work/ref"
+        metaget "$f" seconds_radiosity_fine >>"$work/radf"
+        metaget "$f" seconds_trace_fine >>"$work/ptf"
+        metaget "$f" fine_target >>"$work/fine"
     fi
     i=$((i + 1))
 done
 row "radiosity to 1% per-surface error" s "$work/rad" "path tracer at equal error" "$work/pt"
 row "path tracer to 1% per-surface error" s "$work/pt" "radiosity at equal error" "$work/rad"
+if [ -s "$work/fine" ]; then
+    fine=$(stats "$work/fine"); fine=${fine%% *}
+    row "radiosity to $fine per-surface (the finest the reference allows: 3x its error)" s "$work/radf" "path tracer at equal error" "$work/ptf"
+fi
 refe=$(stats "$work/ref")
 echo >>"$report"
 echo "The reference's own estimated error (median): ${refe%% *} per surface; \`nan\` times mean that method did not reach 1% within the settings (see the CSV columns below)." >>"$report"

@@ -132,6 +132,8 @@ typedef struct bn_study_result {
      * in err_surface_max, by log-log interpolation; NAN when a method never reached it. */
     double target, t_radiosity, t_trace, ratio;   /* ratio = t_trace / t_radiosity */
     double best_radiosity, best_trace;            /* smallest error each reached */
+    /* The same at the finest error the reference allows: 3x its own estimated error. */
+    double fine_target, t_radiosity_fine, t_trace_fine, ratio_fine;
 } bn_study_result;
 
 /* Runs the study on the scene file `path`. Fills *res (free with bn_study_result_free). */

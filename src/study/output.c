@@ -45,6 +45,10 @@ bn_status bn_study_write_csv(const bn_study_result *r, const char *path, const c
     if (!isnan(r->t_radiosity) || !isnan(r->t_trace) || !isnan(r->best_trace))
         fprintf(fp, "# target=%.6g\n# seconds_radiosity=%.6g\n# seconds_trace=%.6g\n# ratio_trace_over_radiosity=%.6g\n",
                 r->target, r->t_radiosity, r->t_trace, r->ratio);
+    if (!isnan(r->fine_target))
+        fprintf(fp, "# fine_target=%.6g\n# seconds_radiosity_fine=%.6g\n# seconds_trace_fine=%.6g\n"
+                    "# ratio_trace_over_radiosity_fine=%.6g\n",
+                r->fine_target, r->t_radiosity_fine, r->t_trace_fine, r->ratio_fine);
     fprintf(fp, "# units: err_inf W m^-2 sr^-1; err_* relative; bound and estimate W m^-2 sr^-1; t_* seconds; "
                 "peak_mb MiB; ground 0 same mesh, 1 reference patches by centroid\n");
     fputs(BN_STUDY_CSV_COLUMNS, fp);
@@ -140,5 +144,20 @@ void bn_study_print(const bn_study_result *r, FILE *fp)
             fprintf(fp, "  tracer     %.4g s (best %.3g)\n", r->t_trace, r->best_trace);
         if (!isnan(r->ratio))
             fprintf(fp, "  ratio      the tracer takes %.3g times as long as radiosity\n", r->ratio);
+        if (!isnan(r->fine_target)) {
+            fprintf(fp, "  finest     %.3g (3x the reference's own error): radiosity ", r->fine_target);
+            if (isnan(r->t_radiosity_fine))
+                fprintf(fp, "not reached");
+            else
+                fprintf(fp, "%.4g s", r->t_radiosity_fine);
+            fprintf(fp, ", tracer ");
+            if (isnan(r->t_trace_fine))
+                fprintf(fp, "not reached");
+            else
+                fprintf(fp, "%.4g s", r->t_trace_fine);
+            if (!isnan(r->ratio_fine))
+                fprintf(fp, ", ratio %.3g", r->ratio_fine);
+            fputc('\n', fp);
+        }
     }
 }

@@ -1065,6 +1065,13 @@ static bn_status bn__study_settings(bn__study *S, bn_error *err)
             R->t_radiosity = bn__time_to(R, "radiosity", R->target, &R->best_radiosity);
             R->t_trace = bn__time_to(R, "trace", R->target, &R->best_trace);
             R->ratio = R->t_trace / R->t_radiosity;
+            R->fine_target = 3 * R->ref_error;
+            if (R->fine_target > 0 && R->fine_target < R->target) {
+                double b;
+                R->t_radiosity_fine = bn__time_to(R, "radiosity", R->fine_target, &b);
+                R->t_trace_fine = bn__time_to(R, "trace", R->fine_target, &b);
+                R->ratio_fine = R->t_trace_fine / R->t_radiosity_fine;
+            }
         }
     }
     bn__study_ref_free(&rr);
@@ -1089,6 +1096,7 @@ bn_status bn_study_run(const char *path, const bn_study_opts *o, bn_study_result
     res->param = o->param;
     res->target = o->target > 0 ? o->target : 0.01;
     res->t_radiosity = res->t_trace = res->ratio = res->best_radiosity = res->best_trace = NAN;
+    res->fine_target = res->t_radiosity_fine = res->t_trace_fine = res->ratio_fine = NAN;
     res->ref_error = res->ref_error_patch = NAN;
     if (!o->values || o->nvalues == 0)
         return bn_error_set(err, BN_EUSAGE, "study: --vary needs at least one value");
