@@ -226,7 +226,10 @@ int bn_cmd_solve(int argc, char **argv, bn_cli_common *c)
     }
     bn_error_clear(&serr);
     st = bn_solve(k, E, &o, &res, &serr);
-    if (a.log) {
+    if (a.log && (st == BN_EINTR || st == BN_ETERM)) {
+        /* an interrupted run leaves nothing behind, not even its partial log */
+        bn__outfile_abort(&logf);
+    } else if (a.log) {
         /* the log documents failed solves too */
         fprintf(logf.fp, "# stop_reason=%s\n", bn_stop_reason_name(res.reason));
         if (bn__outfile_commit(&logf, &err) != BN_OK) {

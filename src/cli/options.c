@@ -93,6 +93,7 @@ static bn_status bn__set(const bn_opt *o, const char *v, bn_error *err)
     }
     case BN_OPT_WXH: {
         char *end;
+        const char *orig = v;
         long w, h;
         errno = 0;
         w = strtol(v, &end, 10);
@@ -101,8 +102,8 @@ static bn_status bn__set(const bn_opt *o, const char *v, bn_error *err)
         v = end + 1;
         h = strtol(v, &end, 10);
         if (end == v || *end != '\0' || errno || w < o->min || h < o->min || w > o->max || h > o->max)
-            return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not WIDTHxHEIGHT with sides in [%g, %g]", o->name, v,
-                                o->min, o->max);
+            return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not WIDTHxHEIGHT with sides in [%g, %g]", o->name,
+                                orig, o->min, o->max);
         ((int *)o->dest)[0] = (int)w;
         ((int *)o->dest)[1] = (int)h;
         return BN_OK;
