@@ -112,7 +112,8 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
         "Neumann and direct to each --tols), max-iter, tol, patches, patch-size, samples, ff (analytic,montecarlo,\n"
         "hemisphere), spp (path tracer) or precision (float,double). Each setting is compared with a stated, more\n"
         "accurate reference whose own error is estimated and printed: bounces/max-iter/tol/precision: a direct solve\n"
-        "of the same K (double for precision); patches/patch-size/spp: a finer mesh (--ref-patches); samples/ff:\n"
+        "of the same K (double for precision); patches/patch-size/spp: a finer mesh (--ref-patches) or the path\n"
+        "tracer (--ref trace; automatic with --against-spp, the equal-error comparison); samples/ff:\n"
         "analytic form factors with --ref-samples shadow rays. Errors: max and RMS relative per patch (on the\n"
         "reference's patches by centroid when meshes differ), per-surface area-weighted means, reflected power.\n"
         "Writes the CSV (with '# key=value' provenance), a summary on stdout and PREFIX.png / PREFIX.svg.";
