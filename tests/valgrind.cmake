@@ -7,6 +7,5 @@ if(BN_VALGRIND AND NOT BOUNCE_SANITIZE)
       --suppressions=${CMAKE_CURRENT_LIST_DIR}/valgrind.supp -q
       $<TARGET_FILE:bounce_cli> solve ${PROJECT_SOURCE_DIR}/meshes/cornell-box.obj --unit mm --patches 40 -n 2
       --threads 2 -q -o ${CMAKE_CURRENT_BINARY_DIR}/tmp/valgrind-patches.csv)
-  set_tests_properties(valgrind.solve_small PROPERTIES LABELS valgrind TIMEOUT 300
-    ENVIRONMENT "BOUNCE_EMBREE_CONFIG=isa=avx2;OPENBLAS_CORETYPE=Haswell")
+  set_tests_properties(valgrind.solve_small PROPERTIES LABELS valgrind TIMEOUT 300)
 endif()
