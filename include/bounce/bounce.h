@@ -9,5 +9,8 @@
 #include "bounce/formfactor.h"
 #include "bounce/solve.h"
 #include "bounce/image.h"
+#include "bounce/bake.h"
+#include "bounce/trace.h"
+#include "bounce/study.h"
 
 #endif
