@@ -45,6 +45,9 @@ void bn_optset_add(bn_optset *s, bn_opt o);
 bn_status bn_cli_parse(bn_optset *s, int argc, char **argv, const char **positional, size_t max_positional,
                        size_t *npositional, int *help, bn_error *err);
 void bn_cli_print_help(const bn_optset *s, FILE *fp);
+/* The usual start of a subcommand taking one SCENE: parses, prints --help, checks that exactly one
+ * positional argument was given (pos[0]). Returns 1 to go on; 0 with *rc the exit code to return. */
+int bn_cli_parse_scene_command(bn_optset *s, int argc, char **argv, const char **pos, int *rc);
 /* Was the option given on the command line? */
 int bn_cli_given(const bn_optset *s, const char *name);
 

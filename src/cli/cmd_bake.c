@@ -29,8 +29,8 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
     bn_cli_ff ff;
     bn_cli_solution sol;
     const char *pos[1], *out = "baked.ply";
-    size_t npos, np, nl = 1;
-    int help, n = 3, ldr = 0, per_bounce = 0, rc = 0;
+    size_t np, nl = 1;
+    int n = 3, ldr = 0, per_bounce = 0, rc = 0;
     double ev = 0, crease = BN_BAKE_DEFAULT_CREASE;
     bn_error err;
     bn_scene *s = NULL;
@@ -77,15 +77,10 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
     bn_cli_add_scene(&set, &so);
     bn_cli_add_common(&set, c);
     bn_error_clear(&err);
-    if (bn_cli_parse(&set, argc, argv, pos, 1, &npos, &help, &err) != BN_OK)
-        return bn_cli_fail(&err);
-    if (help) {
-        bn_cli_print_help(&set, stdout);
-        return 0;
-    }
-    if (npos != 1) {
-        bn_error_set(&err, BN_EUSAGE, "bake needs one SCENE argument (see --help)");
-        return bn_cli_fail(&err);
+    {
+        int prc;
+        if (!bn_cli_parse_scene_command(&set, argc, argv, pos, &prc))
+            return prc;
     }
     {
         const char *dot = strrchr(out, '.');

@@ -29,8 +29,8 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
     bn_cli_solution sol;
     bn_cli_camera co;
     const char *pos[1], *out = "bounces.exr";
-    size_t npos, np, nl;
-    int help, n = 3, half = 0, smooth = 0, no_previews = 0, tile = 320, rc = 0;
+    size_t np, nl;
+    int n = 3, half = 0, smooth = 0, no_previews = 0, tile = 320, rc = 0;
     double ev = 0, crease = BN_BAKE_DEFAULT_CREASE;
     bn_error err;
     bn_scene *s = NULL;
@@ -84,15 +84,10 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
     bn_cli_add_scene(&set, &so);
     bn_cli_add_common(&set, c);
     bn_error_clear(&err);
-    if (bn_cli_parse(&set, argc, argv, pos, 1, &npos, &help, &err) != BN_OK)
-        return bn_cli_fail(&err);
-    if (help) {
-        bn_cli_print_help(&set, stdout);
-        return 0;
-    }
-    if (npos != 1) {
-        bn_error_set(&err, BN_EUSAGE, "bounces needs one SCENE argument (see --help)");
-        return bn_cli_fail(&err);
+    {
+        int prc;
+        if (!bn_cli_parse_scene_command(&set, argc, argv, pos, &prc))
+            return prc;
     }
     bn_cli_apply_threads(c);
     st = bn_cli_load_scene(pos[0], &so, c, &s);

@@ -83,8 +83,8 @@ int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c)
     bn_crosscheck_result cr;
     bn__level fine, other;
     const char *pos[1];
-    size_t npos, spp = 1024;
-    int help, bounces = 3, disc = 0, worst = 10, rc = 0, strategy = 0;
+    size_t spp = 1024;
+    int bounces = 3, disc = 0, worst = 10, rc = 0, strategy = 0;
     double alpha = 0.01, ratio = 2, tol_scale = 3, rtol = 0, solve_tol = 1e-10;
     double *tol = NULL, *power_tol = NULL;
     bn_error err;
@@ -132,15 +132,10 @@ int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c)
     bn_cli_add_scene(&set, &so);
     bn_cli_add_common(&set, c);
     bn_error_clear(&err);
-    if (bn_cli_parse(&set, argc, argv, pos, 1, &npos, &help, &err) != BN_OK)
-        return bn_cli_fail(&err);
-    if (help) {
-        bn_cli_print_help(&set, stdout);
-        return 0;
-    }
-    if (npos != 1) {
-        bn_error_set(&err, BN_EUSAGE, "crosscheck needs one SCENE argument (see --help)");
-        return bn_cli_fail(&err);
+    {
+        int prc;
+        if (!bn_cli_parse_scene_command(&set, argc, argv, pos, &prc))
+            return prc;
     }
     bn_cli_apply_threads(c);
 

@@ -11,8 +11,6 @@ int bn_cmd_formfactors(int argc, char **argv, bn_cli_common *c)
     bn_cli_scene so;
     bn_cli_ff fo;
     const char *pos[1], *output = NULL;
-    size_t npos;
-    int help;
     bn_error err;
     bn_scene *s = NULL;
     bn_rt *rt = NULL;
@@ -39,15 +37,10 @@ int bn_cmd_formfactors(int argc, char **argv, bn_cli_common *c)
                                  "write F to FILE (.csv or .bin); without it only the diagnostics are printed"});
     bn_cli_add_common(&set, c);
     bn_error_clear(&err);
-    if (bn_cli_parse(&set, argc, argv, pos, 1, &npos, &help, &err) != BN_OK)
-        return bn_cli_fail(&err);
-    if (help) {
-        bn_cli_print_help(&set, stdout);
-        return 0;
-    }
-    if (npos != 1) {
-        bn_error_set(&err, BN_EUSAGE, "formfactors needs one SCENE argument (see --help)");
-        return bn_cli_fail(&err);
+    {
+        int prc;
+        if (!bn_cli_parse_scene_command(&set, argc, argv, pos, &prc))
+            return prc;
     }
     if (output) {
         const char *dot = strrchr(output, '.');

@@ -21,8 +21,8 @@ int bn_cmd_info(int argc, char **argv, bn_cli_common *c)
     bn_optset set;
     bn_cli_scene so;
     const char *pos[1];
-    size_t npos, nf, np, nm, nv;
-    int help, all_faces = 0;
+    size_t nf, np, nm, nv;
+    int all_faces = 0;
     bn_error err;
     bn_scene *s = NULL;
     const bn_face *faces;
@@ -42,15 +42,10 @@ int bn_cmd_info(int argc, char **argv, bn_cli_common *c)
                                  "list every face even when there are more than 64"});
     bn_cli_add_common(&set, c);
     bn_error_clear(&err);
-    if (bn_cli_parse(&set, argc, argv, pos, 1, &npos, &help, &err) != BN_OK)
-        return bn_cli_fail(&err);
-    if (help) {
-        bn_cli_print_help(&set, stdout);
-        return 0;
-    }
-    if (npos != 1) {
-        bn_error_set(&err, BN_EUSAGE, "info needs one SCENE argument (see --help)");
-        return bn_cli_fail(&err);
+    {
+        int prc;
+        if (!bn_cli_parse_scene_command(&set, argc, argv, pos, &prc))
+            return prc;
     }
     bn_cli_apply_threads(c);
     {

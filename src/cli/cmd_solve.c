@@ -91,8 +91,8 @@ int bn_cmd_solve(int argc, char **argv, bn_cli_common *c)
     bn_solve_result res;
     bn_ff_diagnostics diag;
     const char *pos[1];
-    size_t npos, np;
-    int help, rc = 0, with_terms;
+    size_t np;
+    int rc = 0, with_terms;
     bn_error err, serr;
     bn_scene *s = NULL;
     bn_transport *k = NULL;
@@ -154,15 +154,10 @@ int bn_cmd_solve(int argc, char **argv, bn_cli_common *c)
                                  "per-patch CSV (required)"});
     bn_cli_add_common(&set, c);
     bn_error_clear(&err);
-    if (bn_cli_parse(&set, argc, argv, pos, 1, &npos, &help, &err) != BN_OK)
-        return bn_cli_fail(&err);
-    if (help) {
-        bn_cli_print_help(&set, stdout);
-        return 0;
-    }
-    if (npos != 1) {
-        bn_error_set(&err, BN_EUSAGE, "solve needs one SCENE argument (see --help)");
-        return bn_cli_fail(&err);
+    {
+        int prc;
+        if (!bn_cli_parse_scene_command(&set, argc, argv, pos, &prc))
+            return prc;
     }
     if (!a.output) {
         bn_error_set(&err, BN_EUSAGE, "solve needs -o FILE for the per-patch CSV (see --help)");

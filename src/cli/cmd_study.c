@@ -90,8 +90,8 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
     bn_cli_ff ffo;
     const char *pos[1], *vary = NULL, *out = "study.csv", *plot = NULL, *methods = NULL, *tols = NULL, *against = NULL;
     const char *title = NULL;
-    size_t npos, max_iter = 0, ref_patches = 0, spp = 0;
-    int help, method = 3, ref_samples = 0, rr_depth = -1, refkind = 0;
+    size_t max_iter = 0, ref_patches = 0, spp = 0;
+    int method = 3, ref_samples = 0, rr_depth = -1, refkind = 0;
     size_t ref_spp = 0;
     double target = 0.01, values[BN__MAXV], tolv[BN__MAXV], againstv[BN__MAXV];
     size_t against_spp[BN__MAXV];
@@ -153,15 +153,10 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
                                  "equal-error target, per-surface relative error (default 0.01)"});
     bn_cli_add_common(&set, c);
     bn_error_clear(&err);
-    if (bn_cli_parse(&set, argc, argv, pos, 1, &npos, &help, &err) != BN_OK)
-        return bn_cli_fail(&err);
-    if (help) {
-        bn_cli_print_help(&set, stdout);
-        return 0;
-    }
-    if (npos != 1) {
-        bn_error_set(&err, BN_EUSAGE, "study needs one SCENE argument (see --help)");
-        return bn_cli_fail(&err);
+    {
+        int prc;
+        if (!bn_cli_parse_scene_command(&set, argc, argv, pos, &prc))
+            return prc;
     }
     if (!vary || !strchr(vary, '=')) {
         bn_error_set(&err, BN_EUSAGE, "study needs --vary PARAM=V1,V2,... (PARAM: bounces, max-iter, tol, patches, "

@@ -56,8 +56,8 @@ int bn_cmd_trace(int argc, char **argv, bn_cli_common *c)
     bn_cli_camera co;
     bn_trace_opts to;
     const char *pos[1], *out = NULL, *patches_out = NULL;
-    size_t npos, spp = 64;   /* the camera group's --spp, also per patch */
-    int help, bounces = 3, strategy = 0, rr_depth = 3, half = 0, rc = 0;
+    size_t spp = 64;   /* the camera group's --spp, also per patch */
+    int bounces = 3, strategy = 0, rr_depth = 3, half = 0, rc = 0;
     bn_error err;
     bn_scene *s = NULL;
     bn_rt *rt = NULL;
@@ -97,15 +97,10 @@ int bn_cmd_trace(int argc, char **argv, bn_cli_common *c)
     bn_cli_add_scene(&set, &so);
     bn_cli_add_common(&set, c);
     bn_error_clear(&err);
-    if (bn_cli_parse(&set, argc, argv, pos, 1, &npos, &help, &err) != BN_OK)
-        return bn_cli_fail(&err);
-    if (help) {
-        bn_cli_print_help(&set, stdout);
-        return 0;
-    }
-    if (npos != 1) {
-        bn_error_set(&err, BN_EUSAGE, "trace needs one SCENE argument (see --help)");
-        return bn_cli_fail(&err);
+    {
+        int prc;
+        if (!bn_cli_parse_scene_command(&set, argc, argv, pos, &prc))
+            return prc;
     }
     if (!out && !patches_out) {
         bn_error_set(&err, BN_EUSAGE, "trace needs -o FILE.exr, --patches-out FILE.csv, or both");

@@ -205,6 +205,29 @@ bn_status bn_cli_parse(bn_optset *s, int argc, char **argv, const char **positio
     return BN_OK;
 }
 
+int bn_cli_parse_scene_command(bn_optset *s, int argc, char **argv, const char **pos, int *rc)
+{
+    bn_error err;
+    size_t npos;
+    int help;
+    bn_error_clear(&err);
+    if (bn_cli_parse(s, argc, argv, pos, 1, &npos, &help, &err) != BN_OK) {
+        *rc = bn_cli_fail(&err);
+        return 0;
+    }
+    if (help) {
+        bn_cli_print_help(s, stdout);
+        *rc = 0;
+        return 0;
+    }
+    if (npos != 1) {
+        bn_error_set(&err, BN_EUSAGE, "%s needs one SCENE argument (see --help)", argv[0]);
+        *rc = bn_cli_fail(&err);
+        return 0;
+    }
+    return 1;
+}
+
 void bn_cli_print_help(const bn_optset *s, FILE *fp)
 {
     fprintf(fp, "usage: %s\n\n%s\n\noptions:\n", s->usage, s->summary);
