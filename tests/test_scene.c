@@ -424,6 +424,9 @@ BN_TEST(cli_exit_codes)
     BN_ASSERT(strstr(out, "--patch-size") && strstr(out, "--threads") && strstr(out, "--seed") &&
               strstr(out, "Exit codes"));
     free(out);
+    BN_ASSERT_EQ(bn_test_bounce("solve --version", &out), 0);
+    BN_ASSERT(strstr(out, "bounce ") != NULL);
+    free(out);
     BN_ASSERT_EQ(bn_test_bounce("info --no-such-option x.obj", &out), 2);
     BN_ASSERT(strstr(out, "unknown option '--no-such-option'"));
     free(out);

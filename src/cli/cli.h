@@ -40,8 +40,8 @@ typedef struct bn_optset {
 } bn_optset;
 
 void bn_optset_add(bn_optset *s, bn_opt o);
-/* Parses argv[1..]; positional arguments are collected in order. --help prints help and
- * sets *help. Unknown options, missing or bad values are usage errors (exit 2) naming them. */
+/* Parses argv[1..]; positional arguments are collected in order. --help sets *help to 1,
+ * --version to 2 (the caller prints). Unknown options, missing or bad values are usage errors (exit 2) naming them. */
 bn_status bn_cli_parse(bn_optset *s, int argc, char **argv, const char **positional, size_t max_positional,
                        size_t *npositional, int *help, bn_error *err);
 void bn_cli_print_help(const bn_optset *s, FILE *fp);

@@ -164,6 +164,10 @@ bn_status bn_cli_parse(bn_optset *s, int argc, char **argv, const char **positio
             *help = 1;
             return BN_OK;
         }
+        if (strcmp(a, "--version") == 0) {
+            *help = 2;
+            return BN_OK;
+        }
         if (a[1] == '-') {
             const char *eq = strchr(a + 2, '=');
             size_t len = eq ? (size_t)(eq - (a + 2)) : strlen(a + 2);
@@ -216,7 +220,10 @@ int bn_cli_parse_scene_command(bn_optset *s, int argc, char **argv, const char *
         return 0;
     }
     if (help) {
-        bn_cli_print_help(s, stdout);
+        if (help == 2)
+            printf("bounce %s\n", bn_version());
+        else
+            bn_cli_print_help(s, stdout);
         *rc = 0;
         return 0;
     }
@@ -241,6 +248,7 @@ void bn_cli_print_help(const bn_optset *s, FILE *fp)
             snprintf(left, sizeof left, "    --%s%s%s", o->name, o->metavar ? " " : "", o->metavar ? o->metavar : "");
         fprintf(fp, "  %-28s %s\n", left, o->help);
     }
+    fprintf(fp, "  %-28s %s\n", "    --version", "print the version");
     fprintf(fp, "  %-28s %s\n\n%s", "-h, --help", "this help", bn_cli_exit_codes);
 }
 

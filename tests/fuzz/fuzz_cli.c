@@ -1,4 +1,6 @@
-/* libFuzzer harness: the option parser on arbitrary argument vectors (NUL-separated). */
+/* libFuzzer harness: the option parser, with every shared option group (common, scene, form
+ * factors, camera, solver) and one option of each type, on arbitrary argument vectors
+ * (NUL-separated). */
 #include "cli/cli.h"
 
 #include <stdint.h>
@@ -10,6 +12,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     bn_optset set;
     bn_cli_common common;
     bn_cli_scene scene;
+    bn_cli_ff ff;
+    bn_cli_camera cam;
+    bn_cli_solution sol;
     char *buf, *argv[64];
     const char *pos[4];
     int argc = 1, help = 0, ival = 0, choice = 0, wh[2] = {0, 0};
@@ -33,18 +38,24 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     memset(&set, 0, sizeof set);
     memset(&common, 0, sizeof common);
     memset(&scene, 0, sizeof scene);
+    memset(&ff, 0, sizeof ff);
+    memset(&cam, 0, sizeof cam);
+    memset(&sol, 0, sizeof sol);
     set.usage = "fuzz";
     set.summary = "fuzz";
     bn_cli_add_scene(&set, &scene);
+    bn_cli_add_ff(&set, &ff);
+    bn_cli_add_camera(&set, &cam);
+    bn_cli_add_solution(&set, &sol);
     bn_cli_add_common(&set, &common);
-    bn_optset_add(&set, (bn_opt){"int", 'i', BN_OPT_INT, &ival, NULL, -5, 5, "N", ""});
-    bn_optset_add(&set, (bn_opt){"size", 0, BN_OPT_SIZE, &sz, NULL, 0, 1e12, "N", ""});
-    bn_optset_add(&set, (bn_opt){"dbl", 0, BN_OPT_DOUBLE, &d, NULL, -1e3, 1e3, "X", ""});
-    bn_optset_add(&set, (bn_opt){"choice", 'c', BN_OPT_CHOICE, &choice, "a|bb|ccc", 0, 0, "C", ""});
-    bn_optset_add(&set, (bn_opt){"vec", 0, BN_OPT_VEC3, v3, NULL, 0, 0, "X,Y,Z", ""});
-    bn_optset_add(&set, (bn_opt){"wxh", 0, BN_OPT_WXH, wh, NULL, 1, 16384, "WxH", ""});
-    bn_optset_add(&set, (bn_opt){"u64", 0, BN_OPT_U64, &u, NULL, 0, 0, "S", ""});
-    bn_optset_add(&set, (bn_opt){"str", 's', BN_OPT_STRING, &str, NULL, 0, 0, "S", ""});
+    bn_optset_add(&set, (bn_opt){"fz-int", 'i', BN_OPT_INT, &ival, NULL, -5, 5, "N", ""});
+    bn_optset_add(&set, (bn_opt){"fz-size", 0, BN_OPT_SIZE, &sz, NULL, 0, 1e12, "N", ""});
+    bn_optset_add(&set, (bn_opt){"fz-dbl", 0, BN_OPT_DOUBLE, &d, NULL, -1e3, 1e3, "X", ""});
+    bn_optset_add(&set, (bn_opt){"fz-choice", 'c', BN_OPT_CHOICE, &choice, "a|bb|ccc", 0, 0, "C", ""});
+    bn_optset_add(&set, (bn_opt){"fz-vec", 0, BN_OPT_VEC3, v3, NULL, 0, 0, "X,Y,Z", ""});
+    bn_optset_add(&set, (bn_opt){"fz-wxh", 0, BN_OPT_WXH, wh, NULL, 1, 16384, "WxH", ""});
+    bn_optset_add(&set, (bn_opt){"fz-u64", 0, BN_OPT_U64, &u, NULL, 0, 0, "S", ""});
+    bn_optset_add(&set, (bn_opt){"fz-str", 's', BN_OPT_STRING, &str, NULL, 0, 0, "S", ""});
     (void)bn_cli_parse(&set, argc, argv, pos, 4, &npos, &help, &err);
     free(buf);
     return 0;
