@@ -468,21 +468,37 @@ static bool all_distinct(const std::vector<long long> &v)
     return true;
 }
 
-// OFF's counts line (the first non-comment line after the keyword), for a cross-check of what
-// OpenMesh kept.
-static bool off_counts(const char *path, unsigned long long &nv, unsigned long long &nf)
+// OFF text without its '#' comments (to the end of each line).
+static std::string off_strip_comments(const std::string &text)
 {
-    std::ifstream in(path);
+    std::string clean;
+    bool comment = false;
+    clean.reserve(text.size());
+    for (char ch : text) {
+        if (ch == '#')
+            comment = true;
+        if (ch == '\n')
+            comment = false;
+        if (!comment)
+            clean.push_back(ch);
+    }
+    return clean;
+}
+
+// OFF's counts line (the first non-blank line after the keyword, comments already removed).
+static bool off_counts_text(const std::string &text, unsigned long long &nv, unsigned long long &nf)
+{
+    std::istringstream in(text);
     std::string ln, kw;
     if (!std::getline(in, ln))
         return false;
     std::istringstream first(ln);
     first >> kw;
-    if (kw.find("OFF") == std::string::npos || kw.find("BINARY") != std::string::npos)
+    if (kw.find("OFF") == std::string::npos)
         return false;
     std::string rest;
     std::getline(first, rest);
-    while (rest.find_first_not_of(" \t\r") == std::string::npos || rest[rest.find_first_not_of(" \t\r")] == '#') {
+    while (rest.find_first_not_of(" \t\r") == std::string::npos) {
         if (!std::getline(in, rest))
             return false;
     }
@@ -514,24 +530,51 @@ static bn_status read_openmesh(const char *path, bn__soup *out, const bn_log *lo
     if (!is_ply || S.face_colour)
         opt += OpenMesh::IO::Options::FaceColor;
     {
-        // OpenMesh's OFF reader stops at '#' comments (which OFF allows): give it a copy without
-        // them, under a registered temporary name removed afterwards.
         std::string read_path = path;
         char *tmp = nullptr;
         if (!is_ply) {
             std::ifstream in(path, std::ios::binary);
             std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-            if (text.find('#') != std::string::npos && text.find("BINARY") == std::string::npos) {
-                std::string clean;
-                bool comment = false;
-                for (char ch : text) {
-                    if (ch == '#')
-                        comment = true;
-                    if (ch == '\n')
-                        comment = false;
-                    if (!comment)
-                        clean.push_back(ch);
-                }
+            bool binary = text.find("BINARY") != std::string::npos;
+            std::string clean = binary ? std::string() : off_strip_comments(text);
+            // OpenMesh reserves whatever the header announces: check the counts against what the
+            // file can hold before it sees them (a vertex takes at least 4 bytes, a face 4 more).
+            unsigned long long nv = 0, nf = 0;
+            if (!binary) {
+                if (!off_counts_text(clean, nv, nf))
+                    return bn_error_set(err, BN_EINPUT, "%s: not an OFF file: no 'OFF' keyword followed by a line "
+                                                        "'vertices faces edges'", path);
+                if (nv > text.size() / 4 || nf > text.size() / 4)
+                    return bn_error_set(err, BN_EINPUT,
+                                        "%s: the header announces %llu vertices and %llu faces, more than a file of "
+                                        "%zu bytes can hold",
+                                        path, nv, nf, text.size());
+            } else if (text.size() < 16) {
+                return bn_error_set(err, BN_EINPUT, "%s: truncated binary OFF file", path);
+            } else {
+                // binary OFF: the counts follow the keyword line as int32s (read either byte order
+                // and accept the header if one reading fits the file)
+                size_t p0 = text.find('\n');
+                if (p0 == std::string::npos || p0 + 9 > text.size())
+                    return bn_error_set(err, BN_EINPUT, "%s: truncated binary OFF header", path);
+                const unsigned char *b = reinterpret_cast<const unsigned char *>(text.data() + p0 + 1);
+                auto fits = [&](bool big) {
+                    for (int k = 0; k < 2; k++) {
+                        const unsigned char *q = b + 4 * k;
+                        uint32_t v = big ? (uint32_t)q[0] << 24 | (uint32_t)q[1] << 16 | (uint32_t)q[2] << 8 | q[3]
+                                         : (uint32_t)q[3] << 24 | (uint32_t)q[2] << 16 | (uint32_t)q[1] << 8 | q[0];
+                        if (v > text.size() / 4)
+                            return false;
+                    }
+                    return true;
+                };
+                if (!fits(true) && !fits(false))
+                    return bn_error_set(err, BN_EINPUT, "%s: the binary OFF header announces more elements than a "
+                                                        "file of %zu bytes can hold", path, text.size());
+            }
+            if (!binary && text.find('#') != std::string::npos) {
+                // OpenMesh's OFF reader stops at '#' comments (which OFF allows): give it a copy without
+                // them, under a registered temporary name removed afterwards.
                 std::string alt = std::string(path) + ".nocomments.off";
                 if (bn__tmpname_reserve(alt.c_str(), &tmp, err) != BN_OK)
                     return err ? err->status : BN_ENOMEM;
@@ -567,7 +610,9 @@ static bn_status read_openmesh(const char *path, bn__soup *out, const bn_log *lo
                                 (size_t)mesh.n_faces(), file_face.size());
     } else {
         unsigned long long nv = 0, nf = 0;
-        if (off_counts(path, nv, nf) && nf != mesh.n_faces())
+        std::ifstream in(path, std::ios::binary);
+        std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+        if (off_counts_text(off_strip_comments(text), nv, nf) && nf != mesh.n_faces())
             return bn_error_set(err, BN_EINPUT,
                                 "%s: OpenMesh kept %zu of the %llu faces the header announces (a face has an index out "
                                 "of range, a repeated vertex or fewer than 3 vertices)",
