@@ -22,7 +22,7 @@ for n in "${names[@]}"; do
   work=build-fuzz/corpus-$n
   mkdir -p "$work"
   echo "== $n for ${secs}s" >&2
-  "build-fuzz/tests/fuzz/$n" "$work" "tests/fuzz/corpus/${n#fuzz_}" -max_total_time="$secs" \
+  "build-fuzz/tests/fuzz/$n" "$work" "tests/fuzz/corpus/${n#fuzz_}" -max_total_time="$secs" -timeout=10 \
     -artifact_prefix=build-fuzz/crashes/ -print_final_stats=1 2>&1 | grep -E "stat::number_of_executed_units|stat::average_exec_per_sec|ERROR|SUMMARY|Done" || true
 done
 ls build-fuzz/crashes

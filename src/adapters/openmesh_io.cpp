@@ -494,8 +494,18 @@ static bool off_counts_text(const std::string &text, unsigned long long &nv, uns
         return false;
     std::istringstream first(ln);
     first >> kw;
-    if (kw.find("OFF") == std::string::npos)
-        return false;
+    // The keyword is exactly one of OpenMesh's variants: [ST][C][N][4][n]OFF.
+    {
+        size_t k = 0;
+        for (const char *opt = "STCN4n"; *opt && k < kw.size(); opt++) {
+            if (*opt == 'T' && k > 0 && kw[k - 1] == 'S')
+                continue;   /* S and T exclude each other */
+            if (kw[k] == *opt)
+                k++;
+        }
+        if (kw.compare(k, std::string::npos, "OFF") != 0)
+            return false;
+    }
     std::string rest;
     std::getline(first, rest);
     while (rest.find_first_not_of(" \t\r") == std::string::npos) {
@@ -541,6 +551,10 @@ static bn_status read_openmesh(const char *path, bn__soup *out, const bn_log *lo
             // file can hold before it sees them (a vertex takes at least 4 bytes, a face 4 more).
             unsigned long long nv = 0, nf = 0;
             if (!binary) {
+                for (unsigned char ch : clean)
+                    if (ch < 0x20 && ch != '\t' && ch != '\r' && ch != '\n')
+                        return bn_error_set(err, BN_EINPUT, "%s: an ASCII OFF file holds a control byte (0x%02x)", path,
+                                            ch);
                 if (!off_counts_text(clean, nv, nf))
                     return bn_error_set(err, BN_EINPUT, "%s: not an OFF file: no 'OFF' keyword followed by a line "
                                                         "'vertices faces edges'", path);
