@@ -46,4 +46,19 @@ void bn__poly_sample(const double *v, size_t nv, double u, double w, double out[
 /* Distance from x to the convex polygon v with unit normal n. */
 double bn__point_polygon_dist(const double x[3], const double *v, size_t nv, const double n[3]);
 
+/* Directions from a point x into a convex polygon (in x's front half-space, at most
+ * BN__FF_POLY_MAX corners), uniform in solid angle: Arvo, "Stratified sampling of spherical
+ * triangles" (SIGGRAPH 1995), on a fan of spherical triangles chosen by their solid angles. */
+typedef struct bn__sph_poly {
+    double v[3 * BN__FF_POLY_MAX];      /* unit directions from x to the corners */
+    double omega[BN__FF_POLY_MAX];      /* solid angle of fan triangle (0, t+1, t+2) */
+    size_t nv;
+    double total;                       /* the polygon's solid angle */
+    double cmax;                        /* an upper bound of n . w over the polygon, in (0, 1] */
+} bn__sph_poly;
+/* 0 if the polygon subtends no solid angle from x (x on it, or degenerate). */
+int bn__sph_poly_init(bn__sph_poly *sp, const double x[3], const double n[3], const double *v, size_t nv);
+/* Unit direction for (u, w) in [0,1)^2, uniform in solid angle over the polygon. */
+void bn__sph_poly_sample(const bn__sph_poly *sp, double u, double w, double dir[3]);
+
 #endif

@@ -391,3 +391,129 @@ void bn__poly_sample(const double *v, size_t nv, double u, double w, double out[
     for (int k = 0; k < 3; k++)
         out[k] = b0 * v[k] + b1 * v[3 * (t + 1) + k] + b2 * v[3 * (t + 2) + k];
 }
+
+/* ---- directions uniform in a polygon's solid angle (Arvo 1995) ---- */
+
+/* Solid angle of the spherical triangle of unit vectors a, b, c (Van Oosterom & Strackee 1983):
+ *   tan(Omega / 2) = |a . (b x c)| / (1 + a.b + b.c + c.a). */
+static double bn__sph_tri_area(const double a[3], const double b[3], const double c[3])
+{
+    double bc[3];
+    bn_v3_cross(b, c, bc);
+    return 2 * atan2(fabs(bn_v3_dot(a, bc)), 1 + bn_v3_dot(a, b) + bn_v3_dot(b, c) + bn_v3_dot(c, a));
+}
+
+/* Angle between unit vectors, accurate for small and near-pi angles (no acos). */
+static double bn__angle_between(const double a[3], const double b[3])
+{
+    double d[3];
+    if (bn_v3_dot(a, b) < 0) {
+        bn_v3_add(a, b, d);
+        return BN_PI - 2 * asin(fmin(1, bn_v3_len(d) / 2));
+    }
+    bn_v3_sub(b, a, d);
+    return 2 * asin(fmin(1, bn_v3_len(d) / 2));
+}
+
+int bn__sph_poly_init(bn__sph_poly *sp, const double x[3], const double n[3], const double *v, size_t nv)
+{
+    double cmax = 0, sum[3] = {0, 0, 0};
+    int pos = 0, neg = 0;
+    if (nv < 3 || nv > BN__FF_POLY_MAX)
+        return 0;
+    sp->nv = nv;
+    for (size_t k = 0; k < nv; k++) {
+        double *d = sp->v + 3 * k;
+        bn_v3_sub(v + 3 * k, x, d);
+        if (!(bn_v3_normalize(d) > 0))
+            return 0;
+        cmax = fmax(cmax, bn_v3_dot(n, d));
+        bn_v3_add(sum, d, sum);
+    }
+    sp->total = 0;
+    for (size_t t = 0; t + 2 < nv; t++) {
+        sp->omega[t] = bn__sph_tri_area(sp->v, sp->v + 3 * (t + 1), sp->v + 3 * (t + 2));
+        sp->total += sp->omega[t];
+    }
+    if (!(sp->total > 0))
+        return 0;
+    /* max of n . w over the spherical polygon: 1 if n lies inside it, else on a vertex or at the
+     * point of an edge's great-circle arc nearest to n */
+    for (size_t k = 0; k < nv; k++) {
+        const double *a = sp->v + 3 * k, *b = sp->v + 3 * (k + 1 < nv ? k + 1 : 0);
+        double m[3], q[3], aq[3], qb[3], s;
+        bn_v3_cross(a, b, m);
+        s = bn_v3_dot(m, n);
+        pos += s > 0;
+        neg += s < 0;
+        if (!(bn_v3_normalize(m) > 0))
+            continue;
+        bn_v3_madd(n, -bn_v3_dot(n, m), m, q);
+        if (!(bn_v3_normalize(q) > 0))
+            continue;
+        bn_v3_cross(a, q, aq);
+        bn_v3_cross(q, b, qb);
+        if (bn_v3_dot(aq, m) >= 0 && bn_v3_dot(qb, m) >= 0)
+            cmax = fmax(cmax, bn_v3_dot(n, q));
+    }
+    if ((pos == 0 || neg == 0) && bn_v3_dot(n, sum) > 0)
+        cmax = 1;
+    /* a relative margin for rounding: a bound slightly high only lowers the acceptance rate */
+    sp->cmax = fmin(1, cmax * (1 + 1e-9) + 1e-12);
+    return 1;
+}
+
+void bn__sph_poly_sample(const bn__sph_poly *sp, double u, double w, double dir[3])
+{
+    const double *a, *b, *c;
+    double nab[3], nbc[3], nca[3], t[3], cp[3], alpha, beta, gamma, ap, sphi, cphi, ca, sa, k1, k2, cosb, sinb, ct,
+        st;
+    size_t ntri = sp->nv - 2, k = 0;
+    double acc = 0;
+    u *= sp->total;
+    for (; k + 1 < ntri; k++) {
+        if (u < acc + sp->omega[k])
+            break;
+        acc += sp->omega[k];
+    }
+    u = sp->omega[k] > 0 ? bn_clamp((u - acc) / sp->omega[k], 0, 1) : 0.5;
+    a = sp->v;
+    b = sp->v + 3 * (k + 1);
+    c = sp->v + 3 * (k + 2);
+    /* Arvo's inversion, in the form of pbrt-v4's SampleSphericalTriangle: the sub-triangle
+     * (a, b, c') with area u * Omega, then a point on the arc b -> c' with the right density. */
+    bn_v3_cross(a, b, nab);
+    bn_v3_cross(b, c, nbc);
+    bn_v3_cross(c, a, nca);
+    if (!(bn_v3_normalize(nab) > 0) || !(bn_v3_normalize(nbc) > 0) || !(bn_v3_normalize(nca) > 0)) {
+        memcpy(dir, a, 3 * sizeof(double));
+        return;
+    }
+    bn_v3_scale(nca, -1, t);
+    alpha = bn__angle_between(nab, t);
+    bn_v3_scale(nab, -1, t);
+    beta = bn__angle_between(nbc, t);
+    bn_v3_scale(nbc, -1, t);
+    gamma = bn__angle_between(nca, t);
+    ap = BN_PI + u * (alpha + beta + gamma - BN_PI);   /* A' + pi */
+    ca = cos(alpha);
+    sa = sin(alpha);
+    sphi = sin(ap) * ca - cos(ap) * sa;
+    cphi = cos(ap) * ca + sin(ap) * sa;
+    k1 = cphi + ca;
+    k2 = sphi - sa * bn_v3_dot(a, b);
+    cosb = (k2 + (k2 * cphi - k1 * sphi) * ca) / ((k2 * sphi + k1 * cphi) * sa);
+    cosb = bn_clamp(cosb, -1, 1);
+    sinb = sqrt(fmax(0, 1 - cosb * cosb));
+    bn_v3_madd(c, -bn_v3_dot(c, a), a, t);   /* c - (c.a) a */
+    bn_v3_normalize(t);
+    for (int d = 0; d < 3; d++)
+        cp[d] = cosb * a[d] + sinb * t[d];
+    ct = 1 - w * (1 - bn_v3_dot(cp, b));
+    st = sqrt(fmax(0, 1 - ct * ct));
+    bn_v3_madd(cp, -bn_v3_dot(cp, b), b, t);   /* c' - (c'.b) b */
+    bn_v3_normalize(t);
+    for (int d = 0; d < 3; d++)
+        dir[d] = ct * b[d] + st * t[d];
+    bn_v3_normalize(dir);
+}
