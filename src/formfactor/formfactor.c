@@ -22,9 +22,16 @@
 #define BN__F_SLACK 1e-9
 /* Row sums: hemisphere counts cannot exceed 1 but by rounding, so any excess is an error. The
  * analytic unoccluded part is exact to its tolerance but the visible fractions are sampled, so a
- * row of a closed scene may exceed 1 by sampling noise (a warning); 5% above 1 is a wrong F, not
- * noise, and an error. Monte Carlo rows are statistical: warnings only. */
-#define BN__ROWSUM_ERROR 0.05
+ * row of a closed scene may exceed 1 by sampling noise (a warning). A visible fraction from N
+ * samples has a standard deviation of at most 0.5/sqrt(N), so a row above 1 by more than five of
+ * those (and never less than 5%) is a wrong F, not noise, and an error. Monte Carlo rows are
+ * statistical: warnings only. */
+static double bn__rowsum_error(int samples)
+{
+    double five_sigma = 2.5 / sqrt((double)(samples > 0 ? samples : 1));
+    return five_sigma > 0.05 ? five_sigma : 0.05;
+}
+#define BN__ROWSUM_ERROR bn__rowsum_error(bn__samples(o))
 
 const char *bn_ff_method_name(bn_ff_method m)
 {
