@@ -516,6 +516,68 @@ static bool off_counts_text(const std::string &text, unsigned long long &nv, uns
     return (bool)(ls >> nv >> nf);
 }
 
+// Checks an ASCII OFF body (comments removed, line numbers kept) before OpenMesh reads it, whose
+// reader loops on malformed records: nv vertex lines of at least 3 finite numbers, then nf face
+// lines "n i_1 .. i_n [colour]" with n >= 3 and every index in [0, nv).
+static bn_status off_scan(const char *path, const std::string &clean, unsigned long long nv, unsigned long long nf,
+                          bn_error *err)
+{
+    std::istringstream in(clean);
+    std::string ln;
+    unsigned line = 0;
+    bool counts_seen = false, keyword_seen = false;
+    unsigned long long v = 0, f = 0;
+    while (std::getline(in, ln)) {
+        line++;
+        std::istringstream ls(ln);
+        std::vector<std::string> tok;
+        std::string t;
+        while (ls >> t)
+            tok.push_back(t);
+        if (tok.empty())
+            continue;
+        if (!keyword_seen) {
+            keyword_seen = true;
+            if (tok.size() == 1)
+                continue;
+            tok.erase(tok.begin());   /* counts on the keyword's line */
+        }
+        if (!counts_seen) {
+            counts_seen = true;
+            continue;
+        }
+        std::vector<double> num;
+        for (const std::string &x : tok) {
+            char *end = nullptr;
+            double d = std::strtod(x.c_str(), &end);
+            if (end == x.c_str() || *end != '\0' || !std::isfinite(d))
+                return bn_error_set(err, BN_EINPUT, "%s:%u: '%s' is not a finite number", path, line, x.c_str());
+            num.push_back(d);
+        }
+        if (v < nv) {
+            if (num.size() < 3)
+                return bn_error_set(err, BN_EINPUT, "%s:%u: vertex %llu needs 3 coordinates", path, line, v);
+            v++;
+        } else if (f < nf) {
+            double n = num[0];
+            if (n != std::floor(n) || n < 3 || n > 65536 || num.size() < (size_t)n + 1)
+                return bn_error_set(err, BN_EINPUT, "%s:%u: face %llu: '%s' vertices, or fewer indices than that",
+                                    path, line, f, tok[0].c_str());
+            for (size_t k = 1; k <= (size_t)n; k++)
+                if (num[k] != std::floor(num[k]) || num[k] < 0 || num[k] >= (double)nv)
+                    return bn_error_set(err, BN_EINPUT, "%s:%u: face %llu: vertex index %s is out of range (%llu "
+                                                        "vertices)", path, line, f, tok[k].c_str(), nv);
+            f++;
+        } else {
+            break;   /* trailing data (edges) is not read */
+        }
+    }
+    if (v < nv || f < nf)
+        return bn_error_set(err, BN_EINPUT, "%s: the file ends after %llu of %llu vertices and %llu of %llu faces", path,
+                            v, nv, f, nf);
+    return BN_OK;
+}
+
 struct MatKey {
     std::array<double, 6> v;
     bool operator<(const MatKey &o) const { return v < o.v; }
@@ -563,6 +625,11 @@ static bn_status read_openmesh(const char *path, bn__soup *out, const bn_log *lo
                                         "%s: the header announces %llu vertices and %llu faces, more than a file of "
                                         "%zu bytes can hold",
                                         path, nv, nf, text.size());
+                {
+                    bn_status st = off_scan(path, clean, nv, nf, err);
+                    if (st != BN_OK)
+                        return st;
+                }
             } else if (text.size() < 16) {
                 return bn_error_set(err, BN_EINPUT, "%s: truncated binary OFF file", path);
             } else {
