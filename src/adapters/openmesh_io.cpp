@@ -508,6 +508,9 @@ static bool off_counts_text(const std::string &text, unsigned long long &nv, uns
     }
     std::string rest;
     std::getline(first, rest);
+    // OpenMesh reads the counts from the lines after the keyword's, never from the same line.
+    if (rest.find_first_not_of(" \t\r") != std::string::npos)
+        return false;
     while (rest.find_first_not_of(" \t\r") == std::string::npos) {
         if (!std::getline(in, rest))
             return false;
@@ -520,8 +523,9 @@ static bool off_counts_text(const std::string &text, unsigned long long &nv, uns
 // reader loops on malformed records: nv vertex lines of at least 3 finite numbers, then nf face
 // lines "n i_1 .. i_n [colour]" with n >= 3 and every index in [0, nv).
 static bn_status off_scan(const char *path, const std::string &clean, unsigned long long nv, unsigned long long nf,
-                          bn_error *err)
+                          bool &face_colour, bn_error *err)
 {
+    face_colour = nf > 0;   /* every face line carries at least r g b after its indices */
     std::istringstream in(clean);
     std::string ln;
     unsigned line = 0;
@@ -536,11 +540,9 @@ static bn_status off_scan(const char *path, const std::string &clean, unsigned l
             tok.push_back(t);
         if (tok.empty())
             continue;
-        if (!keyword_seen) {
+        if (!keyword_seen) {   /* the keyword alone (off_counts_text checked it) */
             keyword_seen = true;
-            if (tok.size() == 1)
-                continue;
-            tok.erase(tok.begin());   /* counts on the keyword's line */
+            continue;
         }
         if (!counts_seen) {
             counts_seen = true;
@@ -567,6 +569,8 @@ static bn_status off_scan(const char *path, const std::string &clean, unsigned l
                 if (num[k] != std::floor(num[k]) || num[k] < 0 || num[k] >= (double)nv)
                     return bn_error_set(err, BN_EINPUT, "%s:%u: face %llu: vertex index %s is out of range (%llu "
                                                         "vertices)", path, line, f, tok[k].c_str(), nv);
+            if (num.size() < (size_t)n + 4)
+                face_colour = false;
             f++;
         } else {
             break;   /* trailing data (edges) is not read */
@@ -593,6 +597,7 @@ static bn_status read_openmesh(const char *path, bn__soup *out, const bn_log *lo
         if (st != BN_OK)
             return st;
     }
+    bool off_face_colour = false, off_vertex_colour = false;   /* what our OFF scan found */
     FloatMesh mesh;
     mesh.request_vertex_colors();
     mesh.request_face_colors();
@@ -618,17 +623,24 @@ static bn_status read_openmesh(const char *path, bn__soup *out, const bn_log *lo
                         return bn_error_set(err, BN_EINPUT, "%s: an ASCII OFF file holds a control byte (0x%02x)", path,
                                             ch);
                 if (!off_counts_text(clean, nv, nf))
-                    return bn_error_set(err, BN_EINPUT, "%s: not an OFF file: no 'OFF' keyword followed by a line "
-                                                        "'vertices faces edges'", path);
+                    return bn_error_set(err, BN_EINPUT, "%s: not an OFF file: no line with the 'OFF' keyword alone, "
+                                                        "followed by a line 'vertices faces edges'", path);
                 if (nv > text.size() / 4 || nf > text.size() / 4)
                     return bn_error_set(err, BN_EINPUT,
                                         "%s: the header announces %llu vertices and %llu faces, more than a file of "
                                         "%zu bytes can hold",
                                         path, nv, nf, text.size());
                 {
-                    bn_status st = off_scan(path, clean, nv, nf, err);
+                    bn_status st = off_scan(path, clean, nv, nf, off_face_colour, err);
                     if (st != BN_OK)
                         return st;
+                }
+                {
+                    /* vertex colours: the C of [ST]COFF */
+                    std::istringstream k(clean);
+                    std::string kw;
+                    k >> kw;
+                    off_vertex_colour = kw.find('C') != std::string::npos;
                 }
             } else if (text.size() < 16) {
                 return bn_error_set(err, BN_EINPUT, "%s: truncated binary OFF file", path);
@@ -717,8 +729,10 @@ static bn_status read_openmesh(const char *path, bn__soup *out, const bn_log *lo
     }
     std::map<MatKey, unsigned> mats;
     bool refl_props = is_ply && S.has_prop[0], emis_props = is_ply && S.has_prop[3];
-    bool fcol = mesh.has_face_colors() && (is_ply ? S.face_colour : opt.face_has_color());
-    bool vcol = mesh.has_vertex_colors() && (is_ply ? S.vertex_colour : opt.vertex_has_color());
+    // OpenMesh may flag colours the file does not have (its values are then uninitialised): trust
+    // our own scans for which colours exist.
+    bool fcol = mesh.has_face_colors() && (is_ply ? S.face_colour : off_face_colour && opt.face_has_color());
+    bool vcol = mesh.has_vertex_colors() && (is_ply ? S.vertex_colour : off_vertex_colour && opt.vertex_has_color());
     size_t k = 0;
     for (auto fh : mesh.faces()) {
         size_t ff = file_face[k++];
