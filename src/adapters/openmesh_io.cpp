@@ -593,6 +593,23 @@ static bn_status read_openmesh(const char *path, bn__soup *out, const bn_log *lo
     bool is_ply = dot && strcasecmp(dot, ".ply") == 0;
     PlyScan S;
     if (is_ply) {
+        // A PLY header is text, and so is an ASCII body: control bytes in them (a NUL inside a
+        // number) desynchronise OpenMesh's reader, which then writes out of bounds.
+        std::ifstream in(path, std::ios::binary);
+        std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+        size_t eh = text.find("end_header");
+        bool ascii = eh != std::string::npos && text.substr(0, eh).find("format ascii") != std::string::npos;
+        size_t limit = eh == std::string::npos ? text.size() : ascii ? text.size() : eh;
+        unsigned line = 1;
+        for (size_t i = 0; i < limit; i++) {
+            unsigned char ch = (unsigned char)text[i];
+            if (ch == '\n')
+                line++;
+            else if (ch < 0x20 && ch != '\t' && ch != '\r')
+                return bn_error_set(err, BN_EINPUT, "%s:%u: control byte 0x%02x in PLY text", path, line, ch);
+        }
+    }
+    if (is_ply) {
         bn_status st = ply_scan(path, S, err);
         if (st != BN_OK)
             return st;
