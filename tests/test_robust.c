@@ -154,3 +154,16 @@ BN_TEST(exit_code_classes)
     BN_ASSERT(strstr(out, "verdict: fail") != NULL);
     free(out);
 }
+
+/* A PLY face with a repeated vertex is dropped, and the face colours of the others are read by
+ * bounce's own scan (OpenMesh writes out of bounds setting the colour of a face it refused). */
+BN_TEST(ply_degenerate_face_with_colour)
+{
+    char args[4200], *out = NULL;
+    snprintf(args, sizeof args, "info '%s' -q", bn_test_path("tests/data/ply-degenerate-face-with-colour.ply"));
+    BN_ASSERT_EQ(bn_test_bounce(args, &out), 0);
+    BN_ASSERT(strstr(out, "1 faces with a repeated vertex were dropped") != NULL);
+    BN_ASSERT(strstr(out, "1 faces after validation") != NULL);
+    BN_ASSERT(strstr(out, "1        0.502    0 ") != NULL);   /* (255, 128, 0) / 255 */
+    free(out);
+}

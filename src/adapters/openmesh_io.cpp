@@ -185,6 +185,7 @@ struct PlyScan {
     std::vector<std::vector<long long>> faces;
     std::vector<unsigned> face_line;           // ASCII line of each face (0 for binary)
     std::vector<std::array<double, 6>> face_props;
+    std::vector<std::array<double, 3>> face_rgb;   // face colours as linear reflectance (8-bit / 255)
     bool has_prop[6] = {false, false, false, false, false, false};
     bool face_colour = false, vertex_colour = false;
 };
@@ -351,7 +352,8 @@ static bn_status ply_scan(const char *path, PlyScan &S, bn_error *err)
     bool seen_vertex = false, seen_face = false;
     for (const PlyElem &e : S.elems) {
         bool is_v = e.name == "vertex", is_f = e.name == "face";
-        int ix = -1, iy = -1, iz = -1, iidx = -1, iprop[6] = {-1, -1, -1, -1, -1, -1};
+        int ix = -1, iy = -1, iz = -1, iidx = -1, iprop[6] = {-1, -1, -1, -1, -1, -1}, irgb[3] = {-1, -1, -1};
+        double rgb_scale[3] = {1, 1, 1};
         for (size_t k = 0; k < e.props.size(); k++) {
             const std::string &n = e.props[k].name;
             if (is_v) {
@@ -362,7 +364,13 @@ static bn_status ply_scan(const char *path, PlyScan &S, bn_error *err)
             }
             if (is_f) {
                 if ((n == "vertex_indices" || n == "vertex_index") && e.props[k].list) iidx = (int)k;
-                if (n == "red" || n == "green" || n == "blue") S.face_colour = true;
+                if (n == "red" || n == "green" || n == "blue") {
+                    if (e.props[k].list)
+                        return bn_error_set(err, BN_EINPUT, "%s: face colour '%s' is a list", path, n.c_str());
+                    irgb[n == "red" ? 0 : n == "green" ? 1 : 2] = (int)k;
+                    rgb_scale[n == "red" ? 0 : n == "green" ? 1 : 2] =
+                        e.props[k].type == T_FLOAT32 || e.props[k].type == T_FLOAT64 ? 1.0 : 1.0 / 255.0;
+                }
                 for (int q = 0; q < 6; q++)
                     if (n == face_prop_names[q] && !e.props[k].list) {
                         iprop[q] = (int)k;
@@ -388,11 +396,17 @@ static bn_status ply_scan(const char *path, PlyScan &S, bn_error *err)
             for (int q = 3; q < 6; q++) nset += S.has_prop[q];
             if (nset != 0 && nset != 3)
                 return bn_error_set(err, BN_EINPUT, "%s: face emission needs all of emission_red, _green, _blue", path);
+            if (irgb[0] >= 0 || irgb[1] >= 0 || irgb[2] >= 0) {
+                if (irgb[0] < 0 || irgb[1] < 0 || irgb[2] < 0)
+                    return bn_error_set(err, BN_EINPUT, "%s: face colours need all of red, green and blue", path);
+                S.face_colour = true;
+            }
             seen_face = true;
         }
         for (unsigned long long r = 0; r < e.count; r++) {
             std::array<double, 3> p = {0, 0, 0};
             std::array<double, 6> fp = {0, 0, 0, 0, 0, 0};
+            std::array<double, 3> rgb = {0, 0, 0};
             std::vector<long long> idx;
             R.skip_ws();
             unsigned start_line = R.line;
@@ -420,6 +434,9 @@ static bn_status ply_scan(const char *path, PlyScan &S, bn_error *err)
                     for (int q = 0; q < 6; q++)
                         if (is_f && (int)k == iprop[q])
                             fp[q] = v;
+                    for (int q = 0; q < 3; q++)
+                        if (is_f && (int)k == irgb[q])
+                            rgb[q] = v * rgb_scale[q];
                 }
             }
             if (is_v) {
@@ -445,6 +462,7 @@ static bn_status ply_scan(const char *path, PlyScan &S, bn_error *err)
                 S.faces.push_back(idx);
                 S.face_line.push_back(S.format == F_ASCII ? start_line : 0);
                 S.face_props.push_back(fp);
+                S.face_rgb.push_back(rgb);
             }
         }
         continue;
@@ -621,7 +639,9 @@ static bn_status read_openmesh(const char *path, bn__soup *out, const bn_log *lo
     OpenMesh::IO::Options opt;
     if (!is_ply || S.vertex_colour)
         opt += OpenMesh::IO::Options::VertexColor;
-    if (!is_ply || S.face_colour)
+    // PLY face colours come from our own scan: OpenMesh sets the colour of a face it has just
+    // refused (a repeated vertex) and writes out of bounds.
+    if (!is_ply)
         opt += OpenMesh::IO::Options::FaceColor;
     {
         std::string read_path = path;
@@ -748,7 +768,7 @@ static bn_status read_openmesh(const char *path, bn__soup *out, const bn_log *lo
     bool refl_props = is_ply && S.has_prop[0], emis_props = is_ply && S.has_prop[3];
     // OpenMesh may flag colours the file does not have (its values are then uninitialised): trust
     // our own scans for which colours exist.
-    bool fcol = mesh.has_face_colors() && (is_ply ? S.face_colour : off_face_colour && opt.face_has_color());
+    bool fcol = is_ply ? S.face_colour : mesh.has_face_colors() && off_face_colour && opt.face_has_color();
     bool vcol = mesh.has_vertex_colors() && (is_ply ? S.vertex_colour : off_vertex_colour && opt.vertex_has_color());
     size_t k = 0;
     for (auto fh : mesh.faces()) {
@@ -777,6 +797,8 @@ static bn_status read_openmesh(const char *path, bn__soup *out, const bn_log *lo
         }
         if (refl_props)
             for (int c = 0; c < 3; c++) rho[c] = S.face_props[ff][c];
+        else if (fcol && is_ply)
+            for (int c = 0; c < 3; c++) rho[c] = S.face_rgb[ff][c];   // 8-bit colour / 255
         else if (fcol)
             for (int c = 0; c < 3; c++) rho[c] = mesh.color(fh)[c];   // 8-bit colour / 255
         else if (vcol)
