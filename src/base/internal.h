@@ -85,6 +85,8 @@ typedef struct bn__progress {
 } bn__progress;
 void bn__progress_begin(bn__progress *p, const char *label, size_t total, int quiet);
 void bn__progress_update(bn__progress *p, size_t done);   /* call from one thread */
+/* From inside an OpenMP loop: adds `work` finished items to *done (atomically); thread 0 redraws. */
+void bn__progress_step(bn__progress *p, size_t *done, size_t work);
 void bn__progress_end(bn__progress *p);
 
 /* FNV-1a 64 over bytes, chained. */

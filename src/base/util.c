@@ -8,6 +8,7 @@
 #include <string.h>
 #include <time.h>
 #include <unistd.h>
+#include <omp.h>
 
 int bn__mul_size(size_t a, size_t b, size_t *out)
 {
@@ -259,6 +260,15 @@ void bn__progress_update(bn__progress *p, size_t done)
         fprintf(stderr, "\r%-14s [%s] %5.1f%%  %6.1fs left ", p->label, bar, 100 * frac, left);
         fflush(stderr);
     }
+}
+
+void bn__progress_step(bn__progress *p, size_t *done, size_t work)
+{
+    size_t d;
+#pragma omp atomic capture
+    d = *done += work;
+    if (omp_get_thread_num() == 0)
+        bn__progress_update(p, d);
 }
 
 void bn__progress_end(bn__progress *p)

@@ -814,6 +814,23 @@ static double bn__rowsum_tol(const bn_formfactor_opts *o)
 static bn_status bn__build_from_cache(const bn_scene *scene, const bn_formfactor_opts *o, const char *key,
                                       bn_transport **out, bn_ff_diagnostics *diag, int *hit, bn_error *err);
 
+
+/* K = diag(rho) F over the storage just filled (ownership of impl passes to the transport). */
+static bn_status bn__wrap_transport(const bn_scene *scene, size_t n, const bn_transport_ops *ops, void *impl,
+                                   bn_transport **out, bn_error *err)
+{
+    bn_status st;
+    double *rho = bn__malloc_array(3 * n, sizeof(double));
+    if (!rho) {
+        ops->destroy(impl);
+        return bn_error_set(err, BN_ENOMEM, "out of memory");
+    }
+    bn_scene_patch_reflectance(scene, rho);
+    st = bn_transport_create(n, rho, ops, impl, out, err);
+    free(rho);
+    return st;
+}
+
 bn_status bn_formfactor_build(const bn_scene *scene, const bn_rt *rt, const bn_formfactor_opts *o_in,
                               bn_transport **out, bn_ff_diagnostics *diag, bn_error *err)
 {
@@ -824,7 +841,7 @@ bn_status bn_formfactor_build(const bn_scene *scene, const bn_rt *rt, const bn_f
     void *impl = NULL;
     const bn_transport_ops *ops = NULL;
     size_t n, S, limit, need, *counts = NULL;
-    double t0 = bn__now(), *rho = NULL;
+    double t0 = bn__now();
     bn_status st;
     char key[512];
     volatile int fail = 0;
@@ -946,14 +963,7 @@ bn_status bn_formfactor_build(const bn_scene *scene, const bn_rt *rt, const bn_f
                     bn__analytic_or_mc_pair(rt, &g, &o, rtol, cand, ncand, i, j, &s, &sink, &c);
                 work = n - 1 - i;
             }
-#pragma omp atomic
-            done += work;
-            if (omp_get_thread_num() == 0) {
-                size_t dn;
-#pragma omp atomic read
-                dn = done;
-                bn__progress_update(&prog, dn);
-            }
+            bn__progress_step(&prog, &done, work);
         }
 #pragma omp critical(bn_ff_counts)
         {
@@ -1006,14 +1016,7 @@ bn_status bn_formfactor_build(const bn_scene *scene, const bn_rt *rt, const bn_f
                 d->rows_above_one, d->row_sum_tol, d->row_sum_max, bn_ff_method_name(o.method),
                 o.method == BN_FF_HEMISPHERE ? ""
                                              : ": sampling noise of the visibility estimate; more --samples reduce it");
-    rho = bn__malloc_array(3 * n, sizeof(double));
-    if (!rho) {
-        ops->destroy(impl);
-        return bn_error_set(err, BN_ENOMEM, "out of memory");
-    }
-    bn_scene_patch_reflectance(scene, rho);
-    st = bn_transport_create(n, rho, ops, impl, out, err);
-    free(rho);
+    st = bn__wrap_transport(scene, n, ops, impl, out, err);
     if (st != BN_OK)
         return st;
     d->bytes = bn_transport_bytes(*out);
@@ -1035,7 +1038,6 @@ static bn_status bn__build_from_cache(const bn_scene *scene, const bn_formfactor
     void *impl = NULL;
     const bn_transport_ops *ops = NULL;
     size_t n;
-    double *rho;
     bn_status st;
     char why[256];
     bn_scene_patches(scene, &n);
@@ -1055,14 +1057,7 @@ static bn_status bn__build_from_cache(const bn_scene *scene, const bn_formfactor
         ops->destroy(impl);
         return st;
     }
-    rho = bn__malloc_array(3 * n, sizeof(double));
-    if (!rho) {
-        ops->destroy(impl);
-        return bn_error_set(err, BN_ENOMEM, "out of memory");
-    }
-    bn_scene_patch_reflectance(scene, rho);
-    st = bn_transport_create(n, rho, ops, impl, out, err);
-    free(rho);
+    st = bn__wrap_transport(scene, n, ops, impl, out, err);
     if (st != BN_OK)
         return st;
     d->bytes = bn_transport_bytes(*out);

@@ -108,14 +108,7 @@ bn_status bn_trace_image_run(const bn_rt *rt, const bn_camera *cam, const bn_tra
                         out->var[k] = (float)fmax(var, 0.0);
                     }
             }
-#pragma omp atomic
-            done++;
-            if (omp_get_thread_num() == 0) {
-                size_t d;
-#pragma omp atomic read
-                d = done;
-                bn__progress_update(&prog, d);
-            }
+            bn__progress_step(&prog, &done, 1);
         }
         free(sample);
         free(mean);

@@ -89,14 +89,7 @@ bn_status bn_trace_patches_run(const bn_rt *rt, const bn_trace_opts *o, bn_trace
                     out->mean[k] = mean[j];
                     out->se[k] = sqrt(fmax(var, 0.0) / (double)o->spp);
                 }
-#pragma omp atomic
-            done++;
-            if (omp_get_thread_num() == 0) {
-                size_t d;
-#pragma omp atomic read
-                d = done;
-                bn__progress_update(&prog, d);
-            }
+            bn__progress_step(&prog, &done, 1);
         }
         free(sample);
         free(mean);
