@@ -25,7 +25,7 @@ bn_status bn_trace_image_run(const bn_rt *rt, const bn_camera *cam, const bn_tra
     bn_status st;
     size_t npx, nl, bytes, done = 0;
     unsigned long long rays = 0;
-    int stop = 0;
+    int no_buffers = 0;   /* a thread could not allocate its sample buffers */
     bn__progress prog;
     double t0 = bn__now();
     const int W = cam->width, H = cam->height;
@@ -64,19 +64,12 @@ bn_status bn_trace_image_run(const bn_rt *rt, const bn_camera *cam, const bn_tra
                *m2 = malloc(m * sizeof(double));
         if (!sample || !mean || !m2) {
 #pragma omp atomic write
-            stop = 2;
+            no_buffers = 1;
         }
 #pragma omp for schedule(dynamic, 1)
         for (int row = 0; row < H; row++) {
-            int halt;
-#pragma omp atomic read
-            halt = stop;
-            if (!halt && bn_interrupted() != BN_OK) {
-#pragma omp atomic write
-                stop = 1;
-                halt = 1;
-            }
-            if (halt || !sample || !mean || !m2)
+            /* after an interrupt (or without buffers) the remaining iterations do nothing */
+            if (!sample || !mean || !m2 || bn_interrupted() != BN_OK)
                 continue;
             for (int col = 0; col < W; col++) {
                 size_t px = (size_t)row * (size_t)W + (size_t)col;
@@ -118,7 +111,7 @@ bn_status bn_trace_image_run(const bn_rt *rt, const bn_camera *cam, const bn_tra
     bn__tracer_free(&t);
     out->rays = rays;
     out->seconds = bn__now() - t0;
-    if (stop) {
+    if (no_buffers || bn_interrupted() != BN_OK) {
         bn_status s = bn_interrupted();
         bn_trace_image_free(out);
         if (s != BN_OK)

@@ -17,7 +17,7 @@ bn_status bn_trace_patches_run(const bn_rt *rt, const bn_trace_opts *o, bn_trace
     size_t n, nl, bytes;
     unsigned long long rays = 0;
     size_t done = 0;
-    int stop = 0;
+    int no_buffers = 0;   /* a thread could not allocate its sample buffers */
     bn__progress prog;
     double t0 = bn__now();
 
@@ -51,19 +51,12 @@ bn_status bn_trace_patches_run(const bn_rt *rt, const bn_trace_opts *o, bn_trace
                *m2 = malloc(m * sizeof(double));
         if (!sample || !mean || !m2) {
 #pragma omp atomic write
-            stop = 2;
+            no_buffers = 1;
         }
 #pragma omp for schedule(dynamic, 1)
         for (size_t i = 0; i < n; i++) {
-            int halt;
-#pragma omp atomic read
-            halt = stop;
-            if (!halt && bn_interrupted() != BN_OK) {
-#pragma omp atomic write
-                stop = 1;
-                halt = 1;
-            }
-            if (halt || !sample || !mean || !m2)
+            /* after an interrupt (or without buffers) the remaining iterations do nothing */
+            if (!sample || !mean || !m2 || bn_interrupted() != BN_OK)
                 continue;
             memset(mean, 0, m * sizeof(double));
             memset(m2, 0, m * sizeof(double));
@@ -99,7 +92,7 @@ bn_status bn_trace_patches_run(const bn_rt *rt, const bn_trace_opts *o, bn_trace
     bn__tracer_free(&t);
     out->rays = rays;
     out->seconds = bn__now() - t0;
-    if (stop) {
+    if (no_buffers || bn_interrupted() != BN_OK) {
         bn_status s = bn_interrupted();
         bn_trace_patches_free(out);
         if (s != BN_OK)
