@@ -139,8 +139,8 @@ BN_TEST(mcguire_loads_as_shipped)
              bn_test_source_dir());
     bn_load_opts_default(&o);
     o.log.quiet = 1;
-    if (!bn_test_file_exists(path))
-        BN_FAIL("reference file missing: %s", path);
+    if (!bn_test_file_exists(path))   /* shared/ sits beside the clone in CI; elsewhere it may not */
+        BN_SKIP("reference file not found beside the clone: %s", path);
     BN_ASSERT_STATUS(bn_scene_load(path, &o, &s, &err), BN_OK);
     f = bn_scene_faces(s, &nf);
     m = bn_scene_materials(s, &nm);
