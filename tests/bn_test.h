@@ -7,6 +7,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include "bounce/transport.h"
 
 typedef void (*bn_test_fn)(void);
 void bn_test_register(const char *name, bn_test_fn fn);
@@ -100,5 +101,17 @@ int bn_test_bounce(const char *args, char **output);
 /* Reads a whole file (malloc'd, NUL-terminated) or NULL. */
 char *bn_test_read_file(const char *path, size_t *size);
 int bn_test_file_exists(const char *path);
+
+/* F_ij of an operator with entries; fails the test if the operator cannot give it. */
+static inline double bn_test_F(const bn_transport *k, size_t i, size_t j)
+{
+    double v = NAN;
+    bn_error e;
+    if (bn_transport_entry(k, i, j, &v, &e) != BN_OK) {
+        fprintf(stderr, "FAIL: F[%zu][%zu]: %s\n", i, j, e.msg);
+        exit(1);
+    }
+    return v;
+}
 
 #endif

@@ -83,7 +83,7 @@ BN_TEST(cornell_occluded_at_most_unoccluded)
     for (size_t i = 0; i < nw; i++) {
         double row = 0;
         for (size_t j = 0; j < nw; j++) {
-            double f = bn_transport_F(Kw, i, j);
+            double f = bn_test_F(Kw, i, j);
             BN_ASSERT(f >= 0 && f <= 1);
             row += f;
         }
@@ -92,7 +92,7 @@ BN_TEST(cornell_occluded_at_most_unoccluded)
     }
     for (size_t i = 0; i < nn; i++)
         for (size_t j = 0; j < nn; j++) {
-            double fo = bn_transport_F(Kw, i, j), fu = bn_transport_F(Kn, i, j);
+            double fo = bn_test_F(Kw, i, j), fu = bn_test_F(Kn, i, j);
             pairs++;
             if (fo < fu)
                 tighter++;

@@ -130,7 +130,7 @@ static err_stats pair_errors(const bn_scene *scene, const bn_rt *rt, int samples
     err_stats e;
     for (uint64_t seed = 1; seed <= BN_NSEEDS; seed++) {
         bn_transport *K = build(scene, rt, samples, seed);
-        double f = bn_transport_F(K, 0, 1);
+        double f = bn_test_F(K, 0, 1);
         BN_ASSERT(f >= 0 && f <= 1);
         s1 += f - exact;
         s2 += (f - exact) * (f - exact);
@@ -176,7 +176,7 @@ static void check_exact_case(const char *name, const double A[12], const double 
     {
         /* the scene's own unoccluded A -> C (when C faces A) is the contour integral */
         bn_transport *K = build(scene, rt, 16, 1);
-        BN_ASSERT_NEAR(bn_transport_F(K, 0, 2), flip_c ? 0 : F_AC, 1e-7);
+        BN_ASSERT_NEAR(bn_test_F(K, 0, 2), flip_c ? 0 : F_AC, 1e-7);
         bn_transport_destroy(K);
     }
     e16 = pair_errors(scene, rt, 16, exact);
@@ -254,7 +254,7 @@ BN_TEST(closed_room_with_block_rows_unbiased)
             for (size_t i = 0; i < n; i++) {
                 double r = -1;
                 for (size_t j = 0; j < n; j++)
-                    r += bn_transport_F(K, i, j);
+                    r += bn_test_F(K, i, j);
                 m += r;
                 d2 += r * r;
             }

@@ -25,9 +25,10 @@ typedef struct bn_formfactor_opts {
     int          samples;     /* montecarlo: point pairs per patch pair (default 64); hemisphere: rays
                                  per patch (default 4096); analytic: shadow rays per pair that an
                                  occluder may block (default 32). 0 = the method's default */
-    bn_storage   storage;     /* default dense */
+    const char  *storage;     /* a storage name (bn_storage_names(): "dense", "sparse"); default dense */
     bn_precision precision;   /* default float */
-    double       sparse_threshold;  /* sparse: drop F_ij below it (default 0: exact zeros only) */
+    double       sparse_threshold;  /* storages that drop entries (sparse): drop F_ij below it (default 0:
+                                       exact zeros only) */
     size_t       max_memory;  /* bytes; 0 = 80% of physical memory */
     uint64_t     seed;
     int          quiet;       /* no progress bar */
@@ -92,10 +93,11 @@ double bn_ff_polygon_pair(const double *vi, size_t ni, const double *vj, size_t 
 
 /* Writes F: `.csv` (provenance lines starting with '#', then `patch,area,F0,...,F{N-1}` and one
  * row per patch, areas in m^2) or `.bin` (the layout documented in doc/readme/formfactors.md:
- * "BNFF", version 1, N, value bytes, layout dense|csr, nnz, provenance text, areas, F).
+ * "BNFF", version 2, N, nnz, value bytes, layout full|indexed rows, storage, key, provenance text,
+ * areas, F), values written in `prec`. Needs an operator with entries (BN_OP_ENTRIES).
  * provenance: '#'-prefixed lines (may be NULL). Atomic: written to a temporary and renamed. */
 bn_status bn_ff_write(const bn_transport *k, const bn_scene *scene, const char *path, const char *provenance,
-                      bn_error *err);
+                      bn_precision prec, bn_error *err);
 
 /* Prints diagnostics as `key value` lines (for logs and `bounce formfactors`). */
 void bn_ff_diagnostics_print(const bn_ff_diagnostics *d, FILE *fp);

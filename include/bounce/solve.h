@@ -107,8 +107,10 @@ typedef struct bn_solve_result {
 } bn_solve_result;
 
 /* Solves (I - K) L = E. E: N*3 (borrowed). Fills *res (free with bn_solve_result_free). Returns
- * BN_OK when converged, BN_ENOTCONV at the iteration limit, BN_ENUMERIC when diverged or
- * singular (res->reason says which), BN_EINTR/BN_ETERM when interrupted. */
+ * BN_OK when converged, BN_ENOTCONV at the iteration limit (L and the terms are kept),
+ * BN_ENUMERIC when diverged or singular (res->reason says which), BN_ENOTSUP when K cannot serve
+ * the method (Gauss-Seidel needs rows, direct needs entries), BN_EINTR/BN_ETERM when interrupted,
+ * or the status of a failed application of K. On any failure but BN_ENOTCONV, res holds no L. */
 bn_status bn_solve(const bn_transport *k, const double *E, const bn_solve_opts *o, bn_solve_result *res,
                    bn_error *err);
 void bn_solve_result_free(bn_solve_result *res);
@@ -122,8 +124,9 @@ size_t bn_solve_direct_bytes(size_t n);
 bn_status bn_solve_spectral_radius(const bn_transport *k, size_t max_steps, double *estimate, double *lower,
                                    size_t *steps, bn_error *err);
 
-/* Fills terms[k] = K^k E for k = 0..nterms-1 (caller-allocated, N*3 each). */
-void bn_solve_terms(const bn_transport *k, const double *E, int nterms, double **terms);
+/* Fills terms[k] = K^k E for k = 0..nterms-1 (caller-allocated, N*3 each); stops with the
+ * operator's status if an application of K fails. */
+bn_status bn_solve_terms(const bn_transport *k, const double *E, int nterms, double **terms, bn_error *err);
 
 /* The column names of the convergence table. */
 #define BN_SOLVE_LOG_COLUMNS "iteration,residual_max,residual_rms,residual_max_R,residual_max_G,residual_max_B,change,bound,error_bound,seconds"

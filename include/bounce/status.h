@@ -20,6 +20,7 @@ extern "C" {
     X(ENOMEM,    4,   "resource limit (memory)")                                \
     X(ENUMERIC,  5,   "numerical failure")                                      \
     X(ENOTCONV,  5,   "not converged within the iteration limit")               \
+    X(ENOTSUP,   2,   "the operator cannot do what was asked")                  \
     X(EVERDICT,  6,   "a check or study verdict failed")                        \
     X(EINTR,     130, "interrupted by SIGINT")                                  \
     X(ETERM,     143, "interrupted by SIGTERM")                                 \

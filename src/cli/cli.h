@@ -88,7 +88,7 @@ typedef struct bn_cli_ff {
     int    method;            /* index into "analytic|montecarlo|hemisphere" */
     int    samples;           /* 0 = the method's default */
     int    precision;         /* index into "float|double" */
-    int    storage;           /* index into "dense|sparse" */
+    const char *storage;      /* a storage name (bn_storage_names()); NULL = the default */
     double sparse_threshold;
     size_t max_memory;        /* bytes, 0 = 80% of physical memory */
     double tolerance;         /* 0 = default */

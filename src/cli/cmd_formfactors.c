@@ -68,7 +68,7 @@ int bn_cmd_formfactors(int argc, char **argv, bn_cli_common *c)
                      c->cmdline, bn_version(), desc, bn_scene_path(s), bn_scene_digest(s), d.n,
                      bn_unit_name(bn_scene_unit(s)), d.row_sum_min, d.row_sum_max, d.reciprocity_residual,
                      d.k_norm_inf);
-            st = bn_ff_write(k, s, output, prov, &err);
+            st = bn_ff_write(k, s, output, prov, opts.precision, &err);
         }
         if (st != BN_OK)
             bn_cli_fail(&err);

@@ -14,7 +14,7 @@ void bn_cli_add_ff(bn_optset *s, bn_cli_ff *o)
                               "point pairs per pair (64); hemisphere: rays per patch (4096)"});
     bn_optset_add(s, (bn_opt){"precision", 0, BN_OPT_CHOICE, &o->precision, "float|double", 0, 0, "float|double",
                               "storage precision of F (default float; sums are always double)"});
-    bn_optset_add(s, (bn_opt){"storage", 0, BN_OPT_CHOICE, &o->storage, "dense|sparse", 0, 0, "dense|sparse",
+    bn_optset_add(s, (bn_opt){"storage", 0, BN_OPT_STRING, &o->storage, NULL, 0, 0, "dense|sparse",
                               "F storage: dense N^2 (default) or sparse CSR without the exact zeros"});
     bn_optset_add(s, (bn_opt){"sparse-threshold", 0, BN_OPT_DOUBLE, &o->sparse_threshold, NULL, 0, 0.999, "T",
                               "sparse: also drop F_ij < T; the dropped mass per row is reported (default 0)"});
@@ -41,7 +41,8 @@ void bn_cli_ff_opts(const bn_cli_ff *o, const bn_cli_common *c, bn_formfactor_op
     out->method = (bn_ff_method)o->method;
     out->samples = o->samples;
     out->precision = o->precision ? BN_PRECISION_DOUBLE : BN_PRECISION_FLOAT;
-    out->storage = o->storage ? BN_STORAGE_SPARSE : BN_STORAGE_DENSE;
+    if (o->storage)
+        out->storage = o->storage;
     out->sparse_threshold = o->sparse_threshold;
     out->max_memory = o->max_memory;
     if (o->tolerance > 0)

@@ -1,19 +1,29 @@
-/* F on disk: CSV for people, the BNFF binary layout for programs and the cache.
- * BNFF v1, little-endian:
- *   0  char[4]  "BNFF"          4  uint32 version (1)      8  uint64 N
- *   16 uint32 value bytes (4 float32, 8 float64)           20 uint32 layout (0 dense, 1 CSR)
- *   24 uint64 nnz (dense: N*N)  32 uint64 T, text length   40 T bytes of '#' lines (provenance, key)
+/* F on disk: CSV for people, the BNFF binary layout for programs and the cache. Both are written
+ * row by row through the operator's entries and read back through a storage's builder, so neither
+ * knows how F is stored. BNFF v2, little-endian:
+ *   0  char[4]  "BNFF"       4  uint32 version (2)       8  uint64 N       16 uint64 nnz (entries written)
+ *   24 uint32 value bytes (4 float32, 8 float64)          28 uint32 layout (0 full rows, 1 indexed rows)
+ *   32 char[16] the storage the values were kept in (cache files: "dense", "sparse"), else the
+ *               operator's name (NUL-padded; a cache is used only when it names the storage asked for)
+ *   48 uint64 K, key length  56 uint64 T, text length     64 K bytes of key, then T bytes of '#' lines
  *   then N float64 patch areas (m^2), then
- *     dense: N*N values, row-major (F_ij at i*N + j);
- *     CSR:   N+1 uint64 row starts, nnz uint32 columns, nnz values. */
+ *     full rows:    N*N values, row-major (F_ij at i*N + j);
+ *     indexed rows: N+1 uint64 row starts, nnz uint32 columns (increasing in each row), nnz values. */
 #include "formfactor/ff_io.h"
-#include "transport/transport_internal.h"
 #include "base/internal.h"
 
 #include <errno.h>
 #include <string.h>
 
-#define BN__BNFF_VERSION 1u
+#define BN__BNFF_VERSION 2u
+#define BN__BNFF_HEAD 64
+#define BN__BNFF_TEXT_MAX (1u << 20)
+
+typedef struct bn__bnff_head {
+    uint64_t n, nnz, klen, tlen;
+    uint32_t vbytes, layout;
+    char storage[17];
+} bn__bnff_head;
 
 static int bn__little_endian(void)
 {
@@ -27,12 +37,6 @@ static const char *bn__ext(const char *path)
     return dot && (!slash || dot > slash) ? dot : "";
 }
 
-bn_status bn_ff_write(const bn_transport *k, const bn_scene *scene, const char *path, const char *provenance,
-                      bn_error *err)
-{
-    return bn__ff_write_file(k, scene, path, NULL, provenance, err);
-}
-
 static double bn__area_m2(const bn_scene *s, size_t i)
 {
     size_t np;
@@ -41,15 +45,157 @@ static double bn__area_m2(const bn_scene *s, size_t i)
     return p[i].area * m * m;
 }
 
+/* Row buffers for reading F through the operator. */
+typedef struct bn__rows {
+    size_t *cols;
+    double *vals;
+} bn__rows;
+
+static bn_status bn__rows_init(bn__rows *r, size_t n, bn_error *err)
+{
+    r->cols = bn__malloc_array(n ? n : 1, sizeof(size_t));
+    r->vals = bn__malloc_array(n ? n : 1, sizeof(double));
+    if (!r->cols || !r->vals) {
+        free(r->cols);
+        free(r->vals);
+        return bn_error_set(err, BN_ENOMEM, "out of memory for rows of %zu entries", n);
+    }
+    return BN_OK;
+}
+
+static void bn__rows_free(bn__rows *r)
+{
+    free(r->cols);
+    free(r->vals);
+}
+
+static bn_status bn__write_csv(FILE *fp, const bn_transport *k, const bn_scene *scene, const char *provenance,
+                               bn_precision prec, bn_error *err)
+{
+    size_t n = bn_transport_size(k), cnt;
+    bn__rows r;
+    bn_status st = bn__rows_init(&r, n, err);
+    if (st != BN_OK)
+        return st;
+    if (provenance)
+        fputs(provenance, fp);
+    fprintf(fp, "# F_ij: row i holds the form factors from patch i to patches j = 0..N-1; area in m^2\n");
+    fprintf(fp, "patch,area");
+    for (size_t j = 0; j < n; j++)
+        fprintf(fp, ",F%zu", j);
+    fputc('\n', fp);
+    for (size_t i = 0; i < n && st == BN_OK && !ferror(fp); i++) {
+        size_t q = 0;
+        st = bn_transport_row_entries(k, i, r.cols, r.vals, &cnt, err);
+        fprintf(fp, "%zu,%.17g", i, bn__area_m2(scene, i));
+        for (size_t j = 0; j < n && st == BN_OK; j++) {
+            double v = q < cnt && r.cols[q] == j ? r.vals[q++] : 0;
+            if (v == 0)
+                fputs(",0", fp);
+            else
+                fprintf(fp, prec == BN_PRECISION_FLOAT ? ",%.9g" : ",%.17g", v);
+        }
+        fputc('\n', fp);
+        if ((i & 63) == 0 && bn_interrupted() != BN_OK)
+            st = bn_error_set(err, bn_interrupted(), "interrupted while writing F");
+    }
+    bn__rows_free(&r);
+    return st;
+}
+
+static void bn__put_value(FILE *fp, double v, uint32_t vbytes)
+{
+    if (vbytes == 4) {
+        float x = (float)v;
+        fwrite(&x, sizeof x, 1, fp);
+    } else {
+        fwrite(&v, sizeof v, 1, fp);
+    }
+}
+
+/* Counts the stored entries (one pass), then writes header, text, areas and rows (a second). */
+static bn_status bn__write_bnff(FILE *fp, const bn_transport *k, const bn_scene *scene, const char *key,
+                                const char *provenance, bn_precision prec, const char *storage, bn_error *err)
+{
+    size_t n = bn_transport_size(k), cnt;
+    uint64_t nnz = 0, pos = 0;
+    bn__bnff_head h;
+    unsigned char head[BN__BNFF_HEAD];
+    bn__rows r;
+    bn_status st;
+    if (!bn__little_endian())
+        return bn_error_set(err, BN_EINTERNAL, "BNFF files are little-endian; this host is not");
+    st = bn__rows_init(&r, n, err);
+    for (size_t i = 0; i < n && st == BN_OK; i++) {
+        st = bn_transport_row_entries(k, i, r.cols, r.vals, &cnt, err);
+        nnz += cnt;
+    }
+    if (st != BN_OK) {
+        bn__rows_free(&r);
+        return st;
+    }
+    memset(&h, 0, sizeof h);
+    memset(head, 0, sizeof head);
+    h.n = n;
+    h.nnz = nnz;
+    h.vbytes = prec == BN_PRECISION_FLOAT ? 4 : 8;
+    h.layout = nnz == (uint64_t)n * n ? 0 : 1;
+    h.klen = key ? strlen(key) : 0;
+    h.tlen = provenance ? strlen(provenance) : 0;
+    memcpy(head, "BNFF", 4);
+    {
+        uint32_t v = BN__BNFF_VERSION;
+        memcpy(head + 4, &v, 4);
+    }
+    memcpy(head + 8, &h.n, 8);
+    memcpy(head + 16, &h.nnz, 8);
+    memcpy(head + 24, &h.vbytes, 4);
+    memcpy(head + 28, &h.layout, 4);
+    strncpy((char *)head + 32, storage ? storage : "", 16);
+    memcpy(head + 48, &h.klen, 8);
+    memcpy(head + 56, &h.tlen, 8);
+    fwrite(head, 1, sizeof head, fp);
+    if (key)
+        fwrite(key, 1, (size_t)h.klen, fp);
+    if (provenance)
+        fwrite(provenance, 1, (size_t)h.tlen, fp);
+    for (size_t i = 0; i < n; i++) {
+        double a = bn__area_m2(scene, i);
+        fwrite(&a, sizeof a, 1, fp);
+    }
+    if (h.layout == 1) {
+        /* row starts, then every row's columns, then every row's values */
+        for (size_t i = 0; i < n && st == BN_OK; i++) {
+            fwrite(&pos, 8, 1, fp);
+            st = bn_transport_row_entries(k, i, r.cols, r.vals, &cnt, err);
+            pos += cnt;
+        }
+        fwrite(&pos, 8, 1, fp);
+        for (size_t i = 0; i < n && st == BN_OK; i++) {
+            st = bn_transport_row_entries(k, i, r.cols, r.vals, &cnt, err);
+            for (size_t q = 0; q < cnt; q++) {
+                uint32_t c = (uint32_t)r.cols[q];
+                fwrite(&c, 4, 1, fp);
+            }
+        }
+    }
+    for (size_t i = 0; i < n && st == BN_OK && !ferror(fp); i++) {
+        st = bn_transport_row_entries(k, i, r.cols, r.vals, &cnt, err);
+        for (size_t q = 0; q < cnt; q++)
+            bn__put_value(fp, r.vals[q], h.vbytes);
+        if ((i & 63) == 0 && st == BN_OK && bn_interrupted() != BN_OK)
+            st = bn_error_set(err, bn_interrupted(), "interrupted while writing F");
+    }
+    bn__rows_free(&r);
+    return st;
+}
+
 bn_status bn__ff_write_file(const bn_transport *k, const bn_scene *scene, const char *path, const char *key,
-                            const char *provenance, bn_error *err)
+                            const char *provenance, bn_precision prec, const char *storage, bn_error *err)
 {
     bn__outfile f;
     bn_status st;
     size_t n = bn_transport_size(k), np;
-    const bn__csr *csr = bn__csr_of(k);
-    const char *name = bn_transport_name(k);
-    int is_float = strstr(name, "float") != NULL;
     const char *ext = bn__ext(path);
     int csv = strcmp(ext, ".csv") == 0 || strcmp(ext, ".CSV") == 0;
     bn_scene_patches(scene, &np);
@@ -57,190 +203,180 @@ bn_status bn__ff_write_file(const bn_transport *k, const bn_scene *scene, const 
         return bn_error_set(err, BN_EINTERNAL, "F has %zu rows but the scene %zu patches", n, np);
     if (!csv && strcmp(ext, ".bin") != 0 && !key)
         return bn_error_set(err, BN_EUSAGE, "%s: the output must end in .csv or .bin", path);
+    st = bn_transport_require(k, BN_OP_ENTRIES, "writing F to a file", err);
+    if (st != BN_OK)
+        return st;
     st = bn__outfile_open(&f, path, csv ? "w" : "wb", err);
     if (st != BN_OK)
         return st;
-    if (csv) {
-        if (provenance)
-            fputs(provenance, f.fp);
-        fprintf(f.fp, "# F_ij: row i holds the form factors from patch i to patches j = 0..N-1; area in m^2\n");
-        fprintf(f.fp, "patch,area");
-        for (size_t j = 0; j < n; j++)
-            fprintf(f.fp, ",F%zu", j);
-        fputc('\n', f.fp);
-        for (size_t i = 0; i < n && !ferror(f.fp); i++) {
-            fprintf(f.fp, "%zu,%.17g", i, bn__area_m2(scene, i));
-            for (size_t j = 0; j < n; j++) {
-                double v = bn_transport_F(k, i, j);
-                if (v == 0)
-                    fputs(",0", f.fp);
-                else
-                    fprintf(f.fp, is_float ? ",%.9g" : ",%.17g", v);
-            }
-            fputc('\n', f.fp);
-            if ((i & 63) == 0 && bn_interrupted() != BN_OK) {
-                bn__outfile_abort(&f);
-                return bn_error_set(err, bn_interrupted(), "interrupted while writing %s", path);
-            }
-        }
-    } else {
-        char head[40];
-        uint32_t u32;
-        uint64_t u64, tlen;
-        size_t klen = key ? strlen(key) + 8 : 0, plen = provenance ? strlen(provenance) : 0;
-        if (!bn__little_endian()) {
-            bn__outfile_abort(&f);
-            return bn_error_set(err, BN_EINTERNAL, "BNFF files are little-endian; this host is not");
-        }
-        tlen = klen + plen;
-        memcpy(head, "BNFF", 4);
-        u32 = BN__BNFF_VERSION;
-        memcpy(head + 4, &u32, 4);
-        u64 = n;
-        memcpy(head + 8, &u64, 8);
-        u32 = is_float ? 4 : 8;
-        memcpy(head + 16, &u32, 4);
-        u32 = csr ? 1 : 0;
-        memcpy(head + 20, &u32, 4);
-        u64 = csr ? csr->nnz : (uint64_t)n * n;
-        memcpy(head + 24, &u64, 8);
-        memcpy(head + 32, &tlen, 8);
-        fwrite(head, 1, sizeof head, f.fp);
-        if (key)
-            fprintf(f.fp, "# key: %s\n", key);
-        if (provenance)
-            fwrite(provenance, 1, plen, f.fp);
-        for (size_t i = 0; i < n; i++) {
-            double a = bn__area_m2(scene, i);
-            fwrite(&a, sizeof a, 1, f.fp);
-        }
-        if (csr) {
-            for (size_t i = 0; i <= n; i++) {
-                u64 = csr->rowptr[i];
-                fwrite(&u64, 8, 1, f.fp);
-            }
-            fwrite(csr->col, sizeof(uint32_t), csr->nnz, f.fp);
-            if (csr->v32)
-                fwrite(csr->v32, sizeof(float), csr->nnz, f.fp);
-            else
-                fwrite(csr->v64, sizeof(double), csr->nnz, f.fp);
-        } else {
-            for (size_t i = 0; i < n && !ferror(f.fp); i++)
-                for (size_t j = 0; j < n; j++) {
-                    double v = bn_transport_F(k, i, j);
-                    if (is_float) {
-                        float x = (float)v;
-                        fwrite(&x, sizeof x, 1, f.fp);
-                    } else {
-                        fwrite(&v, sizeof v, 1, f.fp);
-                    }
-                }
-        }
+    st = csv ? bn__write_csv(f.fp, k, scene, provenance, prec, err)
+             : bn__write_bnff(f.fp, k, scene, key, provenance, prec, storage ? storage : bn_transport_name(k), err);
+    if (st != BN_OK) {
+        bn__outfile_abort(&f);
+        return st;
     }
     return bn__outfile_commit(&f, err);
 }
 
+bn_status bn_ff_write(const bn_transport *k, const bn_scene *scene, const char *path, const char *provenance,
+                      bn_precision prec, bn_error *err)
+{
+    return bn__ff_write_file(k, scene, path, NULL, provenance, prec, NULL, err);
+}
+
+/* ---- reading the cache ---- */
+
 static int bn__read(FILE *fp, void *p, size_t size, size_t n) { return fread(p, size, n, fp) == n; }
 
-bn_status bn__ff_read_cache(const char *path, const char *key, size_t n, bn_precision prec, bn_storage storage,
-                            float **f32, double **f64, bn__csr **csr, void **impl, const bn_transport_ops **ops,
-                            char *why, size_t why_size)
+static int bn__read_head(FILE *fp, bn__bnff_head *h, char *why, size_t why_size)
+{
+    unsigned char head[BN__BNFF_HEAD];
+    uint32_t version;
+    if (!bn__read(fp, head, 1, sizeof head) || memcmp(head, "BNFF", 4) != 0) {
+        snprintf(why, why_size, "not a BNFF file");
+        return 0;
+    }
+    memcpy(&version, head + 4, 4);
+    if (version != BN__BNFF_VERSION) {
+        snprintf(why, why_size, "BNFF version %u, not %u", version, BN__BNFF_VERSION);
+        return 0;
+    }
+    memcpy(&h->n, head + 8, 8);
+    memcpy(&h->nnz, head + 16, 8);
+    memcpy(&h->vbytes, head + 24, 4);
+    memcpy(&h->layout, head + 28, 4);
+    memcpy(h->storage, head + 32, 16);
+    h->storage[16] = '\0';
+    memcpy(&h->klen, head + 48, 8);
+    memcpy(&h->tlen, head + 56, 8);
+    return 1;
+}
+
+/* The file's pattern for storages that want one: row i's columns from the indexed layout (or
+ * every column for full rows). */
+typedef struct bn__file_pattern {
+    size_t n;
+    const uint64_t *rowptr;   /* NULL: full rows */
+    const uint32_t *col;
+} bn__file_pattern;
+
+static size_t bn__file_cols(void *user, size_t i, uint32_t *cols)
+{
+    const bn__file_pattern *p = user;
+    size_t b = p->rowptr ? (size_t)p->rowptr[i] : 0, e = p->rowptr ? (size_t)p->rowptr[i + 1] : p->n;
+    if (cols)
+        for (size_t q = b; q < e; q++)
+            cols[q - b] = p->rowptr ? p->col[q] : (uint32_t)q;
+    return e - b;
+}
+
+/* The indexed layout's row starts and columns, checked (monotone, in range, increasing). */
+static int bn__read_index(FILE *fp, const bn__bnff_head *h, uint64_t **rowptr, uint32_t **col)
+{
+    size_t n = (size_t)h->n;
+    int ok;
+    *rowptr = bn__malloc_array(n + 1, sizeof(uint64_t));
+    *col = bn__malloc_array(h->nnz ? (size_t)h->nnz : 1, sizeof(uint32_t));
+    ok = *rowptr && *col && bn__read(fp, *rowptr, 8, n + 1) && (*rowptr)[0] == 0 && (*rowptr)[n] == h->nnz &&
+         bn__read(fp, *col, 4, (size_t)h->nnz);
+    for (size_t i = 0; ok && i < n; i++) {
+        ok = (*rowptr)[i + 1] >= (*rowptr)[i];
+        for (uint64_t q = (*rowptr)[i]; ok && q < (*rowptr)[i + 1]; q++)
+            ok = (*col)[q] < n && (q == (*rowptr)[i] || (*col)[q] > (*col)[q - 1]);
+    }
+    return ok;
+}
+
+/* Values row by row into the builder. */
+static int bn__read_values(FILE *fp, const bn__bnff_head *h, const bn__file_pattern *p, bn_transport_builder *b)
+{
+    size_t n = (size_t)h->n;
+    bn__rows r;
+    int ok = 1;
+    if (bn__rows_init(&r, n, NULL) != BN_OK)
+        return 0;
+    for (size_t i = 0; ok && i < n; i++) {
+        size_t cnt = p->rowptr ? (size_t)(p->rowptr[i + 1] - p->rowptr[i]) : n, base = p->rowptr ? (size_t)p->rowptr[i] : 0;
+        for (size_t q = 0; ok && q < cnt; q++) {
+            r.cols[q] = p->rowptr ? p->col[base + q] : q;
+            if (h->vbytes == 4) {
+                float x;
+                ok = bn__read(fp, &x, 4, 1);
+                r.vals[q] = x;
+            } else {
+                ok = bn__read(fp, &r.vals[q], 8, 1);
+            }
+        }
+        ok = ok && bn_transport_builder_put_row(b, i, r.cols, r.vals, cnt, NULL) == BN_OK;
+    }
+    bn__rows_free(&r);
+    return ok;
+}
+
+bn_status bn__ff_read_cache(const char *path, const char *key, size_t n, const char *storage, bn_precision prec,
+                            const double *rho, bn_transport **out, char *why, size_t why_size)
 {
     FILE *fp = fopen(path, "rb");
-    char head[40], *text = NULL, *want = NULL;
-    uint32_t version, vbytes, layout;
-    uint64_t N, nnz, tlen;
-    size_t elem = prec == BN_PRECISION_FLOAT ? 4 : 8;
+    bn__bnff_head h;
+    char *text = NULL;
+    uint64_t *rowptr = NULL;
+    uint32_t *col = NULL;
+    bn_transport_builder *b = NULL;
+    bn_builder_opts bo;
+    bn__file_pattern pat;
     bn_status st = BN_EINPUT;
-    bn_error err;
-    *f32 = NULL;
-    *f64 = NULL;
-    *csr = NULL;
-    *impl = NULL;
-    *ops = NULL;
-    bn_error_clear(&err);
+    *out = NULL;
     if (!fp) {
         if (errno != ENOENT)
             snprintf(why, why_size, "cannot read it: %s", strerror(errno));
         return BN_EIO;
     }
-    if (!bn__read(fp, head, 1, sizeof head) || memcmp(head, "BNFF", 4) != 0) {
-        snprintf(why, why_size, "not a BNFF file");
+    if (!bn__read_head(fp, &h, why, why_size))
+        goto done;
+    if (h.n != n || strcmp(h.storage, storage) != 0 || h.vbytes != (prec == BN_PRECISION_FLOAT ? 4u : 8u) ||
+        h.layout > 1 || h.klen != strlen(key) || h.tlen > BN__BNFF_TEXT_MAX ||
+        (h.layout == 0 && h.nnz != (uint64_t)n * n) || h.nnz > (uint64_t)n * n) {
+        snprintf(why, why_size, "its patch count, storage, precision or layout differ");
         goto done;
     }
-    memcpy(&version, head + 4, 4);
-    memcpy(&N, head + 8, 8);
-    memcpy(&vbytes, head + 16, 4);
-    memcpy(&layout, head + 20, 4);
-    memcpy(&nnz, head + 24, 8);
-    memcpy(&tlen, head + 32, 8);
-    if (version != BN__BNFF_VERSION || N != n || vbytes != elem ||
-        layout != (storage == BN_STORAGE_SPARSE ? 1u : 0u) || tlen > (1u << 20)) {
-        snprintf(why, why_size, "its version, patch count, precision or storage differ");
-        goto done;
-    }
-    text = malloc(tlen + 1);
-    want = malloc(strlen(key) + 16);
-    if (!text || !want || !bn__read(fp, text, 1, tlen)) {
-        snprintf(why, why_size, "truncated header");
-        goto done;
-    }
-    text[tlen] = '\0';
-    snprintf(want, strlen(key) + 16, "# key: %s\n", key);
-    if (strncmp(text, want, strlen(want)) != 0) {
+    text = malloc((size_t)h.klen + 1);
+    if (!text || !bn__read(fp, text, 1, (size_t)h.klen) || memcmp(text, key, (size_t)h.klen) != 0) {
         snprintf(why, why_size, "its key differs (scene, meshing or form-factor options changed)");
         goto done;
     }
-    if (fseek(fp, (long)(8 * n), SEEK_CUR) != 0) {
-        snprintf(why, why_size, "truncated areas");
+    if (fseek(fp, (long)(h.tlen + 8 * n), SEEK_CUR) != 0) {
+        snprintf(why, why_size, "truncated text or areas");
         goto done;
     }
-    if (layout == 0) {
-        bn__dense_view v;
-        if (nnz != (uint64_t)n * n || bn__dense_alloc(n, prec, &v, impl, ops, &err) != BN_OK) {
-            snprintf(why, why_size, "bad size or out of memory");
-            goto done;
-        }
-        if (!bn__read(fp, v.f32 ? (void *)v.f32 : (void *)v.f64, elem, n * n)) {
-            (*ops)->destroy(*impl);
-            *impl = NULL;
-            snprintf(why, why_size, "truncated values");
-            goto done;
-        }
-        *f32 = v.f32;
-        *f64 = v.f64;
-    } else {
-        size_t *counts = bn__malloc_array(n + 1, sizeof(size_t));
-        uint64_t *rp = bn__malloc_array(n + 1, sizeof(uint64_t));
-        bn__csr *c = NULL;
-        int ok = counts && rp && bn__read(fp, rp, 8, n + 1) && rp[0] == 0 && rp[n] == nnz;
-        for (size_t i = 0; ok && i < n; i++) {
-            ok = rp[i + 1] >= rp[i];
-            counts[i] = (size_t)(rp[i + 1] - rp[i]);
-        }
-        if (ok)
-            ok = bn__csr_alloc(n, counts, prec, &c, &err) == BN_OK;
-        free(counts);
-        free(rp);
-        if (ok)
-            ok = bn__read(fp, c->col, 4, c->nnz) &&
-                 bn__read(fp, c->v32 ? (void *)c->v32 : (void *)c->v64, elem, c->nnz);
-        for (size_t i = 0; ok && i < n; i++)
-            for (size_t k = c->rowptr[i]; ok && k < c->rowptr[i + 1]; k++)
-                ok = c->col[k] < n && (k == c->rowptr[i] || c->col[k] > c->col[k - 1]);
-        if (!ok) {
-            bn__csr_free(c);
-            snprintf(why, why_size, "malformed sparse data");
-            goto done;
-        }
-        *csr = c;
-        *impl = c;
-        *ops = bn__csr_ops(c);
+    if (h.layout == 1 && !bn__read_index(fp, &h, &rowptr, &col)) {
+        snprintf(why, why_size, "malformed row index");
+        goto done;
     }
-    st = BN_OK;
+    pat.n = n;
+    pat.rowptr = rowptr;
+    pat.col = col;
+    bn_builder_opts_default(&bo);
+    bo.storage = storage;
+    bo.precision = prec;
+    bo.pattern = bn__file_cols;
+    bo.pattern_user = &pat;
+    if (bn_transport_builder_create(n, &bo, NULL, &b, NULL) != BN_OK) {
+        snprintf(why, why_size, "out of memory");
+        goto done;
+    }
+    if (!bn__read_values(fp, &h, &pat, b)) {
+        snprintf(why, why_size, "truncated values");
+        goto done;
+    }
+    st = bn_transport_builder_finish(b, rho, out, NULL, NULL);
+    b = NULL;
+    if (st != BN_OK)
+        snprintf(why, why_size, "cannot make the operator");
 done:
+    bn_transport_builder_destroy(b);
     free(text);
-    free(want);
+    free(rowptr);
+    free(col);
     fclose(fp);
     return st;
 }

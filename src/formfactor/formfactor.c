@@ -7,8 +7,6 @@
 #include "bounce/formfactor.h"
 #include "formfactor/ff_internal.h"
 #include "formfactor/ff_io.h"
-#include "transport/transport_internal.h"
-#include "transport/sparse_internal.h"
 #include "base/internal.h"
 #include "base/vec.h"
 
@@ -53,7 +51,7 @@ void bn_formfactor_opts_default(bn_formfactor_opts *o)
     memset(o, 0, sizeof *o);
     o->method = BN_FF_ANALYTIC;
     o->samples = 0;
-    o->storage = BN_STORAGE_DENSE;
+    o->storage = BN_STORAGE_DEFAULT;
     o->precision = BN_PRECISION_FLOAT;
     o->sparse_threshold = 0;
     o->max_memory = 0;
@@ -70,8 +68,7 @@ void bn_formfactor_opts_describe(const bn_formfactor_opts *o, char *buf, size_t 
 {
     snprintf(buf, size, "method=%s samples=%d seed=%llu precision=%s storage=%s sparse_threshold=%.17g tolerance=%.17g",
              bn_ff_method_name(o->method), bn__samples(o), (unsigned long long)o->seed,
-             o->precision == BN_PRECISION_FLOAT ? "float" : "double",
-             o->storage == BN_STORAGE_DENSE ? "dense" : "sparse", o->sparse_threshold,
+             bn_precision_name(o->precision), o->storage ? o->storage : BN_STORAGE_DEFAULT, o->sparse_threshold,
              o->method == BN_FF_ANALYTIC ? (o->tolerance > 0 ? o->tolerance : 1e-5) : 0.0);
 }
 
@@ -299,30 +296,24 @@ static int bn__shaft_maybe(const bn__ffg *g, const size_t *cand, size_t ncand, s
     return 0;
 }
 
-/* ---- storage sink ---- */
+/* ---- where F goes: the storage's builder ---- */
 
-typedef struct bn__sink {
-    size_t n;
-    float *f32;
-    double *f64;
-    bn__csr *csr;
-    size_t lost;   /* writes that found no slot in the CSR pattern (hemisphere grazing hits) */
-} bn__sink;
+typedef bn_transport_builder bn__sink;
 
-static void bn__sink_put(bn__sink *s, size_t i, size_t j, double v)
+static void bn__sink_put(bn__sink *s, size_t i, size_t j, double v) { bn_transport_builder_put(s, i, j, v); }
+
+/* The storage's pattern: row i's facing patches (the only possible nonzeros). */
+static size_t bn__facing_cols(void *user, size_t i, uint32_t *cols)
 {
-    if (s->csr) {
-        size_t k = bn__csr_find(s->csr, i, j);
-        if (k != (size_t)-1)
-            bn__csr_set(s->csr, k, v);
-        else {
-#pragma omp atomic
-            s->lost++;
+    const bn__ffg *g = user;
+    size_t m = 0;
+    for (size_t j = 0; j < g->n; j++)
+        if (bn__facing(g, i, j)) {
+            if (cols)
+                cols[m] = (uint32_t)j;
+            m++;
         }
-    } else if (s->f32)
-        s->f32[i * s->n + j] = (float)v;
-    else
-        s->f64[i * s->n + j] = v;
+    return m;
 }
 
 /* ---- per-thread scratch for sampled pairs ---- */
@@ -632,99 +623,94 @@ static void bn__gib(double b, char *buf, size_t n)
     snprintf(buf, n, "%.3g %s", b, u[k]);
 }
 
-/* Per-row counts of the facing pairs: the CSR pattern (an upper bound of its entries). */
-static size_t bn__pattern_counts(const bn__ffg *g, size_t *counts)
-{
-    long n = (long)g->n;
-    size_t total = 0;
-#pragma omp parallel for schedule(dynamic, 16) reduction(+ : total)
-    for (long i = 0; i < n; i++) {
-        size_t c = 0;
-        for (size_t j = 0; j < g->n; j++)
-            c += (size_t)bn__facing(g, (size_t)i, j);
-        if (counts)
-            counts[i] = c;
-        total += c;
-    }
-    return total;
-}
-
+/* Per-thread buffers of the assembly and the per-patch geometry, beside F itself. */
 static size_t bn__scratch_bytes(size_t S, size_t n, int threads)
 {
-    return (size_t)threads * (S * (3 * sizeof(unsigned) + 7 * sizeof(double) + 7 * sizeof(float) + 1) + n * 8);
+    return (size_t)threads * (S * (3 * sizeof(unsigned) + 7 * sizeof(double) + 7 * sizeof(float) + 1) + n * 8) +
+           n * 64;
 }
 
-static size_t bn__dense_bytes(size_t n, bn_precision prec)
+static size_t bn__work_bytes(const bn_formfactor_opts *o, size_t n)
 {
-    size_t nn, b;
-    if (!bn__mul_size(n, n, &nn) || !bn__mul_size(nn, prec == BN_PRECISION_FLOAT ? 4 : 8, &b))
-        return (size_t)-1;
-    return b;
+    return bn__scratch_bytes((size_t)bn__samples(o), o->method == BN_FF_HEMISPHERE ? n : 0, bn_threads_get());
 }
 
 size_t bn_formfactor_bytes_needed(const bn_scene *scene, const bn_formfactor_opts *o)
 {
-    size_t n, need;
+    size_t n, nnz = 0, need;
     bn_scene_patches(scene, &n);
-    if (o->storage == BN_STORAGE_DENSE) {
-        need = bn__dense_bytes(n, o->precision);
-    } else {
+    if (bn_storage_needs_pattern(o->storage)) {
         bn__ffg g;
         if (bn__ffg_init(&g, scene, 0, NULL) != BN_OK)
-            return (size_t)-1;
-        need = bn__csr_bytes_for(n, bn__pattern_counts(&g, NULL), o->precision);
+            return SIZE_MAX;
+        for (size_t i = 0; i < n; i++)
+            nnz += bn__facing_cols(&g, i, NULL);
         bn__ffg_free(&g);
     }
-    if (need == (size_t)-1)
-        return need;
-    return need + bn__scratch_bytes((size_t)bn__samples(o), n, bn_threads_get()) + n * 64;
+    need = bn_storage_bytes(o->storage, n, nnz, o->precision);
+    return need == SIZE_MAX ? need : need + bn__work_bytes(o, n);
 }
 
 static bn_status bn__memory_error(size_t n, size_t need, size_t limit, const bn_formfactor_opts *o, bn_error *err)
 {
     char a[32], b[32], c[32];
-    double ratio = need == (size_t)-1 ? 1e30 : (double)need / (double)limit;
-    bn__gib(need == (size_t)-1 ? 1.8e19 : (double)need, a, sizeof a);
+    double ratio = need == SIZE_MAX ? 1e30 : (double)need / (double)limit;
+    size_t dense = bn_storage_bytes("dense", n, 0, o->precision);
+    int is_dense = strcmp(o->storage, "dense") == 0;
+    bn__gib(need == SIZE_MAX ? 1.8e19 : (double)need, a, sizeof a);
     bn__gib((double)limit, b, sizeof b);
-    bn__gib((double)n * (double)n * (o->precision == BN_PRECISION_FLOAT ? 4 : 8), c, sizeof c);
+    bn__gib(dense == SIZE_MAX ? 1.8e19 : (double)dense, c, sizeof c);
     return bn_error_set(err, BN_ENOMEM,
                         "%s F for %zu patches needs %s (dense N^2 alone is %s), above the limit of %s (--max-memory%s). "
                         "Remedies: a coarser mesh (about %zu patches would fit: raise --patch-size by %.2gx or lower "
-                        "--patches), --storage sparse%s, or raise --max-memory",
-                        o->storage == BN_STORAGE_DENSE ? "dense" : "sparse", n, a, c, b,
-                        o->max_memory ? "" : "; default 80% of physical memory",
+                        "--patches)%s%s, or raise --max-memory",
+                        o->storage, n, a, c, b, o->max_memory ? "" : "; default 80% of physical memory",
                         (size_t)((double)n / sqrt(ratio) * 0.95), sqrt(sqrt(ratio)) * 1.05,
+                        is_dense ? ", --storage sparse" : "",
                         o->precision == BN_PRECISION_DOUBLE ? ", --precision float" : "");
 }
 
-/* ---- diagnostics over the stored F ---- */
+/* ---- diagnostics over the stored F (through the operator: any storage) ---- */
 
-static bn_status bn__diagnose(const bn_scene *scene, const bn__sink *s, const bn_formfactor_opts *o,
+/* The first entry outside [0, 1] (or not finite), with its patches and faces. */
+static bn_status bn__bad_entry(const bn_scene *scene, const bn_ff_diagnostics *d, size_t i, size_t j, double v,
+                               const bn_formfactor_opts *o, bn_error *err)
+{
+    size_t np, nf;
+    const bn_patch *patch = bn_scene_patches(scene, &np);
+    const bn_face *faces = bn_scene_faces(scene, &nf);
+    return bn_error_set(err, BN_ENUMERIC,
+                        "F[%zu][%zu] = %.9g between patch %zu (face %zu, line %u) and patch %zu (face %zu, line "
+                        "%u) is outside [0, 1] or not finite (%zu negative, %zu above 1 or non-finite entries; "
+                        "method %s): refusing to use it",
+                        i, j, v, i, patch[i].face, faces[patch[i].face].line, j, patch[j].face,
+                        faces[patch[j].face].line, d->negative_entries, d->above_one_entries,
+                        bn_ff_method_name(o->method));
+}
+
+/* Row sums, entry ranges, reciprocity A_i F_ij = A_j F_ji and ||K||_inf of the stored F; refuses
+ * entries outside [0, 1] and rows summing far above 1 (bn__rowsum_error). */
+static bn_status bn__diagnose(const bn_scene *scene, const bn_transport *k, const bn_formfactor_opts *o,
                               bn_ff_diagnostics *d, bn_error *err)
 {
-    size_t n = s->n, np;
+    size_t n = bn_transport_size(k), np, worst_row = 0, bad_i = SIZE_MAX, bad_j = 0, cnt;
     const bn_patch *patch = bn_scene_patches(scene, &np);
-    double *rho = bn__malloc_array(3 * (n ? n : 1), sizeof(double));
-    double sum_dev2 = 0, rec = 0;
-    size_t bad_i = (size_t)-1, bad_j = 0;
-    double bad_v = 0;
-    size_t worst_row = 0;
-    if (!rho)
-        return bn_error_set(err, BN_ENOMEM, "out of memory");
-    bn_scene_patch_reflectance(scene, rho);
+    const double *rho = bn_transport_rho(k);
+    size_t *cols = bn__malloc_array(n ? n : 1, sizeof(size_t));
+    double *vals = bn__malloc_array(n ? n : 1, sizeof(double));
+    double sum_dev2 = 0, rec = 0, bad_v = 0;
+    bn_status st = (cols && vals) ? BN_OK : bn_error_set(err, BN_ENOMEM, "out of memory");
     d->n = n;
     d->row_sum_min = n ? INFINITY : 0;
     d->row_sum_max = n ? -INFINITY : 0;
-    d->negative_entries = d->above_one_entries = 0;
+    d->negative_entries = d->above_one_entries = d->rows_above_one = d->nonzeros = 0;
     d->k_norm_inf = 0;
-    d->rows_above_one = 0;
-    d->nonzeros = 0;
-    for (size_t i = 0; i < n; i++) {
+    for (size_t i = 0; i < n && st == BN_OK; i++) {
         double rs = 0;
-        size_t b = s->csr ? s->csr->rowptr[i] : 0, e = s->csr ? s->csr->rowptr[i + 1] : n;
-        for (size_t k = b; k < e; k++) {
-            size_t j = s->csr ? s->csr->col[k] : k;
-            double v = s->csr ? bn__csr_value(s->csr, k) : s->f32 ? (double)s->f32[i * n + j] : s->f64[i * n + j];
+        st = bn_transport_row_entries(k, i, cols, vals, &cnt, err);
+        for (size_t q = 0; q < cnt && st == BN_OK; q++) {
+            size_t j = cols[q];
+            double v = vals[q], w;
             int bad = 0;
             if (v != 0)
                 d->nonzeros++;
@@ -734,23 +720,22 @@ static bn_status bn__diagnose(const bn_scene *scene, const bn__sink *s, const bn
                 bad = 1, d->negative_entries++;
             else if (v > 1 + BN__F_SLACK)
                 bad = 1, d->above_one_entries++;
-            if (bad && bad_i == (size_t)-1) {
+            if (bad && bad_i == SIZE_MAX) {
                 bad_i = i;
                 bad_j = j;
                 bad_v = v;
             }
             rs += v;
-            /* reciprocity A_i F_ij = A_j F_ji, each stored pair seen once (j > i) */
-            if (j > i && v != 0) {
-                double w = s->csr ? (double)(bn__csr_find(s->csr, j, i) == (size_t)-1
-                                                 ? 0.0
-                                                 : bn__csr_value(s->csr, bn__csr_find(s->csr, j, i)))
-                                  : s->f32 ? (double)s->f32[j * n + i] : s->f64[j * n + i];
+            if (v == 0 || j == i)
+                continue;
+            /* reciprocity, each stored pair once (j > i); a mirror that is 0 is a broken pair */
+            st = bn_transport_entry(k, j, i, &w, err);
+            if (st == BN_OK && j > i) {
                 double a = patch[i].area * v, c = patch[j].area * w, m = fmax(fabs(a), fabs(c));
                 if (m > 0)
                     rec = fmax(rec, fabs(a - c) / m);
-            } else if (j < i && v != 0 && s->csr && bn__csr_find(s->csr, j, i) == (size_t)-1) {
-                rec = 1;   /* F_ji dropped by the threshold, F_ij kept */
+            } else if (st == BN_OK && w == 0) {
+                rec = 1;
             }
         }
         d->row_sum_min = fmin(d->row_sum_min, rs);
@@ -763,31 +748,14 @@ static bn_status bn__diagnose(const bn_scene *scene, const bn__sink *s, const bn
         for (int c = 0; c < 3; c++)
             d->k_norm_inf = fmax(d->k_norm_inf, rho[3 * i + c] * rs);
     }
-    if (s->f32 || s->f64) {
-        /* dense: the pairs with j < i whose mirror is zero were not seen above */
-        for (size_t i = 0; i < n; i++)
-            for (size_t j = 0; j < i; j++) {
-                double v = s->f32 ? (double)s->f32[i * n + j] : s->f64[i * n + j];
-                double w = s->f32 ? (double)s->f32[j * n + i] : s->f64[j * n + i];
-                if (v != 0 && w == 0)
-                    rec = 1;
-            }
-    }
+    free(cols);
+    free(vals);
+    if (st != BN_OK)
+        return st;
     d->row_sum_rms_dev = n ? sqrt(sum_dev2 / (double)n) : 0;
     d->reciprocity_residual = rec;
-    free(rho);
-    if (bad_i != (size_t)-1) {
-        const bn_face *faces;
-        size_t nf;
-        faces = bn_scene_faces(scene, &nf);
-        return bn_error_set(err, BN_ENUMERIC,
-                            "F[%zu][%zu] = %.9g between patch %zu (face %zu, line %u) and patch %zu (face %zu, line "
-                            "%u) is outside [0, 1] or not finite (%zu negative, %zu above 1 or non-finite entries; "
-                            "method %s): refusing to use it",
-                            bad_i, bad_j, bad_v, bad_i, patch[bad_i].face, faces[patch[bad_i].face].line, bad_j,
-                            patch[bad_j].face, faces[patch[bad_j].face].line, d->negative_entries,
-                            d->above_one_entries, bn_ff_method_name(o->method));
-    }
+    if (bad_i != SIZE_MAX)
+        return bn__bad_entry(scene, d, bad_i, bad_j, bad_v, o, err);
     if ((o->method == BN_FF_HEMISPHERE && d->row_sum_max > 1 + d->row_sum_tol) ||
         (o->method == BN_FF_ANALYTIC && d->row_sum_max > 1 + BN__ROWSUM_ERROR))
         return bn_error_set(err, BN_ENUMERIC,
@@ -801,7 +769,8 @@ static bn_status bn__diagnose(const bn_scene *scene, const bn__sink *s, const bn
 
 static double bn__rowsum_tol(const bn_formfactor_opts *o)
 {
-    double round = o->precision == BN_PRECISION_FLOAT ? 1e-6 : 1e-12;   /* float: 2^-23 per entry */
+    /* float: 2^-24 rounding per entry, a row of up to ~16 of them; double: far below any method */
+    double round = o->precision == BN_PRECISION_FLOAT ? 1e-6 : 1e-12;
     if (o->method == BN_FF_ANALYTIC)   /* quadrature; sampled visibility may add noise */
         return 10 * (o->tolerance > 0 ? o->tolerance : 1e-5) + round;
     if (o->method == BN_FF_HEMISPHERE)
@@ -809,80 +778,223 @@ static double bn__rowsum_tol(const bn_formfactor_opts *o)
     return 3.0 / sqrt((double)bn__samples(o));   /* montecarlo: statistical */
 }
 
-/* ---- the public entry ---- */
+/* ---- the stages of the assembly ---- */
 
-static bn_status bn__build_from_cache(const bn_scene *scene, const bn_formfactor_opts *o, const char *key,
-                                      bn_transport **out, bn_ff_diagnostics *diag, int *hit, bn_error *err);
-
-
-/* K = diag(rho) F over the storage just filled (ownership of impl passes to the transport). */
-static bn_status bn__wrap_transport(const bn_scene *scene, size_t n, const bn_transport_ops *ops, void *impl,
-                                   bn_transport **out, bn_error *err)
+/* The cache key: everything that changes F (scene, meshing through its digest, options). */
+static void bn__cache_key(const bn_scene *scene, const bn_formfactor_opts *o, size_t n, char *key, size_t size)
 {
+    char desc[400];
+    bn_formfactor_opts_describe(o, desc, sizeof desc);
+    snprintf(key, size, "bounce-ff-cache v2 bounce=%s scene=%016llx patches=%zu %s", bn_version(),
+             (unsigned long long)bn_scene_digest(scene), n, desc);
+}
+
+/* The storage's builder, refused with the remedies when F and the work buffers exceed the limit. */
+static bn_status bn__open_builder(const bn_scene *scene, bn__ffg *g, const bn_formfactor_opts *o, size_t n,
+                                  bn__sink **out, bn_error *err)
+{
+    bn_builder_opts bo;
+    size_t limit = bn__limit(o), work = bn__work_bytes(o, n), need = 0;
     bn_status st;
-    double *rho = bn__malloc_array(3 * n, sizeof(double));
-    if (!rho) {
-        ops->destroy(impl);
-        return bn_error_set(err, BN_ENOMEM, "out of memory");
-    }
-    bn_scene_patch_reflectance(scene, rho);
-    st = bn_transport_create(n, rho, ops, impl, out, err);
-    free(rho);
+    (void)scene;
+    bn_builder_opts_default(&bo);
+    bo.storage = o->storage;
+    bo.precision = o->precision;
+    bo.drop_below = o->sparse_threshold;
+    bo.max_bytes = limit > work ? limit - work : 1;
+    bo.pattern = bn__facing_cols;
+    bo.pattern_user = g;
+    st = bn_transport_builder_create(n, &bo, &need, out, err);
+    if (st == BN_ENOMEM && (need == SIZE_MAX || need > bo.max_bytes))
+        return bn__memory_error(n, need == SIZE_MAX ? need : need + work, limit, o, err);
     return st;
 }
 
-bn_status bn_formfactor_build(const bn_scene *scene, const bn_rt *rt, const bn_formfactor_opts *o_in,
-                              bn_transport **out, bn_ff_diagnostics *diag, bn_error *err)
+/* Every pair (or every row, for hemisphere) into the builder; counts into *tot. Rows are dealt
+ * cyclically to balance the triangle i < j; every pair is computed from its own seed, so the result
+ * does not depend on the schedule or the thread count. */
+static bn_status bn__assemble(const bn_rt *rt, const bn__ffg *g, const bn_formfactor_opts *o, bn__sink *sink,
+                              bn__counts *tot, bn_error *err)
 {
-    bn_formfactor_opts o = *o_in;
-    bn_ff_diagnostics dlocal, *d = diag ? diag : &dlocal;
-    bn__ffg g;
-    bn__sink sink;
-    void *impl = NULL;
-    const bn_transport_ops *ops = NULL;
-    size_t n, S, limit, need, *counts = NULL;
-    double t0 = bn__now();
-    bn_status st;
-    char key[512];
+    size_t n = g->n, S = (size_t)bn__samples(o), done = 0;
     volatile int fail = 0;
-    bn__counts tot;
     bn__progress prog;
-    size_t done = 0, total_work;
-    double rtol;
+    bn__progress_begin(&prog, "form factors", o->method == BN_FF_HEMISPHERE ? n : n * (n - 1) / 2, o->quiet);
+#pragma omp parallel
+    {
+        bn__scratch s;
+        bn__counts c;
+        size_t *cand = bn__malloc_array(g->nf ? g->nf : 1, sizeof(size_t));
+        long ln = (long)n;
+        memset(&c, 0, sizeof c);
+        if (!bn__scratch_init(&s, S, o->method == BN_FF_HEMISPHERE ? n : 0) || !cand)
+            fail = 1;
+#pragma omp for schedule(static, 1)
+        for (long li = 0; li < ln; li++) {
+            size_t i = (size_t)li, work;
+            if (fail || bn_interrupted() != BN_OK)
+                continue;
+            if (o->method == BN_FF_HEMISPHERE) {
+                bn__hemisphere_row(rt, g, o, i, &s, sink, &c);
+                work = 1;
+            } else {
+                size_t ncand = bn__row_candidates(g, i, cand);
+                for (size_t j = i + 1; j < n; j++)
+                    bn__analytic_or_mc_pair(rt, g, o, o->tolerance, cand, ncand, i, j, &s, sink, &c);
+                work = n - 1 - i;
+            }
+            bn__progress_step(&prog, &done, work);
+        }
+#pragma omp critical(bn_ff_counts)
+        {
+            tot->pairs_nonzero += c.pairs_nonzero;
+            tot->pairs_culled += c.pairs_culled;
+            tot->pairs_tested += c.pairs_tested;
+            tot->pairs_blocked += c.pairs_blocked;
+            tot->rays += c.rays;
+            tot->evals += c.evals;
+        }
+        bn__scratch_free(&s);
+        free(cand);
+    }
+    bn__progress_end(&prog);
+    if (fail)
+        return bn_error_set(err, BN_ENOMEM, "out of memory for per-thread buffers (%zu samples)", S);
+    if (bn_interrupted() != BN_OK)
+        return bn_error_set(err, bn_interrupted(), "form-factor assembly interrupted");
+    return BN_OK;
+}
 
-    *out = NULL;
-    memset(d, 0, sizeof *d);
-    memset(&tot, 0, sizeof tot);
-    if (o.tolerance <= 0)
-        o.tolerance = 1e-5;
-    rtol = o.tolerance;
-    S = (size_t)bn__samples(&o);
-    d->method = o.method;
-    d->samples = (int)S;
-    d->row_sum_tol = bn__rowsum_tol(&o);
+/* K = diag(rho) F from the filled builder, with the assembly's counts in the diagnostics. */
+static bn_status bn__finish(const bn_scene *scene, size_t n, bn__sink *sink, const bn__counts *tot,
+                            const bn_formfactor_opts *o, bn_transport **out, bn_ff_diagnostics *d, bn_error *err)
+{
+    bn_builder_report rep;
+    bn_status st;
+    double *rho = bn__malloc_array(3 * (n ? n : 1), sizeof(double));
+    if (!rho) {
+        bn_transport_builder_destroy(sink);
+        return bn_error_set(err, BN_ENOMEM, "out of memory");
+    }
+    bn_scene_patch_reflectance(scene, rho);
+    st = bn_transport_builder_finish(sink, rho, out, &rep, err);
+    free(rho);
+    if (st != BN_OK)
+        return st;
+    d->dropped_entries = rep.dropped_entries;
+    d->dropped_mass_max = rep.dropped_mass_max;
+    d->pairs_nonzero = tot->pairs_nonzero;
+    d->pairs_culled = tot->pairs_culled;
+    d->pairs_tested = tot->pairs_tested;
+    d->pairs_blocked = tot->pairs_blocked;
+    d->rays = tot->rays;
+    d->quad_evals = tot->evals;
+    d->occluded_fraction = tot->pairs_nonzero ? (double)tot->pairs_blocked / (double)tot->pairs_nonzero : 0;
+    if (rep.lost_puts)
+        bn_logf(&o->log, BN_LOG_WARN, "%zu hemisphere hits landed on patches outside the sparse pattern (grazing)",
+                rep.lost_puts);
+    return BN_OK;
+}
+
+static void bn__warn_rows(const bn_formfactor_opts *o, const bn_ff_diagnostics *d)
+{
+    if (d->rows_above_one)
+        bn_logf(&o->log, BN_LOG_WARN, "%zu rows of F sum to more than 1 + %.3g (largest %.9g; method %s)%s",
+                d->rows_above_one, d->row_sum_tol, d->row_sum_max, bn_ff_method_name(o->method),
+                o->method == BN_FF_HEMISPHERE ? ""
+                                             : ": sampling noise of the visibility estimate; more --samples reduce it");
+}
+
+/* A cache hit: K read through the storage's builder, checked like a fresh assembly. *hit = 0 on
+ * a miss (said as a note), which is not an error. */
+static bn_status bn__from_cache(const bn_scene *scene, const bn_formfactor_opts *o, const char *key,
+                                bn_transport **out, bn_ff_diagnostics *d, int *hit, bn_error *err)
+{
+    char why[256];
+    bn_status st;
+    size_t n;
+    double *rho;
+    bn_scene_patches(scene, &n);
+    *hit = 0;
+    why[0] = '\0';
+    rho = bn__malloc_array(3 * (n ? n : 1), sizeof(double));
+    if (!rho)
+        return bn_error_set(err, BN_ENOMEM, "out of memory");
+    bn_scene_patch_reflectance(scene, rho);
+    st = bn__ff_read_cache(o->cache_path, key, n, o->storage, o->precision, rho, out, why, sizeof why);
+    free(rho);
+    if (st != BN_OK) {
+        if (why[0])
+            bn_logf(&o->log, BN_LOG_INFO, "cache %s not used: %s", o->cache_path, why);
+        return BN_OK;   /* a miss: assemble and overwrite */
+    }
+    st = bn__diagnose(scene, *out, o, d, err);
+    if (st != BN_OK) {
+        bn_transport_destroy(*out);
+        *out = NULL;
+        return st;
+    }
+    d->bytes = bn_transport_bytes(*out);
+    d->from_cache = 1;
+    *hit = 1;
+    bn_logf(&o->log, BN_LOG_INFO, "form factors read from cache %s", o->cache_path);
+    return BN_OK;
+}
+
+/* ---- the public entry ---- */
+
+/* Options as the assembly uses them: defaults filled, and checked. */
+static bn_status bn__ff_opts(const bn_scene *scene, const bn_rt *rt, const bn_formfactor_opts *in,
+                             bn_formfactor_opts *o, bn_error *err)
+{
+    size_t n;
+    *o = *in;
+    if (o->tolerance <= 0)
+        o->tolerance = 1e-5;
+    if (!o->storage)
+        o->storage = BN_STORAGE_DEFAULT;
     bn_scene_patches(scene, &n);
     if (n == 0)
         return bn_error_set(err, BN_EINPUT, "%s: no patches (mesh the scene first)", bn_scene_path(scene));
     if (rt && bn_rt_scene(rt) != scene)
         return bn_error_set(err, BN_EINTERNAL, "bn_formfactor_build: rt was built for another scene");
-    if (!(o.sparse_threshold >= 0 && o.sparse_threshold < 1))
-        return bn_error_set(err, BN_EINPUT, "sparse threshold %g is outside [0, 1)", o.sparse_threshold);
-    if (o.storage == BN_STORAGE_SPARSE && n > UINT32_MAX)
-        return bn_error_set(err, BN_ENOMEM, "sparse F: %zu patches exceed 32-bit column indices", n);
+    if (!bn_storage_exists(o->storage))
+        return bn_error_set(err, BN_EUSAGE, "unknown storage '%s' (one of %s)", o->storage, bn_storage_names());
+    if (!(o->sparse_threshold >= 0 && o->sparse_threshold < 1))
+        return bn_error_set(err, BN_EINPUT, "sparse threshold %g is outside [0, 1)", o->sparse_threshold);
+    return BN_OK;
+}
 
-    {
-        char desc[400];
-        bn_formfactor_opts_describe(&o, desc, sizeof desc);
-        snprintf(key, sizeof key, "bounce-ff-cache v1 bounce=%s scene=%016llx patches=%zu %s", bn_version(),
-                 bn_scene_digest(scene), n, desc);
-    }
+bn_status bn_formfactor_build(const bn_scene *scene, const bn_rt *rt, const bn_formfactor_opts *o_in,
+                              bn_transport **out, bn_ff_diagnostics *diag, bn_error *err)
+{
+    bn_formfactor_opts o;
+    bn_ff_diagnostics dlocal, *d = diag ? diag : &dlocal;
+    bn__ffg g;
+    bn__sink *sink = NULL;
+    bn__counts tot;
+    char key[512];
+    double t0 = bn__now();
+    size_t n;
+    int hit = 0;
+    bn_status st;
+
+    *out = NULL;
+    memset(d, 0, sizeof *d);
+    memset(&tot, 0, sizeof tot);
+    st = bn__ff_opts(scene, rt, o_in, &o, err);
+    if (st != BN_OK)
+        return st;
+    bn_scene_patches(scene, &n);
+    d->method = o.method;
+    d->samples = bn__samples(&o);
+    d->row_sum_tol = bn__rowsum_tol(&o);
+    bn__cache_key(scene, &o, n, key, sizeof key);
     if (o.cache_path) {
-        int hit = 0;
-        st = bn__build_from_cache(scene, &o, key, out, d, &hit, err);
-        if (st != BN_OK || hit) {
-            d->seconds = bn__now() - t0;
+        st = bn__from_cache(scene, &o, key, out, d, &hit, err);
+        d->seconds = bn__now() - t0;
+        if (st != BN_OK || hit)
             return st;
-        }
     }
     if (!rt)
         return bn_error_set(err, BN_EINTERNAL, "bn_formfactor_build: no ray-casting structure (and no cache hit)");
@@ -890,180 +1002,32 @@ bn_status bn_formfactor_build(const bn_scene *scene, const bn_rt *rt, const bn_f
     st = bn__ffg_init(&g, scene, bn_rt_epsilon(rt), err);
     if (st != BN_OK)
         return st;
-    limit = bn__limit(&o);
-    memset(&sink, 0, sizeof sink);
-    sink.n = n;
-    if (o.storage == BN_STORAGE_DENSE) {
-        need = bn__dense_bytes(n, o.precision);
-    } else {
-        counts = bn__malloc_array(n, sizeof(size_t));
-        if (!counts) {
-            bn__ffg_free(&g);
-            return bn_error_set(err, BN_ENOMEM, "out of memory");
-        }
-        need = bn__csr_bytes_for(n, bn__pattern_counts(&g, counts), o.precision);
+    st = bn__open_builder(scene, &g, &o, n, &sink, err);
+    if (st == BN_OK) {
+        st = bn__assemble(rt, &g, &o, sink, &tot, err);
+        if (st != BN_OK)
+            bn_transport_builder_destroy(sink);
     }
-    if (need != (size_t)-1)
-        need += bn__scratch_bytes(S, o.method == BN_FF_HEMISPHERE ? n : 0, bn_threads_get()) + n * 64;
-    if (need == (size_t)-1 || need > limit) {
-        free(counts);
-        bn__ffg_free(&g);
-        return bn__memory_error(n, need, limit, &o, err);
-    }
-    if (o.storage == BN_STORAGE_DENSE) {
-        bn__dense_view v;
-        st = bn__dense_alloc(n, o.precision, &v, &impl, &ops, err);
-        sink.f32 = v.f32;
-        sink.f64 = v.f64;
-    } else {
-        st = bn__csr_alloc(n, counts, o.precision, &sink.csr, err);
-        if (st == BN_OK) {
-            long ln = (long)n;
-#pragma omp parallel for schedule(dynamic, 16)
-            for (long i = 0; i < ln; i++) {
-                size_t k = sink.csr->rowptr[i];
-                for (size_t j = 0; j < n; j++)
-                    if (bn__facing(&g, (size_t)i, j))
-                        sink.csr->col[k++] = (uint32_t)j;
-            }
-            impl = sink.csr;
-            ops = bn__csr_ops(sink.csr);
-        }
-    }
-    free(counts);
-    if (st != BN_OK) {
-        bn__ffg_free(&g);
-        return st;
-    }
-
-    total_work = o.method == BN_FF_HEMISPHERE ? n : n * (n - 1) / 2;
-    bn__progress_begin(&prog, "form factors", total_work, o.quiet);
-#pragma omp parallel
-    {
-        bn__scratch s;
-        bn__counts c;
-        size_t *cand = bn__malloc_array(g.nf ? g.nf : 1, sizeof(size_t));
-        long ln = (long)n;
-        memset(&c, 0, sizeof c);
-        if (!bn__scratch_init(&s, S, o.method == BN_FF_HEMISPHERE ? n : 0) || !cand)
-            fail = 1;
-        /* Cyclic rows balance the triangle i < j; every pair is computed from its own seed, so
-         * the result does not depend on the schedule or the thread count. */
-#pragma omp for schedule(static, 1)
-        for (long li = 0; li < ln; li++) {
-            size_t i = (size_t)li, work;
-            if (fail || bn_interrupted() != BN_OK)
-                continue;
-            if (o.method == BN_FF_HEMISPHERE) {
-                bn__hemisphere_row(rt, &g, &o, i, &s, &sink, &c);
-                work = 1;
-            } else {
-                size_t ncand = bn__row_candidates(&g, i, cand);
-                for (size_t j = i + 1; j < n; j++)
-                    bn__analytic_or_mc_pair(rt, &g, &o, rtol, cand, ncand, i, j, &s, &sink, &c);
-                work = n - 1 - i;
-            }
-            bn__progress_step(&prog, &done, work);
-        }
-#pragma omp critical(bn_ff_counts)
-        {
-            tot.pairs_nonzero += c.pairs_nonzero;
-            tot.pairs_culled += c.pairs_culled;
-            tot.pairs_tested += c.pairs_tested;
-            tot.pairs_blocked += c.pairs_blocked;
-            tot.rays += c.rays;
-            tot.evals += c.evals;
-        }
-        bn__scratch_free(&s);
-        free(cand);
-    }
-    bn__progress_end(&prog);
     bn__ffg_free(&g);
-    if (bn_interrupted() != BN_OK || fail) {
-        ops->destroy(impl);
-        if (fail)
-            return bn_error_set(err, BN_ENOMEM, "out of memory for per-thread buffers (%zu samples)", S);
-        return bn_error_set(err, bn_interrupted(), "form-factor assembly interrupted");
-    }
-    if (sink.csr) {
-        double *dropped = bn__calloc(n, sizeof(double));
-        if (!dropped) {
-            ops->destroy(impl);
-            return bn_error_set(err, BN_ENOMEM, "out of memory");
-        }
-        d->dropped_entries = bn__csr_compact(sink.csr, o.sparse_threshold, dropped);
-        for (size_t i = 0; i < n; i++)
-            d->dropped_mass_max = fmax(d->dropped_mass_max, dropped[i]);
-        free(dropped);
-    }
-    d->pairs_nonzero = tot.pairs_nonzero;
-    d->pairs_culled = tot.pairs_culled;
-    d->pairs_tested = tot.pairs_tested;
-    d->pairs_blocked = tot.pairs_blocked;
-    d->rays = tot.rays;
-    d->quad_evals = tot.evals;
-    d->occluded_fraction = tot.pairs_nonzero ? (double)tot.pairs_blocked / (double)tot.pairs_nonzero : 0;
-    st = bn__diagnose(scene, &sink, &o, d, err);
+    if (st == BN_OK)
+        st = bn__finish(scene, n, sink, &tot, &o, out, d, err);
+    if (st == BN_OK)
+        st = bn__diagnose(scene, *out, &o, d, err);
     if (st != BN_OK) {
-        ops->destroy(impl);
+        bn_transport_destroy(*out);
+        *out = NULL;
         return st;
     }
-    if (sink.lost)
-        bn_logf(&o.log, BN_LOG_WARN, "%zu hemisphere hits landed on patches outside the sparse pattern (grazing)",
-                sink.lost);
-    if (d->rows_above_one)
-        bn_logf(&o.log, BN_LOG_WARN, "%zu rows of F sum to more than 1 + %.3g (largest %.9g; method %s)%s",
-                d->rows_above_one, d->row_sum_tol, d->row_sum_max, bn_ff_method_name(o.method),
-                o.method == BN_FF_HEMISPHERE ? ""
-                                             : ": sampling noise of the visibility estimate; more --samples reduce it");
-    st = bn__wrap_transport(scene, n, ops, impl, out, err);
-    if (st != BN_OK)
-        return st;
+    bn__warn_rows(&o, d);
     d->bytes = bn_transport_bytes(*out);
     d->seconds = bn__now() - t0;
     d->rays_per_second = d->seconds > 0 ? (double)d->rays / d->seconds : 0;
     if (o.cache_path) {
         bn_error cerr;
         bn_error_clear(&cerr);
-        if (bn__ff_write_file(*out, scene, o.cache_path, key, NULL, &cerr) != BN_OK)
+        if (bn__ff_write_file(*out, scene, o.cache_path, key, NULL, o.precision, o.storage, &cerr) != BN_OK)
             bn_logf(&o.log, BN_LOG_WARN, "cannot write the form-factor cache: %s", cerr.msg);
     }
-    return BN_OK;
-}
-
-static bn_status bn__build_from_cache(const bn_scene *scene, const bn_formfactor_opts *o, const char *key,
-                                      bn_transport **out, bn_ff_diagnostics *d, int *hit, bn_error *err)
-{
-    bn__sink sink;
-    void *impl = NULL;
-    const bn_transport_ops *ops = NULL;
-    size_t n;
-    bn_status st;
-    char why[256];
-    bn_scene_patches(scene, &n);
-    *hit = 0;
-    memset(&sink, 0, sizeof sink);
-    sink.n = n;
-    why[0] = '\0';
-    st = bn__ff_read_cache(o->cache_path, key, n, o->precision, o->storage, &sink.f32, &sink.f64, &sink.csr, &impl,
-                           &ops, why, sizeof why);
-    if (st != BN_OK) {
-        if (why[0])
-            bn_logf(&o->log, BN_LOG_INFO, "cache %s not used: %s", o->cache_path, why);
-        return BN_OK;   /* a miss: assemble and overwrite */
-    }
-    st = bn__diagnose(scene, &sink, o, d, err);
-    if (st != BN_OK) {
-        ops->destroy(impl);
-        return st;
-    }
-    st = bn__wrap_transport(scene, n, ops, impl, out, err);
-    if (st != BN_OK)
-        return st;
-    d->bytes = bn_transport_bytes(*out);
-    d->from_cache = 1;
-    *hit = 1;
-    bn_logf(&o->log, BN_LOG_INFO, "form factors read from cache %s", o->cache_path);
     return BN_OK;
 }
 

@@ -8,37 +8,50 @@
 #include <lapacke.h>
 #include <string.h>
 
+/* Rows of F fetched per block of the fill (bn__direct_fill). */
+#define BN__FILL_ROWS 32
+
 size_t bn_solve_direct_bytes(size_t n)
 {
     size_t nn, a;
     if (!bn__mul_size(n, n, &nn) || !bn__mul_size(nn, sizeof(double), &a))
         return SIZE_MAX;
-    return a + n * (sizeof(lapack_int) + 3 * sizeof(double));
+    return a + n * (sizeof(lapack_int) + sizeof(size_t) + (4 + BN__FILL_ROWS) * sizeof(double));
 }
 
-/* A <- I - diag(rho_c) F in column-major order (A[j n + i] = delta_ij - rho_ic F_ij), by tiles so
- * that reads of F's rows and writes of A's columns both stay in cache. */
-static void bn__direct_fill(const bn_transport *k, const double *rho, int c, size_t n, double *A)
+/* A <- I - diag(rho_c) F in column-major order (A[j n + i] = delta_ij - rho_ic F_ij). Each row's
+ * stored entries are read once through the operator (any storage) into a block of dense rows,
+ * which is then written out column by column, so both the reads and the writes stream. Serial:
+ * an operator's entry functions need not be thread-safe. */
+static bn_status bn__direct_fill(const bn_transport *k, const double *rho, int c, size_t n, double *A, double *blk,
+                                 size_t *cols, double *vals, bn_error *err)
 {
-    const size_t B = 64;
-    long nt = (long)((n + B - 1) / B);
-#pragma omp parallel for schedule(static)
-    for (long ti = 0; ti < nt; ti++) {
-        size_t i0 = (size_t)ti * B, i1 = i0 + B < n ? i0 + B : n;
-        for (size_t j0 = 0; j0 < n; j0 += B) {
-            size_t j1 = j0 + B < n ? j0 + B : n;
-            for (size_t i = i0; i < i1; i++)
-                for (size_t j = j0; j < j1; j++)
-                    A[j * n + i] = (i == j ? 1.0 : 0.0) - rho[3 * i + (size_t)c] * bn_transport_F(k, i, j);
+    for (size_t i0 = 0; i0 < n; i0 += BN__FILL_ROWS) {
+        size_t nb = n - i0 < BN__FILL_ROWS ? n - i0 : BN__FILL_ROWS;
+        memset(blk, 0, nb * n * sizeof(double));
+        for (size_t q = 0; q < nb; q++) {
+            size_t cnt;
+            bn_status st = bn_transport_row_entries(k, i0 + q, cols, vals, &cnt, err);
+            if (st != BN_OK)
+                return st;
+            for (size_t e = 0; e < cnt; e++)
+                blk[q * n + cols[e]] = vals[e];
         }
+        for (size_t j = 0; j < n; j++)
+            for (size_t q = 0; q < nb; q++) {
+                size_t i = i0 + q;
+                A[j * n + i] = (i == j ? 1.0 : 0.0) - rho[3 * i + (size_t)c] * blk[q * n + j];
+            }
     }
+    return BN_OK;
 }
 
 static bn_status bn__direct_solve(const bn__solve_ctx *ctx, double *L, int *singular, bn_error *err)
 {
     size_t n = ctx->n, need = bn_solve_direct_bytes(n), limit = ctx->o->max_memory;
     const double *rho = bn_transport_rho(ctx->k);
-    double *A, *b;
+    double *A, *b, *vals, *blk;
+    size_t *cols;
     lapack_int *ipiv, info;
     int grey = 1;
     bn_status st = BN_OK;
@@ -58,7 +71,10 @@ static bn_status bn__direct_solve(const bn__solve_ctx *ctx, double *L, int *sing
     A = bn__malloc_array(n * n, sizeof(double));
     b = bn__malloc_array(3 * n, sizeof(double));
     ipiv = bn__malloc_array(n, sizeof(lapack_int));
-    if (!A || !b || !ipiv) {
+    cols = bn__malloc_array(n, sizeof(size_t));
+    vals = bn__malloc_array(n, sizeof(double));
+    blk = bn__malloc_array((size_t)BN__FILL_ROWS * n, sizeof(double));
+    if (!A || !b || !ipiv || !cols || !vals || !blk) {
         st = bn_error_set(err, BN_ENOMEM, "direct solve: cannot allocate %.3g GiB for %zu patches",
                           (double)need / 1073741824.0, n);
         goto done;
@@ -67,7 +83,9 @@ static bn_status bn__direct_solve(const bn__solve_ctx *ctx, double *L, int *sing
         grey = rho[3 * i] == rho[3 * i + 1] && rho[3 * i] == rho[3 * i + 2];
     for (int c = 0; c < 3; c++) {
         int nrhs = grey ? 3 : 1;
-        bn__direct_fill(ctx->k, rho, c, n, A);
+        st = bn__direct_fill(ctx->k, rho, c, n, A, blk, cols, vals, err);
+        if (st != BN_OK)
+            goto done;
         /* b <- E_c (column-major n x nrhs) */
         for (size_t i = 0; i < n; i++)
             for (int q = 0; q < nrhs; q++)
@@ -98,7 +116,10 @@ done:
     free(A);
     free(b);
     free(ipiv);
+    free(cols);
+    free(vals);
+    free(blk);
     return st;
 }
 
-const bn_solver_type bn__solver_direct = {"direct", 0, 0, NULL, NULL, NULL, bn__direct_solve};
+const bn_solver_type bn__solver_direct = {"direct", BN_OP_ENTRIES, 0, 0, NULL, NULL, NULL, bn__direct_solve};

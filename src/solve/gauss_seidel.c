@@ -21,41 +21,48 @@ static bn_status bn__gs_setup(void *st, const bn__solve_ctx *ctx, const double *
     return BN_OK;
 }
 
-static void bn__gs_update(const bn__solve_ctx *ctx, size_t i, double *L)
+static bn_status bn__gs_update(const bn__solve_ctx *ctx, size_t i, double *L, bn_error *err)
 {
     double kl[3];
     const double *d = ctx->diag;
     /* kl <- (K L)_i with the newest L;  L_i <- (E_i + kl - K_ii L_i) / (1 - K_ii) */
-    bn_transport_row(ctx->k, i, L, kl);
+    bn_status st = bn_transport_row(ctx->k, i, L, kl, err);
+    if (st != BN_OK)
+        return st;
     for (int c = 0; c < 3; c++) {
         size_t q = 3 * i + (size_t)c;
         L[q] = d ? (ctx->E[q] + kl[c] - d[q] * L[q]) / (1.0 - d[q]) : ctx->E[q] + kl[c];
     }
+    return BN_OK;
 }
 
-static int bn__gs_iterate(void *st, double *L, double *r)
+static bn_status bn__gs_iterate(void *st, double *L, double *r, int *have_r, bn_error *err)
 {
     bn__gs *s = st;
+    bn_status rc = BN_OK;
     (void)r;
-    for (size_t i = 0; i < s->ctx->n; i++)
-        bn__gs_update(s->ctx, i, L);
-    return 0;
+    *have_r = 0;
+    for (size_t i = 0; i < s->ctx->n && rc == BN_OK; i++)
+        rc = bn__gs_update(s->ctx, i, L, err);
+    return rc;
 }
 
-static int bn__gs_iterate_symmetric(void *st, double *L, double *r)
+static bn_status bn__gs_iterate_symmetric(void *st, double *L, double *r, int *have_r, bn_error *err)
 {
     bn__gs *s = st;
+    bn_status rc = BN_OK;
     (void)r;
-    for (size_t i = 0; i < s->ctx->n; i++)
-        bn__gs_update(s->ctx, i, L);
-    for (size_t i = s->ctx->n; i-- > 0;)
-        bn__gs_update(s->ctx, i, L);
-    return 0;
+    *have_r = 0;
+    for (size_t i = 0; i < s->ctx->n && rc == BN_OK; i++)
+        rc = bn__gs_update(s->ctx, i, L, err);
+    for (size_t i = s->ctx->n; i-- > 0 && rc == BN_OK;)
+        rc = bn__gs_update(s->ctx, i, L, err);
+    return rc;
 }
 
 static void bn__gs_cleanup(void *st) { (void)st; }
 
-const bn_solver_type bn__solver_gauss_seidel = {"gauss-seidel", sizeof(bn__gs), 1, bn__gs_setup, bn__gs_iterate,
+const bn_solver_type bn__solver_gauss_seidel = {"gauss-seidel", BN_OP_ROWS, sizeof(bn__gs), 1, bn__gs_setup, bn__gs_iterate,
                                                 bn__gs_cleanup, NULL};
 const bn_solver_type bn__solver_gauss_seidel_symmetric = {
-    "gauss-seidel-symmetric", sizeof(bn__gs), 2, bn__gs_setup, bn__gs_iterate_symmetric, bn__gs_cleanup, NULL};
+    "gauss-seidel-symmetric", BN_OP_ROWS, sizeof(bn__gs), 2, bn__gs_setup, bn__gs_iterate_symmetric, bn__gs_cleanup, NULL};

@@ -27,11 +27,12 @@ static bn_status bn__jacobi_setup(void *st, const bn__solve_ctx *ctx, const doub
     return BN_OK;
 }
 
-static int bn__jacobi_iterate(void *st, double *L, double *r)
+static bn_status bn__jacobi_iterate(void *st, double *L, double *r, int *have_r, bn_error *err)
 {
     bn__jacobi *s = st;
     const double *E = s->ctx->E, *d = s->ctx->diag;
     size_t m = 3 * s->ctx->n;
+    bn_status rc;
     /* L <- (E + K L - D L) / (1 - D) */
     if (d)
         for (size_t i = 0; i < m; i++)
@@ -40,10 +41,13 @@ static int bn__jacobi_iterate(void *st, double *L, double *r)
         for (size_t i = 0; i < m; i++)
             L[i] = E[i] + s->y[i];
     /* y <- K L;  r <- E - (I - K) L */
-    bn_transport_apply(s->ctx->k, L, s->y);
+    rc = bn_transport_apply(s->ctx->k, L, s->y, err);
+    if (rc != BN_OK)
+        return rc;
     for (size_t i = 0; i < m; i++)
         r[i] = E[i] + s->y[i] - L[i];
-    return 1;
+    *have_r = 1;
+    return BN_OK;
 }
 
 static void bn__jacobi_cleanup(void *st)
@@ -53,5 +57,5 @@ static void bn__jacobi_cleanup(void *st)
     s->y = NULL;
 }
 
-const bn_solver_type bn__solver_jacobi = {"jacobi", sizeof(bn__jacobi), 1, bn__jacobi_setup, bn__jacobi_iterate,
+const bn_solver_type bn__solver_jacobi = {"jacobi", 0, sizeof(bn__jacobi), 1, bn__jacobi_setup, bn__jacobi_iterate,
                                           bn__jacobi_cleanup, NULL};

@@ -29,20 +29,24 @@ static bn_status bn__neumann_setup(void *st, const bn__solve_ctx *ctx, const dou
     return BN_OK;
 }
 
-static int bn__neumann_iterate(void *st, double *L, double *r)
+static bn_status bn__neumann_iterate(void *st, double *L, double *r, int *have_r, bn_error *err)
 {
     bn__neumann *s = st;
     size_t m = 3 * s->ctx->n;
     double *tmp;
+    bn_status rc;
     /* S <- S + K^(n+1) E;  t <- K t = K^(n+2) E, the residual of the new S */
     for (size_t i = 0; i < m; i++)
         L[i] += s->t[i];
-    bn_transport_apply(s->ctx->k, s->t, s->u);
+    rc = bn_transport_apply(s->ctx->k, s->t, s->u, err);
+    if (rc != BN_OK)
+        return rc;
     tmp = s->t;
     s->t = s->u;
     s->u = tmp;
     memcpy(r, s->t, m * sizeof(double));
-    return 1;
+    *have_r = 1;
+    return BN_OK;
 }
 
 static void bn__neumann_cleanup(void *st)
@@ -53,5 +57,5 @@ static void bn__neumann_cleanup(void *st)
     s->t = s->u = NULL;
 }
 
-const bn_solver_type bn__solver_neumann = {"neumann", sizeof(bn__neumann), 1, bn__neumann_setup, bn__neumann_iterate,
+const bn_solver_type bn__solver_neumann = {"neumann", 0, sizeof(bn__neumann), 1, bn__neumann_setup, bn__neumann_iterate,
                                            bn__neumann_cleanup, NULL};

@@ -79,14 +79,18 @@ void bn_solve_result_free(bn_solve_result *res)
     res->nterms = 0;
 }
 
-void bn_solve_terms(const bn_transport *k, const double *E, int nterms, double **terms)
+bn_status bn_solve_terms(const bn_transport *k, const double *E, int nterms, double **terms, bn_error *err)
 {
     size_t m = 3 * bn_transport_size(k);
     if (nterms <= 0)
-        return;
+        return BN_OK;
     memcpy(terms[0], E, m * sizeof(double));
-    for (int q = 1; q < nterms; q++)
-        bn_transport_apply(k, terms[q - 1], terms[q]);   /* K^q E <- K (K^(q-1) E) */
+    for (int q = 1; q < nterms; q++) {
+        bn_status st = bn_transport_apply(k, terms[q - 1], terms[q], err);   /* K^q E <- K (K^(q-1) E) */
+        if (st != BN_OK)
+            return st;
+    }
+    return BN_OK;
 }
 
 bn_status bn_solve_spectral_radius(const bn_transport *k, size_t max_steps, double *estimate, double *lower,
@@ -95,6 +99,7 @@ bn_status bn_solve_spectral_radius(const bn_transport *k, size_t max_steps, doub
     size_t n = bn_transport_size(k), m = 3 * n, s;
     double *x = bn__malloc_array(m ? m : 1, sizeof(double)), *y = bn__malloc_array(m ? m : 1, sizeof(double));
     double prev = -1, est = 0, low = 0;
+    bn_status st = BN_OK;
     *estimate = *lower = 0;
     *steps = 0;
     if (!x || !y) {
@@ -108,7 +113,9 @@ bn_status bn_solve_spectral_radius(const bn_transport *k, size_t max_steps, doub
         max_steps = 1;
     for (s = 1; s <= max_steps; s++) {
         double xmax[3] = {0, 0, 0}, ymax[3] = {0, 0, 0}, lo[3] = {INFINITY, INFINITY, INFINITY};
-        bn_transport_apply(k, x, y);   /* y <- K x */
+        st = bn_transport_apply(k, x, y, err);   /* y <- K x */
+        if (st != BN_OK)
+            break;
         for (size_t i = 0; i < n; i++)
             for (int c = 0; c < 3; c++) {
                 size_t q = 3 * i + (size_t)c;
@@ -125,9 +132,8 @@ bn_status bn_solve_spectral_radius(const bn_transport *k, size_t max_steps, doub
             }
         }
         if (!isfinite(est)) {
-            free(x);
-            free(y);
-            return bn_error_set(err, BN_ENUMERIC, "power iteration: K applied to ones is not finite");
+            st = bn_error_set(err, BN_ENUMERIC, "power iteration: K applied to ones is not finite");
+            break;
         }
         /* x <- y / ||y_c||_inf per channel */
         for (size_t i = 0; i < n; i++)
@@ -137,12 +143,14 @@ bn_status bn_solve_spectral_radius(const bn_transport *k, size_t max_steps, doub
             break;
         prev = est;
     }
-    *estimate = est;
-    *lower = low;
-    *steps = s > max_steps ? max_steps : s;
+    if (st == BN_OK) {
+        *estimate = est;
+        *lower = low;
+        *steps = s > max_steps ? max_steps : s;
+    }
     free(x);
     free(y);
-    return BN_OK;
+    return st;
 }
 
 /* ---- the monitor ---- */
@@ -273,307 +281,424 @@ static int bn__emit_row(const bn_solve_opts *o, const bn_solve_row *row, const d
     return o->monitor ? o->monitor(o->monitor_user, row, L) : 0;
 }
 
-bn_status bn_solve(const bn_transport *k, const double *E, const bn_solve_opts *o, bn_solve_result *res,
-                   bn_error *err)
-{
-    size_t n = bn_transport_size(k), m = 3 * n, bad;
-    const bn_solver_type *type = bn__solver_for(o);
-    bn_solve_stop stop = o->stop;
-    double t0 = bn__now(), t1, knorm, thr = o->singular_threshold, target, r0max, gap;
-    double *ones = NULL, *rs = NULL, *diag = NULL, *r = NULL, *Lprev = NULL;
-    void *state = NULL;
-    int have_diag = 0, state_ready = 0;
-    bn__solve_ctx ctx;
+/* ---- the driver: check, analyse, iterate (or solve directly), keep the terms ---- */
+
+/* Everything one solve holds; each stage below reads and fills its part. */
+typedef struct bn__solve {
+    const bn_transport *k;
+    const double *E;
+    const bn_solve_opts *o;
+    const bn_solver_type *type;
+    bn_solve_result *res;
+    bn_error *err;
+    bn_solve_stop stop;
+    size_t n, m;
+    double t0, knorm, target, r0max;
+    double kpow;                    /* ||K||^(s k + 1) at iteration k (s sweeps per iteration) */
+    double *diag, *r, *Lprev, *y;   /* diag NULL when K_ii = 0 for every i (or unknown) */
     bn_solve_row row;
-    bn_status st = BN_OK;
+} bn__solve;
 
-    memset(res, 0, sizeof *res);
-    res->n = n;
-    res->method = o->method;
-    res->bad_patch = SIZE_MAX;
-    res->reason = BN_STOP_NONE;
-    if (!type)
-        return bn_error_set(err, BN_EUSAGE, "unknown solve method %d", (int)o->method);
+/* A non-finite value at x[bad]: the patch, and the reason the solve stopped. */
+static void bn__solve_nonfinite(bn__solve *S, size_t bad)
+{
+    S->res->bad_patch = bad / 3;
+    S->res->reason = BN_STOP_DIVERGED_NAN;
+}
+
+/* Options, the method, what it needs of K, and E (finite, nonnegative). */
+static bn_status bn__solve_check(bn__solve *S)
+{
+    const bn_solve_opts *o = S->o;
+    bn_solve_result *res = S->res;
+    size_t bad;
+    if (!S->type)
+        return bn_error_set(S->err, BN_EUSAGE, "unknown solve method %d", (int)o->method);
     if (!(o->tol >= 0) || !(o->atol >= 0) || !isfinite(o->tol) || !isfinite(o->atol))
-        return bn_error_set(err, BN_EUSAGE, "tolerances must be finite and >= 0 (tol %g, atol %g)", o->tol, o->atol);
-    if (!(thr >= 0 && thr < 1))
-        return bn_error_set(err, BN_EUSAGE, "singular threshold %g is outside [0, 1)", thr);
-    if (stop == BN_SOLVE_STOP_DEFAULT)
-        stop = o->method == BN_SOLVE_NEUMANN ? BN_SOLVE_STOP_BOUND : BN_SOLVE_STOP_RESIDUAL;
-
-    /* ---- analysis: E, K, norms, spectral radius, singularity, prediction ---- */
-    bad = bn__first_nonfinite(E, m);
+        return bn_error_set(S->err, BN_EUSAGE, "tolerances must be finite and >= 0 (tol %g, atol %g)", o->tol, o->atol);
+    if (!(o->singular_threshold >= 0 && o->singular_threshold < 1))
+        return bn_error_set(S->err, BN_EUSAGE, "singular threshold %g is outside [0, 1)", o->singular_threshold);
+    if (bn_transport_require(S->k, S->type->needs, S->type->name, S->err) != BN_OK)
+        return S->err ? S->err->status : BN_ENOTSUP;
+    S->stop = o->stop;
+    if (S->stop == BN_SOLVE_STOP_DEFAULT)
+        S->stop = o->method == BN_SOLVE_NEUMANN ? BN_SOLVE_STOP_BOUND : BN_SOLVE_STOP_RESIDUAL;
+    bad = bn__first_nonfinite(S->E, S->m);
     if (bad != SIZE_MAX) {
         res->bad_patch = bad / 3;
-        return bn_error_set(err, BN_EINPUT, "emission E of patch %zu (channel %c) is %g", bad / 3, "RGB"[bad % 3], E[bad]);
+        return bn_error_set(S->err, BN_EINPUT, "emission E of patch %zu (channel %c) is %g", bad / 3, "RGB"[bad % 3],
+                            S->E[bad]);
     }
-    for (size_t i = 0; i < m; i++) {
-        if (E[i] < 0) {
+    for (size_t i = 0; i < S->m; i++) {
+        if (S->E[i] < 0) {
             res->bad_patch = i / 3;
-            return bn_error_set(err, BN_EINPUT, "emission E of patch %zu (channel %c) is negative (%g)", i / 3,
-                                "RGB"[i % 3], E[i]);
+            return bn_error_set(S->err, BN_EINPUT, "emission E of patch %zu (channel %c) is negative (%g)", i / 3,
+                                "RGB"[i % 3], S->E[i]);
         }
-        res->norm_E = fmax(res->norm_E, E[i]);
+        res->norm_E = fmax(res->norm_E, S->E[i]);
     }
-    ones = bn__malloc_array(m ? m : 1, sizeof(double));
-    rs = bn__malloc_array(m ? m : 1, sizeof(double));
-    diag = bn__malloc_array(m ? m : 1, sizeof(double));
-    r = bn__malloc_array(m ? m : 1, sizeof(double));
-    Lprev = bn__malloc_array(m ? m : 1, sizeof(double));
-    res->L = bn__malloc_array(m ? m : 1, sizeof(double));
-    if (!ones || !rs || !diag || !r || !Lprev || !res->L) {
-        st = bn_error_set(err, BN_ENOMEM, "solve: out of memory for vectors of %zu patches", n);
-        goto fail;
-    }
-    /* ||K||_inf = max_ic rho_ic sum_j F_ij: K applied to ones (F >= 0) */
-    for (size_t i = 0; i < m; i++)
+    S->r = bn__malloc_array(S->m ? S->m : 1, sizeof(double));
+    S->y = bn__malloc_array(S->m ? S->m : 1, sizeof(double));
+    S->Lprev = bn__malloc_array(S->m ? S->m : 1, sizeof(double));
+    res->L = bn__malloc_array(S->m ? S->m : 1, sizeof(double));
+    if (!S->r || !S->y || !S->Lprev || !res->L)
+        return bn_error_set(S->err, BN_ENOMEM, "solve: out of memory for vectors of %zu patches", S->n);
+    return BN_OK;
+}
+
+/* ||K||_inf (K applied to ones, F >= 0): finite and nonnegative rows, or a failure naming one. */
+static bn_status bn__solve_norm(bn__solve *S)
+{
+    double *ones = S->Lprev, *rs = S->y;   /* scratch until the iterations start */
+    bn_status st;
+    for (size_t i = 0; i < S->m; i++)
         ones[i] = 1.0;
-    bn_transport_apply(k, ones, rs);
-    knorm = 0;
-    for (size_t i = 0; i < m; i++) {
-        if (!isfinite(rs[i]) || rs[i] < 0) {
-            res->bad_patch = i / 3;
-            st = bn_error_set(err, BN_ENUMERIC, "K is not finite and nonnegative: row of patch %zu (channel %c) sums to %g",
-                              i / 3, "RGB"[i % 3], rs[i]);
-            goto fail;
-        }
-        knorm = fmax(knorm, rs[i]);
-    }
-    res->k_norm_inf = knorm;
-    const double *rho = bn_transport_rho(k);
-    for (size_t i = 0; i < n; i++) {
-        double fii = bn_transport_F(k, i, i);
-        for (int c = 0; c < 3; c++) {
-            diag[3 * i + (size_t)c] = rho[3 * i + (size_t)c] * fii;
-            have_diag |= fii != 0;
-        }
-    }
-    st = bn_solve_spectral_radius(k, o->power_iter, &res->spectral_radius, &res->spectral_radius_lower,
-                                  &res->power_iterations, err);
+    st = bn_transport_apply(S->k, ones, rs, S->err);
     if (st != BN_OK)
-        goto fail;
-    gap = 1.0 - thr;
-    if (res->spectral_radius_lower >= gap || (knorm >= gap && res->spectral_radius >= gap)) {
-        res->reason = BN_STOP_SINGULAR;
-        res->seconds_analyse = bn__now() - t0;
-        st = bn_error_set(err, BN_ENUMERIC,
-                          "I - K is singular within F's accuracy: ||K||_inf = %.9g and the spectral radius of K is "
-                          "%.9g (at least %.9g), not below 1 - %g (the threshold: F's row sums are only known to "
-                          "about that; the error bound delta/(1 - ||K||) would exceed 100%%). A closed scene with "
-                          "reflectance 1 reflects light forever. Lower the reflectance, open the scene, or set the "
-                          "threshold to F's row-sum error if you know it is smaller",
-                          knorm, res->spectral_radius, res->spectral_radius_lower, thr);
-        goto fail;
+        return st;
+    S->knorm = 0;
+    for (size_t i = 0; i < S->m; i++) {
+        if (!isfinite(rs[i]) || rs[i] < 0) {
+            S->res->bad_patch = i / 3;
+            return bn_error_set(S->err, BN_ENUMERIC,
+                                "K is not finite and nonnegative: row of patch %zu (channel %c) sums to %g", i / 3,
+                                "RGB"[i % 3], rs[i]);
+        }
+        S->knorm = fmax(S->knorm, rs[i]);
     }
-    if (knorm >= 1)
-        bn__note(o, BN_LOG_WARN,
+    S->res->k_norm_inf = S->knorm;
+    return BN_OK;
+}
+
+/* K_ii = rho_ic F_ii where the operator knows F_ii; NULL diag when all are 0 or it cannot say. */
+static bn_status bn__solve_diag(bn__solve *S)
+{
+    const double *rho = bn_transport_rho(S->k);
+    int any = 0;
+    bn_status st;
+    if (!(bn_transport_caps(S->k) & (BN_OP_DIAG | BN_OP_ENTRIES)))
+        return BN_OK;
+    S->diag = bn__malloc_array(S->m ? S->m : 1, sizeof(double));
+    if (!S->diag)
+        return bn_error_set(S->err, BN_ENOMEM, "solve: out of memory for the diagonal");
+    st = bn_transport_diag(S->k, S->y, S->err);   /* F_ii into scratch */
+    if (st != BN_OK)
+        return st;
+    for (size_t i = 0; i < S->n; i++)
+        for (int c = 0; c < 3; c++) {
+            S->diag[3 * i + (size_t)c] = rho[3 * i + (size_t)c] * S->y[i];
+            any |= S->y[i] != 0;
+        }
+    if (!any) {
+        free(S->diag);
+        S->diag = NULL;
+    }
+    return BN_OK;
+}
+
+/* Refuses a (near-)singular I - K before any iteration. */
+static bn_status bn__solve_singular(bn__solve *S)
+{
+    bn_solve_result *res = S->res;
+    double thr = S->o->singular_threshold, gap = 1.0 - thr;
+    if (res->spectral_radius_lower >= gap || (S->knorm >= gap && res->spectral_radius >= gap)) {
+        res->reason = BN_STOP_SINGULAR;
+        return bn_error_set(S->err, BN_ENUMERIC,
+                            "I - K is singular within F's accuracy: ||K||_inf = %.9g and the spectral radius of K is "
+                            "%.9g (at least %.9g), not below 1 - %g (the threshold: F's row sums are only known to "
+                            "about that; the error bound delta/(1 - ||K||) would exceed 100%%). A closed scene with "
+                            "reflectance 1 reflects light forever. Lower the reflectance, open the scene, or set the "
+                            "threshold to F's row-sum error if you know it is smaller",
+                            S->knorm, res->spectral_radius, res->spectral_radius_lower, thr);
+    }
+    if (S->knorm >= 1)
+        bn__note(S->o, BN_LOG_WARN,
                  "||K||_inf = %.9g >= 1 but the spectral radius is %.9g < 1: the iterations converge, but the a "
                  "priori bounds (bound, error_bound columns) do not apply",
-                 knorm, res->spectral_radius);
+                 S->knorm, res->spectral_radius);
+    return BN_OK;
+}
 
-    /* L0 = E;  r0 = E - (I - K) L0 = K E */
-    memcpy(res->L, E, m * sizeof(double));
-    bn_transport_apply(k, E, r);
-    memset(&row, 0, sizeof row);
-    bn__residual_norms(r, n, &row);
-    r0max = row.residual_max;
-    target = o->tol * res->norm_E;
-    {
-        double rate = res->spectral_radius, tgt = fmax(target, o->atol);
-        if (stop == BN_SOLVE_STOP_BOUND && knorm < 1)
-            tgt *= 1.0 - knorm;   /* ||r|| / (1 - ||K||) <= target */
-        res->predicted_iterations = bn__predict(rate, r0max, tgt);
-        if (type->sweeps == 2 && res->predicted_iterations != SIZE_MAX)
-            res->predicted_iterations = (res->predicted_iterations + 1) / 2;
-    }
-    res->seconds_analyse = bn__now() - t0;
+/* L0 = E, r0 = K E, the target and the predicted iteration count (said in a note). */
+static bn_status bn__solve_start(bn__solve *S)
+{
+    const bn_solve_opts *o = S->o;
+    bn_solve_result *res = S->res;
+    double tgt;
+    bn_status st;
+    memcpy(res->L, S->E, S->m * sizeof(double));
+    st = bn_transport_apply(S->k, S->E, S->r, S->err);   /* r0 = E - (I - K) E = K E */
+    if (st != BN_OK)
+        return st;
+    memset(&S->row, 0, sizeof S->row);
+    bn__residual_norms(S->r, S->n, &S->row);
+    S->r0max = S->row.residual_max;
+    S->target = o->tol * res->norm_E;
+    tgt = fmax(S->target, o->atol);
+    if (S->stop == BN_SOLVE_STOP_BOUND && S->knorm < 1)
+        tgt *= 1.0 - S->knorm;   /* ||r|| / (1 - ||K||) <= target */
+    res->predicted_iterations = bn__predict(res->spectral_radius, S->r0max, tgt);
+    if (S->type->sweeps == 2 && res->predicted_iterations != SIZE_MAX)
+        res->predicted_iterations = (res->predicted_iterations + 1) / 2;
     if (res->predicted_iterations == SIZE_MAX)
         bn__note(o, BN_LOG_INFO, "spectral radius ~ %.9g (>= %.9g, %zu power steps); ||K||_inf = %.9g; the tolerance "
-                 "cannot be predicted", res->spectral_radius, res->spectral_radius_lower, res->power_iterations, knorm);
+                 "cannot be predicted", res->spectral_radius, res->spectral_radius_lower, res->power_iterations, S->knorm);
     else
         bn__note(o, BN_LOG_INFO,
                  "spectral radius ~ %.9g (>= %.9g, %zu power steps); ||K||_inf = %.9g; predicted %zu %s to "
                  "tol %g (rate rho^k%s)",
-                 res->spectral_radius, res->spectral_radius_lower, res->power_iterations, knorm,
+                 res->spectral_radius, res->spectral_radius_lower, res->power_iterations, S->knorm,
                  res->predicted_iterations, o->method == BN_SOLVE_NEUMANN ? "bounces" : "iterations", o->tol,
                  o->method == BN_SOLVE_GAUSS_SEIDEL ? "; Gauss-Seidel needs at most this, often about half" : "");
-    if (res->predicted_iterations != SIZE_MAX && res->predicted_iterations > o->max_iter && type->solve == NULL)
+    if (res->predicted_iterations != SIZE_MAX && res->predicted_iterations > o->max_iter && S->type->solve == NULL)
         bn__note(o, BN_LOG_WARN, "the predicted %zu iterations exceed --max-iter %zu: expect the iteration limit",
                  res->predicted_iterations, o->max_iter);
-    bn__write_log_head(o, k, res, thr, stop);
+    return BN_OK;
+}
 
-    ctx.k = k;
-    ctx.E = E;
-    ctx.diag = have_diag ? diag : NULL;
-    ctx.o = o;
-    ctx.n = n;
-    t1 = bn__now();
-
-    if (type->solve) {
-        /* ---- direct ---- */
-        int singular = 0;
-        st = type->solve(&ctx, res->L, &singular, err);
-        if (st != BN_OK) {
-            if (singular)
-                res->reason = BN_STOP_SINGULAR;
-            goto fail;
-        }
-        bad = bn__first_nonfinite(res->L, m);
-        if (bad != SIZE_MAX) {
-            res->bad_patch = bad / 3;
-            res->reason = BN_STOP_DIVERGED_NAN;
-            st = bn_error_set(err, BN_ENUMERIC, "direct solve: L of patch %zu (channel %c) is %g", bad / 3,
-                              "RGB"[bad % 3], res->L[bad]);
-            goto fail;
-        }
-        /* r <- E - (I - K) L */
-        bn_transport_apply(k, res->L, rs);
-        for (size_t i = 0; i < m; i++)
-            r[i] = E[i] - res->L[i] + rs[i];
-        bn__residual_norms(r, n, &row);
-        row.iteration = 0;
-        row.change = 0;
-        row.bound = 0;
-        row.error_bound = knorm < 1 ? row.residual_max / (1 - knorm) : INFINITY;
-        row.seconds = bn__now() - t0;
-        res->reason = BN_STOP_DIRECT;
-        res->iterations = 0;
-        bn__emit_row(o, &row, res->L);
-    } else {
-        /* ---- iterative: one driver for every method ---- */
-        size_t it;
-        double kpow = knorm;   /* ||K||^(s k + 1) */
-        state = bn__calloc(1, type->state_size);
-        if (!state) {
-            st = bn_error_set(err, BN_ENOMEM, "solve: out of memory");
-            goto fail;
-        }
-        st = type->setup(state, &ctx, res->L, r, err);
-        state_ready = 1;
-        if (st != BN_OK)
-            goto fail;
-        for (it = 0;; it++) {
-            double measure;
-            if (it > 0) {
-                memcpy(Lprev, res->L, m * sizeof(double));
-                if (!type->iterate(state, res->L, r)) {
-                    /* r <- E - (I - K) L */
-                    bn_transport_apply(k, res->L, rs);
-                    for (size_t i = 0; i < m; i++)
-                        r[i] = E[i] - res->L[i] + rs[i];
-                }
-                bn__residual_norms(r, n, &row);
-                row.change = 0;
-                for (size_t i = 0; i < m; i++)
-                    row.change = fmax(row.change, fabs(res->L[i] - Lprev[i]));
-                for (int s = 0; s < type->sweeps; s++)
-                    kpow *= knorm;
-            }
-            row.iteration = it;
-            row.bound = knorm < 1 ? kpow / (1 - knorm) * res->norm_E : INFINITY;
-            row.error_bound = knorm < 1 ? row.residual_max / (1 - knorm) : INFINITY;
-            row.seconds = bn__now() - t0;
-            res->iterations = it;
-            /* NaN / Inf: where did it first appear? */
-            bad = bn__first_nonfinite(res->L, m);
-            if (bad != SIZE_MAX || !isfinite(row.residual_max)) {
-                if (bad == SIZE_MAX)
-                    bad = bn__first_nonfinite(r, m);
-                res->bad_patch = bad / 3;
-                res->reason = BN_STOP_DIVERGED_NAN;
-                st = bn_error_set(err, BN_ENUMERIC, "%s: iteration %zu produced a non-finite value at patch %zu (channel %c)",
-                                  type->name, it, bad / 3, "RGB"[bad % 3]);
-                goto fail;
-            }
-            if (bn__emit_row(o, &row, res->L)) {
-                st = bn_error_set(err, BN_EINTR, "%s: stopped by the monitor at iteration %zu", type->name, it);
-                goto fail;
-            }
-            /* stop test */
-            measure = stop == BN_SOLVE_STOP_BOUND && knorm < 1 ? row.error_bound : row.residual_max;
-            if (measure <= target) {
-                res->reason = BN_STOP_CONVERGED_RTOL;
-                break;
-            }
-            if (measure <= o->atol) {
-                res->reason = BN_STOP_CONVERGED_ATOL;
-                break;
-            }
-            if (row.residual_max > o->divergence * fmax(r0max, DBL_MIN) && o->divergence > 0) {
-                res->reason = BN_STOP_DIVERGED_GROWTH;
-                st = bn_error_set(err, BN_ENUMERIC, "%s diverged: residual %.6g at iteration %zu is %.3g times the initial %.6g",
-                                  type->name, row.residual_max, it, row.residual_max / r0max, r0max);
-                goto fail;
-            }
-            if (it >= o->max_iter) {
-                res->reason = BN_STOP_MAX_ITER;
-                st = bn_error_set(err, BN_ENOTCONV,
-                                  "%s did not converge within %zu iterations: residual %.6g > %.6g (tol %g x ||E|| %.6g)%s",
-                                  type->name, o->max_iter, row.residual_max, fmax(target, o->atol), o->tol, res->norm_E,
-                                  res->predicted_iterations != SIZE_MAX ? "; raise --max-iter to the predicted count" : "");
-                break;
-            }
-            if (bn_interrupted() != BN_OK) {
-                st = bn_error_set(err, bn_interrupted(), "%s interrupted at iteration %zu", type->name, it);
-                goto fail;
-            }
-        }
-    }
-    res->residual_max = row.residual_max;
-    res->residual_rms = row.residual_rms;
-    memcpy(res->residual_ch, row.residual_ch, sizeof row.residual_ch);
-    res->change = row.change;
-    res->error_bound = row.error_bound;
-    res->seconds_iterate = bn__now() - t1;
-
-    /* ---- the per-bounce terms K^0 E .. K^n E ---- */
-    t1 = bn__now();
-    if (o->bounces >= 0) {
-        res->nterms = o->bounces + 1;
-        res->terms = bn__calloc((size_t)res->nterms, sizeof(double *));
-        if (!res->terms) {
-            res->nterms = 0;
-            st = bn_error_set(err, BN_ENOMEM, "solve: out of memory for %d bounce terms", o->bounces + 1);
-            goto fail;
-        }
-        for (int q = 0; q < res->nterms; q++)
-            if (!(res->terms[q] = bn__malloc_array(m ? m : 1, sizeof(double)))) {
-                st = bn_error_set(err, BN_ENOMEM, "solve: out of memory for %d bounce terms of %zu patches",
-                                  o->bounces + 1, n);
-                goto fail;
-            }
-        bn_solve_terms(k, E, res->nterms, res->terms);
-    }
-    res->seconds_terms = bn__now() - t1;
-    res->seconds = bn__now() - t0;
-    if (state_ready)
-        type->cleanup(state);
-    free(state);
-    free(ones);
-    free(rs);
-    free(diag);
-    free(r);
-    free(Lprev);
+/* Norms, diagonal, spectral radius, the singularity check, the start and the log's head. */
+static bn_status bn__solve_analyse(bn__solve *S)
+{
+    bn_status st = bn__solve_norm(S);
+    if (st == BN_OK)
+        st = bn__solve_diag(S);
+    if (st == BN_OK)
+        st = bn_solve_spectral_radius(S->k, S->o->power_iter, &S->res->spectral_radius,
+                                      &S->res->spectral_radius_lower, &S->res->power_iterations, S->err);
+    if (st == BN_OK)
+        st = bn__solve_singular(S);
+    if (st == BN_OK)
+        st = bn__solve_start(S);
+    S->res->seconds_analyse = bn__now() - S->t0;
+    if (st == BN_OK)
+        bn__write_log_head(S->o, S->k, S->res, S->o->singular_threshold, S->stop);
     return st;
+}
 
-fail:
-    if (state_ready)
-        type->cleanup(state);
+/* r <- E - (I - K) L. */
+static bn_status bn__solve_residual(bn__solve *S, const double *L)
+{
+    bn_status st = bn_transport_apply(S->k, L, S->y, S->err);
+    if (st != BN_OK)
+        return st;
+    for (size_t i = 0; i < S->m; i++)
+        S->r[i] = S->E[i] - L[i] + S->y[i];
+    return BN_OK;
+}
+
+/* One iteration of the method, its residual and the change it made. */
+static bn_status bn__solve_step(bn__solve *S, void *state)
+{
+    double *L = S->res->L;
+    int have_r = 0;
+    bn_status st;
+    memcpy(S->Lprev, L, S->m * sizeof(double));
+    st = S->type->iterate(state, L, S->r, &have_r, S->err);
+    if (st == BN_OK && !have_r)
+        st = bn__solve_residual(S, L);
+    if (st != BN_OK)
+        return st;
+    bn__residual_norms(S->r, S->n, &S->row);
+    S->row.change = 0;
+    for (size_t i = 0; i < S->m; i++)
+        S->row.change = fmax(S->row.change, fabs(L[i] - S->Lprev[i]));
+    return BN_OK;
+}
+
+/* The row's bounds: a priori ||K||^(s k + 1) / (1 - ||K||) ||E||, a posteriori ||r|| / (1 - ||K||). */
+static void bn__solve_bounds(bn__solve *S, size_t it)
+{
+    if (it == 0)
+        S->kpow = S->knorm;
+    else
+        for (int q = 0; q < S->type->sweeps; q++)
+            S->kpow *= S->knorm;
+    S->row.iteration = it;
+    S->row.bound = S->knorm < 1 ? S->kpow / (1 - S->knorm) * S->res->norm_E : INFINITY;
+    S->row.error_bound = S->knorm < 1 ? S->row.residual_max / (1 - S->knorm) : INFINITY;
+    S->row.seconds = bn__now() - S->t0;
+}
+
+/* After a row: *done = 1 with the stop reason set (and the status of a failed stop), or 0 to go on. */
+static bn_status bn__solve_stop_test(bn__solve *S, int *done)
+{
+    const bn_solve_opts *o = S->o;
+    bn_solve_result *res = S->res;
+    const bn_solve_row *row = &S->row;
+    size_t it = row->iteration;
+    double measure = S->stop == BN_SOLVE_STOP_BOUND && S->knorm < 1 ? row->error_bound : row->residual_max;
+    *done = 1;
+    if (measure <= S->target) {
+        res->reason = BN_STOP_CONVERGED_RTOL;
+        return BN_OK;
+    }
+    if (measure <= o->atol) {
+        res->reason = BN_STOP_CONVERGED_ATOL;
+        return BN_OK;
+    }
+    if (o->divergence > 0 && row->residual_max > o->divergence * fmax(S->r0max, DBL_MIN)) {
+        res->reason = BN_STOP_DIVERGED_GROWTH;
+        return bn_error_set(S->err, BN_ENUMERIC, "%s diverged: residual %.6g at iteration %zu is %.3g times the initial %.6g",
+                            S->type->name, row->residual_max, it, row->residual_max / S->r0max, S->r0max);
+    }
+    if (it >= o->max_iter) {
+        res->reason = BN_STOP_MAX_ITER;
+        return bn_error_set(S->err, BN_ENOTCONV,
+                            "%s did not converge within %zu iterations: residual %.6g > %.6g (tol %g x ||E|| %.6g)%s",
+                            S->type->name, o->max_iter, row->residual_max, fmax(S->target, o->atol), o->tol,
+                            res->norm_E,
+                            res->predicted_iterations != SIZE_MAX ? "; raise --max-iter to the predicted count" : "");
+    }
+    if (bn_interrupted() != BN_OK)
+        return bn_error_set(S->err, bn_interrupted(), "%s interrupted at iteration %zu", S->type->name, it);
+    *done = 0;
+    return BN_OK;
+}
+
+/* sweep -> residual -> bounds -> NaN check -> monitor row -> stop test, from row 0 (L0 = E). */
+static bn_status bn__solve_iterate(bn__solve *S)
+{
+    bn__solve_ctx ctx = {S->k, S->E, S->diag, S->o, S->n};
+    void *state = bn__calloc(1, S->type->state_size);
+    bn_status st;
+    int done = 0;
+    if (!state)
+        return bn_error_set(S->err, BN_ENOMEM, "solve: out of memory");
+    st = S->type->setup(state, &ctx, S->res->L, S->r, S->err);
+    for (size_t it = 0; st == BN_OK && !done; it++) {
+        size_t bad;
+        if (it > 0 && (st = bn__solve_step(S, state)) != BN_OK)
+            break;
+        bn__solve_bounds(S, it);
+        S->res->iterations = it;
+        bad = bn__first_nonfinite(S->res->L, S->m);
+        if (bad != SIZE_MAX || !isfinite(S->row.residual_max)) {
+            if (bad == SIZE_MAX)
+                bad = bn__first_nonfinite(S->r, S->m);
+            bn__solve_nonfinite(S, bad);
+            st = bn_error_set(S->err, BN_ENUMERIC, "%s: iteration %zu produced a non-finite value at patch %zu (channel %c)",
+                              S->type->name, it, bad / 3, "RGB"[bad % 3]);
+            break;
+        }
+        if (bn__emit_row(S->o, &S->row, S->res->L)) {
+            st = bn_error_set(S->err, BN_EINTR, "%s: stopped by the monitor at iteration %zu", S->type->name, it);
+            break;
+        }
+        st = bn__solve_stop_test(S, &done);
+    }
+    S->type->cleanup(state);
     free(state);
-    free(ones);
-    free(rs);
-    free(diag);
-    free(r);
-    free(Lprev);
-    /* No NaN and no half answer leaves a failed solve: L and the terms are released. */
-    free(res->L);
-    res->L = NULL;
-    if (res->terms)
-        for (int q = 0; q < res->nterms; q++)
-            free(res->terms[q]);
-    free(res->terms);
-    res->terms = NULL;
-    res->nterms = 0;
-    res->seconds = bn__now() - t0;
+    return st;
+}
+
+/* The direct method: L at once, then its residual as the one row of the table. */
+static bn_status bn__solve_direct(bn__solve *S)
+{
+    bn__solve_ctx ctx = {S->k, S->E, S->diag, S->o, S->n};
+    int singular = 0;
+    size_t bad;
+    bn_status st = S->type->solve(&ctx, S->res->L, &singular, S->err);
+    if (st != BN_OK) {
+        if (singular)
+            S->res->reason = BN_STOP_SINGULAR;
+        return st;
+    }
+    bad = bn__first_nonfinite(S->res->L, S->m);
+    if (bad != SIZE_MAX) {
+        bn__solve_nonfinite(S, bad);
+        return bn_error_set(S->err, BN_ENUMERIC, "direct solve: L of patch %zu (channel %c) is %g", bad / 3,
+                            "RGB"[bad % 3], S->res->L[bad]);
+    }
+    st = bn__solve_residual(S, S->res->L);
+    if (st != BN_OK)
+        return st;
+    bn__residual_norms(S->r, S->n, &S->row);
+    S->row.iteration = 0;
+    S->row.change = 0;
+    S->row.bound = 0;
+    S->row.error_bound = S->knorm < 1 ? S->row.residual_max / (1 - S->knorm) : INFINITY;
+    S->row.seconds = bn__now() - S->t0;
+    S->res->reason = BN_STOP_DIRECT;
+    S->res->iterations = 0;
+    bn__emit_row(S->o, &S->row, S->res->L);
+    return BN_OK;
+}
+
+/* The per-bounce terms K^0 E .. K^bounces E. */
+static bn_status bn__solve_keep_terms(bn__solve *S)
+{
+    bn_solve_result *res = S->res;
+    if (S->o->bounces < 0)
+        return BN_OK;
+    res->nterms = S->o->bounces + 1;
+    res->terms = bn__calloc((size_t)res->nterms, sizeof(double *));
+    if (!res->terms) {
+        res->nterms = 0;
+        return bn_error_set(S->err, BN_ENOMEM, "solve: out of memory for %d bounce terms", S->o->bounces + 1);
+    }
+    for (int q = 0; q < res->nterms; q++)
+        if (!(res->terms[q] = bn__malloc_array(S->m ? S->m : 1, sizeof(double))))
+            return bn_error_set(S->err, BN_ENOMEM, "solve: out of memory for %d bounce terms of %zu patches",
+                                S->o->bounces + 1, S->n);
+    return bn_solve_terms(S->k, S->E, res->nterms, res->terms, S->err);
+}
+
+static void bn__solve_record(bn__solve *S)
+{
+    bn_solve_result *res = S->res;
+    res->residual_max = S->row.residual_max;
+    res->residual_rms = S->row.residual_rms;
+    memcpy(res->residual_ch, S->row.residual_ch, sizeof S->row.residual_ch);
+    res->change = S->row.change;
+    res->error_bound = S->row.error_bound;
+}
+
+bn_status bn_solve(const bn_transport *k, const double *E, const bn_solve_opts *o, bn_solve_result *res,
+                   bn_error *err)
+{
+    bn__solve S;
+    bn_status st, run = BN_OK;
+    double t;
+    memset(&S, 0, sizeof S);
+    memset(res, 0, sizeof *res);
+    S.k = k;
+    S.E = E;
+    S.o = o;
+    S.res = res;
+    S.err = err;
+    S.type = bn__solver_for(o);
+    S.n = bn_transport_size(k);
+    S.m = 3 * S.n;
+    S.t0 = bn__now();
+    res->n = S.n;
+    res->method = o->method;
+    res->bad_patch = SIZE_MAX;
+    res->reason = BN_STOP_NONE;
+
+    st = bn__solve_check(&S);
+    if (st == BN_OK)
+        st = bn__solve_analyse(&S);
+    if (st == BN_OK) {
+        t = bn__now();
+        run = S.type->solve ? bn__solve_direct(&S) : bn__solve_iterate(&S);
+        res->seconds_iterate = bn__now() - t;
+        bn__solve_record(&S);
+        /* The iteration limit is a failure that keeps its answer (the caller may want it). */
+        st = run == BN_ENOTCONV ? BN_OK : run;
+    }
+    if (st == BN_OK) {
+        t = bn__now();
+        st = bn__solve_keep_terms(&S);
+        res->seconds_terms = bn__now() - t;
+        if (st == BN_OK)
+            st = run;
+    }
+    res->seconds = bn__now() - S.t0;
+    free(S.diag);
+    free(S.r);
+    free(S.y);
+    free(S.Lprev);
+    if (st != BN_OK && st != BN_ENOTCONV)
+        bn_solve_result_free(res);   /* no NaN and no half answer leaves a failed solve */
     return st;
 }

@@ -574,7 +574,7 @@ static bn_status bn__study_operator(bn__study *S, bn_error *err)
             goto done;
         }
         /* ||KE||_inf for the second bound (one application, not timed). */
-        bn_transport_apply(K, E, y);
+        st = bn_transport_apply(K, E, y, err);
         for (size_t q = 0; q < m; q++)
             norm_ke = fmax(norm_ke, fabs(y[q]));
         memcpy(x, E, m * sizeof(double));
@@ -584,7 +584,9 @@ static bn_status bn__study_operator(bn__study *S, bn_error *err)
             double t0;
             if (k > 0) {
                 t0 = bn__now();
-                bn_transport_apply(K, x, y);   /* K^k E <- K (K^(k-1) E) */
+                st = bn_transport_apply(K, x, y, err);   /* K^k E <- K (K^(k-1) E) */
+                if (st != BN_OK)
+                    break;
                 for (size_t q = 0; q < m; q++)
                     Sn[q] += y[q];             /* S_k <- S_(k-1) + K^k E */
                 t_apply += bn__now() - t0;

@@ -1,7 +1,7 @@
 /* Dense F storage in float or double, row-major; every sum accumulates in double.
  * Memory-bandwidth bound: one pass over F serves all three channels. */
 #include "bounce/transport.h"
-#include "transport/transport_internal.h"
+#include "transport/storage.h"
 #include "base/internal.h"
 
 #include <string.h>
@@ -138,30 +138,32 @@ BN__ROW4_PLANAR(double)
 BN__ROW_INTERLEAVED(float)
 BN__ROW_INTERLEAVED(double)
 
-static void bn__dense_row(const void *impl, size_t i, const double *x, double out[3])
+static bn_status bn__dense_row(void *ctx, size_t i, const double *x, double out[3], bn_error *err)
 {
-    const bn__dense *d = impl;
+    const bn__dense *d = ctx;
+    (void)err;
     if (d->prec == BN_PRECISION_FLOAT)
         bn__row_inter_float((const float *)d->data + i * d->n, d->n, x, out);
     else
         bn__row_inter_double((const double *)d->data + i * d->n, d->n, x, out);
+    return BN_OK;
 }
 
 /* Below this size a parallel region costs more than the product (and oversubscribed machines
  * make it far worse). */
 #define BN__DENSE_PARALLEL_MIN 256
 
-static void bn__dense_apply(const void *impl, const double *x, double *y)
+static bn_status bn__dense_apply(void *ctx, const double *x, double *y, bn_error *err)
 {
-    const bn__dense *d = impl;
+    const bn__dense *d = ctx;
     long n = (long)d->n;
     double *xp = bn__malloc_array(3 * d->n, sizeof(double));
     if (!xp) {
         /* No room for the planar copy: the interleaved kernel gives the same sums. */
 #pragma omp parallel for schedule(static) if (n >= BN__DENSE_PARALLEL_MIN)
         for (long i = 0; i < n; i++)
-            bn__dense_row(impl, (size_t)i, x, y + 3 * i);
-        return;
+            bn__dense_row(ctx, (size_t)i, x, y + 3 * i, err);
+        return BN_OK;
     }
     for (long j = 0; j < n; j++) {
         xp[j] = x[3 * j];
@@ -191,46 +193,89 @@ static void bn__dense_apply(const void *impl, const double *x, double *y)
         }
     }
     free(xp);
+    return BN_OK;
 }
 
-static double bn__dense_entry(const void *impl, size_t i, size_t j)
+static double bn__dense_get(const bn__dense *d, size_t k)
 {
-    const bn__dense *d = impl;
-    return d->prec == BN_PRECISION_FLOAT ? (double)((const float *)d->data)[i * d->n + j]
-                                         : ((const double *)d->data)[i * d->n + j];
+    return d->prec == BN_PRECISION_FLOAT ? (double)((const float *)d->data)[k] : ((const double *)d->data)[k];
 }
 
-static size_t bn__dense_bytes(const void *impl)
+static bn_status bn__dense_entry(void *ctx, size_t i, size_t j, double *v, bn_error *err)
 {
-    const bn__dense *d = impl;
-    return d->n * d->n * (d->prec == BN_PRECISION_FLOAT ? sizeof(float) : sizeof(double));
+    const bn__dense *d = ctx;
+    (void)err;
+    *v = bn__dense_get(d, i * d->n + j);
+    return BN_OK;
 }
 
-static void bn__dense_destroy(void *impl)
+/* A dense row stores every column. */
+static bn_status bn__dense_row_entries(void *ctx, size_t i, size_t *cols, double *vals, size_t *count, bn_error *err)
 {
-    bn__dense *d = impl;
+    const bn__dense *d = ctx;
+    (void)err;
+    for (size_t j = 0; j < d->n; j++) {
+        cols[j] = j;
+        vals[j] = bn__dense_get(d, i * d->n + j);
+    }
+    *count = d->n;
+    return BN_OK;
+}
+
+static bn_status bn__dense_diag(void *ctx, double *out, bn_error *err)
+{
+    const bn__dense *d = ctx;
+    (void)err;
+    for (size_t i = 0; i < d->n; i++)
+        out[i] = bn__dense_get(d, i * d->n + i);
+    return BN_OK;
+}
+
+static size_t bn__dense_bytes_for(size_t n, size_t nnz, bn_precision prec)
+{
+    size_t nn, b;
+    (void)nnz;
+    if (!bn__mul_size(n, n, &nn) || !bn__mul_size(nn, prec == BN_PRECISION_FLOAT ? sizeof(float) : sizeof(double), &b))
+        return SIZE_MAX;
+    return b;
+}
+
+static size_t bn__dense_bytes(const void *ctx)
+{
+    const bn__dense *d = ctx;
+    return bn__dense_bytes_for(d->n, 0, d->prec);
+}
+
+static void bn__dense_destroy(void *ctx)
+{
+    bn__dense *d = ctx;
     if (d) {
         free(d->data);
         free(d);
     }
 }
 
-static const bn_transport_ops bn__dense_float_ops = {"dense-float", bn__dense_apply, bn__dense_row, bn__dense_entry,
-                                                     bn__dense_bytes, bn__dense_destroy};
-static const bn_transport_ops bn__dense_double_ops = {"dense-double", bn__dense_apply, bn__dense_row,
-                                                      bn__dense_entry, bn__dense_bytes, bn__dense_destroy};
+#define BN__DENSE_CAPS (BN_OP_ROWS | BN_OP_ENTRIES | BN_OP_DIAG)
+static const bn_transport_ops bn__dense_float_ops = {
+    "dense-float", BN__DENSE_CAPS, bn__dense_apply, bn__dense_row, bn__dense_entry, bn__dense_row_entries,
+    bn__dense_diag, bn__dense_bytes, bn__dense_destroy};
+static const bn_transport_ops bn__dense_double_ops = {
+    "dense-double", BN__DENSE_CAPS, bn__dense_apply, bn__dense_row, bn__dense_entry, bn__dense_row_entries,
+    bn__dense_diag, bn__dense_bytes, bn__dense_destroy};
 
-bn_status bn__dense_alloc(size_t n, bn_precision prec, bn__dense_view *view, void **impl, const bn_transport_ops **ops,
-                          bn_error *err)
+/* ---- the storage: zeroed N^2, filled in place ---- */
+
+static bn_status bn__dense_begin(size_t n, bn_precision prec, const size_t *counts, void **sink, bn_error *err)
 {
-    size_t nn, bytes;
+    size_t nn, bytes = bn__dense_bytes_for(n, 0, prec);
     bn__dense *d;
-    size_t elem = prec == BN_PRECISION_FLOAT ? sizeof(float) : sizeof(double);
-    if (!bn__mul_size(n, n, &nn) || !bn__mul_size(nn, elem, &bytes))
+    (void)counts;
+    *sink = NULL;
+    if (bytes == SIZE_MAX || !bn__mul_size(n, n, &nn))
         return bn_error_set(err, BN_ENOMEM, "dense F for %zu patches overflows size_t", n);
     d = calloc(1, sizeof *d);
     if (d)
-        d->data = calloc(nn ? nn : 1, elem);
+        d->data = calloc(nn ? nn : 1, prec == BN_PRECISION_FLOAT ? sizeof(float) : sizeof(double));
     if (!d || !d->data) {
         free(d);
         return bn_error_set(err, BN_ENOMEM, "cannot allocate dense F: %zu patches need %.3g GiB", n,
@@ -238,28 +283,31 @@ bn_status bn__dense_alloc(size_t n, bn_precision prec, bn__dense_view *view, voi
     }
     d->n = n;
     d->prec = prec;
-    view->n = n;
-    view->f32 = prec == BN_PRECISION_FLOAT ? d->data : NULL;
-    view->f64 = prec == BN_PRECISION_DOUBLE ? d->data : NULL;
-    *impl = d;
-    *ops = prec == BN_PRECISION_FLOAT ? &bn__dense_float_ops : &bn__dense_double_ops;
+    *sink = d;
     return BN_OK;
 }
 
-bn_status bn_transport_dense_from_array(size_t n, const double *F, const double *rho, bn_precision prec,
-                                        bn_transport **out, bn_error *err)
+static int bn__dense_put(void *sink, size_t i, size_t j, double v)
 {
-    bn__dense_view v;
-    void *impl;
-    const bn_transport_ops *ops;
-    bn_status st = bn__dense_alloc(n, prec, &v, &impl, &ops, err);
-    if (st != BN_OK)
-        return st;
-    for (size_t i = 0; i < n * n; i++) {
-        if (v.f32)
-            v.f32[i] = (float)F[i];
-        else
-            v.f64[i] = F[i];
-    }
-    return bn_transport_create(n, rho, ops, impl, out, err);
+    bn__dense *d = sink;
+    if (d->prec == BN_PRECISION_FLOAT)
+        ((float *)d->data)[i * d->n + j] = (float)v;
+    else
+        ((double *)d->data)[i * d->n + j] = v;
+    return 1;
 }
+
+static bn_status bn__dense_finish(void *sink, double drop_below, bn_builder_report *rep, const bn_transport_ops **ops,
+                                  void **ctx, bn_error *err)
+{
+    bn__dense *d = sink;
+    (void)drop_below;   /* dense keeps every entry */
+    (void)rep;
+    (void)err;
+    *ops = d->prec == BN_PRECISION_FLOAT ? &bn__dense_float_ops : &bn__dense_double_ops;
+    *ctx = d;
+    return BN_OK;
+}
+
+const bn__storage bn__storage_dense = {"dense", 0, bn__dense_bytes_for, bn__dense_begin, NULL,
+                                       bn__dense_put, bn__dense_finish, bn__dense_destroy};

@@ -1,6 +1,6 @@
-/* The transport operator K = diag(rho) F: the generic wrapper over a storage implementation. */
+/* The transport operator K = diag(rho) F: the generic wrapper over any operator for F (a storage
+ * or a user's own), the capability checks the solvers rely on, and the names of precisions. */
 #include "bounce/transport.h"
-#include "transport/transport_internal.h"
 #include "base/internal.h"
 
 #include <math.h>
@@ -10,31 +10,57 @@ struct bn_transport {
     size_t n;
     double *rho;
     const bn_transport_ops *ops;
-    void *impl;
+    void *ctx;
 };
 
-bn_status bn_transport_create(size_t n, const double *rho, const bn_transport_ops *ops, void *impl,
+static void bn__ctx_destroy(const bn_transport_ops *ops, void *ctx)
+{
+    if (ops && ops->destroy)
+        ops->destroy(ctx);
+}
+
+/* Each capability bit and the function(s) it promises. */
+static const char *bn__ops_missing(const bn_transport_ops *ops)
+{
+    if (!ops->apply)
+        return "apply";
+    if ((ops->caps & BN_OP_ROWS) && !ops->row)
+        return "row (BN_OP_ROWS)";
+    if ((ops->caps & BN_OP_ENTRIES) && !ops->entry)
+        return "entry (BN_OP_ENTRIES)";
+    if ((ops->caps & BN_OP_DIAG) && !ops->diag)
+        return "diag (BN_OP_DIAG)";
+    return NULL;
+}
+
+bn_status bn_transport_create(size_t n, const double *rho, const bn_transport_ops *ops, void *ctx,
                               bn_transport **out, bn_error *err)
 {
     bn_transport *k;
+    const char *missing;
     *out = NULL;
+    if (!ops || (missing = bn__ops_missing(ops)) != NULL) {
+        bn__ctx_destroy(ops, ctx);
+        return bn_error_set(err, BN_EUSAGE, "transport operator %s: no %s function", ops && ops->name ? ops->name : "?",
+                            ops ? missing : "ops table");
+    }
     for (size_t i = 0; i < 3 * n; i++)
         if (!(rho[i] >= 0 && rho[i] <= 1)) {
-            ops->destroy(impl);
+            bn__ctx_destroy(ops, ctx);
             return bn_error_set(err, BN_EINPUT, "patch %zu: reflectance %g is outside [0, 1]", i / 3, rho[i]);
         }
     k = calloc(1, sizeof *k);
     if (k)
-        k->rho = bn__malloc_array(3 * n, sizeof(double));
+        k->rho = bn__malloc_array(n ? 3 * n : 1, sizeof(double));
     if (!k || !k->rho) {
         free(k);
-        ops->destroy(impl);
+        bn__ctx_destroy(ops, ctx);
         return bn_error_set(err, BN_ENOMEM, "out of memory");
     }
     memcpy(k->rho, rho, 3 * n * sizeof(double));
     k->n = n;
     k->ops = ops;
-    k->impl = impl;
+    k->ctx = ctx;
     *out = k;
     return BN_OK;
 }
@@ -43,62 +69,181 @@ void bn_transport_destroy(bn_transport *k)
 {
     if (!k)
         return;
-    k->ops->destroy(k->impl);
+    bn__ctx_destroy(k->ops, k->ctx);
     free(k->rho);
     free(k);
 }
 
-const bn_transport_ops *bn__transport_ops(const bn_transport *k) { return k->ops; }
-const void *bn__transport_impl(const bn_transport *k) { return k->impl; }
-
 size_t bn_transport_size(const bn_transport *k) { return k->n; }
 const double *bn_transport_rho(const bn_transport *k) { return k->rho; }
-const char *bn_transport_name(const bn_transport *k) { return k->ops->name; }
-size_t bn_transport_bytes(const bn_transport *k) { return k->ops->bytes(k->impl) + 3 * k->n * sizeof(double); }
-double bn_transport_F(const bn_transport *k, size_t i, size_t j) { return k->ops->entry(k->impl, i, j); }
+const char *bn_transport_name(const bn_transport *k) { return k->ops->name ? k->ops->name : "user"; }
+unsigned bn_transport_caps(const bn_transport *k) { return k->ops->caps; }
 
-void bn_transport_apply(const bn_transport *k, const double *x, double *y)
+size_t bn_transport_bytes(const bn_transport *k)
+{
+    return (k->ops->bytes ? k->ops->bytes(k->ctx) : 0) + 3 * k->n * sizeof(double);
+}
+
+bn_status bn_transport_require(const bn_transport *k, unsigned need, const char *who, bn_error *err)
+{
+    unsigned lack = need & ~k->ops->caps;
+    if (!lack)
+        return BN_OK;
+    return bn_error_set(err, BN_ENOTSUP, "%s needs %s of K, which the %s operator does not offer%s", who,
+                        lack & BN_OP_ENTRIES ? "single entries" : lack & BN_OP_ROWS ? "row access" : "the diagonal",
+                        bn_transport_name(k),
+                        lack & BN_OP_ENTRIES ? ": use an iterative method (jacobi, gauss-seidel, neumann)"
+                        : lack & BN_OP_ROWS  ? ": use jacobi or neumann, which need only y = K x"
+                                             : "");
+}
+
+/* An operator's failure without a message still says which operator and call failed. */
+static bn_status bn__checked(const bn_transport *k, bn_status st, const char *what, bn_error *err)
+{
+    if (st != BN_OK && err && err->status != st)
+        bn_error_set(err, st, "%s operator: %s failed (%s)", bn_transport_name(k), what, bn_status_str(st));
+    return st;
+}
+
+bn_status bn_transport_apply_F(const bn_transport *k, const double *x, double *y, bn_error *err)
+{
+    if (err)
+        err->status = BN_OK;
+    return bn__checked(k, k->ops->apply(k->ctx, x, y, err), "apply", err);
+}
+
+bn_status bn_transport_apply(const bn_transport *k, const double *x, double *y, bn_error *err)
 {
     /* y <- F x, then y <- diag(rho) y */
-    k->ops->apply_F(k->impl, x, y);
+    bn_status st = bn_transport_apply_F(k, x, y, err);
+    if (st != BN_OK)
+        return st;
     for (size_t i = 0; i < 3 * k->n; i++)
         y[i] *= k->rho[i];
+    return BN_OK;
 }
 
-void bn_transport_row(const bn_transport *k, size_t i, const double *x, double out[3])
+bn_status bn_transport_row(const bn_transport *k, size_t i, const double *x, double out[3], bn_error *err)
 {
-    k->ops->row_F(k->impl, i, x, out);
+    bn_status st;
+    if (!(k->ops->caps & BN_OP_ROWS))
+        return bn_transport_require(k, BN_OP_ROWS, "row access", err);
+    if (err)
+        err->status = BN_OK;
+    st = bn__checked(k, k->ops->row(k->ctx, i, x, out, err), "row", err);
+    if (st != BN_OK)
+        return st;
     for (int c = 0; c < 3; c++)
-        out[c] *= k->rho[3 * i + c];
+        out[c] *= k->rho[3 * i + (size_t)c];
+    return BN_OK;
 }
 
-double bn_transport_norm_inf(const bn_transport *k, double per_channel[3])
+bn_status bn_transport_entry(const bn_transport *k, size_t i, size_t j, double *v, bn_error *err)
+{
+    if (!(k->ops->caps & BN_OP_ENTRIES))
+        return bn_transport_require(k, BN_OP_ENTRIES, "entry access", err);
+    if (err)
+        err->status = BN_OK;
+    return bn__checked(k, k->ops->entry(k->ctx, i, j, v, err), "entry", err);
+}
+
+bn_status bn_transport_row_entries(const bn_transport *k, size_t i, size_t *cols, double *vals, size_t *count,
+                                   bn_error *err)
+{
+    bn_status st;
+    if (!(k->ops->caps & BN_OP_ENTRIES))
+        return bn_transport_require(k, BN_OP_ENTRIES, "entry access", err);
+    if (err)
+        err->status = BN_OK;
+    if (k->ops->row_entries)
+        return bn__checked(k, k->ops->row_entries(k->ctx, i, cols, vals, count, err), "row_entries", err);
+    *count = 0;
+    for (size_t j = 0; j < k->n; j++) {
+        double v;
+        st = bn__checked(k, k->ops->entry(k->ctx, i, j, &v, err), "entry", err);
+        if (st != BN_OK)
+            return st;
+        if (v != 0) {
+            cols[*count] = j;
+            vals[(*count)++] = v;
+        }
+    }
+    return BN_OK;
+}
+
+bn_status bn_transport_diag(const bn_transport *k, double *d, bn_error *err)
+{
+    if (err)
+        err->status = BN_OK;
+    if (k->ops->caps & BN_OP_DIAG)
+        return bn__checked(k, k->ops->diag(k->ctx, d, err), "diag", err);
+    if (!(k->ops->caps & BN_OP_ENTRIES))
+        return bn_transport_require(k, BN_OP_DIAG, "the diagonal", err);
+    for (size_t i = 0; i < k->n; i++) {
+        bn_status st = bn__checked(k, k->ops->entry(k->ctx, i, i, &d[i], err), "entry", err);
+        if (st != BN_OK)
+            return st;
+    }
+    return BN_OK;
+}
+
+bn_status bn_transport_norm_inf(const bn_transport *k, double *norm, double per_channel[3], bn_error *err)
 {
     /* ||K||_inf = max_i rho_ic sum_j |F_ij| (F >= 0): the row sums are F applied to ones. */
-    double *ones = bn__malloc_array(3 * k->n, sizeof(double)), *rs = bn__malloc_array(3 * k->n, sizeof(double));
-    double pc[3] = {0, 0, 0}, m = 0;
+    size_t m = 3 * k->n;
+    double *ones = bn__malloc_array(m ? m : 1, sizeof(double)), *rs = bn__malloc_array(m ? m : 1, sizeof(double));
+    double pc[3] = {0, 0, 0};
+    bn_status st;
+    *norm = NAN;
     if (!ones || !rs) {
         free(ones);
         free(rs);
-        return NAN;
+        return bn_error_set(err, BN_ENOMEM, "||K||: out of memory for %zu patches", k->n);
     }
-    for (size_t i = 0; i < 3 * k->n; i++)
+    for (size_t i = 0; i < m; i++)
         ones[i] = 1.0;
-    k->ops->apply_F(k->impl, ones, rs);
-    for (size_t i = 0; i < k->n; i++)
-        for (int c = 0; c < 3; c++)
-            pc[c] = fmax(pc[c], k->rho[3 * i + c] * rs[3 * i + c]);
-    m = fmax(pc[0], fmax(pc[1], pc[2]));
-    if (per_channel)
-        memcpy(per_channel, pc, sizeof pc);
+    st = bn_transport_apply(k, ones, rs, err);
+    if (st == BN_OK) {
+        for (size_t i = 0; i < m; i++)
+            pc[i % 3] = fmax(pc[i % 3], rs[i]);
+        *norm = fmax(pc[0], fmax(pc[1], pc[2]));
+        if (per_channel)
+            memcpy(per_channel, pc, sizeof pc);
+    }
     free(ones);
     free(rs);
-    return m;
+    return st;
 }
 
-void bn_transport_to_dense(const bn_transport *k, double *F)
+bn_status bn_transport_to_dense(const bn_transport *k, double *F, bn_error *err)
 {
-    for (size_t i = 0; i < k->n; i++)
-        for (size_t j = 0; j < k->n; j++)
-            F[i * k->n + j] = k->ops->entry(k->impl, i, j);
+    size_t *cols = bn__malloc_array(k->n ? k->n : 1, sizeof(size_t)), cnt;
+    double *vals = bn__malloc_array(k->n ? k->n : 1, sizeof(double));
+    bn_status st = (cols && vals) ? BN_OK : bn_error_set(err, BN_ENOMEM, "out of memory");
+    for (size_t i = 0; i < k->n && st == BN_OK; i++) {
+        st = bn_transport_row_entries(k, i, cols, vals, &cnt, err);
+        memset(F + i * k->n, 0, k->n * sizeof(double));
+        for (size_t q = 0; st == BN_OK && q < cnt; q++)
+            F[i * k->n + cols[q]] = vals[q];
+    }
+    free(cols);
+    free(vals);
+    return st;
 }
+
+/* ---- precisions ---- */
+
+const char *bn_precision_name(bn_precision p) { return p == BN_PRECISION_DOUBLE ? "double" : "float"; }
+
+int bn_precision_parse(const char *s, bn_precision *out)
+{
+    if (strcmp(s, "float") == 0)
+        *out = BN_PRECISION_FLOAT;
+    else if (strcmp(s, "double") == 0)
+        *out = BN_PRECISION_DOUBLE;
+    else
+        return -1;
+    return 0;
+}
+
+double bn_precision_epsilon(bn_precision p) { return p == BN_PRECISION_DOUBLE ? 0x1p-53 : 0x1p-24; }
