@@ -525,16 +525,25 @@ BN_TEST(cli_outputs_cache_and_limits)
     txt = bn_test_read_file(bin, &size);
     BN_ASSERT(txt && memcmp(txt, "BNFF", 4) == 0);
     {
-        uint64_t n, tlen;
-        uint32_t vb;
+        /* the layout documented in the README (BNFF v2): a 64-byte typed header */
+        uint64_t n, nnz, klen, tlen;
+        uint32_t version, vb, layout;
         double f01;
+        memcpy(&version, txt + 4, 4);
         memcpy(&n, txt + 8, 8);
-        memcpy(&vb, txt + 16, 4);
-        memcpy(&tlen, txt + 32, 8);
+        memcpy(&nnz, txt + 16, 8);
+        memcpy(&vb, txt + 24, 4);
+        memcpy(&layout, txt + 28, 4);
+        memcpy(&klen, txt + 48, 8);
+        memcpy(&tlen, txt + 56, 8);
+        BN_ASSERT_EQ(version, 2);
         BN_ASSERT_EQ(n, 2);
+        BN_ASSERT_EQ(nnz, 4);
         BN_ASSERT_EQ(vb, 8);
-        BN_ASSERT_EQ(size, 40 + tlen + 2 * 8 + 4 * 8);
-        memcpy(&f01, txt + 40 + tlen + 16 + 8, 8);
+        BN_ASSERT_EQ(layout, 0);   /* full rows: dense */
+        BN_ASSERT(strncmp(txt + 32, "dense-double", 16) == 0);
+        BN_ASSERT_EQ(size, 64 + klen + tlen + 2 * 8 + 4 * 8);
+        memcpy(&f01, txt + 64 + klen + tlen + 16 + 8, 8);
         BN_ASSERT_REL(f01, pub_parallel(1, 1, 1), BN_TOL_PUBLISHED);
     }
     free(txt);
@@ -553,16 +562,17 @@ BN_TEST(cli_outputs_cache_and_limits)
     /* a corrupted F (View3D's F = 1.31) is never let through, even from a cache */
     {
         FILE *fp;
-        uint64_t tlen;
+        uint64_t klen, tlen;
         float bad = 1.31f;
         txt = bn_test_read_file(cache, &size);
         BN_ASSERT(txt != NULL);
-        memcpy(&tlen, txt + 32, 8);
+        memcpy(&klen, txt + 48, 8);
+        memcpy(&tlen, txt + 56, 8);
         free(txt);
         snprintf(cmd, sizeof cmd, "formfactors %s --no-subdivide --cache %s --samples 8", scene, cache);
         fp = fopen(cache, "r+b");
         BN_ASSERT(fp != NULL);
-        fseek(fp, (long)(40 + tlen + 2 * 8 + 4), SEEK_SET);   /* F_01, float32 */
+        fseek(fp, (long)(64 + klen + tlen + 2 * 8 + 4), SEEK_SET);   /* F_01, float32 */
         fwrite(&bad, sizeof bad, 1, fp);
         fclose(fp);
         BN_ASSERT_EQ(bn_test_bounce(cmd, &out), 5);

@@ -97,19 +97,34 @@ bn_status bn_transport_require(const bn_transport *k, unsigned need, const char 
                                              : "");
 }
 
-/* An operator's failure without a message still says which operator and call failed. */
-static bn_status bn__checked(const bn_transport *k, bn_status st, const char *what, bn_error *err)
-{
-    if (st != BN_OK && err && err->status != st)
-        bn_error_set(err, st, "%s operator: %s failed (%s)", bn_transport_name(k), what, bn_status_str(st));
-    return st;
-}
+/* Calls an operator function with a fresh error record of its own, so that a caller's earlier
+ * error is never touched by a call that succeeds; a failure without a message still says which
+ * operator and call failed. */
+#define BN__OP_CALL(k, err, what, call)                                                             \
+    do {                                                                                           \
+        bn_error op_err_;                                                                          \
+        bn_status op_st_;                                                                          \
+        bn_error *err_ = &op_err_;                                                                 \
+        op_err_.status = BN_OK;                                                                    \
+        op_err_.msg[0] = '\0';                                                                     \
+        op_st_ = (call);                                                                           \
+        if (op_st_ != BN_OK) {                                                                     \
+            if (op_err_.status == op_st_ && op_err_.msg[0]) {                                      \
+                if (err)                                                                           \
+                    *(err) = op_err_;                                                              \
+            } else {                                                                               \
+                bn_error_set(err, op_st_, "%s operator: %s failed (%s)", bn_transport_name(k), what, \
+                             bn_status_str(op_st_));                                               \
+            }                                                                                      \
+            return op_st_;                                                                         \
+        }                                                                                          \
+        (void)err_;                                                                                \
+    } while (0)
 
 bn_status bn_transport_apply_F(const bn_transport *k, const double *x, double *y, bn_error *err)
 {
-    if (err)
-        err->status = BN_OK;
-    return bn__checked(k, k->ops->apply(k->ctx, x, y, err), "apply", err);
+    BN__OP_CALL(k, err, "apply", k->ops->apply(k->ctx, x, y, err_));
+    return BN_OK;
 }
 
 bn_status bn_transport_apply(const bn_transport *k, const double *x, double *y, bn_error *err)
@@ -125,14 +140,9 @@ bn_status bn_transport_apply(const bn_transport *k, const double *x, double *y, 
 
 bn_status bn_transport_row(const bn_transport *k, size_t i, const double *x, double out[3], bn_error *err)
 {
-    bn_status st;
     if (!(k->ops->caps & BN_OP_ROWS))
         return bn_transport_require(k, BN_OP_ROWS, "row access", err);
-    if (err)
-        err->status = BN_OK;
-    st = bn__checked(k, k->ops->row(k->ctx, i, x, out, err), "row", err);
-    if (st != BN_OK)
-        return st;
+    BN__OP_CALL(k, err, "row", k->ops->row(k->ctx, i, x, out, err_));
     for (int c = 0; c < 3; c++)
         out[c] *= k->rho[3 * i + (size_t)c];
     return BN_OK;
@@ -142,27 +152,23 @@ bn_status bn_transport_entry(const bn_transport *k, size_t i, size_t j, double *
 {
     if (!(k->ops->caps & BN_OP_ENTRIES))
         return bn_transport_require(k, BN_OP_ENTRIES, "entry access", err);
-    if (err)
-        err->status = BN_OK;
-    return bn__checked(k, k->ops->entry(k->ctx, i, j, v, err), "entry", err);
+    BN__OP_CALL(k, err, "entry", k->ops->entry(k->ctx, i, j, v, err_));
+    return BN_OK;
 }
 
 bn_status bn_transport_row_entries(const bn_transport *k, size_t i, size_t *cols, double *vals, size_t *count,
                                    bn_error *err)
 {
-    bn_status st;
     if (!(k->ops->caps & BN_OP_ENTRIES))
         return bn_transport_require(k, BN_OP_ENTRIES, "entry access", err);
-    if (err)
-        err->status = BN_OK;
-    if (k->ops->row_entries)
-        return bn__checked(k, k->ops->row_entries(k->ctx, i, cols, vals, count, err), "row_entries", err);
+    if (k->ops->row_entries) {
+        BN__OP_CALL(k, err, "row_entries", k->ops->row_entries(k->ctx, i, cols, vals, count, err_));
+        return BN_OK;
+    }
     *count = 0;
     for (size_t j = 0; j < k->n; j++) {
         double v;
-        st = bn__checked(k, k->ops->entry(k->ctx, i, j, &v, err), "entry", err);
-        if (st != BN_OK)
-            return st;
+        BN__OP_CALL(k, err, "entry", k->ops->entry(k->ctx, i, j, &v, err_));
         if (v != 0) {
             cols[*count] = j;
             vals[(*count)++] = v;
@@ -173,17 +179,14 @@ bn_status bn_transport_row_entries(const bn_transport *k, size_t i, size_t *cols
 
 bn_status bn_transport_diag(const bn_transport *k, double *d, bn_error *err)
 {
-    if (err)
-        err->status = BN_OK;
-    if (k->ops->caps & BN_OP_DIAG)
-        return bn__checked(k, k->ops->diag(k->ctx, d, err), "diag", err);
+    if (k->ops->caps & BN_OP_DIAG) {
+        BN__OP_CALL(k, err, "diag", k->ops->diag(k->ctx, d, err_));
+        return BN_OK;
+    }
     if (!(k->ops->caps & BN_OP_ENTRIES))
         return bn_transport_require(k, BN_OP_DIAG, "the diagonal", err);
-    for (size_t i = 0; i < k->n; i++) {
-        bn_status st = bn__checked(k, k->ops->entry(k->ctx, i, i, &d[i], err), "entry", err);
-        if (st != BN_OK)
-            return st;
-    }
+    for (size_t i = 0; i < k->n; i++)
+        BN__OP_CALL(k, err, "entry", k->ops->entry(k->ctx, i, i, &d[i], err_));
     return BN_OK;
 }
 
