@@ -7,6 +7,7 @@
  * usage: ff_bench [--quick] [--scene FILE] [--unit m|cm|mm] [--patches N]                      */
 #include "bounce/formfactor.h"
 #include "bounce/rt.h"
+#include "bounce/pipeline.h"
 #include "base/internal.h"
 
 #include <math.h>
@@ -159,8 +160,8 @@ int main(int argc, char **argv)
     int quick = 0, reps;
     size_t patches = 0, np, pairs, nrays;
     bn_unit unit = BN_UNIT_MM;
-    bn_load_opts lo;
-    bn_mesh_opts mo;
+    bn_pipeline_opts po;
+    bn_pipeline pl;
     bn_scene *s;
     bn_rt *rt;
     bn_error err;
@@ -188,20 +189,18 @@ int main(int argc, char **argv)
         patches = quick ? 300 : BN_DEFAULT_PATCHES;
     reps = quick ? 3 : 5;
     nrays = quick ? (size_t)1 << 18 : (size_t)1 << 21;
-    bn_load_opts_default(&lo);
-    lo.unit = unit;
-    lo.log.quiet = 1;
+    /* The pipeline's first stage (load, mesh); the rays are kept here, as every assembly below and
+     * the raw rates share them. */
+    bn_pipeline_opts_default(&po);
+    po.load.unit = unit;
+    po.load.log.quiet = 1;
+    po.mesh.target_patches = patches;
     bn_error_clear(&err);
-    if (bn_scene_load(scene_path, &lo, &s, &err) != BN_OK) {
+    if (bn_pipeline_scene(scene_path, &po, &pl, &err) != BN_OK || bn_rt_create(pl.scene, 0, &rt, &err) != BN_OK) {
         fprintf(stderr, "ff_bench: %s\n", err.msg);
         return 1;
     }
-    bn_mesh_opts_default(&mo);
-    mo.target_patches = patches;
-    if (bn_scene_mesh(s, &mo, &err) != BN_OK || bn_rt_create(s, 0, &rt, &err) != BN_OK) {
-        fprintf(stderr, "ff_bench: %s\n", err.msg);
-        return 1;
-    }
+    s = pl.scene;
     bn_scene_patches(s, &np);
     pairs = np * (np - 1) / 2;
 
@@ -247,6 +246,6 @@ int main(int argc, char **argv)
     printf("| hemisphere (%d rays/patch): time | %.3f s; %.3g rays/s | raw closest-hit %.3g | %.2f |\n", dh.samples,
            dh.seconds, dh.rays_per_second, rc, dh.rays_per_second / rc);
     bn_rt_destroy(rt);
-    bn_scene_destroy(s);
+    bn_pipeline_free(&pl);
     return 0;
 }

@@ -12,6 +12,7 @@
 #include "bounce/formfactor.h"
 #include "bounce/solve.h"
 #include "bounce/trace.h"
+#include "bounce/pipeline.h"
 #include "base/internal.h"
 #include "base/vec.h"
 
@@ -96,54 +97,37 @@ int main(int argc, char **argv)
     int quick = argc > 1 && strcmp(argv[1], "--quick") == 0;
     size_t patches = quick ? 300 : 1200, spp0 = quick ? 64 : 128, spp_ref = quick ? 1024 : 4096;
     size_t nraw = quick ? 400000 : 2000000, n;
-    bn_load_opts lo;
-    bn_mesh_opts mo;
-    bn_scene *s = NULL;
-    bn_rt *rt = NULL;
-    bn_transport *k = NULL;
-    bn_formfactor_opts fo;
-    bn_solve_opts so;
-    bn_solve_result res;
+    bn_pipeline_opts po;
+    bn_pipeline pl;
+    bn_scene *s;
+    bn_rt *rt;
     bn_trace_opts to;
     bn_trace_patches ref, run[3];
     bn_error err;
-    double t_mesh, t_ff, t_solve, *E, raw[3], pt[3], raw_m, pt_m, e_rad2 = 0, se2 = 0, e_rad, se0, t0s[3];
+    double t_mesh, t_ff, t_solve, raw[3], pt[3], raw_m, pt_m, e_rad2 = 0, se2 = 0, e_rad, se0, t0s[3];
     size_t cnt = 0;
     const bn_patch *p;
     char path[1024];
 
     snprintf(path, sizeof path, "%s/meshes/cornell-box.obj", BN_SOURCE_DIR);
-    bn_load_opts_default(&lo);
-    lo.unit = BN_UNIT_MM;
-    lo.log.quiet = 1;
-    lo.log.fn = NULL;
-    if (bn_scene_load(path, &lo, &s, &err) != BN_OK)
-        die("load", &err);
-    t_mesh = bn__now();
-    bn_mesh_opts_default(&mo);
-    mo.target_patches = patches;
-    if (bn_scene_mesh(s, &mo, &err) != BN_OK)
-        die("mesh", &err);
+    /* Radiosity through the pipeline every command uses: load, mesh, rays + K, solve. */
+    bn_pipeline_opts_default(&po);
+    po.load.unit = BN_UNIT_MM;
+    po.load.log = (bn_log){NULL, NULL, 1};
+    po.mesh.target_patches = patches;
+    po.ff.quiet = 1;
+    po.solve.quiet = 1;
+    po.solve.bounces = -1;
+    po.solve.log_sink = (bn_log){NULL, NULL, 1};
+    po.keep_rt = 1;
+    if (bn_pipeline_run(path, &po, &pl, &err) != BN_OK)
+        die("radiosity", &err);
+    s = pl.scene;
+    rt = pl.rt;
     p = bn_scene_patches(s, &n);
-    if (bn_rt_create(s, 0, &rt, &err) != BN_OK)
-        die("rt", &err);
-    t_mesh = bn__now() - t_mesh;
-    t_ff = bn__now();
-    bn_formfactor_opts_default(&fo);
-    fo.quiet = 1;
-    if (bn_formfactor_build(s, rt, &fo, &k, NULL, &err) != BN_OK)
-        die("form factors", &err);
-    t_ff = bn__now() - t_ff;
-    E = malloc(n * 3 * sizeof(double));
-    bn_scene_patch_emission(s, E);
-    bn_solve_opts_default(&so);
-    so.quiet = 1;
-    so.bounces = -1;
-    so.log_sink = (bn_log){NULL, NULL, 1};
-    t_solve = bn__now();
-    if (bn_solve(k, E, &so, &res, &err) != BN_OK)
-        die("solve", &err);
-    t_solve = bn__now() - t_solve;
+    t_mesh = pl.seconds_mesh;
+    t_ff = pl.seconds_operator;
+    t_solve = pl.seconds_solve;
 
     /* Ray rates: raw mix and the tracer, three alternating runs each, medians. */
     bn_trace_opts_default(&to);
@@ -175,7 +159,7 @@ int main(int argc, char **argv)
                 continue;
             for (int c = 0; c < 3; c++) {
                 size_t q = (lL * n + i) * 3 + (size_t)c;
-                R += res.L[3 * i + (size_t)c];
+                R += pl.res.L[3 * i + (size_t)c];
                 T += ref.mean[q];
                 S2 += ref.se[q] * ref.se[q];   /* channels of one patch: summed variance (upper bound) */
                 T0 += run[1].mean[q];
@@ -215,11 +199,7 @@ int main(int argc, char **argv)
     for (int r = 0; r < 3; r++)
         bn_trace_patches_free(&run[r]);
     bn_trace_patches_free(&ref);
-    bn_solve_result_free(&res);
-    free(E);
-    bn_transport_destroy(k);
-    bn_rt_destroy(rt);
-    bn_scene_destroy(s);
+    bn_pipeline_free(&pl);
     (void)p;
     return 0;
 }

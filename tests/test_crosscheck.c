@@ -108,7 +108,7 @@ BN_TEST(mesh_tolerance_mapping)
 {
     bn_scene *fine = load("meshes/furnace-box.obj", 0.25, 0), *coarse = load("meshes/furnace-box.obj", 0.5, 0);
     int bounces = 0;
-    size_t nf, nc, nl = (size_t)bn_trace_nlayers(bounces);
+    size_t nf, nc, nl = (size_t)bn_layer_count(bounces);
     const bn_patch *pf = bn_scene_patches(fine, &nf), *pc = bn_scene_patches(coarse, &nc);
     double *lf = malloc(nl * nf * 3 * sizeof(double)), *lc = malloc(nl * nc * 3 * sizeof(double));
     double *tol = malloc(nl * nf * 3 * sizeof(double)), ptol[3 * 16], worst = 0; /* nl <= 16 layers */

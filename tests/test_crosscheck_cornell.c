@@ -60,8 +60,8 @@ static void cornell_run(cornell *c, size_t patches, size_t spp, int bounces)
     if (bn_solve(c->k, E, &so, &c->res, &err) != BN_OK)
         BN_FAIL("%s", err.msg);
     free(E);
-    c->rad = malloc((size_t)bn_trace_nlayers(bounces) * n * 3 * sizeof(double));
-    bn_crosscheck_layers((const double *const *)c->res.terms, c->res.L, n, bounces, c->rad);
+    c->rad = malloc((size_t)bn_layer_count(bounces) * n * 3 * sizeof(double));
+    bn_layers_stack((const double *const *)c->res.terms, c->res.L, n, bounces, c->rad);
     bn_trace_opts_default(&to);
     to.spp = spp;
     to.bounces = bounces;

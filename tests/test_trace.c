@@ -300,10 +300,10 @@ BN_TEST(quantiles)
 BN_TEST(layer_names)
 {
     char b[16];
-    BN_ASSERT(strcmp(bn_trace_layer_name(0, 3, b, sizeof b), "E") == 0);
-    BN_ASSERT(strcmp(bn_trace_layer_name(1, 3, b, sizeof b), "KE") == 0);
-    BN_ASSERT(strcmp(bn_trace_layer_name(3, 3, b, sizeof b), "K3E") == 0);
-    BN_ASSERT(strcmp(bn_trace_layer_name(4, 3, b, sizeof b), "rest") == 0);
-    BN_ASSERT(strcmp(bn_trace_layer_name(5, 3, b, sizeof b), "L") == 0);
-    BN_ASSERT(strcmp(bn_trace_layer_name(1, 0, b, sizeof b), "rest") == 0);
+    BN_ASSERT(strcmp(bn_layer_name(0, 3, b, sizeof b), "E") == 0);
+    BN_ASSERT(strcmp(bn_layer_name(1, 3, b, sizeof b), "KE") == 0);
+    BN_ASSERT(strcmp(bn_layer_name(3, 3, b, sizeof b), "K3E") == 0);
+    BN_ASSERT(strcmp(bn_layer_name(4, 3, b, sizeof b), "rest") == 0);
+    BN_ASSERT(strcmp(bn_layer_name(5, 3, b, sizeof b), "L") == 0);
+    BN_ASSERT(strcmp(bn_layer_name(1, 0, b, sizeof b), "rest") == 0);
 }

@@ -3,6 +3,7 @@
 #define BOUNCE_BOUNCE_H
 
 #include "bounce/status.h"
+#include "bounce/layers.h"
 #include "bounce/scene.h"
 #include "bounce/rt.h"
 #include "bounce/transport.h"
@@ -12,5 +13,6 @@
 #include "bounce/bake.h"
 #include "bounce/trace.h"
 #include "bounce/study.h"
+#include "bounce/pipeline.h"
 
 #endif

@@ -6,6 +6,7 @@
 #include <stdint.h>
 #include "bounce/scene.h"
 #include "bounce/rt.h"
+#include "bounce/layers.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -59,9 +60,6 @@ typedef struct bn_layer {
     const char *name;
     const bn_image *img;
 } bn_layer;
-
-/* The layer name of bounce term k (K^k E): "E", "KE", "K2E", ... (never "K1E"). */
-void bn_term_name(int k, char *buf, size_t n);
 
 /* Key/value attributes recorded in file headers (command line, version, solver, tolerance...). */
 typedef struct bn_attr {

@@ -76,6 +76,10 @@ const char *bn_version(void);
 void bn_threads_set(int n);
 int bn_threads_get(void);
 
+/* The memory limit wherever an option's "0 = default" applies (form factors' storage, the direct
+ * solve's dense copy): 80% of physical memory, or SIZE_MAX when it cannot be known. */
+size_t bn_memory_limit_default(void);
+
 /* Interruption: the CLI installs handlers for SIGINT/SIGTERM that call bn_interrupt_raise;
  * long loops poll bn_interrupted() and return BN_EINTR or BN_ETERM (its value). */
 void bn_interrupt_raise(bn_status s);

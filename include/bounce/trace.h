@@ -17,6 +17,7 @@
 #include "bounce/scene.h"
 #include "bounce/rt.h"
 #include "bounce/image.h"
+#include "bounce/layers.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -40,11 +41,6 @@ typedef struct bn_trace_opts {
 } bn_trace_opts;
 void bn_trace_opts_default(bn_trace_opts *o);
 
-/* Layers of a result: K^0 E .. K^bounces E (index k), then rest (bounces + 1), then L
- * (bounces + 2). nlayers = bounces + 3. Names as `bounce bounces`: "E", "KE", "K2E", ... */
-int bn_trace_nlayers(int bounces);
-/* Writes the name of layer `layer` into buf ("E", "KE", "K3E", "rest", "L"); returns buf. */
-const char *bn_trace_layer_name(int layer, int bounces, char *buf, size_t size);
 
 /* Per-patch estimates of the patch-averaged outgoing radiance (W m^-2 sr^-1): points uniform on
  * each patch, directions cosine-distributed, L_o = Le + rho E_irr / pi. Each patch's `spp`
@@ -88,15 +84,11 @@ void bn_trace_image_free(bn_trace_image *r);
 
 /* ---- the cross-check: radiosity against the per-patch tracer ---- */
 
-/* Radiosity's terms in the tracer's layer layout: out[(l * n + i) * 3 + c] for l = 0 .. bounces
- * (terms[l]), rest = L - sum of the terms, and L. terms: bounces + 1 arrays of N*3 (borrowed);
- * out: nlayers * N * 3 (caller-allocated). */
-void bn_crosscheck_layers(const double *const *terms, const double *L, size_t n, int bounces, double *out);
 
 /* Discretisation tolerance from a second mesh level of the same scene (same faces, another patch
  * size): for patch i of `fine` in face f, tol = |R_i - R'_m(i)| per layer and channel, with m(i) the
  * patch of `other` in face f that contains i's centroid; power_tol = |P - P'| (watts) per layer and
- * channel. Layers as bn_crosscheck_layers for both. Either level may be the finer one. */
+ * channel. Layers as bn_layers_stack for both. Either level may be the finer one. */
 bn_status bn_crosscheck_mesh_tolerance(const bn_scene *fine, const double *fine_layers, const bn_scene *other,
                                        const double *other_layers, int bounces, double *tol, double *power_tol,
                                        bn_error *err);
@@ -104,7 +96,7 @@ bn_status bn_crosscheck_mesh_tolerance(const bn_scene *fine, const double *fine_
 typedef struct bn_crosscheck_input {
     const bn_scene *scene;             /* borrowed, meshed like the tracer's */
     const bn_trace_patches *trace;     /* borrowed */
-    const double *rad;                 /* radiosity layers, nlayers * N * 3 (bn_crosscheck_layers) */
+    const double *rad;                 /* radiosity layers, nlayers * N * 3 (bn_layers_stack) */
     const double *tol;                 /* discretisation tolerance, same layout, or NULL for none */
     const double *power_tol;           /* nlayers * 3 watts, or NULL */
     double tol_scale;                  /* multiplies tol and power_tol (default 1) */

@@ -62,63 +62,47 @@ void bn_cli_add_solution(bn_optset *s, bn_cli_solution *o)
                               "iteration limit (default 100000)"});
 }
 
-bn_status bn_cli_run_solution(const bn_scene *scene, const bn_cli_ff *ff, const bn_cli_solution *so,
-                              const bn_cli_common *c, int bounces, bn_rt **rt, bn_transport **k,
-                              bn_solve_result *res, char *describe, size_t ndescribe)
+void bn_cli_pipeline_opts(const bn_cli_scene *so, const bn_cli_ff *ff, const bn_cli_solution *sol,
+                          const bn_cli_common *c, bn_pipeline_opts *out)
 {
-    bn_solve_opts sopt;
+    bn_pipeline_opts_default(out);
+    out->load.unit = (bn_unit)so->unit;
+    if (so->planar_tol > 0)
+        out->load.planar_tol = so->planar_tol;
+    out->load.log = (bn_log){bn_cli_log, (void *)c, c->quiet};
+    out->mesh.patch_size = so->patch_size;
+    if (so->patches)
+        out->mesh.target_patches = so->patches;
+    out->mesh.no_subdivide = so->no_subdivide;
+    if (ff)
+        bn_cli_ff_opts(ff, c, &out->ff);
+    if (sol) {
+        out->solve.method = (bn_solve_method)sol->method;
+        if (sol->tol > 0)
+            out->solve.tol = sol->tol;
+        if (sol->max_iter > 0)
+            out->solve.max_iter = sol->max_iter;
+    }
+    out->solve.quiet = c->quiet;
+    out->solve.log_sink = (bn_log){bn_cli_log, (void *)c, c->quiet};
+    out->threads = c->threads;
+}
+
+bn_status bn_cli_run_solution(const char *path, const bn_cli_scene *so, const bn_cli_ff *ff,
+                              const bn_cli_solution *sol, const bn_cli_common *c, int bounces, bn_pipeline *p,
+                              char *describe, size_t ndescribe)
+{
+    bn_pipeline_opts po;
     bn_error err;
     bn_status st;
-    double *E;
-    size_t np;
-
-    memset(res, 0, sizeof *res);
     bn_error_clear(&err);
-    st = bn_cli_build_ff(scene, ff, c, rt, k, NULL, NULL);
-    if (st != BN_OK)
-        return st;
-    if (!*rt) {   /* F came from the cache: the camera still needs rays */
-        st = bn_rt_create(scene, c->threads, rt, &err);
-        if (st != BN_OK)
-            goto fail;
-    }
-    bn_scene_patches(scene, &np);
-    E = bn__malloc_array(np, 3 * sizeof(double));
-    if (!E) {
-        st = bn_error_set(&err, BN_ENOMEM, "out of memory");
-        goto fail;
-    }
-    bn_scene_patch_emission(scene, E);
-    bn_solve_opts_default(&sopt);
-    sopt.method = (bn_solve_method)so->method;
-    if (so->tol > 0)
-        sopt.tol = so->tol;
-    if (so->max_iter > 0)
-        sopt.max_iter = so->max_iter;
-    sopt.bounces = bounces;
-    sopt.quiet = c->quiet;
-    st = bn_solve(k ? *k : NULL, E, &sopt, res, &err);
-    free(E);
+    bn_cli_pipeline_opts(so, ff, sol, c, &po);
+    po.solve.bounces = bounces;
+    po.keep_rt = 1;
+    st = bn_pipeline_run(path, &po, p, &err);
     if (describe)
-        snprintf(describe, ndescribe, "%s tol=%g max_iter=%zu: %s after %zu iterations, residual %.3g",
-                 bn_solve_method_name(sopt.method), sopt.tol, sopt.max_iter, bn_stop_reason_name(res->reason),
-                 res->iterations, res->residual_max);
-    if (st != BN_OK) {
-        bn_solve_result_free(res);
-        goto fail;
-    }
-    if (res->nterms < bounces + 1) {
-        st = bn_error_set(&err, BN_EINTERNAL, "the solver kept %d bounce terms, %d were asked for", res->nterms,
-                          bounces + 1);
-        bn_solve_result_free(res);
-        goto fail;
-    }
-    return BN_OK;
-fail:
-    bn_cli_fail(&err);
-    bn_rt_destroy(*rt);
-    bn_transport_destroy(*k);
-    *rt = NULL;
-    *k = NULL;
+        bn_pipeline_describe_solve(&po, p, describe, ndescribe);
+    if (st != BN_OK)
+        bn_cli_fail(&err);
     return st;
 }

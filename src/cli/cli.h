@@ -69,8 +69,10 @@ typedef struct bn_cli_scene {
     double planar_tol;
 } bn_cli_scene;
 void bn_cli_add_scene(bn_optset *s, bn_cli_scene *o);
-/* Loads and meshes; prints the error and returns its status on failure. */
+/* Loads and meshes (the pipeline's first stage); prints the error and returns its status on failure. */
 bn_status bn_cli_load_scene(const char *path, const bn_cli_scene *o, const bn_cli_common *c, bn_scene **out);
+/* Log sink for library notes and warnings: warnings always, notes unless --quiet (user: the bn_cli_common). */
+void bn_cli_log(void *user, bn_log_level level, const char *msg);
 
 /* Applies --threads to OpenMP. */
 void bn_cli_apply_threads(const bn_cli_common *c);
@@ -97,11 +99,6 @@ typedef struct bn_cli_ff {
 void bn_cli_add_ff(bn_optset *s, bn_cli_ff *o);
 /* Fills library options from the CLI groups. */
 void bn_cli_ff_opts(const bn_cli_ff *o, const bn_cli_common *c, bn_formfactor_opts *out);
-/* Builds the ray-casting structure and F (K = diag(rho) F) for a meshed scene; prints the
- * diagnostics to diag_fp (may be NULL) and any error to stderr. *rt may be left NULL when F
- * came from the cache. Returns the status (bn_status_exit_code gives the exit code). */
-bn_status bn_cli_build_ff(const bn_scene *scene, const bn_cli_ff *o, const bn_cli_common *c, bn_rt **rt,
-                          bn_transport **k, bn_ff_diagnostics *diag, FILE *diag_fp);
 
 /* Camera options (src/cli/camera_options.c), shared by bounces and trace: defaults from the
  * scene's box, then its NAME.camera sidecar, then these flags. */
@@ -118,20 +115,24 @@ bn_status bn_cli_make_camera(const bn_optset *s, const bn_cli_camera *o, const c
 void bn_cli_camera_describe(const bn_camera *cam, char *buf, size_t n);
 
 /* Solver options for the image and bake commands (src/cli/camera_options.c) and the helper
- * running form factors + solve with the bounce terms kept. */
+ * running the whole pipeline with the bounce terms kept. */
 #include "bounce/solve.h"
+#include "bounce/pipeline.h"
 typedef struct bn_cli_solution {
     int    method;     /* index into "jacobi|gauss-seidel|neumann|direct" (default gauss-seidel) */
     double tol;        /* 0 = default 1e-6 */
     size_t max_iter;   /* 0 = default */
 } bn_cli_solution;
 void bn_cli_add_solution(bn_optset *s, bn_cli_solution *o);
-/* Builds rt + K from the form-factor options, solves (I - K) L = E keeping K^0 E .. K^bounces E.
- * On success *rt, *k and *res are the caller's; describe (may be NULL) receives the solver line
- * for provenance. Prints errors; returns the status. */
-bn_status bn_cli_run_solution(const bn_scene *scene, const bn_cli_ff *ff, const bn_cli_solution *so,
-                              const bn_cli_common *c, int bounces, bn_rt **rt, bn_transport **k,
-                              bn_solve_result *res, char *describe, size_t ndescribe);
+/* The pipeline's options from the CLI groups (ff and sol may be NULL: the library's defaults). */
+void bn_cli_pipeline_opts(const bn_cli_scene *so, const bn_cli_ff *ff, const bn_cli_solution *sol,
+                          const bn_cli_common *c, bn_pipeline_opts *out);
+/* The whole pipeline for `path` with the ray scene kept, solving (I - K) L = E keeping K^0 E ..
+ * K^bounces E and rest; describe (may be NULL) receives the solver line for provenance. Prints
+ * errors; returns the status. *p is the caller's to free, also on failure. */
+bn_status bn_cli_run_solution(const char *path, const bn_cli_scene *so, const bn_cli_ff *ff,
+                              const bn_cli_solution *sol, const bn_cli_common *c, int bounces, bn_pipeline *p,
+                              char *describe, size_t ndescribe);
 
 /* Subcommands: each takes argv from the subcommand's name on. */
 int bn_cmd_info(int argc, char **argv, bn_cli_common *c);

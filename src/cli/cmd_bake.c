@@ -33,13 +33,9 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
     int n = 3, ldr = 0, per_bounce = 0, rc = 0;
     double ev = 0, crease = BN_BAKE_DEFAULT_CREASE;
     bn_error err;
-    bn_scene *s = NULL;
-    bn_rt *rt = NULL;
-    bn_transport *k = NULL;
+    bn_pipeline p;
     bn_bake *bake = NULL;
-    bn_solve_result res;
     bn_status st;
-    double *rest = NULL;
     bn_bake_layer *layers = NULL;
     char (*names)[16] = NULL;
     char solver[256], ffdesc[256], patches[32], evbuf[64], creasebuf[32], verts[32];
@@ -50,7 +46,7 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
     memset(&so, 0, sizeof so);
     memset(&ff, 0, sizeof ff);
     memset(&sol, 0, sizeof sol);
-    memset(&res, 0, sizeof res);
+    memset(&p, 0, sizeof p);
     set.usage = "bounce bake SCENE [-o baked.ply|.om|.obj] [--ldr] [--per-bounce -n K] [options]";
     set.summary =
         "Solves L = E + K L and bakes L to vertex colours: each vertex takes the area-weighted mean of the\n"
@@ -94,45 +90,33 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
         }
     }
     bn_cli_apply_threads(c);
-    st = bn_cli_load_scene(pos[0], &so, c, &s);
-    if (st != BN_OK)
-        return bn_status_exit_code(st);
-    st = bn_cli_run_solution(s, &ff, &sol, c, per_bounce ? n : 0, &rt, &k, &res, solver, sizeof solver);
+    st = bn_cli_run_solution(pos[0], &so, &ff, &sol, c, per_bounce ? n : 0, &p, solver, sizeof solver);
     if (st != BN_OK) {
         rc = bn_status_exit_code(st);
         goto done;
     }
-    bn_scene_patches(s, &np);
-    nl = per_bounce ? (size_t)n + 3 : 1;
+    np = p.n;
+    nl = per_bounce ? (size_t)bn_layer_count(n) : 1;   /* L first, then E .. K^n E and rest */
     layers = bn__calloc(nl, sizeof *layers);
     names = bn__calloc(nl, sizeof *names);
-    rest = bn__malloc_array(np, 3 * sizeof(double));
-    if (!layers || !names || !rest) {
+    if (!layers || !names) {
         bn_error_set(&err, BN_ENOMEM, "out of memory");
         rc = bn_cli_fail(&err);
         goto done;
     }
-    layers[0] = (bn_bake_layer){"L", res.L};
-    if (per_bounce) {
-        for (size_t i = 0; i < 3 * np; i++) {
-            double sum = 0;
-            for (int t = 0; t <= n; t++)
-                sum += res.terms[t][i];
-            rest[i] = res.L[i] - sum;   /* rest <- L - sum_{k<=K} K^k E */
-        }
-        for (int t = 0; t <= n; t++) {
-            bn_term_name(t, names[t + 1], sizeof names[t + 1]);
-            layers[t + 1] = (bn_bake_layer){names[t + 1], res.terms[t]};
-        }
-        layers[n + 2] = (bn_bake_layer){"rest", rest};
+    layers[0] = (bn_bake_layer){"L", p.res.L};
+    for (size_t l = 1; l < nl; l++) {
+        int layer = (int)l - 1;
+        bn_layer_name(layer, n, names[l], sizeof names[l]);
+        layers[l] = (bn_bake_layer){names[l], layer <= n ? p.res.terms[layer] : p.rest};
     }
-    st = bn_bake_create(s, crease, &bake, &err);
+    st = bn_bake_create(p.scene, crease, &bake, &err);
     if (st != BN_OK) {
         rc = bn_cli_fail(&err);
         goto done;
     }
     if (ldr && !bn_cli_given(&set, "exposure"))
-        ev = bn__patch_exposure(res.L, np);
+        ev = bn__patch_exposure(p.res.L, np);
     bn_cli_ff_opts(&ff, c, &fo);
     bn_formfactor_opts_describe(&fo, ffdesc, sizeof ffdesc);
     snprintf(patches, sizeof patches, "%zu", np);
@@ -145,7 +129,7 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
     {
         char tolbuf[64];
         bn_attr attrs[] = {
-            {"command line", c->cmdline}, {"scene", bn_scene_path(s)}, {"solver", solver}, {"tolerance", tolbuf},
+            {"command line", c->cmdline}, {"scene", bn_scene_path(p.scene)}, {"solver", solver}, {"tolerance", tolbuf},
             {"form factors", ffdesc},      {"patches", patches},         {"vertices", verts}, {"crease", creasebuf},
             {"colours", evbuf},
             {"vertex colour", "L, area-weighted mean of the patches around the vertex within its smooth surface"},
@@ -168,12 +152,8 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
 done:
     free(layers);
     free(names);
-    free(rest);
     bn_bake_destroy(bake);
-    bn_solve_result_free(&res);
-    bn_transport_destroy(k);
-    bn_rt_destroy(rt);
-    bn_scene_destroy(s);
+    bn_pipeline_free(&p);
     if (rc == 0 && bn_interrupted() != BN_OK)
         rc = bn_cli_interrupted();
     return rc;

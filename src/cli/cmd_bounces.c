@@ -33,14 +33,10 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
     int n = 3, half = 0, smooth = 0, no_previews = 0, tile = 320, rc = 0;
     double ev = 0, crease = BN_BAKE_DEFAULT_CREASE;
     bn_error err;
-    bn_scene *s = NULL;
-    bn_rt *rt = NULL;
-    bn_transport *k = NULL;
+    bn_pipeline p;
     bn_bake *bake = NULL;
-    bn_solve_result res;
     bn_camera cam;
     bn_status st;
-    double *rest = NULL;
     const double **vals = NULL;
     bn_image *imgs = NULL;
     bn_layer *layers = NULL;
@@ -53,7 +49,7 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
     memset(&ff, 0, sizeof ff);
     memset(&sol, 0, sizeof sol);
     memset(&co, 0, sizeof co);
-    memset(&res, 0, sizeof res);
+    memset(&p, 0, sizeof p);
     set.usage = "bounce bounces SCENE [-n K] [-o out.exr] [camera, solver, form-factor, meshing options]";
     set.summary =
         "Solves L = E + K L keeping every bounce term K^k E and renders, through a pinhole camera, the layers\n"
@@ -90,46 +86,31 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
             return prc;
     }
     bn_cli_apply_threads(c);
-    st = bn_cli_load_scene(pos[0], &so, c, &s);
-    if (st != BN_OK)
-        return bn_status_exit_code(st);
-    st = bn_cli_make_camera(&set, &co, pos[0], s, &cam, &err);
-    if (st != BN_OK) {
-        rc = bn_cli_fail(&err);
-        goto done;
-    }
-    st = bn_cli_run_solution(s, &ff, &sol, c, n, &rt, &k, &res, solver, sizeof solver);
+    st = bn_cli_run_solution(pos[0], &so, &ff, &sol, c, n, &p, solver, sizeof solver);
     if (st != BN_OK) {
         rc = bn_status_exit_code(st);
         goto done;
     }
-    bn_scene_patches(s, &np);
-    nl = (size_t)n + 3;
-    rest = bn__malloc_array(np, 3 * sizeof(double));
+    st = bn_cli_make_camera(&set, &co, pos[0], p.scene, &cam, &err);
+    if (st != BN_OK) {
+        rc = bn_cli_fail(&err);
+        goto done;
+    }
+    np = p.n;
+    nl = (size_t)bn_layer_count(n);
     vals = bn__calloc(nl, sizeof *vals);
     imgs = bn__calloc(nl, sizeof *imgs);
     layers = bn__calloc(nl, sizeof *layers);
     names = bn__calloc(nl, sizeof *names);
-    if (!rest || !vals || !imgs || !layers || !names) {
+    if (!vals || !imgs || !layers || !names) {
         bn_error_set(&err, BN_ENOMEM, "out of memory");
         rc = bn_cli_fail(&err);
         goto done;
     }
-    /* rest <- L - sum_{k<=K} K^k E */
-    for (size_t i = 0; i < 3 * np; i++) {
-        double sum = 0;
-        for (int t = 0; t <= n; t++)
-            sum += res.terms[t][i];
-        rest[i] = res.L[i] - sum;
+    for (size_t l = 0; l < nl; l++) {
+        bn_layer_name((int)l, n, names[l], sizeof names[l]);
+        vals[l] = (int)l <= n ? p.res.terms[l] : (int)l == n + 1 ? p.rest : p.res.L;
     }
-    for (int t = 0; t <= n; t++) {
-        bn_term_name(t, names[t], sizeof names[t]);
-        vals[t] = res.terms[t];
-    }
-    strcpy(names[n + 1], "rest");
-    vals[n + 1] = rest;
-    strcpy(names[n + 2], "L");
-    vals[n + 2] = res.L;
     for (size_t l = 0; l < nl; l++) {
         st = bn_image_alloc(&imgs[l], cam.width, cam.height, &err);
         if (st != BN_OK) {
@@ -140,13 +121,13 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
         layers[l].img = &imgs[l];
     }
     if (smooth) {
-        st = bn_bake_create(s, crease, &bake, &err);
+        st = bn_bake_create(p.scene, crease, &bake, &err);
         if (st != BN_OK) {
             rc = bn_cli_fail(&err);
             goto done;
         }
     }
-    st = bn_image_render(rt, &cam, vals, nl, bake, c->seed, imgs, &err);
+    st = bn_image_render(p.rt, &cam, vals, nl, bake, c->seed, imgs, &err);
     if (st != BN_OK) {
         rc = bn_cli_fail(&err);
         goto done;
@@ -163,7 +144,7 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
         const bn_attr attrs[] = {
             {"bounce:commandLine", c->cmdline},
             {"bounce:version", bn_version()},
-            {"bounce:scene", bn_scene_path(s)},
+            {"bounce:scene", bn_scene_path(p.scene)},
             {"bounce:solver", solver},
             {"bounce:tolerance", ""},
             {"bounce:formFactors", ffdesc},
@@ -233,12 +214,8 @@ done:
     free(layers);
     free(names);
     free(vals);
-    free(rest);
     bn_bake_destroy(bake);
-    bn_solve_result_free(&res);
-    bn_transport_destroy(k);
-    bn_rt_destroy(rt);
-    bn_scene_destroy(s);
+    bn_pipeline_free(&p);
     if (rc == 0 && bn_interrupted() != BN_OK)
         rc = bn_cli_interrupted();
     return rc;

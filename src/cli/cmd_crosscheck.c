@@ -3,69 +3,45 @@
  * tolerance estimated from a second mesh level; exit 6 when the verdict fails. */
 #include "cli/cli.h"
 #include "base/internal.h"
-#include "bounce/formfactor.h"
-#include "bounce/solve.h"
 #include "bounce/trace.h"
 
 #include <math.h>
 #include <string.h>
 
-/* One radiosity level: scene, rays, K, solution, and its layers in the tracer's layout. */
+/* One radiosity level: the pipeline's result (scene, rays, K, solution) and its layers stacked in
+ * the tracer's layout. */
 typedef struct bn__level {
-    bn_scene *s;
-    bn_rt *rt;
-    bn_transport *k;
-    bn_solve_result res;
+    bn_pipeline p;
     double *layers;
-    size_t n;
     double seconds;
 } bn__level;
 
 static void bn__level_free(bn__level *l)
 {
     free(l->layers);
-    bn_solve_result_free(&l->res);
-    bn_transport_destroy(l->k);
-    bn_rt_destroy(l->rt);
-    bn_scene_destroy(l->s);
+    bn_pipeline_free(&l->p);
     memset(l, 0, sizeof *l);
 }
 
-/* Loads and meshes `path` with `so`, builds K with `fo` and solves with `sopt`. */
-static bn_status bn__level_run(const char *path, const bn_cli_scene *so, const bn_cli_common *c,
-                               const bn_formfactor_opts *fo, const bn_solve_opts *sopt, int bounces, bn__level *lv,
-                               bn_error *err)
+/* The whole pipeline for `path` at meshing `so`, with the rays kept for the tracer. */
+static bn_status bn__level_run(const char *path, const bn_pipeline_opts *po, const bn_cli_scene *so,
+                               const bn_cli_common *c, int bounces, bn__level *lv, bn_error *err)
 {
+    bn_pipeline_opts o = *po;
+    bn_pipeline_opts mesh;
     bn_status st;
-    const double *const *terms;
-    double *E;
     double t0 = bn__now();
     memset(lv, 0, sizeof *lv);
-    st = bn_cli_load_scene(path, so, c, &lv->s);
-    if (st != BN_OK)
-        return bn_error_set(err, st, "%s", "");   /* already printed */
-    bn_scene_patches(lv->s, &lv->n);
-    st = bn_rt_create(lv->s, c->threads, &lv->rt, err);
-    if (st == BN_OK)
-        st = bn_formfactor_build(lv->s, lv->rt, fo, &lv->k, NULL, err);
+    bn_cli_pipeline_opts(so, NULL, NULL, c, &mesh);
+    o.mesh = mesh.mesh;
+    o.keep_rt = 1;
+    st = bn_pipeline_run(path, &o, &lv->p, err);
     if (st != BN_OK)
         return st;
-    E = bn__malloc_array(lv->n, 3 * sizeof(double));
-    lv->layers = bn__malloc_array(lv->n * (size_t)bn_trace_nlayers(bounces), 3 * sizeof(double));
-    if (!E || !lv->layers) {
-        free(E);
-        return bn_error_set(err, BN_ENOMEM, "crosscheck: out of memory for %zu patches", lv->n);
-    }
-    bn_scene_patch_emission(lv->s, E);
-    st = bn_solve(lv->k, E, sopt, &lv->res, err);
-    free(E);
-    if (st != BN_OK)
-        return st;
-    if (lv->res.nterms != bounces + 1)
-        return bn_error_set(err, BN_EINTERNAL, "crosscheck: the solver kept %d terms, %d asked", lv->res.nterms,
-                            bounces + 1);
-    terms = (const double *const *)lv->res.terms;
-    bn_crosscheck_layers(terms, lv->res.L, lv->n, bounces, lv->layers);
+    lv->layers = bn__malloc_array(lv->p.n * (size_t)bn_layer_count(bounces), 3 * sizeof(double));
+    if (!lv->layers)
+        return bn_error_set(err, BN_ENOMEM, "crosscheck: out of memory for %zu patches", lv->p.n);
+    bn_layers_stack((const double *const *)lv->p.res.terms, lv->p.res.L, lv->p.n, bounces, lv->layers);
     lv->seconds = bn__now() - t0;
     return BN_OK;
 }
@@ -74,9 +50,8 @@ int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c)
 {
     bn_optset set;
     bn_cli_scene so, so2;
-    bn_formfactor_opts fo;
     bn_cli_ff ffo;
-    bn_solve_opts sopt;
+    bn_pipeline_opts po;
     bn_trace_opts to;
     bn_trace_patches tr;
     bn_crosscheck_input in;
@@ -139,18 +114,17 @@ int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c)
     }
     bn_cli_apply_threads(c);
 
-    bn_cli_ff_opts(&ffo, c, &fo);
-    bn_formfactor_opts_describe(&fo, ffdesc, sizeof ffdesc);
-    bn_solve_opts_default(&sopt);
-    sopt.tol = solve_tol;
-    sopt.bounces = bounces;
-    sopt.quiet = 1;
-    sopt.log_sink = (bn_log){NULL, NULL, 1};   /* warnings only: the report says how the solve went */
+    bn_cli_pipeline_opts(&so, &ffo, NULL, c, &po);
+    bn_formfactor_opts_describe(&po.ff, ffdesc, sizeof ffdesc);
+    po.solve.tol = solve_tol;
+    po.solve.bounces = bounces;
+    po.solve.quiet = 1;
+    po.solve.log_sink = (bn_log){NULL, NULL, 1};   /* warnings only: the report says how the solve went */
 
     /* Radiosity at the mesh asked. */
-    st = bn__level_run(pos[0], &so, c, &fo, &sopt, bounces, &fine, &err);
+    st = bn__level_run(pos[0], &po, &so, c, bounces, &fine, &err);
     if (st != BN_OK) {
-        rc = err.msg[0] ? bn_cli_fail(&err) : bn_status_exit_code(st);
+        rc = bn_cli_fail(&err);
         goto done;
     }
     /* The path tracer on the same patches. */
@@ -160,15 +134,15 @@ int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c)
     to.seed = c->seed;
     to.quiet = c->quiet;
     to.strategy = (bn_trace_strategy)strategy;
-    st = bn_trace_patches_run(fine.rt, &to, &tr, &err);
+    st = bn_trace_patches_run(fine.p.rt, &to, &tr, &err);
     if (st != BN_OK) {
         rc = bn_cli_fail(&err);
         goto done;
     }
     /* The second mesh level, for the discretisation tolerance. */
     if (disc != 2) {
-        double h = bn_scene_patch_size(fine.s);
-        size_t nl = (size_t)bn_trace_nlayers(bounces);
+        double h = bn_scene_patch_size(fine.p.scene);
+        size_t nl = (size_t)bn_layer_count(bounces);
         so2 = so;
         so2.patches = 0;
         so2.no_subdivide = 0;
@@ -179,20 +153,20 @@ int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c)
             rc = bn_cli_fail(&err);
             goto done;
         }
-        fo.cache_path = NULL;   /* the cache holds the mesh asked for */
-        st = bn__level_run(pos[0], &so2, c, &fo, &sopt, bounces, &other, &err);
+        po.ff.cache_path = NULL;   /* the cache holds the mesh asked for */
+        st = bn__level_run(pos[0], &po, &so2, c, bounces, &other, &err);
         if (st != BN_OK) {
-            rc = err.msg[0] ? bn_cli_fail(&err) : bn_status_exit_code(st);
+            rc = bn_cli_fail(&err);
             goto done;
         }
-        tol = bn__malloc_array(fine.n * nl, 3 * sizeof(double));
+        tol = bn__malloc_array(fine.p.n * nl, 3 * sizeof(double));
         power_tol = bn__malloc_array(nl, 3 * sizeof(double));
         if (!tol || !power_tol) {
             bn_error_set(&err, BN_ENOMEM, "crosscheck: out of memory");
             rc = bn_cli_fail(&err);
             goto done;
         }
-        st = bn_crosscheck_mesh_tolerance(fine.s, fine.layers, other.s, other.layers, bounces, tol, power_tol, &err);
+        st = bn_crosscheck_mesh_tolerance(fine.p.scene, fine.layers, other.p.scene, other.layers, bounces, tol, power_tol, &err);
         if (st != BN_OK) {
             rc = bn_cli_fail(&err);
             goto done;
@@ -200,7 +174,7 @@ int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c)
     }
 
     bn_crosscheck_input_default(&in);
-    in.scene = fine.s;
+    in.scene = fine.p.scene;
     in.trace = &tr;
     in.rad = fine.layers;
     in.tol = tol;
@@ -218,14 +192,14 @@ int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c)
         goto done;
     }
     printf("# command=%s\n# bounce=%s\n# scene=%s unit=%s\n", c->cmdline, bn_version(), pos[0],
-           bn_unit_name(bn_scene_unit(fine.s)));
+           bn_unit_name(bn_scene_unit(fine.p.scene)));
     printf("# radiosity: %zu patches (patch size %.6g), form factors %s, %s tol %g (%s, %zu iterations), %.2f s\n",
-           fine.n, bn_scene_patch_size(fine.s), ffdesc, bn_solve_method_name(sopt.method), sopt.tol,
-           bn_stop_reason_name(fine.res.reason), fine.res.iterations, fine.seconds);
-    if (other.s)
+           fine.p.n, bn_scene_patch_size(fine.p.scene), ffdesc, bn_solve_method_name(po.solve.method), po.solve.tol,
+           bn_stop_reason_name(fine.p.res.reason), fine.p.res.iterations, fine.seconds);
+    if (other.p.scene)
         printf("# discretisation: second level %zu patches (patch size %.6g, %s by r = %g), %.2f s; tolerance = "
                "Fs %g x %s|difference| / (r - 1) = %g x |difference| (two-level GCI, order 1)\n",
-               other.n, bn_scene_patch_size(other.s), disc == 0 ? "coarser" : "finer", ratio, other.seconds,
+               other.p.n, bn_scene_patch_size(other.p.scene), disc == 0 ? "coarser" : "finer", ratio, other.seconds,
                tol_scale, disc == 0 ? "" : "r ", in.tol_scale);
     else
         printf("# discretisation: no allowance (--disc none)\n");

@@ -1,6 +1,5 @@
 /* `bounce formfactors SCENE -o F.csv|F.bin`: F with visibility, its diagnostics, and the file. */
 #include "cli/cli.h"
-#include "bounce/rt.h"
 #include "base/internal.h"
 
 #include <string.h>
@@ -12,11 +11,8 @@ int bn_cmd_formfactors(int argc, char **argv, bn_cli_common *c)
     bn_cli_ff fo;
     const char *pos[1], *output = NULL;
     bn_error err;
-    bn_scene *s = NULL;
-    bn_rt *rt = NULL;
-    bn_transport *k = NULL;
-    bn_ff_diagnostics d;
-    bn_formfactor_opts opts;
+    bn_pipeline_opts po;
+    bn_pipeline p;
     bn_status st;
     char desc[512], *prov = NULL;
     size_t plen;
@@ -50,13 +46,20 @@ int bn_cmd_formfactors(int argc, char **argv, bn_cli_common *c)
         }
     }
     bn_cli_apply_threads(c);
-    st = bn_cli_load_scene(pos[0], &so, c, &s);
-    if (st != BN_OK)
+    bn_cli_pipeline_opts(&so, &fo, NULL, c, &po);
+    st = bn_pipeline_scene(pos[0], &po, &p, &err);
+    if (st == BN_OK)
+        st = bn_pipeline_operator(&po, &p, &err);
+    if (st != BN_OK) {
+        bn_cli_fail(&err);
+        bn_pipeline_free(&p);
         return bn_status_exit_code(st);
-    st = bn_cli_build_ff(s, &fo, c, &rt, &k, &d, c->quiet ? NULL : stdout);
-    if (st == BN_OK && output) {
-        bn_cli_ff_opts(&fo, c, &opts);
-        bn_formfactor_opts_describe(&opts, desc, sizeof desc);
+    }
+    if (!c->quiet)
+        bn_ff_diagnostics_print(&p.ff, stdout);
+    if (output) {
+        const bn_ff_diagnostics *d = &p.ff;
+        bn_formfactor_opts_describe(&po.ff, desc, sizeof desc);
         plen = strlen(c->cmdline) + strlen(desc) + 512;
         prov = malloc(plen);
         if (!prov) {
@@ -65,10 +68,10 @@ int bn_cmd_formfactors(int argc, char **argv, bn_cli_common *c)
             snprintf(prov, plen,
                      "# %s\n# bounce %s\n# %s\n# scene %s digest %016llx, %zu patches, unit %s\n"
                      "# row sums min %.9g max %.9g; reciprocity residual %.3g; ||K||_inf %.9g\n",
-                     c->cmdline, bn_version(), desc, bn_scene_path(s), bn_scene_digest(s), d.n,
-                     bn_unit_name(bn_scene_unit(s)), d.row_sum_min, d.row_sum_max, d.reciprocity_residual,
-                     d.k_norm_inf);
-            st = bn_ff_write(k, s, output, prov, opts.precision, &err);
+                     c->cmdline, bn_version(), desc, bn_scene_path(p.scene), bn_scene_digest(p.scene), d->n,
+                     bn_unit_name(bn_scene_unit(p.scene)), d->row_sum_min, d->row_sum_max, d->reciprocity_residual,
+                     d->k_norm_inf);
+            st = bn_ff_write(p.k, p.scene, output, prov, po.ff.precision, &err);
         }
         if (st != BN_OK)
             bn_cli_fail(&err);
@@ -76,8 +79,6 @@ int bn_cmd_formfactors(int argc, char **argv, bn_cli_common *c)
             printf("wrote                %s\n", output);
     }
     free(prov);
-    bn_transport_destroy(k);
-    bn_rt_destroy(rt);
-    bn_scene_destroy(s);
+    bn_pipeline_free(&p);
     return bn_status_exit_code(st);
 }

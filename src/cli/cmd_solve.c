@@ -3,38 +3,9 @@
  * with --log, a summary on stderr. */
 #include "cli/cli.h"
 #include "base/internal.h"
-#include "bounce/rt.h"
-#include "bounce/solve.h"
 
 #include <math.h>
 #include <string.h>
-
-typedef struct bn__solve_cli {
-    int method, stop, symmetric, bounces;
-    double tol, atol, singular_threshold;
-    size_t max_iter;
-    const char *log, *output;
-} bn__solve_cli;
-
-static void bn__cli_note(void *user, bn_log_level level, const char *msg)
-{
-    const bn_cli_common *c = user;
-    if (level == BN_LOG_WARN)
-        fprintf(stderr, "bounce: warning: %s\n", msg);
-    else if (level == BN_LOG_INFO && !c->quiet)
-        fprintf(stderr, "bounce: %s\n", msg);
-}
-
-/* Bounce term names: E, KE, K2E, K3E, ... (bounce 1 is KE, never K1E). */
-static void bn__term_name(int k, char *buf, size_t n)
-{
-    if (k == 0)
-        snprintf(buf, n, "E");
-    else if (k == 1)
-        snprintf(buf, n, "KE");
-    else
-        snprintf(buf, n, "K%dE", k);
-}
 
 /* A CSV field: quoted when it holds a comma, quote or line break. */
 static void bn__csv_str(FILE *fp, const char *s)
@@ -55,19 +26,22 @@ static void bn__csv_str(FILE *fp, const char *s)
 /* Provenance: the run's configuration as `# key=value` lines. `run` (command, scene, meshing,
  * form factors) heads the log, whose solver keys the solver writes itself; the CSV gets `run`
  * followed by the solver keys written here. */
-static void bn__provenance_run(char *buf, size_t n, const bn_cli_common *c, const bn_scene *s, const bn_cli_ff *ffo,
-                               const bn_ff_diagnostics *d)
+static void bn__provenance_run(char *buf, size_t n, const bn_cli_common *c, const bn_pipeline_opts *po,
+                               const bn_pipeline *p)
 {
+    const bn_scene *s = p->scene;
+    const bn_ff_diagnostics *d = &p->ff;
     snprintf(buf, n,
              "# command=%s\n# scene=%s\n# unit=%s\n# seed=%llu\n# threads=%d\n# ff_method=%s\n"
              "# ff_row_sum_min=%.9g\n# ff_row_sum_max=%.9g\n# ff_reciprocity_residual=%.3g\n# ff_seconds=%.3f\n",
              c->cmdline ? c->cmdline : "bounce solve", bn_scene_path(s), bn_unit_name(bn_scene_unit(s)),
-             (unsigned long long)c->seed, bn_threads_get(), bn_ff_method_name((bn_ff_method)ffo->method), d->row_sum_min,
+             (unsigned long long)c->seed, bn_threads_get(), bn_ff_method_name(po->ff.method), d->row_sum_min,
              d->row_sum_max, d->reciprocity_residual, d->seconds);
 }
 
-static void bn__provenance_solve(FILE *fp, const bn_solve_opts *o, const bn_solve_result *res, const bn_transport *k)
+static void bn__provenance_solve(FILE *fp, const bn_solve_opts *o, const bn_pipeline *p)
 {
+    const bn_solve_result *res = &p->res;
     fprintf(fp,
             "# version=%s\n# patches=%zu\n# method=%s%s\n# tol=%.9g\n# atol=%.9g\n# max_iter=%zu\n# stop=%s\n"
             "# bounces=%d\n# singular_threshold=%.3g\n# transport=%s\n# radiance_unit=W m^-2 sr^-1\n# area_unit=m^2\n"
@@ -75,52 +49,39 @@ static void bn__provenance_solve(FILE *fp, const bn_solve_opts *o, const bn_solv
             "# spectral_radius=%.9g\n",
             bn_version(), res->n, bn_solve_method_name(o->method),
             o->symmetric && o->method == BN_SOLVE_GAUSS_SEIDEL ? "-symmetric" : "", o->tol, o->atol, o->max_iter,
-            bn_solve_stop_name(o->stop), o->bounces, o->singular_threshold, bn_transport_name(k),
+            bn_solve_stop_name(o->stop), o->bounces, p->singular_threshold, bn_transport_name(p->k),
             bn_stop_reason_name(res->reason), res->iterations, res->residual_max, res->error_bound, res->k_norm_inf,
             res->spectral_radius);
 }
 
-int bn_cmd_solve(int argc, char **argv, bn_cli_common *c)
-{
+/* The solve command's own options, beside the shared groups. */
+typedef struct bn__solve_cli {
     bn_optset set;
     bn_cli_scene so;
     bn_cli_ff ffo;
-    bn_rt *rt = NULL;
-    bn__solve_cli a;
-    bn_solve_opts o;
-    bn_solve_result res;
-    bn_ff_diagnostics diag;
-    const char *pos[1];
-    size_t np;
-    int rc = 0, with_terms;
-    bn_error err, serr;
-    bn_scene *s = NULL;
-    bn_transport *k = NULL;
-    double *E = NULL, t0, t_load, t_ff, t_out = 0, m2;
-    bn__outfile logf, outf;
-    char prov[4096];
-    bn_status st;
-    const bn_patch *patches;
-    const bn_material *mats;
-    size_t nm;
+    int method, stop, symmetric, bounces, with_terms;
+    double tol, atol, singular_threshold;
+    size_t max_iter;
+    const char *log, *output, *scene;
+} bn__solve_cli;
 
-    memset(&set, 0, sizeof set);
-    memset(&so, 0, sizeof so);
-    memset(&ffo, 0, sizeof ffo);
-    memset(&a, 0, sizeof a);
-    memset(&res, 0, sizeof res);
-    memset(&logf, 0, sizeof logf);
-    memset(&outf, 0, sizeof outf);
-    bn_solve_opts_default(&o);
-    a.method = (int)o.method;
-    a.tol = o.tol;
-    a.atol = o.atol;
-    a.max_iter = o.max_iter;
-    a.bounces = o.bounces;
-    a.singular_threshold = o.singular_threshold;
-    set.usage = "bounce solve SCENE [meshing options] [--method M] [--tol T] [--atol A] [--max-iter N] [--bounces N]\n"
-                "                    [--symmetric] [--log conv.csv] -o patches.csv";
-    set.summary =
+/* Parses argv into *a; returns 1 to go on, or 0 with *rc the exit code. */
+static int bn__solve_parse(int argc, char **argv, bn_cli_common *c, bn__solve_cli *a, int *rc)
+{
+    bn_optset *set = &a->set;
+    bn_solve_opts d;
+    const char *pos[1];
+    bn_error err;
+    bn_solve_opts_default(&d);
+    a->method = (int)d.method;
+    a->tol = d.tol;
+    a->atol = d.atol;
+    a->max_iter = d.max_iter;
+    a->bounces = d.bounces;
+    a->singular_threshold = d.singular_threshold;
+    set->usage = "bounce solve SCENE [meshing options] [--method M] [--tol T] [--atol A] [--max-iter N] [--bounces N]\n"
+                 "                    [--symmetric] [--log conv.csv] -o patches.csv";
+    set->summary =
         "Meshes SCENE into patches, computes the form factors F and solves (I - K) L = E per channel,\n"
         "K = diag(rho) F, for the outgoing radiance L of every patch (W m^-2 sr^-1). Writes one CSV row\n"
         "per patch: patch,face,material,area (m^2),L_R,L_G,L_B, and with -n N the bounce terms\n"
@@ -129,174 +90,196 @@ int bn_cmd_solve(int argc, char **argv, bn_cli_common *c)
         "||K^(n+1) E|| / (1 - ||K||) is below it. Before iterating, ||K||_inf and the spectral radius\n"
         "(power iteration) are reported with the predicted iteration count, and a (near-)singular\n"
         "system (a closed scene with reflectance 1) is refused with exit code 5.";
-    bn_cli_add_scene(&set, &so);
-    bn_cli_add_ff(&set, &ffo);
-    bn_optset_add(&set, (bn_opt){"method", 'm', BN_OPT_CHOICE, &a.method, "jacobi|gauss-seidel|neumann|direct", 0, 0,
-                                 "M", "jacobi, gauss-seidel, neumann (series) or direct (LAPACK) (default gauss-seidel)"});
-    bn_optset_add(&set, (bn_opt){"tol", 0, BN_OPT_DOUBLE, &a.tol, NULL, 0, 1, "T",
-                                 "stop when ||r||_inf <= T ||E||_inf (default 1e-6)"});
-    bn_optset_add(&set, (bn_opt){"atol", 0, BN_OPT_DOUBLE, &a.atol, NULL, 0, 1e300, "A",
-                                 "or when ||r||_inf <= A, W m^-2 sr^-1 (default 0: off)"});
-    bn_optset_add(&set, (bn_opt){"max-iter", 0, BN_OPT_SIZE, &a.max_iter, NULL, 0, 1e15, "N",
-                                 "iteration limit; reaching it exits with 5 (default 100000)"});
-    bn_optset_add(&set, (bn_opt){"bounces", 'n', BN_OPT_INT, &a.bounces, NULL, 0, 10000, "N",
-                                 "write the terms K^0 E .. K^N E as columns (default: none; 3 kept internally)"});
-    bn_optset_add(&set, (bn_opt){"symmetric", 0, BN_OPT_FLAG, &a.symmetric, NULL, 0, 0, NULL,
-                                 "gauss-seidel: a forward then a backward sweep per iteration"});
-    bn_optset_add(&set, (bn_opt){"stop", 0, BN_OPT_CHOICE, &a.stop, "default|residual|bound", 0, 0, "S",
-                                 "what tol bounds: residual, or the error bound ||r||/(1-||K||) (default: bound for "
-                                 "neumann, residual otherwise)"});
-    bn_optset_add(&set, (bn_opt){"singular-threshold", 0, BN_OPT_DOUBLE, &a.singular_threshold, NULL, 0, 0.5, "D",
-                                 "refuse when rho(K) >= 1 - D; set D to F's row-sum error (default 1e-6)"});
-    bn_optset_add(&set, (bn_opt){"log", 0, BN_OPT_STRING, &a.log, NULL, 0, 0, "FILE",
-                                 "convergence table (CSV, one row per iteration from 0)"});
-    bn_optset_add(&set, (bn_opt){"output", 'o', BN_OPT_STRING, &a.output, NULL, 0, 0, "FILE",
-                                 "per-patch CSV (required)"});
-    bn_cli_add_common(&set, c);
-    bn_error_clear(&err);
-    {
-        int prc;
-        if (!bn_cli_parse_scene_command(&set, argc, argv, pos, &prc))
-            return prc;
-    }
-    if (!a.output) {
+    bn_cli_add_scene(set, &a->so);
+    bn_cli_add_ff(set, &a->ffo);
+    bn_optset_add(set, (bn_opt){"method", 'm', BN_OPT_CHOICE, &a->method, "jacobi|gauss-seidel|neumann|direct", 0, 0,
+                                "M", "jacobi, gauss-seidel, neumann (series) or direct (LAPACK) (default gauss-seidel)"});
+    bn_optset_add(set, (bn_opt){"tol", 0, BN_OPT_DOUBLE, &a->tol, NULL, 0, 1, "T",
+                                "stop when ||r||_inf <= T ||E||_inf (default 1e-6)"});
+    bn_optset_add(set, (bn_opt){"atol", 0, BN_OPT_DOUBLE, &a->atol, NULL, 0, 1e300, "A",
+                                "or when ||r||_inf <= A, W m^-2 sr^-1 (default 0: off)"});
+    bn_optset_add(set, (bn_opt){"max-iter", 0, BN_OPT_SIZE, &a->max_iter, NULL, 0, 1e15, "N",
+                                "iteration limit; reaching it exits with 5 (default 100000)"});
+    bn_optset_add(set, (bn_opt){"bounces", 'n', BN_OPT_INT, &a->bounces, NULL, 0, 10000, "N",
+                                "write the terms K^0 E .. K^N E as columns (default: none; 3 kept internally)"});
+    bn_optset_add(set, (bn_opt){"symmetric", 0, BN_OPT_FLAG, &a->symmetric, NULL, 0, 0, NULL,
+                                "gauss-seidel: a forward then a backward sweep per iteration"});
+    bn_optset_add(set, (bn_opt){"stop", 0, BN_OPT_CHOICE, &a->stop, "default|residual|bound", 0, 0, "S",
+                                "what tol bounds: residual, or the error bound ||r||/(1-||K||) (default: bound for "
+                                "neumann, residual otherwise)"});
+    bn_optset_add(set, (bn_opt){"singular-threshold", 0, BN_OPT_DOUBLE, &a->singular_threshold, NULL, 0, 0.5, "D",
+                                "refuse when rho(K) >= 1 - D; set D to F's row-sum error (default 1e-6)"});
+    bn_optset_add(set, (bn_opt){"log", 0, BN_OPT_STRING, &a->log, NULL, 0, 0, "FILE",
+                                "convergence table (CSV, one row per iteration from 0)"});
+    bn_optset_add(set, (bn_opt){"output", 'o', BN_OPT_STRING, &a->output, NULL, 0, 0, "FILE",
+                                "per-patch CSV (required)"});
+    bn_cli_add_common(set, c);
+    if (!bn_cli_parse_scene_command(set, argc, argv, pos, rc))
+        return 0;
+    a->scene = pos[0];
+    if (!a->output) {
         bn_error_set(&err, BN_EUSAGE, "solve needs -o FILE for the per-patch CSV (see --help)");
-        return bn_cli_fail(&err);
+        *rc = bn_cli_fail(&err);
+        return 0;
     }
-    with_terms = bn_cli_given(&set, "bounces");
-    o.method = (bn_solve_method)a.method;
-    o.tol = a.tol;
-    o.atol = a.atol;
-    o.max_iter = a.max_iter;
-    o.bounces = with_terms ? a.bounces : 3;
-    o.symmetric = a.symmetric;
-    o.stop = (bn_solve_stop)a.stop;
-    o.singular_threshold = a.singular_threshold;
-    o.quiet = c->quiet;
-    o.log_sink.fn = bn__cli_note;
-    o.log_sink.user = c;
-    o.log_sink.quiet = c->quiet;
-    bn_cli_apply_threads(c);
+    a->with_terms = bn_cli_given(set, "bounces");
+    return 1;
+}
 
-    t0 = bn__now();
-    st = bn_cli_load_scene(pos[0], &so, c, &s);
-    if (st != BN_OK)
-        return bn_status_exit_code(st);
-    t_load = bn__now() - t0;
-    patches = bn_scene_patches(s, &np);
-    mats = bn_scene_materials(s, &nm);
-    m2 = bn_unit_to_metres(bn_scene_unit(s));
-    m2 *= m2;
+static void bn__solve_opts(const bn__solve_cli *a, const bn_cli_common *c, bn_pipeline_opts *po)
+{
+    bn_solve_opts *o = &po->solve;
+    bn_cli_pipeline_opts(&a->so, &a->ffo, NULL, c, po);
+    o->method = (bn_solve_method)a->method;
+    o->tol = a->tol;
+    o->atol = a->atol;
+    o->max_iter = a->max_iter;
+    o->bounces = a->with_terms ? a->bounces : 3;
+    o->symmetric = a->symmetric;
+    o->stop = (bn_solve_stop)a->stop;
+    o->singular_threshold = a->singular_threshold;
+}
 
-    t0 = bn__now();
-    st = bn_cli_build_ff(s, &ffo, c, &rt, &k, &diag, NULL);   /* prints its own errors */
-    t_ff = bn__now() - t0;
-    if (st != BN_OK) {
-        rc = bn_status_exit_code(st);
-        goto done;
+/* The solve, with its convergence table in an atomic file when --log is given: a failed solve's
+ * log is kept (it documents the failure), an interrupted one's is dropped. */
+static bn_status bn__solve_logged(const bn__solve_cli *a, bn_pipeline_opts *po, bn_pipeline *p, const char *prov,
+                                  bn_error *err)
+{
+    bn__outfile logf;
+    bn_status st;
+    memset(&logf, 0, sizeof logf);
+    if (a->log) {
+        st = bn__outfile_open(&logf, a->log, "w", err);
+        if (st != BN_OK)
+            return st;
+        po->solve.log = logf.fp;
+        po->solve.log_header = prov;
     }
-    /* Tie the singular threshold to F's accuracy: no row of F can sum above 1, so the excess is a
-     * measured part of F's row-sum error delta, and 1 - ||K|| below delta leaves no accuracy. */
-    if (diag.row_sum_max - 1.0 > o.singular_threshold) {
-        if (!c->quiet)
-            fprintf(stderr, "bounce: F's rows sum up to %.9g: singular threshold raised from %g to %.3g (F's "
-                            "measured row-sum error)\n", diag.row_sum_max, o.singular_threshold, diag.row_sum_max - 1.0);
-        o.singular_threshold = diag.row_sum_max - 1.0;
-    }
-    E = bn__malloc_array(3 * np + 1, sizeof(double));
-    if (!E) {
-        bn_error_set(&err, BN_ENOMEM, "out of memory for %zu patches", np);
-        rc = bn_cli_fail(&err);
-        goto done;
-    }
-    bn_scene_patch_emission(s, E);
-    bn__provenance_run(prov, sizeof prov, c, s, &ffo, &diag);
-    if (a.log) {
-        if (bn__outfile_open(&logf, a.log, "w", &err) != BN_OK) {
-            rc = bn_cli_fail(&err);
-            goto done;
-        }
-        o.log = logf.fp;
-        o.log_header = prov;
-    }
-    bn_error_clear(&serr);
-    st = bn_solve(k, E, &o, &res, &serr);
-    if (a.log && (st == BN_EINTR || st == BN_ETERM)) {
-        /* an interrupted run leaves nothing behind, not even its partial log */
+    st = bn_pipeline_solve(po, p, err);
+    po->solve.log = NULL;
+    if (!a->log)
+        return st;
+    if (st == BN_EINTR || st == BN_ETERM) {
         bn__outfile_abort(&logf);
-    } else if (a.log) {
-        /* the log documents failed solves too */
-        fprintf(logf.fp, "# stop_reason=%s\n", bn_stop_reason_name(res.reason));
-        if (bn__outfile_commit(&logf, &err) != BN_OK) {
-            rc = bn_cli_fail(&err);
-            goto done;
+        return st;
+    }
+    fprintf(logf.fp, "# stop_reason=%s\n", bn_stop_reason_name(p->res.reason));
+    {
+        bn_error lerr;
+        if (bn__outfile_commit(&logf, &lerr) != BN_OK) {
+            if (st == BN_OK)
+                *err = lerr;
+            return st == BN_OK ? lerr.status : st;
         }
     }
-    if (!c->quiet || st != BN_OK)
-        fprintf(stderr, "bounce: solve: %zu patches, %s, K %s (%.3g MiB); ||K||_inf %.6g, spectral radius %.6g (>= %.6g)\n",
-                np, bn_solve_method_name(o.method), bn_transport_name(k), (double)bn_transport_bytes(k) / 1048576.0,
-                res.k_norm_inf, res.spectral_radius, res.spectral_radius_lower);
-    if ((!c->quiet || st != BN_OK) && res.reason != BN_STOP_NONE && res.reason != BN_STOP_SINGULAR) {
+    return st;
+}
+
+/* The summary on stderr: always on failure, else unless --quiet. */
+static void bn__solve_report(const bn_pipeline_opts *po, const bn_pipeline *p, bn_status st, int quiet)
+{
+    const bn_solve_result *res = &p->res;
+    const bn_solve_opts *o = &po->solve;
+    if (quiet && st == BN_OK)
+        return;
+    fprintf(stderr, "bounce: solve: %zu patches, %s, K %s (%.3g MiB); ||K||_inf %.6g, spectral radius %.6g (>= %.6g)\n",
+            p->n, bn_solve_method_name(o->method), bn_transport_name(p->k),
+            (double)bn_transport_bytes(p->k) / 1048576.0, res->k_norm_inf, res->spectral_radius,
+            res->spectral_radius_lower);
+    if (res->reason != BN_STOP_NONE && res->reason != BN_STOP_SINGULAR)
         fprintf(stderr,
                 "bounce: stopped: %s after %zu iteration%s (predicted %s%zu); residual max %.3g, rms %.3g "
                 "(R %.3g G %.3g B %.3g); tol %g x ||E||_inf %.6g = %.3g; error bound %.3g\n",
-                bn_stop_reason_name(res.reason),
-                res.iterations, res.iterations == 1 ? "" : "s", res.predicted_iterations == SIZE_MAX ? "inf " : "",
-                res.predicted_iterations == SIZE_MAX ? (size_t)0 : res.predicted_iterations, res.residual_max,
-                res.residual_rms, res.residual_ch[0], res.residual_ch[1], res.residual_ch[2], o.tol, res.norm_E,
-                o.tol * res.norm_E, res.error_bound);
+                bn_stop_reason_name(res->reason), res->iterations, res->iterations == 1 ? "" : "s",
+                res->predicted_iterations == SIZE_MAX ? "inf " : "",
+                res->predicted_iterations == SIZE_MAX ? (size_t)0 : res->predicted_iterations, res->residual_max,
+                res->residual_rms, res->residual_ch[0], res->residual_ch[1], res->residual_ch[2], o->tol, res->norm_E,
+                o->tol * res->norm_E, res->error_bound);
+}
+
+/* The per-patch CSV: provenance, then one row per patch with L (and the terms with -n). */
+static bn_status bn__solve_write(const bn__solve_cli *a, const bn_pipeline_opts *po, const bn_pipeline *p,
+                                 const char *prov, bn_error *err)
+{
+    bn__outfile f;
+    size_t nm;
+    const bn_patch *patches = bn_scene_patches(p->scene, &nm);
+    const bn_material *mats = bn_scene_materials(p->scene, &nm);
+    const bn_solve_result *res = &p->res;
+    double m2 = bn_unit_to_metres(bn_scene_unit(p->scene));
+    bn_status st = bn__outfile_open(&f, a->output, "w", err);
+    if (st != BN_OK)
+        return st;
+    m2 *= m2;
+    fputs(prov, f.fp);
+    bn__provenance_solve(f.fp, &po->solve, p);
+    fputs("patch,face,material,area,L_R,L_G,L_B", f.fp);
+    if (a->with_terms)
+        for (int q = 0; q < res->nterms; q++) {
+            char nm_[32];
+            bn_term_name(q, nm_, sizeof nm_);
+            fprintf(f.fp, ",%s_R,%s_G,%s_B", nm_, nm_, nm_);
+        }
+    fputc('\n', f.fp);
+    for (size_t i = 0; i < p->n; i++) {
+        fprintf(f.fp, "%zu,%zu,", i, patches[i].face);
+        bn__csv_str(f.fp, patches[i].material < nm ? mats[patches[i].material].name : "?");
+        fprintf(f.fp, ",%.10g,%.9g,%.9g,%.9g", patches[i].area * m2, res->L[3 * i], res->L[3 * i + 1],
+                res->L[3 * i + 2]);
+        if (a->with_terms)
+            for (int q = 0; q < res->nterms; q++)
+                fprintf(f.fp, ",%.9g,%.9g,%.9g", res->terms[q][3 * i], res->terms[q][3 * i + 1],
+                        res->terms[q][3 * i + 2]);
+        fputc('\n', f.fp);
+    }
+    return bn__outfile_commit(&f, err);
+}
+
+int bn_cmd_solve(int argc, char **argv, bn_cli_common *c)
+{
+    bn__solve_cli a;
+    bn_pipeline_opts po;
+    bn_pipeline p;
+    bn_error err;
+    bn_status st;
+    char prov[4096];
+    double t_out;
+    int rc = 0;
+
+    memset(&a, 0, sizeof a);
+    memset(&p, 0, sizeof p);
+    if (!bn__solve_parse(argc, argv, c, &a, &rc))
+        return rc;
+    bn_cli_apply_threads(c);
+    bn__solve_opts(&a, c, &po);
+    bn_error_clear(&err);
+    st = bn_pipeline_scene(a.scene, &po, &p, &err);
+    if (st == BN_OK)
+        st = bn_pipeline_operator(&po, &p, &err);
+    if (st == BN_OK) {
+        bn__provenance_run(prov, sizeof prov, c, &po, &p);
+        st = bn__solve_logged(&a, &po, &p, prov, &err);
+        bn__solve_report(&po, &p, st, c->quiet);
     }
     if (st != BN_OK) {
-        rc = bn_cli_fail(&serr);
+        rc = bn_cli_fail(&err);
         if (st == BN_ENOTCONV)
             fprintf(stderr, "bounce: no output written (the answer is not within the tolerance)\n");
-        goto done;
+        bn_pipeline_free(&p);
+        return rc;
     }
-
-    t0 = bn__now();
-    if (bn__outfile_open(&outf, a.output, "w", &err) != BN_OK) {
+    t_out = bn__now();
+    st = bn__solve_write(&a, &po, &p, prov, &err);
+    t_out = bn__now() - t_out;
+    if (st != BN_OK)
         rc = bn_cli_fail(&err);
-        goto done;
-    }
-    fputs(prov, outf.fp);
-    bn__provenance_solve(outf.fp, &o, &res, k);
-    fputs("patch,face,material,area,L_R,L_G,L_B", outf.fp);
-    if (with_terms)
-        for (int q = 0; q < res.nterms; q++) {
-            char nm_[32];
-            bn__term_name(q, nm_, sizeof nm_);
-            fprintf(outf.fp, ",%s_R,%s_G,%s_B", nm_, nm_, nm_);
-        }
-    fputc('\n', outf.fp);
-    for (size_t i = 0; i < np; i++) {
-        fprintf(outf.fp, "%zu,%zu,", i, patches[i].face);
-        bn__csv_str(outf.fp, patches[i].material < nm ? mats[patches[i].material].name : "?");
-        fprintf(outf.fp, ",%.10g,%.9g,%.9g,%.9g", patches[i].area * m2, res.L[3 * i], res.L[3 * i + 1], res.L[3 * i + 2]);
-        if (with_terms)
-            for (int q = 0; q < res.nterms; q++)
-                fprintf(outf.fp, ",%.9g,%.9g,%.9g", res.terms[q][3 * i], res.terms[q][3 * i + 1], res.terms[q][3 * i + 2]);
-        fputc('\n', outf.fp);
-    }
-    if (bn__outfile_commit(&outf, &err) != BN_OK) {
-        rc = bn_cli_fail(&err);
-        goto done;
-    }
-    t_out = bn__now() - t0;
-    if (!c->quiet)
+    else if (!c->quiet)
         fprintf(stderr,
                 "bounce: time: load+mesh %.3f s, form factors %.3f s, solve %.3f s (analysis %.3f, %s %.3f, bounce "
                 "terms %.3f), output %.3f s\nbounce: wrote %s (%zu patches%s)\n",
-                t_load, t_ff, res.seconds, res.seconds_analyse, o.method == BN_SOLVE_DIRECT ? "factorisation" : "iterations",
-                res.seconds_iterate, res.seconds_terms, t_out, a.output, np, with_terms ? ", with bounce terms" : "");
-done:
-    if (logf.fp)
-        bn__outfile_abort(&logf);
-    if (outf.fp)
-        bn__outfile_abort(&outf);
-    bn_solve_result_free(&res);
-    bn_transport_destroy(k);
-    bn_rt_destroy(rt);
-    bn_scene_destroy(s);
-    free(E);
+                p.seconds_load + p.seconds_mesh, p.seconds_operator, p.res.seconds, p.res.seconds_analyse,
+                po.solve.method == BN_SOLVE_DIRECT ? "factorisation" : "iterations", p.res.seconds_iterate,
+                p.res.seconds_terms, t_out, a.output, p.n, a.with_terms ? ", with bounce terms" : "");
+    bn_pipeline_free(&p);
     return rc;
 }

@@ -24,7 +24,7 @@ static bn_status bn__write_patches_csv(const char *path, const bn_scene *s, cons
     fputs(header, f.fp);
     fprintf(f.fp, "patch,face,material,area_m2,cx,cy,cz");
     for (int l = 0; l < r->nlayers; l++) {
-        bn_trace_layer_name(l, r->bounces, name, sizeof name);
+        bn_layer_name(l, r->bounces, name, sizeof name);
         fprintf(f.fp, ",%s.R,%s.G,%s.B,%s.R_se,%s.G_se,%s.B_se", name, name, name, name, name, name);
     }
     fputc('\n', f.fp);
@@ -156,7 +156,7 @@ int bn_cmd_trace(int argc, char **argv, bn_cli_common *c)
                 double w[3], e[3];
                 bn_trace_patches_power(s, &r, l, w, e);
                 printf("  %-6s %11.5g %11.5g %11.5g  %11.3g %11.3g %11.3g\n",
-                       bn_trace_layer_name(l, bounces, name, sizeof name), w[0], w[1], w[2], e[0], e[1], e[2]);
+                       bn_layer_name(l, bounces, name, sizeof name), w[0], w[1], w[2], e[0], e[1], e[2]);
             }
         }
         bn_trace_patches_free(&r);
@@ -187,7 +187,7 @@ int bn_cmd_trace(int argc, char **argv, bn_cli_common *c)
             size_t npx = (size_t)img.width * (size_t)img.height;
             for (int l = 0; l < img.nlayers; l++) {
                 char name[16];
-                bn_trace_layer_name(l, bounces, name, sizeof name);
+                bn_layer_name(l, bounces, name, sizeof name);
                 snprintf(names[l], sizeof names[l], "%s", name);
                 snprintf(names[img.nlayers + l], sizeof names[0], "%s_var", name);
                 views[l] = (bn_image){img.width, img.height, img.mean + (size_t)l * npx * 3};

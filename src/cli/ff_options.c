@@ -1,7 +1,5 @@
-/* The form-factor option group and the helper that builds rt + F from it (shared by every
- * subcommand that needs K). */
+/* The form-factor option group (shared by every subcommand that needs K). */
 #include "cli/cli.h"
-#include "bounce/rt.h"
 
 #include <string.h>
 
@@ -26,15 +24,6 @@ void bn_cli_add_ff(bn_optset *s, bn_cli_ff *o)
                               "reuse F from FILE when its key (scene, meshing, options) matches; else write it"});
 }
 
-static void bn__ff_log(void *user, bn_log_level level, const char *msg)
-{
-    const bn_cli_common *c = user;
-    if (level == BN_LOG_WARN)
-        fprintf(stderr, "bounce: warning: %s\n", msg);
-    else if (level == BN_LOG_INFO && !c->quiet)
-        fprintf(stderr, "bounce: %s\n", msg);
-}
-
 void bn_cli_ff_opts(const bn_cli_ff *o, const bn_cli_common *c, bn_formfactor_opts *out)
 {
     bn_formfactor_opts_default(out);
@@ -50,33 +39,8 @@ void bn_cli_ff_opts(const bn_cli_ff *o, const bn_cli_common *c, bn_formfactor_op
     out->seed = c->seed;
     out->quiet = c->quiet;
     out->cache_path = o->cache;
-    out->log.fn = bn__ff_log;
+    out->log.fn = bn_cli_log;
     out->log.user = (void *)c;
     out->log.quiet = c->quiet;
 }
 
-bn_status bn_cli_build_ff(const bn_scene *scene, const bn_cli_ff *o, const bn_cli_common *c, bn_rt **rt,
-                          bn_transport **k, bn_ff_diagnostics *diag, FILE *diag_fp)
-{
-    bn_formfactor_opts fo;
-    bn_error err;
-    bn_status st;
-    bn_ff_diagnostics local;
-    bn_ff_diagnostics *d = diag ? diag : &local;
-    *rt = NULL;
-    *k = NULL;
-    bn_error_clear(&err);
-    bn_cli_ff_opts(o, c, &fo);
-    st = bn_rt_create(scene, c->threads, rt, &err);
-    if (st == BN_OK)
-        st = bn_formfactor_build(scene, *rt, &fo, k, d, &err);
-    if (st != BN_OK) {
-        bn_cli_fail(&err);
-        bn_rt_destroy(*rt);
-        *rt = NULL;
-        return st;
-    }
-    if (diag_fp)
-        bn_ff_diagnostics_print(d, diag_fp);
-    return BN_OK;
-}

@@ -276,7 +276,7 @@ void bn_cli_add_scene(bn_optset *s, bn_cli_scene *o)
                               "non-planarity allowed before a polygon is split, relative to its size (default 1e-6)"});
 }
 
-static void bn__cli_log(void *user, bn_log_level level, const char *msg)
+void bn_cli_log(void *user, bn_log_level level, const char *msg)
 {
     const bn_cli_common *c = user;
     if (level == BN_LOG_WARN)
@@ -287,34 +287,16 @@ static void bn__cli_log(void *user, bn_log_level level, const char *msg)
 
 bn_status bn_cli_load_scene(const char *path, const bn_cli_scene *o, const bn_cli_common *c, bn_scene **out)
 {
-    bn_load_opts lo;
-    bn_mesh_opts mo;
+    bn_pipeline_opts po;
+    bn_pipeline p;
     bn_error err;
     bn_status st;
     bn_error_clear(&err);
-    bn_load_opts_default(&lo);
-    lo.unit = (bn_unit)o->unit;
-    if (o->planar_tol > 0)
-        lo.planar_tol = o->planar_tol;
-    lo.log.fn = bn__cli_log;
-    lo.log.user = (void *)c;
-    lo.log.quiet = c->quiet;
-    st = bn_scene_load(path, &lo, out, &err);
-    if (st != BN_OK) {
+    bn_cli_pipeline_opts(o, NULL, NULL, c, &po);
+    st = bn_pipeline_scene(path, &po, &p, &err);
+    *out = p.scene;
+    if (st != BN_OK)
         bn_cli_fail(&err);
-        return st;
-    }
-    bn_mesh_opts_default(&mo);
-    mo.patch_size = o->patch_size;
-    if (o->patches)
-        mo.target_patches = o->patches;
-    mo.no_subdivide = o->no_subdivide;
-    st = bn_scene_mesh(*out, &mo, &err);
-    if (st != BN_OK) {
-        bn_cli_fail(&err);
-        bn_scene_destroy(*out);
-        *out = NULL;
-    }
     return st;
 }
 

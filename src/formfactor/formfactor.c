@@ -605,11 +605,7 @@ static size_t bn__row_candidates(const bn__ffg *g, size_t i, size_t *cand)
 
 static size_t bn__limit(const bn_formfactor_opts *o)
 {
-    size_t phys;
-    if (o->max_memory)
-        return o->max_memory;
-    phys = bn__physical_memory();
-    return phys ? phys / 10 * 8 : (size_t)-1;
+    return o->max_memory ? o->max_memory : bn_memory_limit_default();
 }
 
 static void bn__gib(double b, char *buf, size_t n)

@@ -30,16 +30,6 @@ void bn_image_free(bn_image *img)
     img->width = img->height = 0;
 }
 
-void bn_term_name(int k, char *buf, size_t n)
-{
-    if (k == 0)
-        snprintf(buf, n, "E");
-    else if (k == 1)
-        snprintf(buf, n, "KE");
-    else
-        snprintf(buf, n, "K%dE", k);
-}
-
 /* The strata grid for n samples: sx * sy = n with sx <= sy as close to square as divides n. */
 static void bn__strata(int n, int *sx, int *sy)
 {

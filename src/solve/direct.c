@@ -57,10 +57,10 @@ static bn_status bn__direct_solve(const bn__solve_ctx *ctx, double *L, int *sing
     bn_status st = BN_OK;
     *singular = 0;
     if (limit == 0)
-        limit = bn__physical_memory() / 10 * 8;
+        limit = bn_memory_limit_default();
     if (n > (size_t)INT32_MAX)
         return bn_error_set(err, BN_ENOMEM, "direct solve: %zu patches exceed LAPACK's 32-bit index", n);
-    if (need == SIZE_MAX || (limit && need > limit))
+    if (need == SIZE_MAX || need > limit)
         return bn_error_set(err, BN_ENOMEM,
                             "direct solve: %zu patches need %.3g GiB for the dense double copy of I - K "
                             "(N^2 x 8 bytes), above the limit of %.3g GiB; use an iterative --method "

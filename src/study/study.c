@@ -7,6 +7,7 @@
  * (infinity norms; the geometric a priori bound), and ~ rho(K)^(n+1) / (1 - rho(K)) ||E||_inf. */
 #include "study/study_internal.h"
 #include "base/internal.h"
+#include "bounce/pipeline.h"
 
 #include <float.h>
 #include <math.h>
@@ -149,33 +150,38 @@ static bn_study_curve *bn__curve_new(bn__study *S, const char *label, size_t cap
     return c;
 }
 
-/* Loads the scene file (no patches yet). */
-static bn_status bn__load(bn__study *S, bn_scene **out, bn_error *err)
+/* The pipeline's first stage with the study's load options and mesh m: *seconds is the meshing
+ * time (loading is not part of what a study varies). */
+static bn_status bn__scene(bn__study *S, const bn_mesh_opts *m, bn_scene **out, double *seconds, bn_error *err)
 {
-    return bn_scene_load(S->path, &S->load, out, err);
-}
-
-static bn_status bn__mesh(bn_scene *s, const bn_mesh_opts *m, double *seconds, bn_error *err)
-{
-    double t0 = bn__now();
-    bn_status st = bn_scene_mesh(s, m, err);
-    *seconds = bn__now() - t0;
+    bn_pipeline_opts po;
+    bn_pipeline p;
+    bn_status st;
+    bn_pipeline_opts_default(&po);
+    po.load = S->load;
+    po.mesh = *m;
+    st = bn_pipeline_scene(S->path, &po, &p, err);
+    *out = p.scene;
+    *seconds = p.seconds_mesh;
     return st;
 }
 
-/* K for the meshed scene: the ray caster is built for the assembly and released after it (its
- * time counts as form-factor time). */
+/* The pipeline's second stage for a scene the study keeps: K, the ray caster released after the
+ * assembly (its time counts as form-factor time). */
 static bn_status bn__build_k(const bn_scene *s, const bn_formfactor_opts *ffo, bn_transport **K, double *seconds,
                              bn_error *err)
 {
-    bn_rt *rt = NULL;
-    bn_ff_diagnostics d;
-    double t0 = bn__now();
-    bn_status st = bn_rt_create(s, bn_threads_get(), &rt, err);
-    if (st == BN_OK)
-        st = bn_formfactor_build(s, rt, ffo, K, &d, err);
-    bn_rt_destroy(rt);
-    *seconds = bn__now() - t0;
+    bn_pipeline_opts po;
+    bn_pipeline p;
+    bn_status st;
+    bn_pipeline_opts_default(&po);
+    po.ff = *ffo;
+    memset(&p, 0, sizeof p);
+    p.scene = (bn_scene *)s;   /* borrowed: taken back below */
+    bn_scene_patches(s, &p.n);
+    st = bn_pipeline_operator(&po, &p, err);
+    *K = p.k;
+    *seconds = p.seconds_operator;
     return st;
 }
 
@@ -266,9 +272,7 @@ static bn_status bn__radiosity(bn__study *S, const bn_mesh_opts *m, const bn_for
     memset(out, 0, sizeof *out);
     if (row)
         bn__study_peak_reset();
-    st = bn__load(S, &out->scene, err);
-    if (st == BN_OK)
-        st = bn__mesh(out->scene, m, &tm, err);
+    st = bn__scene(S, m, &out->scene, &tm, err);
     if (st == BN_OK)
         st = bn__build_k(out->scene, ffo, &K, &tf, err);
     if (st == BN_OK) {
@@ -517,9 +521,7 @@ static bn_status bn__study_operator(bn__study *S, bn_error *err)
     memset(&ref, 0, sizeof ref);
     memset(&info, 0, sizeof info);
 
-    st = bn__load(S, &sc, err);
-    if (st == BN_OK)
-        st = bn__mesh(sc, &o->mesh, &tm, err);
+    st = bn__scene(S, &o->mesh, &sc, &tm, err);
     if (st == BN_OK)
         st = bn__build_k(sc, &o->ff, &K, &tf, err);
     if (st != BN_OK)
@@ -546,7 +548,7 @@ static bn_status bn__study_operator(bn__study *S, bn_error *err)
     R->spectral_radius = info.spectral_radius;
     snprintf(R->reference, sizeof R->reference,
              "direct LAPACK solve of the identical K (%zu patches, ff %s, %s storage)", n,
-             bn_ff_method_name(o->ff.method), o->ff.precision == BN_PRECISION_DOUBLE ? "double" : "float");
+             bn_ff_method_name(o->ff.method), bn_precision_name(o->ff.precision));
     /* Its error: the a posteriori bound ||E - (I - K) L||_inf / (1 - ||K||_inf) >= ||L - L*||_inf. */
     R->ref_error = ref.norm_L > 0 ? info.error_bound / ref.norm_L : info.error_bound;
     R->ref_error_patch = R->ref_error;
@@ -812,9 +814,7 @@ static bn_status bn__trace_reference(bn__study *S, const bn_mesh_opts *m, bn__so
     size_t spp = o->ref_spp;
     bn_status st;
     memset(out, 0, sizeof *out);
-    st = bn__load(S, &out->scene, err);
-    if (st == BN_OK)
-        st = bn__mesh(out->scene, m, &tm, err);
+    st = bn__scene(S, m, &out->scene, &tm, err);
     if (st != BN_OK) {
         bn__sol_free(out);
         return st;
@@ -862,9 +862,7 @@ static bn_status bn__trace_row(bn__study *S, const bn__study_ref *ref, const bn_
     if (!(row = bn__row_new(S, "trace", val, (double)spp, err)))
         return err ? err->status : BN_ENOMEM;
     bn__study_peak_reset();
-    st = bn__load(S, &sc, err);
-    if (st == BN_OK)
-        st = bn__mesh(sc, m, &tm, err);
+    st = bn__scene(S, m, &sc, &tm, err);
     if (st == BN_OK)   /* t_solve: ray-caster build + tracing */
         st = bn__trace_solution(sc, &S->o->trace, spp, S->o->trace.seed, &L, &row->se_surface_max, &se_p,
                                 &row->t_solve, err);

@@ -13,7 +13,7 @@ size_t bn_trace_image_bytes(const bn_camera *cam, int bounces)
     if (cam->width <= 0 || cam->height <= 0 || bounces < 0)
         return 0;
     if (!bn__mul_size((size_t)cam->width, (size_t)cam->height, &px) ||
-        !bn__mul_size(px, (size_t)bn_trace_nlayers(bounces) * 3 * 2 * sizeof(float), &b))
+        !bn__mul_size(px, (size_t)bn_layer_count(bounces) * 3 * 2 * sizeof(float), &b))
         return (size_t)-1;
     return b;
 }
@@ -34,15 +34,15 @@ bn_status bn_trace_image_run(const bn_rt *rt, const bn_camera *cam, const bn_tra
     bytes = bn_trace_image_bytes(cam, o->bounces);
     if (bytes == 0)
         return bn_error_set(err, BN_EUSAGE, "trace: image size %dx%d and %d bounces", W, H, o->bounces);
-    if (bytes == (size_t)-1 || bytes > bn__physical_memory() / 5 * 4)
+    if (bytes == (size_t)-1 || bytes > bn_memory_limit_default())
         return bn_error_set(err, BN_ENOMEM, "trace: %dx%d pixels x %d layers x (mean, variance) need %.3g GiB, more "
                             "than 80%% of memory; use a smaller --size or fewer bounces (-n)", W, H,
-                            bn_trace_nlayers(o->bounces), (double)bytes / 1073741824.0);
+                            bn_layer_count(o->bounces), (double)bytes / 1073741824.0);
     st = bn__tracer_init(&t, rt, o, err);
     if (st != BN_OK)
         return st;
     npx = (size_t)W * (size_t)H;
-    nl = (size_t)bn_trace_nlayers(o->bounces);
+    nl = (size_t)bn_layer_count(o->bounces);
     out->width = W;
     out->height = H;
     out->bounces = o->bounces;
@@ -124,7 +124,7 @@ bn_status bn_trace_image_run(const bn_rt *rt, const bn_camera *cam, const bn_tra
             char name[16];
             bn_error_set(err, BN_ENUMERIC, "trace: non-finite value %g (variance %g) at pixel (%zu, %zu), layer %s",
                          (double)out->mean[k], (double)out->var[k], px % (size_t)W, px / (size_t)W,
-                         bn_trace_layer_name((int)l, o->bounces, name, sizeof name));
+                         bn_layer_name((int)l, o->bounces, name, sizeof name));
             bn_trace_image_free(out);
             return BN_ENUMERIC;
         }

@@ -27,21 +27,6 @@ void bn_crosscheck_input_default(bn_crosscheck_input *in)
     in->worst = 10;
 }
 
-void bn_crosscheck_layers(const double *const *terms, const double *L, size_t n, int bounces, double *out)
-{
-    size_t nl = (size_t)bn_trace_nlayers(bounces);
-    double *rest = out + (size_t)(bounces + 1) * n * 3, *all = out + (nl - 1) * n * 3;
-    for (int k = 0; k <= bounces; k++)
-        memcpy(out + (size_t)k * n * 3, terms[k], n * 3 * sizeof(double));
-    for (size_t j = 0; j < n * 3; j++) {
-        double partial = 0;
-        for (int k = 0; k <= bounces; k++)
-            partial += terms[k][j];
-        rest[j] = L[j] - partial;   /* rest <- L - sum_{k<=n} K^k E */
-        all[j] = L[j];
-    }
-}
-
 /* Is point x inside convex patch p (in its plane), with a tolerance of `eps` scene units? */
 static int bn__inside(const bn_patch *p, const double *pv, const double x[3], double eps)
 {
@@ -78,7 +63,7 @@ bn_status bn_crosscheck_mesh_tolerance(const bn_scene *fine, const double *fine_
     size_t nf, nf2, n, n2, npv2;
     const bn_patch *p = bn_scene_patches(fine, &n), *q = bn_scene_patches(other, &n2);
     const double *qv = bn_scene_patch_vertices(other, &npv2);
-    size_t *start, *order, nl = (size_t)bn_trace_nlayers(bounces);
+    size_t *start, *order, nl = (size_t)bn_layer_count(bounces);
     double lo[3], hi[3], eps;
     bn_scene_faces(fine, &nf);
     bn_scene_faces(other, &nf2);
@@ -345,7 +330,7 @@ void bn_crosscheck_print(const bn_crosscheck_input *in, const bn_crosscheck_resu
             in->tol_scale, in->rtol > 0 ? " + rtol |radiosity|" : "");
     fprintf(fp, "  %-6s %12s %12s\n", "layer", "within", "worst z_exc");
     for (int l = 0; l < r->nlayers; l++)
-        fprintf(fp, "  %-6s %11.2f%% %12.3f\n", bn_trace_layer_name(l, bounces, name, sizeof name),
+        fprintf(fp, "  %-6s %11.2f%% %12.3f\n", bn_layer_name(l, bounces, name, sizeof name),
                 100.0 * (double)r->layer_within[l] / (double)(n * 3), r->layer_worst_z[l]);
     fprintf(fp, "  all    %11.2f%% %12.3f   (without the discretisation allowance: %.2f%% within, worst |z| %.3f)\n",
             100.0 * (double)r->within / (double)r->family, r->worst_z, 100.0 * (double)r->within_raw / (double)r->family,
@@ -356,7 +341,7 @@ void bn_crosscheck_print(const bn_crosscheck_input *in, const bn_crosscheck_resu
         for (int k = 0; k < r->nworst; k++) {
             const bn_crosscheck_entry *e = &r->worst[k];
             fprintf(fp, "  %7zu %6zu %-6s %2c %13.6g %13.6g %11.4g %11.4g %9.3f %9.3f\n", e->patch,
-                    patches[e->patch].face, bn_trace_layer_name(e->layer, bounces, name, sizeof name),
+                    patches[e->patch].face, bn_layer_name(e->layer, bounces, name, sizeof name),
                     bn__ch[e->channel], e->radiosity, e->trace, e->se, e->tol, e->z, e->z_excess);
         }
     }
@@ -366,7 +351,7 @@ void bn_crosscheck_print(const bn_crosscheck_input *in, const bn_crosscheck_resu
                      *t = r->power_tol + 3 * l;
         fprintf(fp, "  %-5s %11.5g %11.5g %11.5g | %11.5g %11.5g %11.5g +- %9.3g %9.3g %9.3g | %7.2f %7.2f %7.2f | "
                     "%8.3g %8.3g %8.3g\n",
-                bn_trace_layer_name(l, bounces, name, sizeof name), a[0], a[1], a[2], b[0], b[1], b[2], s[0], s[1],
+                bn_layer_name(l, bounces, name, sizeof name), a[0], a[1], a[2], b[0], b[1], b[2], s[0], s[1],
                 s[2], s[0] > 0 ? (a[0] - b[0]) / s[0] : 0.0, s[1] > 0 ? (a[1] - b[1]) / s[1] : 0.0,
                 s[2] > 0 ? (a[2] - b[2]) / s[2] : 0.0, t[0], t[1], t[2]);
     }

@@ -26,7 +26,7 @@ bn_status bn_trace_patches_run(const bn_rt *rt, const bn_trace_opts *o, bn_trace
     if (st != BN_OK)
         return st;
     n = t.np;
-    nl = (size_t)bn_trace_nlayers(o->bounces);
+    nl = (size_t)bn_layer_count(o->bounces);
     if (!bn__mul_size(n, nl * 3 * sizeof(double), &bytes)) {
         bn__tracer_free(&t);
         return bn_error_set(err, BN_ENOMEM, "trace: %zu patches x %zu layers overflows", n, nl);
@@ -107,7 +107,7 @@ bn_status bn_trace_patches_run(const bn_rt *rt, const bn_trace_opts *o, bn_trace
                     char name[16];
                     bn_error_set(err, BN_ENUMERIC, "trace: non-finite estimate %g (se %g) for patch %zu, layer %s, "
                                  "channel %d", out->mean[k], out->se[k], i,
-                                 bn_trace_layer_name((int)l, o->bounces, name, sizeof name), c);
+                                 bn_layer_name((int)l, o->bounces, name, sizeof name), c);
                     bn_trace_patches_free(out);
                     return BN_ENUMERIC;
                 }

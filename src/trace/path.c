@@ -35,23 +35,6 @@ void bn_trace_opts_default(bn_trace_opts *o)
     o->seed = 1;
 }
 
-int bn_trace_nlayers(int bounces) { return bounces + 3; }
-
-const char *bn_trace_layer_name(int layer, int bounces, char *buf, size_t size)
-{
-    if (layer == bounces + 1)
-        snprintf(buf, size, "rest");
-    else if (layer > bounces + 1)
-        snprintf(buf, size, "L");
-    else if (layer == 0)
-        snprintf(buf, size, "E");
-    else if (layer == 1)
-        snprintf(buf, size, "KE");
-    else
-        snprintf(buf, size, "K%dE", layer);
-    return buf;
-}
-
 static double bn__tri_area(const double *a, const double *b, const double *c)
 {
     double e1[3], e2[3], n[3];

@@ -1,0 +1,76 @@
+/* bounce: the pipeline from a scene file to a solved result with every bounce term, in stages
+ * that each command, the study tool and the benchmarks share:
+ *
+ *   scene file --load, mesh--> patches --rt, form factors--> K --solve--> L, K^k E, rest
+ *   (bn_pipeline_scene)               (bn_pipeline_operator)   (bn_pipeline_solve)
+ *
+ * bn_pipeline_run does all three. A caller may stop after any stage (info after the scene, the
+ * form-factor command after the operator) or set options between stages (a log that names the
+ * form factors' diagnostics). K's storage is whatever opts.ff names; nothing here depends on it. */
+#ifndef BOUNCE_PIPELINE_H
+#define BOUNCE_PIPELINE_H
+
+#include <stddef.h>
+#include "bounce/scene.h"
+#include "bounce/rt.h"
+#include "bounce/transport.h"
+#include "bounce/formfactor.h"
+#include "bounce/solve.h"
+#include "bounce/layers.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct bn_pipeline_opts {
+    bn_load_opts load;         /* how the file is read */
+    bn_mesh_opts mesh;         /* how it is cut into patches */
+    bn_formfactor_opts ff;     /* how F is assembled and stored (and cached) */
+    bn_solve_opts solve;       /* method, tolerance, terms kept (solve.bounces) */
+    int threads;               /* threads of the ray scene (0: all cores) */
+    int keep_rt;               /* keep the ray scene for images and the tracer (built even when F
+                                  comes from the cache); else it is released after F */
+    int tie_threshold;         /* raise solve.singular_threshold to F's measured row-sum excess
+                                  (default 1: no row of F can sum above 1, so the excess is a
+                                  measured part of F's error, and 1 - ||K|| below it leaves no
+                                  accuracy) */
+} bn_pipeline_opts;
+void bn_pipeline_opts_default(bn_pipeline_opts *o);
+
+/* What the stages made; everything is owned and released by bn_pipeline_free. */
+typedef struct bn_pipeline {
+    bn_scene *scene;           /* loaded and meshed */
+    bn_rt *rt;                 /* NULL unless keep_rt */
+    bn_transport *k;           /* K = diag(rho) F */
+    bn_ff_diagnostics ff;      /* the assembly's report (or the cache's) */
+    double *E;                 /* N*3 emitted radiance */
+    bn_solve_result res;       /* L and the terms K^0 E .. K^b E (b = solve.bounces) */
+    double *rest;              /* N*3: L - sum of the kept terms (NULL when none are kept) */
+    size_t n;                  /* patches */
+    double singular_threshold; /* the threshold the solve used */
+    double seconds_load, seconds_mesh, seconds_operator, seconds_solve;
+} bn_pipeline;
+
+/* Each stage reads what the earlier ones left in *p. A caller with a meshed scene of its own may
+ * start at bn_pipeline_operator with p zeroed but for p->scene and p->n (bn_pipeline_free then
+ * destroys that scene too, unless the caller takes it back by setting p->scene to NULL). */
+
+/* Loads and meshes `path`. */
+bn_status bn_pipeline_scene(const char *path, const bn_pipeline_opts *o, bn_pipeline *p, bn_error *err);
+/* Builds the ray scene and K for p->scene; fills p->ff. */
+bn_status bn_pipeline_operator(const bn_pipeline_opts *o, bn_pipeline *p, bn_error *err);
+/* Solves (I - K) L = E keeping the terms, and rest. On BN_ENOTCONV the answer is kept (the caller
+ * decides whether an unconverged answer is a result). */
+bn_status bn_pipeline_solve(const bn_pipeline_opts *o, bn_pipeline *p, bn_error *err);
+/* The three stages. */
+bn_status bn_pipeline_run(const char *path, const bn_pipeline_opts *o, bn_pipeline *p, bn_error *err);
+void bn_pipeline_free(bn_pipeline *p);
+
+/* The solver's settings as one provenance line: "gauss-seidel tol=1e-06 max_iter=100000:
+ * converged-rtol after 10 iterations, residual 7.3e-06". */
+void bn_pipeline_describe_solve(const bn_pipeline_opts *o, const bn_pipeline *p, char *buf, size_t size);
+
+#ifdef __cplusplus
+}
+#endif
+#endif
