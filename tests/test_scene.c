@@ -312,6 +312,43 @@ BN_TEST(mesh_target_count)
     bn_scene_destroy(s);
 }
 
+/* The largest patch edge is what it says, whatever the mesher was asked: one patch per face (a
+ * target below the face count, or no subdivision) gives the longest edge of an input face, found
+ * here from the faces' own vertices; a fine mesh gives at most the size asked and at least half. */
+BN_TEST(largest_patch_edge_is_measured)
+{
+    bn_scene *s = load("meshes/cornell-box.obj", BN_UNIT_MM);
+    size_t nf, nfi, nv;
+    const bn_face *faces = bn_scene_faces(s, &nf);
+    const size_t *fi = bn_scene_face_indices(s, &nfi);
+    const double *v = bn_scene_vertices(s, &nv);
+    double longest = 0, lo[3], hi[3];
+    bn_mesh_opts mo;
+    bn_error err;
+    for (size_t f = 0; f < nf; f++)
+        for (unsigned k = 0; k < faces[f].nverts; k++) {
+            const double *a = v + 3 * fi[faces[f].first + k], *b = v + 3 * fi[faces[f].first + (k + 1) % faces[f].nverts];
+            longest = fmax(longest, sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) +
+                                         (a[2] - b[2]) * (a[2] - b[2])));
+        }
+    bn_scene_bounds(s, lo, hi);
+    BN_ASSERT_LT(longest, sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
+                               (hi[2] - lo[2]) * (hi[2] - lo[2])));
+    for (int q = 0; q < 2; q++) {
+        bn_mesh_opts_default(&mo);
+        mo.target_patches = q ? 0 : 5;
+        mo.no_subdivide = q;
+        BN_ASSERT_STATUS(bn_scene_mesh(s, &mo, &err), BN_OK);
+        BN_ASSERT_REL(bn_scene_largest_patch_edge(s), longest, 1e-12);
+    }
+    bn_mesh_opts_default(&mo);
+    mo.patch_size = 50;
+    BN_ASSERT_STATUS(bn_scene_mesh(s, &mo, &err), BN_OK);
+    BN_ASSERT_LE(bn_scene_largest_patch_edge(s), 50 + 1e-9);
+    BN_ASSERT_GE(bn_scene_largest_patch_edge(s), 25);
+    bn_scene_destroy(s);
+}
+
 BN_TEST(mesh_triangles_uniform)
 {
     /* One triangle with edges 3, 4, 5: n = ceil(5 / 1) = 5 divisions, 25 congruent patches. */

@@ -94,7 +94,10 @@ const size_t      *bn_scene_face_indices(const bn_scene *s, size_t *count);
 const bn_face     *bn_scene_faces(const bn_scene *s, size_t *count);
 const bn_patch    *bn_scene_patches(const bn_scene *s, size_t *count);
 const double      *bn_scene_patch_vertices(const bn_scene *s, size_t *count); /* xyz */
-double             bn_scene_patch_size(const bn_scene *s);  /* edge length used by the mesher */
+/* The size the mesher was given or chose (0 with no_subdivide): an upper bound of the patch edges
+ * along each face's grid, not the patches' actual size, which is: */
+double             bn_scene_patch_size(const bn_scene *s);
+double             bn_scene_largest_patch_edge(const bn_scene *s);   /* longest edge of any patch */
 /* Polygons read, and those dropped as degenerate or duplicate, and triangulated as non-planar. */
 typedef struct bn_scene_stats {
     size_t input_polygons, degenerate_dropped, duplicates_dropped, nonplanar_split,

@@ -77,7 +77,7 @@ int bn_cmd_info(int argc, char **argv, bn_cli_common *c)
     printf("total area  %.10g %s^2 (%.6g m^2)\n", total, bn_unit_name(bn_scene_unit(s)), total * m * m);
     printf("emitters    %zu face%s; emitted power %.6g %.6g %.6g W (R G B; pi * sum A Le)\n",
            bn_scene_emitter_count(s), bn_scene_emitter_count(s) == 1 ? "" : "s", watts[0], watts[1], watts[2]);
-    printf("patches     %zu (largest patch edge %.6g %s)\n", np, bn_scene_patch_size(s),
+    printf("patches     %zu (largest patch edge %.6g %s)\n", np, bn_scene_largest_patch_edge(s),
            bn_unit_name(bn_scene_unit(s)));
     bn__bytes((double)np * (double)np * 4.0, buf, sizeof buf);
     printf("dense K     %s as float (N^2 x 4 bytes; F is stored once for all channels)\n", buf);

@@ -211,6 +211,11 @@ bn_status bn_scene_mesh(bn_scene *s, const bn_mesh_opts *o, bn_error *err)
         }
     }
     BN_CHECK(ip == np && iv == nv);
+    s->largest_edge = 0;
+    for (size_t q = 0; q < np; q++)
+        for (unsigned k = 0; k < patches[q].ncorners; k++)
+            s->largest_edge = fmax(s->largest_edge, bn_v3_dist(pv + 3 * patches[q].corner[k],
+                                                               pv + 3 * patches[q].corner[(k + 1) % patches[q].ncorners]));
     free(s->patches);
     free(s->pverts);
     s->patches = patches;

@@ -615,6 +615,7 @@ BN__ACCESS(bn_scene_patches, bn_patch, patches, npatches)
 BN__ACCESS(bn_scene_patch_vertices, double, pverts, npverts)
 #undef BN__ACCESS
 double bn_scene_patch_size(const bn_scene *s) { return s->patch_size; }
+double bn_scene_largest_patch_edge(const bn_scene *s) { return s->largest_edge; }
 bn_scene_stats bn_scene_stats_get(const bn_scene *s) { return s->stats; }
 
 void bn_scene_bounds(const bn_scene *s, double lo[3], double hi[3])

@@ -54,7 +54,8 @@ struct bn_scene {
     size_t       npatches;
     double      *pverts;    /* patch vertices, xyz */
     size_t       npverts;
-    double       patch_size;
+    double       patch_size;     /* the mesher's size parameter */
+    double       largest_edge;   /* longest edge of any patch */
     bn_scene_stats stats;
     double       lo[3], hi[3];
 };
