@@ -7,9 +7,11 @@ add_executable(test_image_readback ${CMAKE_CURRENT_SOURCE_DIR}/image_readback.cp
 target_include_directories(test_image_readback PRIVATE ${PROJECT_SOURCE_DIR}/src)
 target_include_directories(test_image_readback SYSTEM PRIVATE /usr/include/OpenMesh)
 target_compile_definitions(test_image_readback PRIVATE BN_TEST_SOURCE_DIR="${PROJECT_SOURCE_DIR}"
-  BN_TEST_BINARY_DIR="${CMAKE_CURRENT_BINARY_DIR}/tmp/test_image_readback")
+  BN_TEST_BINARY_DIR="${CMAKE_CURRENT_BINARY_DIR}/tmp/test_image_readback"
+  BN_TEST_BOUNCE_EXE="$<TARGET_FILE:bounce_cli>")
+add_dependencies(test_image_readback bounce_cli)
 target_link_libraries(test_image_readback PRIVATE bounce OpenImageIO::OpenImageIO OpenMeshCore m)
-foreach(t exr_oiio baked_ply_openmesh)
+foreach(t exr_oiio baked_ply_openmesh png_pixels cli_previews_match_exr)
   add_test(NAME test_image_readback.${t} COMMAND test_image_readback ${t})
   set_tests_properties(test_image_readback.${t} PROPERTIES TIMEOUT 600 LABELS test_image_readback)
 endforeach()

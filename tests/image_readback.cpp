@@ -143,6 +143,112 @@ static void baked_ply_openmesh()
     bn_scene_destroy(s);
 }
 
+// The sRGB transfer, written out here (IEC 61966-2-1), not bounce's: 8-bit code of linear x.
+static int srgb8(double x)
+{
+    double v = x <= 0 || !std::isfinite(x) ? 0 : x >= 1 ? 1 : x <= 0.0031308 ? 12.92 * x : 1.055 * std::pow(x, 1 / 2.4) - 0.055;
+    return (int)std::lround(255 * v);
+}
+
+static std::vector<unsigned char> read_rgb8(const std::string &path, int &w, int &h)
+{
+    OIIO::ImageBuf buf(path);
+    CHECK(buf.read(0, 0, true, OIIO::TypeDesc::UINT8));
+    w = buf.spec().width;
+    h = buf.spec().height;
+    CHECK(buf.spec().nchannels >= 3);
+    std::vector<unsigned char> px((size_t)w * h * 3);
+    CHECK(buf.get_pixels(OIIO::ROI(0, w, 0, h, 0, 1, 0, 3), OIIO::TypeDesc::UINT8, px.data()));
+    return px;
+}
+
+// Previews show the radiance at the stated exposure through the sRGB transfer (to the 8-bit
+// rounding), and the contact sheet's first row holds every layer's preview, pixel for pixel.
+static void png_pixels()
+{
+    const int W = 50, H = 30;
+    const double ev = -1.5;
+    const char *lname[3] = {"E", "KE", "K2E"};
+    bn_image img[3];
+    bn_layer layers[3];
+    bn_error err;
+    for (int l = 0; l < 3; l++) {
+        CHECK(bn_image_alloc(&img[l], W, H, &err) == BN_OK);
+        for (int i = 0; i < W * H; i++)
+            for (int c = 0; c < 3; c++)   // a ramp over 0 .. 3.5 (clipped above 2^1.5) per layer and channel
+                img[l].rgb[3 * i + c] = (float)((double)(i % W) / W * (1.0 + l + 0.25 * c) + (i / W) * 1e-3);
+        layers[l].name = lname[l];
+        layers[l].img = &img[l];
+    }
+    std::string dir = tmpdir();
+    for (int l = 0; l < 3; l++) {
+        int w, h;
+        std::string path = dir + "/p" + lname[l] + ".png";
+        CHECK(bn_png_write(path.c_str(), &img[l], ev, nullptr, 0, &err) == BN_OK);
+        std::vector<unsigned char> px = read_rgb8(path, w, h);
+        CHECK_EQ(w, W);
+        CHECK_EQ(h, H);
+        for (int i = 0; i < W * H * 3; i++)
+            CHECK(std::abs((int)px[i] - srgb8(img[l].rgb[i] * std::pow(2.0, ev))) <= 1);
+    }
+    std::string sheet = dir + "/sheet.png";
+    CHECK(bn_contact_sheet_write(sheet.c_str(), layers, 3, ev, 0, nullptr, 0, nullptr, &err) == BN_OK);
+    int sw, sh;
+    std::vector<unsigned char> sp = read_rgb8(sheet, sw, sh);
+    CHECK(sw >= 3 * W && sh >= 2 * H);
+    for (int l = 0; l < 3; l++) {
+        int pw, ph, found = 0;
+        std::vector<unsigned char> pv = read_rgb8(dir + "/p" + lname[l] + ".png", pw, ph);
+        for (int oy = 0; oy + H <= sh && !found; oy++)
+            for (int ox = 0; ox + W <= sw && !found; ox++) {
+                int same = 1;
+                for (int y = 0; y < H && same; y++)
+                    same = std::memcmp(&sp[((size_t)(oy + y) * sw + ox) * 3], &pv[(size_t)y * W * 3], (size_t)W * 3) == 0;
+                found = same;
+            }
+        if (!found)
+            std::fprintf(stderr, "layer %s's preview is not a tile of the contact sheet\n", lname[l]);
+        CHECK(found);
+    }
+    for (int l = 0; l < 3; l++)
+        bn_image_free(&img[l]);
+}
+
+// `bounce bounces`: every preview PNG is its EXR layer at the exposure the EXR records.
+static void cli_previews_match_exr()
+{
+    std::string dir = tmpdir(), exr = dir + "/cb.exr";
+    std::string cmd = std::string("'") + BN_TEST_BOUNCE_EXE + "' bounces '" + BN_TEST_SOURCE_DIR +
+                      "/meshes/cornell-box.obj' -n 2 -o '" + exr +
+                      "' --patches 150 --ff hemisphere --samples 256 --size 40x32 --spp 2 --quiet";
+    CHECK(std::system(cmd.c_str()) == 0);
+    OIIO::ImageBuf buf(exr);
+    CHECK(buf.read(0, 0, true, OIIO::TypeDesc::FLOAT));
+    const OIIO::ImageSpec &spec = buf.spec();
+    double ev = std::atof(spec.get_string_attribute("bounce:previewExposureEV").c_str());
+    std::vector<float> px((size_t)spec.width * spec.height * spec.nchannels);
+    CHECK(buf.get_pixels(OIIO::ROI::All(), OIIO::TypeDesc::FLOAT, px.data()));
+    int lit = 0;
+    for (const char *layer : {"E", "KE", "K2E", "rest", "L"}) {
+        int w, h, ch[3] = {-1, -1, -1};
+        std::vector<unsigned char> png = read_rgb8(dir + "/cb." + layer + ".png", w, h);
+        CHECK_EQ(w, spec.width);
+        CHECK_EQ(h, spec.height);
+        for (int c = 0; c < spec.nchannels; c++)
+            for (int k = 0; k < 3; k++)
+                if (spec.channelnames[c] == std::string(layer) + "." + "RGB"[k])
+                    ch[k] = c;
+        CHECK(ch[0] >= 0 && ch[1] >= 0 && ch[2] >= 0);
+        for (int i = 0; i < w * h; i++)
+            for (int k = 0; k < 3; k++) {
+                int want = srgb8(px[(size_t)i * spec.nchannels + ch[k]] * std::pow(2.0, ev));
+                CHECK(std::abs((int)png[3 * (size_t)i + k] - want) <= 1);
+                lit += std::strcmp(layer, "KE") == 0 && want > 0;
+            }
+    }
+    CHECK(lit > 0);   // direct light is visible at that exposure
+}
+
 int main(int argc, char **argv)
 {
     if (argc != 2)
@@ -151,6 +257,10 @@ int main(int argc, char **argv)
         exr_oiio();
     else if (std::strcmp(argv[1], "baked_ply_openmesh") == 0)
         baked_ply_openmesh();
+    else if (std::strcmp(argv[1], "png_pixels") == 0)
+        png_pixels();
+    else if (std::strcmp(argv[1], "cli_previews_match_exr") == 0)
+        cli_previews_match_exr();
     else
         return 2;
     std::printf("ok\n");

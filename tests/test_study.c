@@ -85,6 +85,58 @@ static double meta_num(const csv *c, const char *key)
     return strtod(p + strlen(pat), NULL);
 }
 
+/* The text of an SVG's <text> elements, entities decoded (non-ASCII as '?'), joined by '|'. */
+static char *svg_text(const char *path)
+{
+    char *s = bn_test_read_file(path, NULL), *out, *w;
+    const char *p;
+    if (!s)
+        BN_FAIL("cannot read %s", path);
+    out = calloc(strlen(s) + 2, 1);
+    w = out;
+    for (p = strstr(s, "<text"); p; p = strstr(p, "<text")) {
+        const char *e;
+        p = strchr(p, '>');
+        if (!p)
+            break;
+        e = strstr(++p, "</text>");
+        if (!e)
+            break;
+        while (p < e) {
+            if (*p == '<') {   /* nested tspan tags */
+                p = strchr(p, '>') + 1;
+            } else if (strncmp(p, "&#x", 3) == 0) {
+                unsigned long u = strtoul(p + 3, NULL, 16);
+                *w++ = u < 128 ? (char)u : '?';
+                p = strchr(p, ';') + 1;
+            } else {
+                *w++ = *p++;
+            }
+        }
+        *w++ = '|';
+    }
+    free(s);
+    return out;
+}
+
+/* The decade tick labels ("10-3", "100", "102" as PLplot writes 10^k without the superscript)
+ * of a plot's text: is there one within a decade of v? */
+static int has_decade_near(const char *text, double v)
+{
+    double lv = log10(v);
+    for (const char *p = text; (p = strstr(p, "|10")) != NULL; p += 3) {
+        char *end;
+        long k = strtol(p + 3, &end, 10);
+        if (*end != '|')
+            continue;
+        if (end == p + 3)
+            k = 1;   /* "10" itself */
+        if (fabs((double)k - lv) <= 1)
+            return 1;
+    }
+    return 0;
+}
+
 static void csv_free(csv *c)
 {
     free(c->text);
@@ -126,7 +178,7 @@ BN_TEST(study_truncation_bound_cornell)
         BN_FAIL("bounce study failed:\n%s", out ? out : "");
     c = csv_read(bn_test_tmp("trunc.csv"));
     check_columns(c, mats, 4);
-    BN_ASSERT(bn_test_file_exists(bn_test_tmp("trunc.png")) && bn_test_file_exists(bn_test_tmp("trunc.svg")));
+    BN_ASSERT(bn_test_file_exists(bn_test_tmp("trunc.png")));   /* its content: the SVG's, checked below */
     /* provenance: how it was made */
     BN_ASSERT(strstr(c->meta, "# command=") && strstr(c->meta, "# version=") && strstr(c->meta, "# seed=1"));
     BN_ASSERT(strstr(c->meta, "# solver=") && strstr(c->meta, "# tolerance=") && strstr(c->meta, "# reference=direct"));
@@ -151,6 +203,23 @@ BN_TEST(study_truncation_bound_cornell)
         rows++;
     }
     BN_ASSERT_EQ(rows, 21);
+    /* The plot shows what the table says: the series and the bound in its legend, the axis of
+     * bounces, and decade ticks within a decade of the smallest and largest truncation error. */
+    {
+        char *t = svg_text(bn_test_tmp("trunc.svg"));
+        double emax = 0, emin = INFINITY;
+        for (int r = 0; r < c->nrow; r++)
+            if (strcmp(csv_str(c, r, "method"), "truncated") == 0) {
+                emax = fmax(emax, csv_num(c, r, "err_inf"));
+                emin = fmin(emin, csv_num(c, r, "err_inf"));
+            }
+        BN_ASSERT(strstr(t, "|truncated series|") != NULL);
+        BN_ASSERT(strstr(t, "|bound ||K||n+1/(1-||K||) ||E|||") != NULL);
+        BN_ASSERT(strstr(t, "bounces n") != NULL);
+        BN_ASSERT(has_decade_near(t, emax));   /* err_inf: W m^-2 sr^-1, as the axis */
+        BN_ASSERT(has_decade_near(t, emin));
+        free(t);
+    }
     /* Gauss-Seidel reaches each tolerance: rows for both, and its error is below the bound of its
      * residual (||L - L_k|| <= ||r|| / (1 - ||K||) <= tol ||E|| / (1 - ||K||)). */
     {

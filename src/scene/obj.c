@@ -101,6 +101,18 @@ static bn_status bn__mtl_rgb(const char *file, unsigned line, const char *key, c
     return BN_OK;
 }
 
+/* The first control byte of a line (not tab, CR, LF, VT, FF), or -1: OBJ and MTL are text, and a
+ * byte like NUL would silently cut the line short for every parser after it. */
+static int bn__control_byte(const char *buf, ssize_t len)
+{
+    for (ssize_t k = 0; k < len; k++) {
+        unsigned char b = (unsigned char)buf[k];
+        if ((b < 0x20 && b != '\t' && b != '\r' && b != '\n' && b != '\v' && b != '\f') || b == 0x7f)
+            return b;
+    }
+    return -1;
+}
+
 static bn_status bn__read_mtl(const char *path, const char *objpath, unsigned objline, bn__soup *s,
                               const bn_log *log, bn_error *err)
 {
@@ -109,13 +121,19 @@ static bn_status bn__read_mtl(const char *path, const char *objpath, unsigned ob
     size_t cap = 0;
     unsigned line = 0;
     int cur = -1;
+    ssize_t len;
     bn_status st = BN_OK;
     if (!fp)
         return bn_error_set(err, BN_EIO, "%s:%u: cannot open material library %s: %s", objpath, objline, path,
                             strerror(errno));
-    while (getline(&buf, &cap, fp) >= 0) {
+    while ((len = getline(&buf, &cap, fp)) >= 0) {
         char *l, *kw, *c;
+        int cb;
         line++;
+        if ((cb = bn__control_byte(buf, len)) >= 0) {
+            st = bn_error_set(err, BN_EINPUT, "%s:%u: control byte 0x%02x in MTL text (not a text file?)", path, line, cb);
+            break;
+        }
         l = bn__strip(buf);
         c = l;
         kw = bn__token(&c);
@@ -234,6 +252,7 @@ bn_status bn__read_obj_stream(FILE *fp, const char *path, bn__soup *s, const bn_
     size_t cap = 0, *fv = NULL, fv_cap = 0;
     unsigned line = 0;
     int cur = -1, default_mat = -1;
+    ssize_t len;
     bn_status st = BN_OK;
     const char *slash;
 
@@ -243,9 +262,14 @@ bn_status bn__read_obj_stream(FILE *fp, const char *path, bn__soup *s, const bn_
         return bn_error_set(err, BN_ENOMEM, "out of memory");
     dir[slash ? (size_t)(slash - path) + 1 : 0] = '\0';
 
-    while (st == BN_OK && getline(&buf, &cap, fp) >= 0) {
+    while (st == BN_OK && (len = getline(&buf, &cap, fp)) >= 0) {
         char *l, *kw, *c;
+        int cb;
         line++;
+        if ((cb = bn__control_byte(buf, len)) >= 0) {
+            st = bn_error_set(err, BN_EINPUT, "%s:%u: control byte 0x%02x in OBJ text (not a text file?)", path, line, cb);
+            break;
+        }
         l = bn__strip(buf);
         c = l;
         kw = bn__token(&c);
