@@ -11,7 +11,7 @@ target_compile_definitions(test_image_readback PRIVATE BN_TEST_SOURCE_DIR="${PRO
   BN_TEST_BOUNCE_EXE="$<TARGET_FILE:bounce_cli>")
 add_dependencies(test_image_readback bounce_cli)
 target_link_libraries(test_image_readback PRIVATE bounce OpenImageIO::OpenImageIO OpenMeshCore m)
-foreach(t exr_oiio baked_ply_openmesh png_pixels cli_previews_match_exr)
+foreach(t exr_oiio baked_ply_openmesh png_pixels cli_previews_match_exr off_binary_openmesh)
   add_test(NAME test_image_readback.${t} COMMAND test_image_readback ${t})
   set_tests_properties(test_image_readback.${t} PROPERTIES TIMEOUT 600 LABELS test_image_readback)
 endforeach()

@@ -249,6 +249,38 @@ static void cli_previews_match_exr()
     CHECK(lit > 0);   // direct light is visible at that exposure
 }
 
+// A binary OFF written by OpenMesh reads back through bounce (OpenMesh's reader, by path): same
+// vertices, faces and area.
+static void off_binary_openmesh()
+{
+    struct T : OpenMesh::DefaultTraits {
+        typedef OpenMesh::Vec3d Point;
+    };
+    OpenMesh::PolyMesh_ArrayKernelT<T> m;
+    std::vector<OpenMesh::VertexHandle> v;
+    const double p[5][3] = {{0, 0, 0}, {2, 0, 0}, {2, 3, 0}, {0, 3, 0}, {1, 5, 0}};
+    for (auto &q : p)
+        v.push_back(m.add_vertex(T::Point(q[0], q[1], q[2])));
+    m.add_face(std::vector<OpenMesh::VertexHandle>{v[0], v[1], v[2], v[3]});
+    m.add_face(std::vector<OpenMesh::VertexHandle>{v[3], v[2], v[4]});
+    std::string path = tmpdir() + "/b.off";
+    OpenMesh::IO::Options o = OpenMesh::IO::Options::Binary;
+    CHECK(OpenMesh::IO::write_mesh(m, path, o));
+    bn_load_opts lo;
+    bn_load_opts_default(&lo);
+    lo.log.quiet = 1;
+    bn_scene *s = nullptr;
+    bn_error err;
+    CHECK(bn_scene_load(path.c_str(), &lo, &s, &err) == BN_OK);
+    size_t nf, nv;
+    const bn_face *f = bn_scene_faces(s, &nf);
+    bn_scene_vertices(s, &nv);
+    CHECK_EQ(nf, 2);
+    CHECK_EQ(nv, 5);
+    CHECK(std::fabs(f[0].area + f[1].area - 8) < 1e-12);   // the 2 x 3 rectangle, and a triangle of base 2, height 2
+    bn_scene_destroy(s);
+}
+
 int main(int argc, char **argv)
 {
     if (argc != 2)
@@ -257,6 +289,8 @@ int main(int argc, char **argv)
         exr_oiio();
     else if (std::strcmp(argv[1], "baked_ply_openmesh") == 0)
         baked_ply_openmesh();
+    else if (std::strcmp(argv[1], "off_binary_openmesh") == 0)
+        off_binary_openmesh();
     else if (std::strcmp(argv[1], "png_pixels") == 0)
         png_pixels();
     else if (std::strcmp(argv[1], "cli_previews_match_exr") == 0)

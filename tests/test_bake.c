@@ -2,6 +2,8 @@
  * averages (checked through an independent PLY parser), OBJ output, and PLY/OFF scene input
  * through OpenMesh with malformed files refused clearly. */
 #include "bn_test.h"
+
+#include <stdint.h>
 #include "bounce/bake.h"
 
 /* Baked colours are stored as float32: 1e-6 relative covers the rounding of the average. */
@@ -339,6 +341,93 @@ BN_TEST(off_input)
     write_file("bad.off", "OFF\n4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n3 0 1 7\n", 0);
     BN_ASSERT_STATUS(load("bad.off", &s, &err), BN_EINPUT);
     BN_ASSERT(strstr(err.msg, "bad.off") != NULL);
+}
+
+/* Colours as reflectance, each file read by one reader: PLY vertex colours (a face takes their
+ * mean), big-endian binary face colours (8 bits / 255), a face with a repeated vertex dropped; OFF
+ * with COFF vertex colours and comments, and with real-valued face colours. Materials are shared
+ * by faces with equal colours, numbered in order of first use. */
+BN_TEST(ply_off_colours)
+{
+    bn_scene *s;
+    bn_error err;
+    size_t nf, nm;
+    const bn_face *f;
+    const bn_material *m;
+    write_file("vc.ply",
+               "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+               "property uchar red\nproperty uchar green\nproperty uchar blue\nelement face 3\n"
+               "property list uchar int vertex_indices\nend_header\n"
+               "0 0 0 255 0 0\n1 0 0 255 0 0\n1 1 0 0 0 255\n0 1 0 0 0 255\n3 0 1 2\n3 0 2 3\n3 0 0 3\n", 0);
+    BN_ASSERT_STATUS(load("vc.ply", &s, &err), BN_OK);
+    f = bn_scene_faces(s, &nf);
+    m = bn_scene_materials(s, &nm);
+    BN_ASSERT_EQ(nf, 2);   /* "3 0 0 3" repeats a vertex: dropped */
+    BN_ASSERT_EQ(nm, 2);
+    BN_ASSERT_REL(m[f[0].material].rho[0], 2.0 / 3.0, 1e-12);   /* (1 + 1 + 0) / 3 */
+    BN_ASSERT_REL(m[f[0].material].rho[2], 1.0 / 3.0, 1e-12);
+    BN_ASSERT_REL(m[f[1].material].rho[0], 1.0 / 3.0, 1e-12);   /* (1 + 0 + 0) / 3 */
+    BN_ASSERT_EQ(f[0].material, 0);
+    bn_scene_destroy(s);
+    {
+        /* big-endian binary: 3 float positions a vertex, faces "uchar n, int indices, uchar r g b" */
+        const char *head = "ply\nformat binary_big_endian 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+                           "property float z\nelement face 2\nproperty list uchar int vertex_indices\n"
+                           "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n";
+        unsigned char buf[512];
+        size_t n = strlen(head);
+        const float v[12] = {0, 0, 0, 2, 0, 0, 2, 2, 0, 0, 2, 0};
+        const int tri[2][3] = {{0, 1, 2}, {0, 2, 3}};
+        const unsigned char rgb[2][3] = {{51, 102, 255}, {51, 102, 255}};
+        memcpy(buf, head, n);
+        for (int k = 0; k < 12; k++) {
+            uint32_t u;
+            memcpy(&u, &v[k], 4);
+            for (int b = 3; b >= 0; b--)
+                buf[n++] = (unsigned char)(u >> (8 * b));
+        }
+        for (int t = 0; t < 2; t++) {
+            buf[n++] = 3;
+            for (int c = 0; c < 3; c++)
+                for (int b = 3; b >= 0; b--)
+                    buf[n++] = (unsigned char)((uint32_t)tri[t][c] >> (8 * b));
+            for (int c = 0; c < 3; c++)
+                buf[n++] = rgb[t][c];
+        }
+        write_file("be.ply", (const char *)buf, n);
+        BN_ASSERT_STATUS(load("be.ply", &s, &err), BN_OK);
+        f = bn_scene_faces(s, &nf);
+        m = bn_scene_materials(s, &nm);
+        BN_ASSERT_EQ(nf, 2);
+        BN_ASSERT_EQ(nm, 1);   /* equal colours share a material */
+        BN_ASSERT_NEAR(f[0].area + f[1].area, 4, 1e-12);
+        BN_ASSERT_REL(m[0].rho[0], 0.2, 1e-12);
+        BN_ASSERT_REL(m[0].rho[1], 0.4, 1e-12);
+        BN_ASSERT_EQ(m[0].rho[2], 1);
+        bn_scene_destroy(s);
+    }
+    write_file("c.off", "COFF # vertex colours\n4 1 0\n0 0 0 255 0 0\n1 0 0 255 0 0\n1 1 0 0 0 255\n"
+                        "0 1 0 0 0 255 # blue\n4 0 1 2 3\n", 0);
+    BN_ASSERT_STATUS(load("c.off", &s, &err), BN_OK);
+    f = bn_scene_faces(s, &nf);
+    m = bn_scene_materials(s, NULL);
+    BN_ASSERT_EQ(nf, 1);
+    BN_ASSERT_EQ(m[f[0].material].rho[0], 0.5);
+    BN_ASSERT_EQ(m[f[0].material].rho[1], 0);
+    BN_ASSERT_EQ(m[f[0].material].rho[2], 0.5);
+    BN_ASSERT_EQ(f[0].line, 7);
+    bn_scene_destroy(s);
+    write_file("fc.off", "OFF\n4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2 0.25 0.5 0.75\n3 0 2 3 0.25 0.5 0.75 1\n", 0);
+    BN_ASSERT_STATUS(load("fc.off", &s, &err), BN_OK);
+    m = bn_scene_materials(s, &nm);
+    BN_ASSERT_EQ(nm, 1);
+    BN_ASSERT_EQ(m[0].rho[0], 0.25);
+    BN_ASSERT_EQ(m[0].rho[2], 0.75);
+    bn_scene_destroy(s);
+    /* 4OFF and nOFF are refused by name */
+    write_file("h.off", "4OFF\n4 1 0\n0 0 0 1\n1 0 0 1\n1 1 0 1\n0 1 0 1\n4 0 1 2 3\n", 0);
+    BN_ASSERT_STATUS(load("h.off", &s, &err), BN_EINPUT);
+    BN_ASSERT(strstr(err.msg, "h.off:1: '4OFF'") != NULL);
 }
 
 BN_TEST(ply_malformed)

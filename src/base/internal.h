@@ -89,6 +89,10 @@ void bn__progress_update(bn__progress *p, size_t done);   /* call from one threa
 void bn__progress_step(bn__progress *p, size_t *done, size_t work);
 void bn__progress_end(bn__progress *p);
 
+/* A whole file in memory, NUL-terminated (malloc'd; *size excludes the NUL): the one read of a
+ * scene file. Fails with BN_EIO naming the file and the system's reason. */
+bn_status bn__read_file(const char *path, char **text, size_t *size, bn_error *err);
+
 /* FNV-1a 64 over bytes, chained. */
 uint64_t bn__fnv1a(uint64_t h, const void *data, size_t n);
 #define BN__FNV_INIT 0xcbf29ce484222325ULL

@@ -276,3 +276,32 @@ void bn__progress_end(bn__progress *p)
     if (p->enabled && p->shown)
         fprintf(stderr, "\r%-14s done in %.1fs%40s\n", p->label, bn__now() - p->start, "");
 }
+
+bn_status bn__read_file(const char *path, char **text, size_t *size, bn_error *err)
+{
+    FILE *fp = fopen(path, "rb");
+    long n;
+    *text = NULL;
+    *size = 0;
+    if (!fp)
+        return bn_error_set(err, BN_EIO, "%s: cannot open: %s", path, strerror(errno));
+    if (fseek(fp, 0, SEEK_END) != 0 || (n = ftell(fp)) < 0 || fseek(fp, 0, SEEK_SET) != 0) {
+        fclose(fp);
+        return bn_error_set(err, BN_EIO, "%s: cannot read: %s", path, strerror(errno));
+    }
+    *text = malloc((size_t)n + 1);
+    if (!*text) {
+        fclose(fp);
+        return bn_error_set(err, BN_ENOMEM, "%s: out of memory for its %ld bytes", path, n);
+    }
+    if (fread(*text, 1, (size_t)n, fp) != (size_t)n) {
+        fclose(fp);
+        free(*text);
+        *text = NULL;
+        return bn_error_set(err, BN_EIO, "%s: cannot read: %s", path, strerror(errno));
+    }
+    fclose(fp);
+    (*text)[n] = '\0';
+    *size = (size_t)n;
+    return BN_OK;
+}

@@ -98,6 +98,62 @@ int bn__soup_add_material(bn__soup *s, const bn_material *m)
     return 1;
 }
 
+/* Materials from per-polygon keys (reflectance RGB, emission RGB: 6 values a polygon): one material
+ * per distinct key, named prefix0, prefix1, ... in order of first use. Sorting groups equal keys
+ * (each run in polygon order), so this is O(n log n) even when every polygon has its own colour. */
+typedef struct bn__mat_key {
+    double v[6];
+    size_t poly;
+} bn__mat_key;
+
+static int bn__mat_key_cmp(const void *a, const void *b)
+{
+    const bn__mat_key *x = a, *y = b;
+    for (int q = 0; q < 6; q++)
+        if (x->v[q] != y->v[q])
+            return x->v[q] < y->v[q] ? -1 : 1;
+    return x->poly < y->poly ? -1 : x->poly > y->poly;
+}
+
+int bn__soup_materials_from_keys(bn__soup *s, const double *keys, const char *prefix)
+{
+    size_t n = s->npolys;
+    bn__mat_key *k = bn__malloc_array(n ? n : 1, sizeof *k);
+    size_t *head = bn__malloc_array(n ? n : 1, sizeof(size_t));    /* first polygon with the same key */
+    unsigned *num = bn__malloc_array(n ? n : 1, sizeof(unsigned)); /* material of a head polygon */
+    int ok = k && head && num;
+    for (size_t f = 0; ok && f < n; f++) {
+        memcpy(k[f].v, keys + 6 * f, sizeof k[f].v);
+        k[f].poly = f;
+        num[f] = UINT32_MAX;
+    }
+    if (ok)
+        qsort(k, n, sizeof *k, bn__mat_key_cmp);
+    for (size_t q = 0, run = 0; ok && q < n; q++) {
+        if (q > 0 && memcmp(k[q].v, k[q - 1].v, sizeof k[q].v) != 0)
+            run = q;
+        head[k[q].poly] = k[run].poly;
+    }
+    /* Walking the polygons in order, a run is first met at its head, whose key is its own. */
+    for (size_t f = 0; ok && f < n; f++) {
+        size_t h = head[f];
+        if (num[h] == UINT32_MAX) {
+            bn_material m;
+            memset(&m, 0, sizeof m);
+            snprintf(m.name, sizeof m.name, "%s%zu", prefix, s->nmats);
+            memcpy(m.rho, keys + 6 * f, 3 * sizeof(double));
+            memcpy(m.Le, keys + 6 * f + 3, 3 * sizeof(double));
+            num[h] = (unsigned)s->nmats;
+            ok = bn__soup_add_material(s, &m);
+        }
+        s->mat[f] = num[h];
+    }
+    free(k);
+    free(head);
+    free(num);
+    return ok;
+}
+
 /* ---------------- face building ---------------- */
 typedef struct bn__builder {
     bn_scene *sc;
@@ -573,8 +629,10 @@ bn_status bn_scene_load(const char *path, const bn_load_opts *o, bn_scene **out,
     memset(&s, 0, sizeof s);
     if (strcasecmp(ext, "obj") == 0)
         st = bn__read_obj(path, &s, &o->log, err);
-    else if (strcasecmp(ext, "ply") == 0 || strcasecmp(ext, "off") == 0)
-        st = bn__read_openmesh(path, &s, &o->log, err);
+    else if (strcasecmp(ext, "ply") == 0)
+        st = bn__read_ply(path, &s, &o->log, err);
+    else if (strcasecmp(ext, "off") == 0)
+        st = bn__read_off(path, &s, &o->log, err);
     else
         st = bn_error_set(err, BN_EINPUT, "%s: unknown scene format '.%s' (bounce reads .obj, .ply and .off)", path,
                           ext);

@@ -27,13 +27,21 @@ void bn__soup_free(bn__soup *s);
 int bn__soup_add_vertex(bn__soup *s, const double p[3]);                 /* 0 on OOM */
 int bn__soup_add_polygon(bn__soup *s, const size_t *idx, unsigned n, unsigned mat, unsigned line);
 int bn__soup_add_material(bn__soup *s, const bn_material *m);
+/* One material per distinct key among keys[6 p .. 6 p + 6) (reflectance RGB, emission RGB) of
+ * polygon p, named prefix0, prefix1, ... in order of first use; sets every polygon's material.
+ * 0 on OOM. */
+int bn__soup_materials_from_keys(bn__soup *s, const double *keys, const char *prefix);
 
 /* Readers. `path` is used in messages. */
 bn_status bn__read_obj(const char *path, bn__soup *out, const bn_log *log, bn_error *err);
 /* The same from an open stream (fuzzing reads from memory); mtllib names resolve beside `path`. */
 bn_status bn__read_obj_stream(FILE *fp, const char *path, bn__soup *out, const bn_log *log, bn_error *err);
-/* PLY and OFF through OpenMesh (src/adapters). */
-bn_status bn__read_openmesh(const char *path, bn__soup *out, const bn_log *log, bn_error *err);
+/* PLY: our own reader (src/scene/ply.c), the file read once. */
+bn_status bn__read_ply(const char *path, bn__soup *out, const bn_log *log, bn_error *err);
+/* OFF: ASCII by our own reader (src/scene/off.c); binary OFF through OpenMesh (src/adapters),
+ * which reads it from its path after a check of the header's counts against the file's size. */
+bn_status bn__read_off(const char *path, bn__soup *out, const bn_log *log, bn_error *err);
+bn_status bn__read_off_binary(const char *path, bn__soup *out, const bn_log *log, bn_error *err);
 
 /* Validates a soup and builds faces; takes ownership of nothing (copies). */
 bn_status bn__scene_build(const char *path, const bn__soup *soup, const bn_load_opts *o,

@@ -1,6 +1,6 @@
-/* libFuzzer harness: PLY and OFF input (bounce's own PLY scan, then OpenMesh) on arbitrary
- * bytes. The first byte picks the extension; the rest is written to a temporary file, since
- * OpenMesh reads from a path. */
+/* libFuzzer harness: PLY input (bounce's own reader) and OFF input (checks, then OpenMesh) on
+ * arbitrary bytes. The first byte picks the extension; the rest is written to a temporary file,
+ * which each reader reads once. */
 #include "scene/scene_internal.h"
 
 #include <stdint.h>
@@ -30,7 +30,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     fclose(fp);
     log.quiet = 1;
     memset(&soup, 0, sizeof soup);
-    if (bn__read_openmesh(path[off], &soup, &log, &err) == BN_OK) {
+    if ((off ? bn__read_off : bn__read_ply)(path[off], &soup, &log, &err) == BN_OK) {
         bn_scene *s = NULL;
         bn_load_opts lo;
         bn_load_opts_default(&lo);
