@@ -73,6 +73,9 @@ void bn_cli_add_scene(bn_optset *s, bn_cli_scene *o);
 bn_status bn_cli_load_scene(const char *path, const bn_cli_scene *o, const bn_cli_common *c, bn_scene **out);
 /* Log sink for library notes and warnings: warnings always, notes unless --quiet (user: the bn_cli_common). */
 void bn_cli_log(void *user, bn_log_level level, const char *msg);
+/* The same with notes on stdout without a prefix ("wrote FILE ..."), for commands whose notes are
+ * their output. */
+void bn_cli_stdout_log(void *user, bn_log_level level, const char *msg);
 
 /* Applies --threads to OpenMP. */
 void bn_cli_apply_threads(const bn_cli_common *c);

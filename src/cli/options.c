@@ -300,6 +300,15 @@ bn_status bn_cli_load_scene(const char *path, const bn_cli_scene *o, const bn_cl
     return st;
 }
 
+void bn_cli_stdout_log(void *user, bn_log_level level, const char *msg)
+{
+    const bn_cli_common *c = user;
+    if (level == BN_LOG_WARN)
+        fprintf(stderr, "bounce: warning: %s\n", msg);
+    else if (level == BN_LOG_INFO && !c->quiet)
+        printf("%s\n", msg);
+}
+
 int bn_cli_fail(const bn_error *err)
 {
     fprintf(stderr, "bounce: error: %s\n", err->msg[0] ? err->msg : bn_status_str(err->status));

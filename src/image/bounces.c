@@ -1,0 +1,128 @@
+/* The per-bounce images of a solution (include/bounce/image.h): every layer E, KE, K2E, ...,
+ * rest, L rendered through one camera, written as one multi-layer EXR, an sRGB PNG per layer and
+ * a labelled contact sheet. */
+#include "bounce/image.h"
+#include "bounce/bake.h"
+#include "base/internal.h"
+
+#include <string.h>
+
+void bn_bounces_opts_default(bn_bounces_opts *o)
+{
+    memset(o, 0, sizeof *o);
+    o->output = "bounces.exr";
+    o->previews = 1;
+    o->tile = 320;
+    o->crease = BN_BAKE_DEFAULT_CREASE;
+    o->auto_exposure = 1;
+    o->seed = 1;
+}
+
+/* "dir/out.exr" + ".KE.png" -> "dir/out.KE.png" (the extension of `path` replaced). */
+static char *bn__sibling(const char *path, const char *suffix)
+{
+    const char *slash = strrchr(path, '/'), *dot = strrchr(path, '.');
+    size_t stem = (dot && (!slash || dot > slash)) ? (size_t)(dot - path) : strlen(path);
+    char *s = malloc(stem + strlen(suffix) + 1);
+    if (s) {
+        memcpy(s, path, stem);
+        strcpy(s + stem, suffix);
+    }
+    return s;
+}
+
+/* The layers' images at the camera's size, rendered (flat, or smooth through a bake). */
+static bn_status bn__bounces_render(const bn_scene *scene, const bn_rt *rt, const bn_camera *cam,
+                                    const double *const *layers, size_t nl, const bn_bounces_opts *o, bn_image *imgs,
+                                    bn_error *err)
+{
+    bn_bake *bake = NULL;
+    bn_status st = BN_OK;
+    for (size_t l = 0; l < nl && st == BN_OK; l++)
+        st = bn_image_alloc(&imgs[l], cam->width, cam->height, err);
+    if (st == BN_OK && o->smooth)
+        st = bn_bake_create(scene, o->crease, &bake, err);
+    if (st == BN_OK)
+        st = bn_image_render(rt, cam, layers, nl, bake, o->seed, imgs, err);
+    bn_bake_destroy(bake);
+    return st;
+}
+
+/* A PNG per layer and the contact sheet, beside the EXR. */
+static bn_status bn__bounces_previews(const bn_layer *named, size_t nl, double ev, const bn_bounces_opts *o,
+                                      bn_error *err)
+{
+    bn_status st = BN_OK;
+    size_t npng = o->nattrs < 4 ? o->nattrs : 4;
+    char *path;
+    for (size_t l = 0; l < nl && st == BN_OK; l++) {
+        char suffix[40];
+        snprintf(suffix, sizeof suffix, ".%s.png", named[l].name);
+        if (!(path = bn__sibling(o->output, suffix)))
+            return bn_error_set(err, BN_ENOMEM, "out of memory");
+        st = bn_png_write(path, named[l].img, ev, o->attrs, npng, err);
+        if (st == BN_OK)
+            bn_logf(&o->log, BN_LOG_INFO, "wrote %s (exposure %+.2f EV, sRGB)", path, ev);
+        free(path);
+    }
+    if (st != BN_OK)
+        return st;
+    if (!(path = bn__sibling(o->output, ".sheet.png")))
+        return bn_error_set(err, BN_ENOMEM, "out of memory");
+    st = bn_contact_sheet_write(path, named, nl, ev, o->tile, o->attrs, npng, &o->log, err);
+    if (st == BN_OK)
+        bn_logf(&o->log, BN_LOG_INFO, "wrote %s (contact sheet: row 1 at %+.2f EV, row 2 each layer normalised)", path,
+                ev);
+    free(path);
+    return st;
+}
+
+bn_status bn_bounces_write(const bn_scene *scene, const bn_rt *rt, const bn_camera *cam, const double *const *layers,
+                           int bounces, const bn_bounces_opts *o, double *ev_used, bn_error *err)
+{
+    size_t nl = (size_t)bn_layer_count(bounces), na = o->nattrs + 2;
+    bn_image *imgs = bn__calloc(nl, sizeof *imgs);
+    bn_layer *named = bn__calloc(nl, sizeof *named);
+    char (*names)[16] = bn__calloc(nl, sizeof *names);
+    bn_attr *attrs = bn__calloc(na, sizeof *attrs);
+    char evbuf[32], shading[80];
+    double ev = o->ev;
+    bn_status st = imgs && named && names && attrs ? BN_OK : bn_error_set(err, BN_ENOMEM, "out of memory");
+    if (st == BN_OK)
+        st = bn__bounces_render(scene, rt, cam, layers, nl, o, imgs, err);
+    if (st == BN_OK) {
+        for (size_t l = 0; l < nl; l++) {
+            named[l].name = bn_layer_name((int)l, bounces, names[l], sizeof names[l]);
+            named[l].img = &imgs[l];
+        }
+        if (o->auto_exposure)
+            ev = bn_image_auto_exposure(&imgs[nl - 1]);   /* L's */
+        if (ev_used)
+            *ev_used = ev;
+        memcpy(attrs, o->attrs, o->nattrs * sizeof *attrs);
+        snprintf(evbuf, sizeof evbuf, "%.4f", ev);
+        if (o->smooth)
+            snprintf(shading, sizeof shading, "smooth (baked vertex values), crease %g degrees", o->crease);
+        else
+            snprintf(shading, sizeof shading, "flat (patch values)");
+        attrs[o->nattrs] = (bn_attr){"bounce:shading", shading};
+        attrs[o->nattrs + 1] = (bn_attr){"bounce:previewExposureEV", evbuf};
+        st = bn_exr_write(o->output, named, nl, attrs, na, o->half, &o->log, err);
+    }
+    if (st == BN_OK)
+        bn_logf(&o->log, BN_LOG_INFO, "wrote %s (%zu layers: E .. %s, rest, L; %dx%d, %s)", o->output, nl,
+                names[bounces], cam->width, cam->height, o->half ? "half" : "float");
+    if (st == BN_OK && o->previews) {
+        bn_bounces_opts po = *o;
+        po.attrs = attrs;
+        po.nattrs = na;
+        st = bn__bounces_previews(named, nl, ev, &po, err);
+    }
+    for (size_t l = 0; imgs && l < nl; l++)
+        bn_image_free(&imgs[l]);
+    free(imgs);
+    free(named);
+    free(names);
+    free(attrs);
+    return st;
+}
