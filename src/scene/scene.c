@@ -381,21 +381,9 @@ static bn_status bn__drop_duplicates(bn_scene *sc, const char *path, const bn_lo
     return BN_OK;
 }
 
-bn_status bn__scene_build(const char *path, const bn__soup *s, const bn_load_opts *o, bn_scene **out,
-                          bn_error *err)
+/* Materials in range, finite vertices, indices and materials in range; the used vertices' bounds. */
+static bn_status bn__soup_check(const char *path, const bn__soup *s, double lo[3], double hi[3], bn_error *err)
 {
-    bn_load_opts defo;
-    bn__builder b;
-    bn_scene *sc;
-    bn_status st = BN_OK;
-    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY}, diag, area_eps;
-    size_t pos = 0, *tri = NULL, tri_cap = 0, degenerate = 0;
-
-    *out = NULL;
-    if (!o) {
-        bn_load_opts_default(&defo);
-        o = &defo;
-    }
     if (s->npolys == 0)
         return bn_error_set(err, BN_EINPUT, "%s: the scene has no faces", path);
     for (size_t m = 0; m < s->nmats; m++)
@@ -413,7 +401,10 @@ bn_status bn__scene_build(const char *path, const bn__soup *s, const bn_load_opt
             if (!isfinite(s->verts[3 * v + k]))
                 return bn_error_set(err, BN_EINPUT, "%s: vertex %zu has a coordinate that is not finite (%g)", path,
                                     v, s->verts[3 * v + k]);
-    /* Bounds over used vertices. */
+    for (int k = 0; k < 3; k++) {
+        lo[k] = INFINITY;
+        hi[k] = -INFINITY;
+    }
     for (size_t i = 0; i < s->nidx; i++) {
         if (s->idx[i] >= s->nverts)
             return bn_error_set(err, BN_EINPUT, "%s: vertex index %zu out of range (%zu vertices)", path, s->idx[i],
@@ -428,19 +419,16 @@ bn_status bn__scene_build(const char *path, const bn__soup *s, const bn_load_opt
         if (s->mat[p] >= s->nmats)
             return bn_error_set(err, BN_EINPUT, "%s: polygon %zu has material %u of %zu", path, p, s->mat[p],
                                 s->nmats);
-    {
-        double d[3];
-        bn_v3_sub(hi, lo, d);
-        diag = bn_v3_len(d);
-    }
-    /* A face smaller than this (in area) is below double rounding at the scene's size. */
-    area_eps = 1e-24 * diag * diag;
+    return BN_OK;
+}
 
-    sc = calloc(1, sizeof *sc);
+/* A scene holding the soup's materials and vertices, no faces yet. */
+static bn_scene *bn__scene_new(const char *path, const bn__soup *s, const bn_load_opts *o, const double lo[3],
+                               const double hi[3])
+{
+    bn_scene *sc = calloc(1, sizeof *sc);
     if (!sc)
-        return bn_error_set(err, BN_ENOMEM, "out of memory");
-    memset(&b, 0, sizeof b);
-    b.sc = sc;
+        return NULL;
     sc->path = bn__strdup(path);
     sc->unit = o->unit;
     sc->nmats = s->nmats;
@@ -449,124 +437,196 @@ bn_status bn__scene_build(const char *path, const bn__soup *s, const bn_load_opt
     sc->verts = bn__malloc_array(3 * s->nverts, sizeof(double));
     if (!sc->path || !sc->mats || !sc->verts) {
         bn_scene_destroy(sc);
-        return bn_error_set(err, BN_ENOMEM, "out of memory");
+        return NULL;
     }
     memcpy(sc->mats, s->mats, s->nmats * sizeof *sc->mats);
     memcpy(sc->verts, s->verts, 3 * s->nverts * sizeof(double));
-    memcpy(sc->lo, lo, sizeof lo);
-    memcpy(sc->hi, hi, sizeof hi);
+    memcpy(sc->lo, lo, 3 * sizeof(double));
+    memcpy(sc->hi, hi, 3 * sizeof(double));
     sc->stats.input_polygons = s->npolys;
+    return sc;
+}
 
-    for (size_t p = 0; p < s->npolys && st == BN_OK; p++) {
-        unsigned n0 = s->counts[p], n = 0, line = s->line[p], mat = s->mat[p];
-        size_t *v;
-        double nrm[3], area, diam, dev = 0, c[3] = {0, 0, 0};
-        if (!bn__grow((void **)&tri, &tri_cap, 4 * (size_t)n0, sizeof(size_t))) {
-            st = BN_ENOMEM;
-            break;
-        }
-        v = tri + 3 * (size_t)n0; /* tri[0 .. 3n0) holds up to n0 - 2 triangles, then n0 scratch */
-        /* Drop repeated vertices (same index or same position as the previous one). */
-        for (unsigned i = 0; i < n0; i++) {
-            size_t vi = s->idx[pos + i];
-            if (n > 0 && (vi == v[n - 1] || bn__cmp_pt(bn__vp(s, vi), bn__vp(s, v[n - 1])) == 0))
-                continue;
-            v[n++] = vi;
-        }
-        while (n > 1 && (v[0] == v[n - 1] || bn__cmp_pt(bn__vp(s, v[0]), bn__vp(s, v[n - 1])) == 0))
-            n--;
-        pos += n0;
-        if (n < 3) {
-            degenerate++;
+/* The polygon's corners without repeats (the same index or position as the previous corner, and
+ * the last closing onto the first): their count. */
+static unsigned bn__polygon_corners(const bn__soup *s, const size_t *idx, unsigned n0, size_t *v)
+{
+    unsigned n = 0;
+    for (unsigned i = 0; i < n0; i++) {
+        size_t vi = idx[i];
+        if (n > 0 && (vi == v[n - 1] || bn__cmp_pt(bn__vp(s, vi), bn__vp(s, v[n - 1])) == 0))
             continue;
-        }
-        bn__newell(s, v, n, nrm);
-        area = 0.5 * bn_v3_normalize(nrm);
-        diam = bn__diameter(s, v, n);
-        if (!(area > area_eps) || !(area > 1e-10 * diam * diam)) {
-            degenerate++;
-            continue;
-        }
-        for (unsigned i = 0; i < n; i++)
-            bn_v3_add(c, bn__vp(s, v[i]), c);
-        bn_v3_scale(c, 1.0 / n, c);
-        for (unsigned i = 0; i < n; i++) {
-            double d[3];
-            bn_v3_sub(bn__vp(s, v[i]), c, d);
-            dev = fmax(dev, fabs(bn_v3_dot(d, nrm)));
-        }
-        if (n == 3) {
-            st = bn__emit_triangle(&b, s, v[0], v[1], v[2], mat, p, line, area_eps, &degenerate);
-            continue;
-        }
-        if (dev > o->planar_tol * diam) {
-            sc->stats.nonplanar_split++;
-            if (n == 4) {
-                bn_logf(&o->log, BN_LOG_WARN,
-                        "%s:%u: quad is non-planar (a vertex is %.3g off its mean plane, %.2g of its size); split into two triangles along the "
-                        "diagonal from its 1st to its 3rd vertex",
-                        path, line, dev, dev / diam);
-                st = bn__emit_triangle(&b, s, v[0], v[1], v[2], mat, p, line, area_eps, &degenerate);
-                if (st == BN_OK)
-                    st = bn__emit_triangle(&b, s, v[0], v[2], v[3], mat, p, line, area_eps, &degenerate);
-                continue;
-            }
-            bn_logf(&o->log, BN_LOG_WARN, "%s:%u: polygon of %u vertices is non-planar by %.3g; triangulated", path,
-                    line, n, dev);
-        } else if (n == 4) {
-            int convex = 1;
-            for (unsigned i = 0; i < 4; i++) {
-                double e1[3], e2[3], cr[3];
-                bn_v3_sub(bn__vp(s, v[(i + 1) % 4]), bn__vp(s, v[i]), e1);
-                bn_v3_sub(bn__vp(s, v[(i + 2) % 4]), bn__vp(s, v[(i + 1) % 4]), e2);
-                bn_v3_cross(e1, e2, cr);
-                if (bn_v3_dot(cr, nrm) <= 1e-12 * diam * diam)
-                    convex = 0;
-            }
-            if (convex) {
-                st = bn__emit_face(&b, s, v, 4, mat, p, line, nrm, area);
-                continue;
-            }
-        }
-        /* Planar non-convex quads and polygons of 5+ vertices: ear clipping. */
-        sc->stats.polygons_triangulated++;
-        {
-            int r = bn__ear_clip(s, v, n, nrm, tri);
-            if (r < 0) {
-                st = BN_ENOMEM;
-                break;
-            }
-            if (r == 0) {
-                st = bn_error_set(err, BN_EINPUT, "%s:%u: polygon of %u vertices intersects itself; cannot triangulate",
-                                  path, line, n);
-                break;
-            }
-            for (unsigned t = 0; t < n - 2 && st == BN_OK; t++)
-                st = bn__emit_triangle(&b, s, tri[3 * t], tri[3 * t + 1], tri[3 * t + 2], mat, p, line, area_eps,
-                                       &degenerate);
-        }
+        v[n++] = vi;
     }
-    free(tri);
-    if (st == BN_ENOMEM)
-        bn_error_set(err, st, "out of memory building faces of %s", path);
-    if (st == BN_OK)
-        st = bn__drop_duplicates(sc, path, &o->log);
-    if (st != BN_OK) {
-        if (st == BN_ENOMEM)
-            bn_error_set(err, st, "out of memory building faces of %s", path);
-        bn_scene_destroy(sc);
-        return st;
+    while (n > 1 && (v[0] == v[n - 1] || bn__cmp_pt(bn__vp(s, v[0]), bn__vp(s, v[n - 1])) == 0))
+        n--;
+    return n;
+}
+
+/* A polygon's plane: unit normal, area, diameter, and the largest distance of a corner from the
+ * plane through the corners' mean. */
+typedef struct bn__plane {
+    double nrm[3], area, diam, dev;
+} bn__plane;
+
+static void bn__polygon_plane(const bn__soup *s, const size_t *v, unsigned n, bn__plane *pl)
+{
+    double c[3] = {0, 0, 0};
+    bn__newell(s, v, n, pl->nrm);
+    pl->area = 0.5 * bn_v3_normalize(pl->nrm);
+    pl->diam = bn__diameter(s, v, n);
+    pl->dev = 0;
+    for (unsigned i = 0; i < n; i++)
+        bn_v3_add(c, bn__vp(s, v[i]), c);
+    bn_v3_scale(c, 1.0 / n, c);
+    for (unsigned i = 0; i < n; i++) {
+        double d[3];
+        bn_v3_sub(bn__vp(s, v[i]), c, d);
+        pl->dev = fmax(pl->dev, fabs(bn_v3_dot(d, pl->nrm)));
     }
+}
+
+static int bn__quad_convex(const bn__soup *s, const size_t *v, const bn__plane *pl)
+{
+    for (unsigned i = 0; i < 4; i++) {
+        double e1[3], e2[3], cr[3];
+        bn_v3_sub(bn__vp(s, v[(i + 1) % 4]), bn__vp(s, v[i]), e1);
+        bn_v3_sub(bn__vp(s, v[(i + 2) % 4]), bn__vp(s, v[(i + 1) % 4]), e2);
+        bn_v3_cross(e1, e2, cr);
+        if (bn_v3_dot(cr, pl->nrm) <= 1e-12 * pl->diam * pl->diam)
+            return 0;
+    }
+    return 1;
+}
+
+/* What building the faces needs besides the soup and the scene. */
+typedef struct bn__polys {
+    const char *path;
+    const bn_load_opts *o;
+    double area_eps;        /* a face smaller than this is below double rounding at the scene's size */
+    size_t *tri, tri_cap;   /* scratch: triangles of an ear clipping, then the corners */
+    size_t degenerate;
+} bn__polys;
+
+/* Polygon p (corners from idx) into faces: a triangle or a planar convex quad as it is; a
+ * non-planar quad split along its 1st-3rd diagonal; anything else by ear clipping. */
+static bn_status bn__build_polygon(bn__builder *b, const bn__soup *s, bn__polys *P, size_t p, const size_t *idx,
+                                   bn_error *err)
+{
+    unsigned n0 = s->counts[p], n, line = s->line[p], mat = s->mat[p];
+    size_t *v, *tri;
+    bn__plane pl;
+    int r;
+    if (!bn__grow((void **)&P->tri, &P->tri_cap, 4 * (size_t)n0, sizeof(size_t)))
+        return BN_ENOMEM;
+    tri = P->tri;
+    v = tri + 3 * (size_t)n0; /* tri[0 .. 3n0) holds up to n0 - 2 triangles, then n0 corners */
+    n = bn__polygon_corners(s, idx, n0, v);
+    if (n < 3) {
+        P->degenerate++;
+        return BN_OK;
+    }
+    bn__polygon_plane(s, v, n, &pl);
+    if (!(pl.area > P->area_eps) || !(pl.area > 1e-10 * pl.diam * pl.diam)) {
+        P->degenerate++;
+        return BN_OK;
+    }
+    if (n == 3)
+        return bn__emit_triangle(b, s, v[0], v[1], v[2], mat, p, line, P->area_eps, &P->degenerate);
+    if (pl.dev > P->o->planar_tol * pl.diam) {
+        b->sc->stats.nonplanar_split++;
+        if (n == 4) {
+            bn_status st;
+            bn_logf(&P->o->log, BN_LOG_WARN,
+                    "%s:%u: quad is non-planar (a vertex is %.3g off its mean plane, %.2g of its size); split into two "
+                    "triangles along the diagonal from its 1st to its 3rd vertex",
+                    P->path, line, pl.dev, pl.dev / pl.diam);
+            st = bn__emit_triangle(b, s, v[0], v[1], v[2], mat, p, line, P->area_eps, &P->degenerate);
+            return st == BN_OK ? bn__emit_triangle(b, s, v[0], v[2], v[3], mat, p, line, P->area_eps, &P->degenerate)
+                               : st;
+        }
+        bn_logf(&P->o->log, BN_LOG_WARN, "%s:%u: polygon of %u vertices is non-planar by %.3g; triangulated", P->path,
+                line, n, pl.dev);
+    } else if (n == 4 && bn__quad_convex(s, v, &pl)) {
+        return bn__emit_face(b, s, v, 4, mat, p, line, pl.nrm, pl.area);
+    }
+    /* Planar non-convex quads and polygons of 5+ vertices: ear clipping. */
+    b->sc->stats.polygons_triangulated++;
+    r = bn__ear_clip(s, v, n, pl.nrm, tri);
+    if (r < 0)
+        return BN_ENOMEM;
+    if (r == 0)
+        return bn_error_set(err, BN_EINPUT, "%s:%u: polygon of %u vertices intersects itself; cannot triangulate",
+                            P->path, line, n);
+    for (unsigned t = 0; t < n - 2; t++) {
+        bn_status st = bn__emit_triangle(b, s, tri[3 * t], tri[3 * t + 1], tri[3 * t + 2], mat, p, line, P->area_eps,
+                                         &P->degenerate);
+        if (st != BN_OK)
+            return st;
+    }
+    return BN_OK;
+}
+
+/* Duplicates dropped, counts and warnings said, and a scene with no face refused. */
+static bn_status bn__scene_finish(bn_scene *sc, const char *path, const bn_load_opts *o, size_t degenerate,
+                                  bn_error *err)
+{
+    bn_status st = bn__drop_duplicates(sc, path, &o->log);
+    if (st != BN_OK)
+        return bn_error_set(err, st, "out of memory building faces of %s", path);
     sc->stats.degenerate_dropped = degenerate;
     if (degenerate)
         bn_logf(&o->log, BN_LOG_WARN, "%s: %zu degenerate (zero-area) face%s dropped", path, degenerate,
                 degenerate == 1 ? "" : "s");
-    if (sc->nfaces == 0) {
-        bn_scene_destroy(sc);
+    if (sc->nfaces == 0)
         return bn_error_set(err, BN_EINPUT, "%s: no face with a non-zero area", path);
-    }
     if (bn_scene_emitter_count(sc) == 0)
         bn_logf(&o->log, BN_LOG_WARN, "%s: no emitter (no material with Ke > 0): the result will be black", path);
+    return BN_OK;
+}
+
+bn_status bn__scene_build(const char *path, const bn__soup *s, const bn_load_opts *o, bn_scene **out,
+                          bn_error *err)
+{
+    bn_load_opts defo;
+    bn__builder b;
+    bn__polys P;
+    bn_scene *sc;
+    double lo[3], hi[3], d[3];
+    size_t pos = 0;
+    bn_status st;
+
+    *out = NULL;
+    if (!o) {
+        bn_load_opts_default(&defo);
+        o = &defo;
+    }
+    st = bn__soup_check(path, s, lo, hi, err);
+    if (st != BN_OK)
+        return st;
+    sc = bn__scene_new(path, s, o, lo, hi);
+    if (!sc)
+        return bn_error_set(err, BN_ENOMEM, "out of memory");
+    memset(&b, 0, sizeof b);
+    b.sc = sc;
+    memset(&P, 0, sizeof P);
+    P.path = path;
+    P.o = o;
+    bn_v3_sub(hi, lo, d);
+    P.area_eps = 1e-24 * bn_v3_dot(d, d);
+    for (size_t p = 0; p < s->npolys && st == BN_OK; p++) {
+        st = bn__build_polygon(&b, s, &P, p, s->idx + pos, err);
+        pos += s->counts[p];
+    }
+    free(P.tri);
+    if (st == BN_ENOMEM)
+        bn_error_set(err, st, "out of memory building faces of %s", path);
+    if (st == BN_OK)
+        st = bn__scene_finish(sc, path, o, P.degenerate, err);
+    if (st != BN_OK) {
+        bn_scene_destroy(sc);
+        return st;
+    }
     *out = sc;
     return BN_OK;
 }
