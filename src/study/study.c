@@ -506,6 +506,179 @@ static bn_status bn__methods(bn__study *S, const bn__study_ref *ref, const bn_tr
     return st;
 }
 
+/* What the bounces, tol and max-iter studies share: one scene, one K, its direct reference. */
+typedef struct bn__opctx {
+    bn_scene *sc;
+    const bn_transport *K;
+    const double *E;
+    const bn__study_ref *ref;
+    size_t n;
+    double tm, tf, tdir;   /* meshing, form factors, the direct solve */
+} bn__opctx;
+
+/* The truncated series S_n = E + KE + ... + K^n E at each n asked, by repeated application timed
+ * cumulatively (row n costs n applications of K), with both a priori bounds and the spectral
+ * estimate of its error; then the methods table at the given tolerances. */
+static bn_status bn__study_series(bn__study *S, const bn__opctx *C, bn_error *err)
+{
+    const bn_study_opts *o = S->o;
+    bn_study_result *R = S->res;
+    const bn_transport *K = C->K;
+    const double *E = C->E;
+    const bn__study_ref *refp = C->ref;
+    bn_scene *sc = C->sc;
+    size_t n = C->n;
+    double tm = C->tm, tf = C->tf, tdir = C->tdir;
+    bn_status st = BN_OK;
+    /* S_n by repeated application, timed cumulatively: row n costs n applications of K. */
+    int nmax = 0;
+    size_t m = 3 * n;
+    double *x = bn__malloc_array(m + 1, sizeof(double)), *y = bn__malloc_array(m + 1, sizeof(double));
+    double *Sn = bn__malloc_array(m + 1, sizeof(double)), t_apply = 0, norm_ke = 0;
+    bn_study_curve *curve;
+    for (size_t v = 0; v < o->nvalues; v++)
+        nmax = (int)fmax(nmax, o->values[v]);
+    curve = bn__curve_new(S, "truncated series", (size_t)nmax + 1, err);
+    if (!x || !y || !Sn || !curve) {
+        free(x);
+        free(y);
+        free(Sn);
+        return bn_error_set(err, BN_ENOMEM, "study: out of memory for the series");
+    }
+    /* ||KE||_inf for the second bound (one application, not timed). */
+    st = bn_transport_apply(K, E, y, err);
+    for (size_t q = 0; q < m; q++)
+        norm_ke = fmax(norm_ke, fabs(y[q]));
+    memcpy(x, E, m * sizeof(double));
+    memcpy(Sn, E, m * sizeof(double));
+    for (int k = 0; k <= nmax && st == BN_OK; k++) {
+        bn_study_row tmp, *row = NULL;
+        double t0;
+        if (k > 0) {
+            t0 = bn__now();
+            st = bn_transport_apply(K, x, y, err);   /* K^k E <- K (K^(k-1) E) */
+            if (st != BN_OK)
+                break;
+            for (size_t q = 0; q < m; q++)
+                Sn[q] += y[q];             /* S_k <- S_(k-1) + K^k E */
+            t_apply += bn__now() - t0;
+            memcpy(x, y, m * sizeof(double));
+        }
+        for (size_t v = 0; v < o->nvalues; v++)
+            if ((int)o->values[v] == k) {
+                char val[32];
+                snprintf(val, sizeof val, "%d", k);
+                if (!(row = bn__row_new(S, "truncated", val, k, err))) {
+                    st = err ? err->status : BN_ENOMEM;
+                    break;
+                }
+                break;
+            }
+        if (st != BN_OK)
+            break;
+        memset(&tmp, 0, sizeof tmp);
+        if (!row)
+            row = &tmp;
+        row->patches = n;
+        row->iterations = (size_t)k;
+        row->k_norm = R->k_norm;
+        row->t_mesh = tm;
+        row->t_ff = tf;
+        row->t_solve = t_apply;
+        row->t_iterate = t_apply;
+        row->bound = bn__geom(R->k_norm, k, R->norm_E);
+        /* L - S_n = sum_{j>=0} K^j (K^(n+1) E) = sum_{j>=n} K^j (KE): <= ||K||^n / (1 - ||K||) ||KE||. */
+        row->bound_ke = bn__geom(R->k_norm, k - 1, norm_ke);
+        {   /* the tail ~ K^n E (rho + rho^2 + ...) once K^n E is along the dominant eigenvector */
+            double tn = 0, q = R->spectral_radius;
+            for (size_t i = 0; i < m; i++)
+                tn = fmax(tn, fabs(x[i]));
+            row->estimate = q < 1 ? tn * q / (1 - q) : INFINITY;
+        }
+        st = bn__study_compare(refp, sc, Sn, row, err);
+        if (row != &tmp) {
+            row->t_output = bn__output_time(sc, Sn);
+            row->peak_mb = bn__study_peak_mb();
+            bn__row_total(row);
+        }
+        curve->t[curve->n] = fmax(t_apply, 1e-7);   /* S_0 = E costs nothing: drawn at 0.1 us */
+        curve->err[curve->n] = row->err_inf_rel;
+        curve->n++;
+    }
+    free(x);
+    free(y);
+    free(Sn);
+    if (st == BN_OK && o->methods) {
+        static const double deftols[] = {1e-2, 1e-4, 1e-6, 1e-8};
+        st = bn__methods(S, refp, K, E, o->ntols ? o->tols : deftols, o->ntols ? o->ntols : 4, tm, tf, tdir, err);
+    }
+    return st;
+}
+
+/* Each iterative method stopped at each iteration limit, its error against the reference and the
+ * solver's own a priori bound after those sweeps. */
+static bn_status bn__study_max_iter(bn__study *S, const bn__opctx *C, bn_error *err)
+{
+    const bn_study_opts *o = S->o;
+    bn_study_result *R = S->res;
+    const bn_transport *K = C->K;
+    const double *E = C->E;
+    const bn__study_ref *refp = C->ref;
+    bn_scene *sc = C->sc;
+    size_t n = C->n;
+    double tm = C->tm, tf = C->tf;
+    bn_solve_result info;
+    bn_status st = BN_OK;
+    static const bn_solve_method iters[3] = {BN_SOLVE_JACOBI, BN_SOLVE_GAUSS_SEIDEL, BN_SOLVE_NEUMANN};
+    for (int q = 0; q < 3 && st == BN_OK; q++) {
+        if (!(o->methods & (1u << iters[q])))
+            continue;
+        for (size_t v = 0; v < o->nvalues && st == BN_OK; v++) {
+            bn_solve_opts so = o->solve;
+            bn__mon M;
+            double *Lk = NULL, ts;
+            char val[32];
+            bn_study_row *row;
+            memset(&M, 0, sizeof M);
+            M.Lref = refp->L;
+            M.normL = refp->norm_L;
+            M.m = 3 * n;
+            M.last_bound = NAN;
+            so.method = iters[q];
+            so.stop = BN_SOLVE_STOP_RESIDUAL;
+            so.tol = 0;   /* run to the limit */
+            so.max_iter = (size_t)o->values[v];
+            so.monitor = bn__monitor;
+            so.monitor_user = &M;
+            snprintf(val, sizeof val, "%zu", so.max_iter);
+            if (!(row = bn__row_new(S, bn_solve_method_name(iters[q]), val, o->values[v], err))) {
+                st = err ? err->status : BN_ENOMEM;
+                break;
+            }
+            bn__study_peak_reset();
+            st = bn__solve(K, E, &so, &Lk, &info, &ts, err);
+            if (st != BN_OK)
+                break;
+            row->patches = n;
+            row->iterations = info.iterations;
+            row->k_norm = R->k_norm;
+            row->t_mesh = tm;
+            row->t_ff = tf;
+            row->t_solve = ts;
+            row->t_iterate = info.seconds_iterate;
+            row->bound = M.last_bound;   /* the solver's a priori bound after these sweeps */
+            row->estimate = bn__geom(R->spectral_radius, (int)info.iterations *
+                                     (iters[q] == BN_SOLVE_GAUSS_SEIDEL && so.symmetric ? 2 : 1), R->norm_E);
+            st = bn__study_compare(refp, sc, Lk, row, err);
+            row->t_output = bn__output_time(sc, Lk);
+            row->peak_mb = bn__study_peak_mb();
+            bn__row_total(row);
+            free(Lk);
+        }
+    }
+    return st;
+}
+
 static bn_status bn__study_operator(bn__study *S, bn_error *err)
 {
     const bn_study_opts *o = S->o;
@@ -558,140 +731,14 @@ static bn_status bn__study_operator(bn__study *S, bn_error *err)
     bn__note(S, "reference: %s; ||K||_inf %.6g, spectral radius %.6g; its error <= %.3g (relative)", R->reference,
              R->k_norm, R->spectral_radius, R->ref_error);
 
-    if (o->param == BN_STUDY_BOUNCES) {
-        /* S_n by repeated application, timed cumulatively: row n costs n applications of K. */
-        int nmax = 0;
-        size_t m = 3 * n;
-        double *x = bn__malloc_array(m + 1, sizeof(double)), *y = bn__malloc_array(m + 1, sizeof(double));
-        double *Sn = bn__malloc_array(m + 1, sizeof(double)), t_apply = 0, norm_ke = 0;
-        bn_study_curve *curve;
-        for (size_t v = 0; v < o->nvalues; v++)
-            nmax = (int)fmax(nmax, o->values[v]);
-        curve = bn__curve_new(S, "truncated series", (size_t)nmax + 1, err);
-        if (!x || !y || !Sn || !curve) {
-            free(x);
-            free(y);
-            free(Sn);
-            st = bn_error_set(err, BN_ENOMEM, "study: out of memory for the series");
-            goto done;
-        }
-        /* ||KE||_inf for the second bound (one application, not timed). */
-        st = bn_transport_apply(K, E, y, err);
-        for (size_t q = 0; q < m; q++)
-            norm_ke = fmax(norm_ke, fabs(y[q]));
-        memcpy(x, E, m * sizeof(double));
-        memcpy(Sn, E, m * sizeof(double));
-        for (int k = 0; k <= nmax && st == BN_OK; k++) {
-            bn_study_row tmp, *row = NULL;
-            double t0;
-            if (k > 0) {
-                t0 = bn__now();
-                st = bn_transport_apply(K, x, y, err);   /* K^k E <- K (K^(k-1) E) */
-                if (st != BN_OK)
-                    break;
-                for (size_t q = 0; q < m; q++)
-                    Sn[q] += y[q];             /* S_k <- S_(k-1) + K^k E */
-                t_apply += bn__now() - t0;
-                memcpy(x, y, m * sizeof(double));
-            }
-            for (size_t v = 0; v < o->nvalues; v++)
-                if ((int)o->values[v] == k) {
-                    char val[32];
-                    snprintf(val, sizeof val, "%d", k);
-                    if (!(row = bn__row_new(S, "truncated", val, k, err))) {
-                        st = err ? err->status : BN_ENOMEM;
-                        break;
-                    }
-                    break;
-                }
-            if (st != BN_OK)
-                break;
-            memset(&tmp, 0, sizeof tmp);
-            if (!row)
-                row = &tmp;
-            row->patches = n;
-            row->iterations = (size_t)k;
-            row->k_norm = R->k_norm;
-            row->t_mesh = tm;
-            row->t_ff = tf;
-            row->t_solve = t_apply;
-            row->t_iterate = t_apply;
-            row->bound = bn__geom(R->k_norm, k, R->norm_E);
-            /* L - S_n = sum_{j>=0} K^j (K^(n+1) E) = sum_{j>=n} K^j (KE): <= ||K||^n / (1 - ||K||) ||KE||. */
-            row->bound_ke = bn__geom(R->k_norm, k - 1, norm_ke);
-            {   /* the tail ~ K^n E (rho + rho^2 + ...) once K^n E is along the dominant eigenvector */
-                double tn = 0, q = R->spectral_radius;
-                for (size_t i = 0; i < m; i++)
-                    tn = fmax(tn, fabs(x[i]));
-                row->estimate = q < 1 ? tn * q / (1 - q) : INFINITY;
-            }
-            st = bn__study_compare(&ref, sc, Sn, row, err);
-            if (row != &tmp) {
-                row->t_output = bn__output_time(sc, Sn);
-                row->peak_mb = bn__study_peak_mb();
-                bn__row_total(row);
-            }
-            curve->t[curve->n] = fmax(t_apply, 1e-7);   /* S_0 = E costs nothing: drawn at 0.1 us */
-            curve->err[curve->n] = row->err_inf_rel;
-            curve->n++;
-        }
-        free(x);
-        free(y);
-        free(Sn);
-        if (st == BN_OK && o->methods) {
-            static const double deftols[] = {1e-2, 1e-4, 1e-6, 1e-8};
-            st = bn__methods(S, &ref, K, E, o->ntols ? o->tols : deftols, o->ntols ? o->ntols : 4, tm, tf, tdir, err);
-        }
-    } else if (o->param == BN_STUDY_TOL) {
-        st = bn__methods(S, &ref, K, E, o->values, o->nvalues, tm, tf, tdir, err);
-    } else {   /* max-iter: each iterative method stopped at each limit */
-        static const bn_solve_method iters[3] = {BN_SOLVE_JACOBI, BN_SOLVE_GAUSS_SEIDEL, BN_SOLVE_NEUMANN};
-        for (int q = 0; q < 3 && st == BN_OK; q++) {
-            if (!(o->methods & (1u << iters[q])))
-                continue;
-            for (size_t v = 0; v < o->nvalues && st == BN_OK; v++) {
-                bn_solve_opts so = o->solve;
-                bn__mon M;
-                double *Lk = NULL, ts;
-                char val[32];
-                bn_study_row *row;
-                memset(&M, 0, sizeof M);
-                M.Lref = ref.L;
-                M.normL = ref.norm_L;
-                M.m = 3 * n;
-                M.last_bound = NAN;
-                so.method = iters[q];
-                so.stop = BN_SOLVE_STOP_RESIDUAL;
-                so.tol = 0;   /* run to the limit */
-                so.max_iter = (size_t)o->values[v];
-                so.monitor = bn__monitor;
-                so.monitor_user = &M;
-                snprintf(val, sizeof val, "%zu", so.max_iter);
-                if (!(row = bn__row_new(S, bn_solve_method_name(iters[q]), val, o->values[v], err))) {
-                    st = err ? err->status : BN_ENOMEM;
-                    break;
-                }
-                bn__study_peak_reset();
-                st = bn__solve(K, E, &so, &Lk, &info, &ts, err);
-                if (st != BN_OK)
-                    break;
-                row->patches = n;
-                row->iterations = info.iterations;
-                row->k_norm = R->k_norm;
-                row->t_mesh = tm;
-                row->t_ff = tf;
-                row->t_solve = ts;
-                row->t_iterate = info.seconds_iterate;
-                row->bound = M.last_bound;   /* the solver's a priori bound after these sweeps */
-                row->estimate = bn__geom(R->spectral_radius, (int)info.iterations *
-                                         (iters[q] == BN_SOLVE_GAUSS_SEIDEL && so.symmetric ? 2 : 1), R->norm_E);
-                st = bn__study_compare(&ref, sc, Lk, row, err);
-                row->t_output = bn__output_time(sc, Lk);
-                row->peak_mb = bn__study_peak_mb();
-                bn__row_total(row);
-                free(Lk);
-            }
-        }
+    {
+        bn__opctx C = {sc, K, E, &ref, n, tm, tf, tdir};
+        if (o->param == BN_STUDY_BOUNCES)
+            st = bn__study_series(S, &C, err);
+        else if (o->param == BN_STUDY_TOL)
+            st = bn__methods(S, &ref, K, E, o->values, o->nvalues, tm, tf, tdir, err);
+        else   /* max-iter */
+            st = bn__study_max_iter(S, &C, err);
     }
 done:
     bn__study_ref_free(&ref);
@@ -880,20 +927,18 @@ static bn_status bn__trace_row(bn__study *S, const bn__study_ref *ref, const bn_
     return st;
 }
 
-static bn_status bn__study_settings(bn__study *S, bn_error *err)
+/* The reference of a settings study and the level below it, from which its error is estimated. */
+typedef struct bn__ref_plan {
+    bn_mesh_opts mref, mcoarse;
+    bn_formfactor_opts fref, fcoarse;
+    int mesh_study, use_trace;
+} bn__ref_plan;
+
+static void bn__ref_levels(const bn_study_opts *o, bn__ref_plan *P)
 {
-    const bn_study_opts *o = S->o;
-    bn_study_result *R = S->res;
     bn_mesh_opts mref = o->mesh, mcoarse;
     bn_formfactor_opts fref = o->ff, fcoarse;
-    bn__sol ref;
-    bn__study_ref rr;
-    bn_status st;
     int mesh_study = o->param == BN_STUDY_PATCHES || o->param == BN_STUDY_PATCH_SIZE, use_trace = 0;
-    memset(&ref, 0, sizeof ref);
-    memset(&rr, 0, sizeof rr);
-
-    /* The reference and the level below it, from which its error is estimated. */
     if (o->param == BN_STUDY_PATCHES || o->param == BN_STUDY_SPP) {
         size_t top = o->mesh.target_patches;
         if (o->param == BN_STUDY_PATCHES)
@@ -946,30 +991,50 @@ static bn_status bn__study_settings(bn__study *S, bn_error *err)
                 mref.patch_size = mcoarse.patch_size;
         }
     }
+    P->mref = mref;
+    P->mcoarse = mcoarse;
+    P->fref = fref;
+    P->fcoarse = fcoarse;
+    P->mesh_study = mesh_study;
+    P->use_trace = use_trace;
+}
+
+/* Builds the reference (radiosity or the tracer), its comparison data and its own error. */
+static bn_status bn__build_reference(bn__study *S, const bn__ref_plan *P, bn__sol *refp, bn__study_ref *rr,
+                                     bn_error *err)
+{
+    const bn_study_opts *o = S->o;
+    bn_study_result *R = S->res;
+    bn_mesh_opts mref = P->mref, mcoarse = P->mcoarse;
+    bn_formfactor_opts fref = P->fref, fcoarse = P->fcoarse;
+    int mesh_study = P->mesh_study, use_trace = P->use_trace;
+    bn__sol ref;
+    bn_status st;
     bn__note(S, "study %s: building the reference (%s)", bn_study_param_name(o->param),
              use_trace ? "path tracer" : "radiosity");
     st = use_trace ? bn__trace_reference(S, &mref, &ref, err) : bn__radiosity(S, &mref, &fref, &ref, NULL, err);
     if (st != BN_OK)
         return st;
-    st = bn__study_ref_init(&rr, ref.scene, ref.L, R->nsurfaces, err);
+    st = bn__study_ref_init(rr, ref.scene, ref.L, R->nsurfaces, err);
     if (st != BN_OK) {
         bn__sol_free(&ref);
         return st;
     }
+    *refp = ref;
     R->ref_patches = ref.n;
     R->ref_seconds = ref.seconds;
-    R->norm_L = rr.norm_L;
+    R->norm_L = rr->norm_L;
     {
         double e = 0;
         for (size_t i = 0; i < 3 * ref.n; i++)
-            e = fmax(e, fabs(rr.E[i]));
+            e = fmax(e, fabs(rr->E[i]));
         R->norm_E = e;
     }
     if (!use_trace)
         snprintf(R->reference, sizeof R->reference, "%s solve, %zu patches (edge %.4g), ff %s with %d samples, %s storage",
              bn_solve_method_name(o->solve.method), ref.n, bn_scene_patch_size(ref.scene), bn_ff_method_name(fref.method),
              fref.samples ? fref.samples : bn_formfactor_default_samples(fref.method),
-             fref.precision == BN_PRECISION_DOUBLE ? "double" : "float");
+             bn_precision_name(fref.precision));
     if (use_trace) {
         /* its error was set from its standard errors */
     } else if (o->param == BN_STUDY_PRECISION) {
@@ -980,51 +1045,126 @@ static bn_status bn__study_settings(bn__study *S, bn_error *err)
         const char *how = mesh_study || o->param == BN_STUDY_SPP
                               ? "|reference - the same at half the patch density per axis| (first order in h: ~ its own error)"
                               : "|reference - the same with a quarter of the shadow rays| (1/sqrt(N): ~2x its own error)";
-        st = bn__ref_error(S, &rr, &mcoarse, &fcoarse, how, err);
+        st = bn__ref_error(S, rr, &mcoarse, &fcoarse, how, err);
     }
     if (st == BN_OK)
         bn__note(S, "reference: %s (%.2f s); its error ~ %.3g per surface (%s)", R->reference, ref.seconds, R->ref_error,
                  R->ref_error_how);
+    return st;
+}
 
+/* Setting v of the varied parameter: mesh and form-factor options, its label and its method. */
+static void bn__setting(const bn_study_opts *o, size_t v, bn_mesh_opts *mo, bn_formfactor_opts *fo, char *val,
+                        size_t nval, const char **methodp)
+{
+    bn_mesh_opts m = o->mesh;
+    bn_formfactor_opts f = o->ff;
+    const char *method = "radiosity";
+    switch (o->param) {
+    case BN_STUDY_PATCHES:
+        m.patch_size = 0;
+        m.no_subdivide = 0;
+        m.target_patches = (size_t)o->values[v];
+        snprintf(val, nval, "%zu", m.target_patches);
+        break;
+    case BN_STUDY_PATCH_SIZE:
+        m.target_patches = 0;
+        m.no_subdivide = 0;
+        m.patch_size = o->values[v];
+        snprintf(val, nval, "%g", m.patch_size);
+        break;
+    case BN_STUDY_SAMPLES:
+        f.samples = (int)o->values[v];
+        snprintf(val, nval, "%d", f.samples);
+        method = bn_ff_method_name(f.method);
+        break;
+    case BN_STUDY_FF:
+        f.method = (bn_ff_method)(int)o->values[v];
+        snprintf(val, nval, "%s", bn_ff_method_name(f.method));
+        method = val;
+        break;
+    default:   /* precision */
+        f.precision = (bn_precision)(int)o->values[v];
+        snprintf(val, nval, "%s", bn_precision_name(f.precision));
+        break;
+    }
+    *mo = m;
+    *fo = f;
+    *methodp = method;
+}
+
+/* A reference is only useful well below what it measures: say so when it is not. */
+static void bn__warn_reference(const bn__study *S)
+{
+    const bn_study_result *R = S->res;
+    double best = INFINITY;
+    for (size_t i = 0; i < R->nrows; i++)
+        if (isfinite(R->rows[i].err_surface_max))
+            best = fmin(best, R->rows[i].err_surface_max);
+    if (isfinite(best) && R->ref_error > best / 3)
+        bn_logf(&S->o->log, BN_LOG_WARN,
+                "the reference's estimated error (%.3g per surface) is not well below the smallest error measured "
+                "(%.3g): errors near it are uncertain; use a finer reference (--ref-patches, --ref-samples, --ref-spp)",
+                R->ref_error, best);
+}
+
+/* The equal-error comparison: the tracer on the first setting's mesh, and the times at which each
+ * method reaches the target error. */
+static bn_status bn__equal_error(bn__study *S, const bn__study_ref *rr, bn_error *err)
+{
+    const bn_study_opts *o = S->o;
+    bn_study_result *R = S->res;
+    bn_mesh_opts m = o->mesh;
+    bn_status st = BN_OK;
+    double b;
+    if (o->param == BN_STUDY_PATCHES) {
+        m.patch_size = 0;
+        m.target_patches = (size_t)o->values[0];
+    } else {
+        m.target_patches = 0;
+        m.patch_size = o->values[0];
+    }
+    for (size_t a = 0; a < o->nagainst && st == BN_OK; a++) {
+        bn__note(S, "equal-error: path tracer at %zu spp", o->against_spp[a]);
+        st = bn__trace_row(S, rr, &m, o->against_spp[a], err);
+    }
+    if (st != BN_OK)
+        return st;
+    R->t_radiosity = bn__time_to(R, "radiosity", R->target, &R->best_radiosity);
+    R->t_trace = bn__time_to(R, "trace", R->target, &R->best_trace);
+    R->ratio = R->t_trace / R->t_radiosity;
+    R->fine_target = 3 * R->ref_error;
+    if (R->fine_target > 0 && R->fine_target < R->target) {
+        R->t_radiosity_fine = bn__time_to(R, "radiosity", R->fine_target, &b);
+        R->t_trace_fine = bn__time_to(R, "trace", R->fine_target, &b);
+        R->ratio_fine = R->t_trace_fine / R->t_radiosity_fine;
+    }
+    return BN_OK;
+}
+
+static bn_status bn__study_settings(bn__study *S, bn_error *err)
+{
+    const bn_study_opts *o = S->o;
+    bn__ref_plan P;
+    bn__sol ref;
+    bn__study_ref rr;
+    bn_status st;
+    memset(&ref, 0, sizeof ref);
+    memset(&rr, 0, sizeof rr);
+    bn__ref_levels(o, &P);
+    st = bn__build_reference(S, &P, &ref, &rr, err);
     for (size_t v = 0; v < o->nvalues && st == BN_OK; v++) {
-        bn_mesh_opts m = o->mesh;
-        bn_formfactor_opts f = o->ff;
+        bn_mesh_opts m;
+        bn_formfactor_opts f;
         char val[BN_STUDY_LABEL];
-        const char *method = "radiosity";
+        const char *method;
         bn_study_row *row;
         bn__sol sol;
         if (o->param == BN_STUDY_SPP) {
             st = bn__trace_row(S, &rr, &o->mesh, (size_t)o->values[v], err);
             continue;
         }
-        switch (o->param) {
-        case BN_STUDY_PATCHES:
-            m.patch_size = 0;
-            m.no_subdivide = 0;
-            m.target_patches = (size_t)o->values[v];
-            snprintf(val, sizeof val, "%zu", m.target_patches);
-            break;
-        case BN_STUDY_PATCH_SIZE:
-            m.target_patches = 0;
-            m.no_subdivide = 0;
-            m.patch_size = o->values[v];
-            snprintf(val, sizeof val, "%g", m.patch_size);
-            break;
-        case BN_STUDY_SAMPLES:
-            f.samples = (int)o->values[v];
-            snprintf(val, sizeof val, "%d", f.samples);
-            method = bn_ff_method_name(f.method);
-            break;
-        case BN_STUDY_FF:
-            f.method = (bn_ff_method)(int)o->values[v];
-            snprintf(val, sizeof val, "%s", bn_ff_method_name(f.method));
-            method = val;
-            break;
-        default:   /* precision */
-            f.precision = (bn_precision)(int)o->values[v];
-            snprintf(val, sizeof val, "%s", f.precision == BN_PRECISION_DOUBLE ? "double" : "float");
-            break;
-        }
+        bn__setting(o, v, &m, &f, val, sizeof val, &method);
         if (!(row = bn__row_new(S, method, val, o->values[v], err))) {
             st = err ? err->status : BN_ENOMEM;
             break;
@@ -1035,45 +1175,10 @@ static bn_status bn__study_settings(bn__study *S, bn_error *err)
             st = bn__study_compare(&rr, sol.scene, sol.L, row, err);
         bn__sol_free(&sol);
     }
-    /* A reference is only useful well below what it measures: say so when it is not. */
-    if (st == BN_OK) {
-        double best = INFINITY;
-        for (size_t i = 0; i < R->nrows; i++)
-            if (isfinite(R->rows[i].err_surface_max))
-                best = fmin(best, R->rows[i].err_surface_max);
-        if (isfinite(best) && R->ref_error > best / 3)
-            bn_logf(&o->log, BN_LOG_WARN,
-                    "the reference's estimated error (%.3g per surface) is not well below the smallest error measured "
-                    "(%.3g): errors near it are uncertain; use a finer reference (--ref-patches, --ref-samples, --ref-spp)",
-                    R->ref_error, best);
-    }
-    /* The equal-error comparison: the tracer on the first setting's mesh. */
-    if (st == BN_OK && mesh_study && o->nagainst > 0) {
-        bn_mesh_opts m = o->mesh;
-        if (o->param == BN_STUDY_PATCHES) {
-            m.patch_size = 0;
-            m.target_patches = (size_t)o->values[0];
-        } else {
-            m.target_patches = 0;
-            m.patch_size = o->values[0];
-        }
-        for (size_t a = 0; a < o->nagainst && st == BN_OK; a++) {
-            bn__note(S, "equal-error: path tracer at %zu spp", o->against_spp[a]);
-            st = bn__trace_row(S, &rr, &m, o->against_spp[a], err);
-        }
-        if (st == BN_OK) {
-            R->t_radiosity = bn__time_to(R, "radiosity", R->target, &R->best_radiosity);
-            R->t_trace = bn__time_to(R, "trace", R->target, &R->best_trace);
-            R->ratio = R->t_trace / R->t_radiosity;
-            R->fine_target = 3 * R->ref_error;
-            if (R->fine_target > 0 && R->fine_target < R->target) {
-                double b;
-                R->t_radiosity_fine = bn__time_to(R, "radiosity", R->fine_target, &b);
-                R->t_trace_fine = bn__time_to(R, "trace", R->fine_target, &b);
-                R->ratio_fine = R->t_trace_fine / R->t_radiosity_fine;
-            }
-        }
-    }
+    if (st == BN_OK)
+        bn__warn_reference(S);
+    if (st == BN_OK && P.mesh_study && o->nagainst > 0)
+        st = bn__equal_error(S, &rr, err);
     bn__study_ref_free(&rr);
     bn__sol_free(&ref);
     return st;
