@@ -164,10 +164,10 @@ static bn_status bn__off_faces(bn__off *O, unsigned long long nv, unsigned long 
                                 BN__OFF_TOKENS);
         if ((st = bn__off_numbers(O, tok, n, num, err)) != BN_OK)
             return st;
-        nc = (size_t)num[0];
-        if (num[0] != floor(num[0]) || num[0] < 3 || num[0] > BN__OFF_TOKENS - 8 || n < nc + 1)
+        if (num[0] != floor(num[0]) || num[0] < 3 || num[0] > BN__OFF_TOKENS - 8 || n < (size_t)num[0] + 1)
             return bn_error_set(err, BN_EINPUT, "%s:%u: face %llu: '%s' vertices, or fewer indices than that", O->path,
                                 O->line, f, tok[0]);
+        nc = (size_t)num[0];   /* in [3, 64]: checked above */
         for (k = 1; k <= nc; k++) {
             if (num[k] != floor(num[k]) || num[k] < 0 || num[k] >= (double)nv)
                 return bn_error_set(err, BN_EINPUT, "%s:%u: face %llu: vertex index %s is out of range (%llu vertices)",

@@ -73,6 +73,14 @@ static bn__ply_type bn__ply_type_of(const char *t)
     return T_BAD;
 }
 
+/* The values an integer type holds (an ASCII token outside them is an error, not a wrap). */
+static int bn__ply_in_range(bn__ply_type t, double v)
+{
+    static const double lo[] = {-128, 0, -32768, 0, -2147483648.0, 0};
+    static const double hi[] = {127, 255, 32767, 65535, 2147483647.0, 4294967295.0};
+    return t >= T_FLOAT32 || (v >= lo[t] && v <= hi[t]);
+}
+
 static size_t bn__ply_size(bn__ply_type t)
 {
     static const size_t sz[] = {1, 1, 2, 2, 4, 4, 4, 8, 0};
@@ -235,7 +243,8 @@ static int bn__ply_value(bn__ply *P, bn__ply_type t, double *out, char *bad, siz
         snprintf(tok, sizeof tok, "%.*s", (int)(len < sizeof tok ? len : sizeof tok - 1), P->p);
         P->p += len;
         *out = strtod(tok, &end);
-        if (*end != '\0' || len >= sizeof tok || (t != T_FLOAT32 && t != T_FLOAT64 && *out != floor(*out))) {
+        if (*end != '\0' || len >= sizeof tok ||
+            (t != T_FLOAT32 && t != T_FLOAT64 && (*out != floor(*out) || !bn__ply_in_range(t, *out)))) {
             snprintf(bad, nbad, "%s", tok);
             return 0;
         }
@@ -367,9 +376,16 @@ static bn_status bn__ply_record(bn__ply *P, const bn__ply_elem *e, const bn__ply
         double v;
         size_t n = 1;
         if (pr->list) {
-            if (!bn__ply_value(P, pr->count_type, &v, bad, sizeof bad) || v < 0)
+            if (!bn__ply_value(P, pr->count_type, &v, bad, sizeof bad)) {
+                if (bad[0])
+                    return bn_error_set(err, BN_EINPUT, "%s:%u: '%s' is not a valid %s count in %s %llu", P->path,
+                                        P->line, bad, pr->name, e->name, r);
                 goto truncated;
-            n = (size_t)v;
+            }
+            if (v < 0)
+                return bn_error_set(err, BN_EINPUT, "%s:%u: %s count %g is negative in %s %llu", P->path, P->line,
+                                    pr->name, v, e->name, r);
+            n = (size_t)v;   /* an integer type's value: at most 2^32 - 1 */
         }
         for (size_t j = 0; j < n; j++) {
             if (!bn__ply_value(P, pr->type, &v, bad, sizeof bad)) {
