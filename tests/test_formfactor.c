@@ -336,9 +336,9 @@ BN_TEST(thread_count_invariance)
         bn_transport *K1, *K2;
         double *F1, *F2;
         size_t n;
-        bn_threads_set(1);
+        o.threads = 1;
         K1 = build(s, &o, &d1);
-        bn_threads_set(2);
+        o.threads = 2;
         K2 = build(s, &o, &d2);
         n = bn_transport_size(K1);
         F1 = dense_of(K1);

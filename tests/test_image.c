@@ -62,7 +62,7 @@ BN_TEST(camera_orientation)
     bn_scene_patch_emission(s, E);
     BN_ASSERT_STATUS(bn_image_alloc(&img[0], 64, 64, &err), BN_OK);
     BN_ASSERT_STATUS(bn_image_alloc(&img[1], 64, 64, &err), BN_OK);
-    BN_ASSERT_STATUS(bn_image_render(rt, &cam, vals, 2, NULL, 1, img, &err), BN_OK);
+    BN_ASSERT_STATUS(bn_image_render(rt, &cam, vals, 2, NULL, 1, 0, img, &err), BN_OK);
     double lr = 0, lg = 0, rr = 0, rg = 0, top = 0, bottom = 0;
     for (int y = 0; y < 64; y++)
         for (int x = 0; x < 64; x++) {
@@ -141,7 +141,7 @@ static void check_layers_sum(int smooth, int spp)
     synthetic_terms(s, N, arr, arr[N + 1], arr[N + 2]);
     if (smooth)
         BN_ASSERT_STATUS(bn_bake_create(s, 30, &bake, &err), BN_OK);
-    BN_ASSERT_STATUS(bn_image_render(rt, &cam, (const double *const *)arr, NL, bake, 7, img, &err), BN_OK);
+    BN_ASSERT_STATUS(bn_image_render(rt, &cam, (const double *const *)arr, NL, bake, 7, 0, img, &err), BN_OK);
     size_t lit = 0;
     for (size_t i = 0; i < (size_t)W * W * 3; i++) {
         double sum = 0, L = img[NL - 1].rgb[i];
@@ -178,10 +178,8 @@ BN_TEST(threads_identical)
     bn_scene_patch_reflectance(s, rho);
     BN_ASSERT_STATUS(bn_image_alloc(&a, 40, 40, &err), BN_OK);
     BN_ASSERT_STATUS(bn_image_alloc(&b, 40, 40, &err), BN_OK);
-    bn_threads_set(1);
-    BN_ASSERT_STATUS(bn_image_render(rt, &cam, vals, 1, NULL, 3, &a, &err), BN_OK);
-    bn_threads_set(2);
-    BN_ASSERT_STATUS(bn_image_render(rt, &cam, vals, 1, NULL, 3, &b, &err), BN_OK);
+    BN_ASSERT_STATUS(bn_image_render(rt, &cam, vals, 1, NULL, 3, 1, &a, &err), BN_OK);
+    BN_ASSERT_STATUS(bn_image_render(rt, &cam, vals, 1, NULL, 3, 2, &b, &err), BN_OK);
     BN_ASSERT_EQ(memcmp(a.rgb, b.rgb, 40 * 40 * 3 * sizeof(float)), 0);
     bn_image_free(&a);
     bn_image_free(&b);

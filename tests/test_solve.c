@@ -92,11 +92,14 @@ static double *fill(size_t m, double v)
     return x;
 }
 
+static int g_threads;   /* the solves' threads (0: the caller's) */
+
 static bn_status solve(const bn_transport *k, const double *E, bn_solve_method method, double tol, size_t max_iter,
                        int bounces, bn_solve_result *res, bn_error *err)
 {
     bn_solve_opts o;
     bn_solve_opts_default(&o);
+    o.threads = g_threads;
     o.method = method;
     o.tol = tol;
     o.max_iter = max_iter;
@@ -571,7 +574,7 @@ BN_TEST(thread_count_invariance)
         for (int t = 1; t <= 3; t++) {
             bn_solve_result res;
             bn_error err;
-            bn_threads_set(t);
+            g_threads = t;
             BN_ASSERT_STATUS(solve(k, E, all_methods[q], 1e-10, 100000, 3, &res, &err), BN_OK);
             if (t == 1) {
                 L1 = malloc(m * sizeof(double));

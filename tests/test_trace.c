@@ -271,9 +271,9 @@ BN_TEST(thread_count_invariance)
     bn_trace_opts_default(&o);
     o.spp = 16;
     o.quiet = 1;
-    bn_threads_set(1);
+    o.threads = 1;
     run_patches(rt, &o, &a);
-    bn_threads_set(2);
+    o.threads = 2;
     run_patches(rt, &o, &b);
     m = (size_t)a.nlayers * a.n * 3;
     BN_ASSERT(memcmp(a.mean, b.mean, m * sizeof(double)) == 0);

@@ -91,10 +91,10 @@ BN_TEST(image_thread_invariance)
     bn_trace_opts_default(&o);
     o.spp = 8;
     o.quiet = 1;
-    bn_threads_set(1);
+    o.threads = 1;
     if (bn_trace_image_run(rt, &cam, &o, &a, &err) != BN_OK)
         BN_FAIL("%s", err.msg);
-    bn_threads_set(2);
+    o.threads = 2;
     if (bn_trace_image_run(rt, &cam, &o, &b, &err) != BN_OK)
         BN_FAIL("%s", err.msg);
     m = (size_t)a.nlayers * (size_t)a.width * (size_t)a.height * 3;

@@ -35,6 +35,7 @@ typedef struct bn_formfactor_opts {
     const char  *cache_path;  /* NULL: no cache */
     bn_log       log;
     double       tolerance;   /* analytic: relative quadrature tolerance per pair (default 1e-5) */
+    int          threads;     /* 0 = the caller's (all cores by default); results do not depend on it */
 } bn_formfactor_opts;
 void bn_formfactor_opts_default(bn_formfactor_opts *o);
 /* The samples a method uses when o->samples is 0. */

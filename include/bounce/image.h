@@ -51,9 +51,9 @@ void bn_image_free(bn_image *img);   /* NULL rgb is a no-op */
  * N*3 (patch-major, a[3*i+c], borrowed), out[l] must be allocated at the camera's size. With
  * `smooth` (NULL = flat), values are first baked to vertices and interpolated across each patch.
  * Jitter for spp > 1 is seeded per pixel and sample from `seed`: the result does not depend on
- * the thread count (OpenMP over rows). */
+ * the thread count (`threads`, 0 = the caller's; OpenMP over rows). */
 bn_status bn_image_render(const bn_rt *rt, const bn_camera *cam, const double *const *values, size_t nlayers,
-                          const struct bn_bake *smooth, uint64_t seed, bn_image *out, bn_error *err);
+                          const struct bn_bake *smooth, uint64_t seed, int threads, bn_image *out, bn_error *err);
 
 /* A named layer for multi-layer output: "E", "KE", "K2E", ..., "rest", "L", "E_var", ... */
 typedef struct bn_layer {
@@ -101,6 +101,7 @@ typedef struct bn_bounces_opts {
     int    auto_exposure;      /* preview exposure from L's 99th percentile (default 1); else `ev` */
     double ev;
     uint64_t seed;             /* pixel jitter */
+    int    threads;            /* 0 = the caller's (all cores by default) */
     const bn_attr *attrs;      /* provenance for every file (borrowed); the first 4 go into PNG text */
     size_t nattrs;
     bn_log log;                /* one note per file written */

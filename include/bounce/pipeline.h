@@ -27,7 +27,7 @@ typedef struct bn_pipeline_opts {
     bn_mesh_opts mesh;         /* how it is cut into patches */
     bn_formfactor_opts ff;     /* how F is assembled and stored (and cached) */
     bn_solve_opts solve;       /* method, tolerance, terms kept (solve.bounces) */
-    int threads;               /* threads of the ray scene (0: all cores) */
+    int threads;               /* every stage's threads (0: the caller's), unless ff or solve set their own */
     int keep_rt;               /* keep the ray scene for images and the tracer (built even when F
                                   comes from the cache); else it is released after F */
     int tie_threshold;         /* raise solve.singular_threshold to F's measured row-sum excess

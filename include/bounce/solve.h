@@ -77,6 +77,7 @@ typedef struct bn_solve_opts {
     bn_solve_monitor_fn monitor;  /* NULL: none (the CSV log is written anyway when log is set) */
     void  *monitor_user;
     bn_log log_sink;          /* notes (prediction, warnings); NULL fn: warnings to stderr */
+    int    threads;           /* for K's applications; 0 = the caller's; results do not depend on it */
 } bn_solve_opts;
 void bn_solve_opts_default(bn_solve_opts *o);
 

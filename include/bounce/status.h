@@ -71,10 +71,12 @@ void bn_logf(const bn_log *log, bn_log_level level, const char *fmt, ...)
 /* Version of the library, "MAJOR.MINOR.PATCH". */
 const char *bn_version(void);
 
-/* Threads for the library's parallel loops (OpenMP); n <= 0 means all cores. Results never
- * depend on it: random streams are seeded per patch or pixel and sample, not per thread. */
-void bn_threads_set(int n);
-int bn_threads_get(void);
+/* Threads are an option of each call that runs parallel loops (form factors, solve, tracer,
+ * images, pipeline, study: their opts' `threads`), scoped to that call; 0 inherits the caller's
+ * setting (OpenMP's default: all cores, or OMP_NUM_THREADS), so a call made inside another uses
+ * the outer call's count. Results never depend on it: random streams are seeded per patch or pixel
+ * and sample, not per thread, and sums run in a fixed order. The count a `threads` value means: */
+int bn_threads_resolve(int threads);
 
 /* The memory limit wherever an option's "0 = default" applies (form factors' storage, the direct
  * solve's dense copy): 80% of physical memory, or SIZE_MAX when it cannot be known. */

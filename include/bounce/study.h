@@ -72,6 +72,7 @@ typedef struct bn_study_opts {
     size_t nagainst;
     double target;               /* equal-error target: per-surface relative error (default 0.01) */
     bn_log log;                  /* progress notes (one per setting) */
+    int threads;                 /* every phase's threads (0: the caller's); results do not depend on it */
 } bn_study_opts;
 void bn_study_opts_default(bn_study_opts *o);
 

@@ -38,6 +38,7 @@ typedef struct bn_trace_opts {
     bn_trace_strategy strategy;  /* default MIS */
     uint64_t seed;         /* streams are keyed by (seed, pixel or patch, sample index) */
     int      quiet;        /* no progress bar */
+    int      threads;      /* 0 = the caller's (all cores by default); results do not depend on it */
 } bn_trace_opts;
 void bn_trace_opts_default(bn_trace_opts *o);
 

@@ -43,6 +43,11 @@ char *bn__strdup(const char *s);
 /* Multiplies with overflow detection: returns 0 on overflow. */
 int bn__mul_size(size_t a, size_t b, size_t *out);
 
+/* A library call's thread count (its opts' `threads`, 0 = all cores), from begin to end: begin
+ * returns what end restores. */
+int bn__threads_begin(int threads);
+void bn__threads_end(int prev);
+
 /* Physical memory in bytes (0 if unknown) and the default --max-memory (80% of it). */
 size_t bn__physical_memory(void);
 

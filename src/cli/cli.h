@@ -77,8 +77,6 @@ void bn_cli_log(void *user, bn_log_level level, const char *msg);
  * their output. */
 void bn_cli_stdout_log(void *user, bn_log_level level, const char *msg);
 
-/* Applies --threads to OpenMP. */
-void bn_cli_apply_threads(const bn_cli_common *c);
 /* Prints "bounce: <message>" and returns the exit code of the status. */
 int bn_cli_fail(const bn_error *err);
 /* Returns the exit code for an interrupted run if one happened, else 0. */

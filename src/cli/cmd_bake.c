@@ -89,7 +89,6 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
             return bn_cli_fail(&err);
         }
     }
-    bn_cli_apply_threads(c);
     st = bn_cli_run_solution(pos[0], &so, &ff, &sol, c, per_bounce ? n : 0, &p, solver, sizeof solver);
     if (st != BN_OK) {
         rc = bn_status_exit_code(st);

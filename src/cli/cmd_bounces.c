@@ -107,7 +107,6 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
         if (!bn_cli_parse_scene_command(&set, argc, argv, pos, &prc))
             return prc;
     }
-    bn_cli_apply_threads(c);
     st = bn_cli_run_solution(pos[0], &so, &ff, &sol, c, n, &p, NULL, 0);
     if (st == BN_OK)
         st = bn_cli_make_camera(&set, &co, pos[0], p.scene, &cam, &err);
@@ -125,6 +124,7 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
         bo.auto_exposure = !bn_cli_given(&set, "exposure");
         bo.ev = ev;
         bo.seed = c->seed;
+        bo.threads = c->threads;
         bo.log = (bn_log){bn_cli_stdout_log, c, c->quiet};
         st = bn__bounces_write(&p, &cam, n, &ff, &sol, c, &bo, &err);
     }

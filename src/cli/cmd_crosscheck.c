@@ -112,7 +112,6 @@ int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c)
         if (!bn_cli_parse_scene_command(&set, argc, argv, pos, &prc))
             return prc;
     }
-    bn_cli_apply_threads(c);
 
     bn_cli_pipeline_opts(&so, &ffo, NULL, c, &po);
     bn_formfactor_opts_describe(&po.ff, ffdesc, sizeof ffdesc);
@@ -133,6 +132,7 @@ int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c)
     to.bounces = bounces;
     to.seed = c->seed;
     to.quiet = c->quiet;
+    to.threads = c->threads;
     to.strategy = (bn_trace_strategy)strategy;
     st = bn_trace_patches_run(fine.p.rt, &to, &tr, &err);
     if (st != BN_OK) {

@@ -45,7 +45,6 @@ int bn_cmd_formfactors(int argc, char **argv, bn_cli_common *c)
             return bn_cli_fail(&err);
         }
     }
-    bn_cli_apply_threads(c);
     bn_cli_pipeline_opts(&so, &fo, NULL, c, &po);
     st = bn_pipeline_scene(pos[0], &po, &p, &err);
     if (st == BN_OK)

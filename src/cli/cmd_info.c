@@ -47,7 +47,6 @@ int bn_cmd_info(int argc, char **argv, bn_cli_common *c)
         if (!bn_cli_parse_scene_command(&set, argc, argv, pos, &prc))
             return prc;
     }
-    bn_cli_apply_threads(c);
     {
         bn_status lst = bn_cli_load_scene(pos[0], &so, c, &s);
         if (lst != BN_OK)

@@ -35,7 +35,7 @@ static void bn__provenance_run(char *buf, size_t n, const bn_cli_common *c, cons
              "# command=%s\n# scene=%s\n# unit=%s\n# seed=%llu\n# threads=%d\n# ff_method=%s\n"
              "# ff_row_sum_min=%.9g\n# ff_row_sum_max=%.9g\n# ff_reciprocity_residual=%.3g\n# ff_seconds=%.3f\n",
              c->cmdline ? c->cmdline : "bounce solve", bn_scene_path(s), bn_unit_name(bn_scene_unit(s)),
-             (unsigned long long)c->seed, bn_threads_get(), bn_ff_method_name(po->ff.method), d->row_sum_min,
+             (unsigned long long)c->seed, bn_threads_resolve(c->threads), bn_ff_method_name(po->ff.method), d->row_sum_min,
              d->row_sum_max, d->reciprocity_residual, d->seconds);
 }
 
@@ -250,7 +250,6 @@ int bn_cmd_solve(int argc, char **argv, bn_cli_common *c)
     memset(&p, 0, sizeof p);
     if (!bn__solve_parse(argc, argv, c, &a, &rc))
         return rc;
-    bn_cli_apply_threads(c);
     bn__solve_opts(&a, c, &po);
     bn_error_clear(&err);
     st = bn_pipeline_scene(a.scene, &po, &p, &err);

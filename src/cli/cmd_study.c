@@ -163,7 +163,6 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
                                       "patch-size, samples, ff, spp, precision)");
         return bn_cli_fail(&err);
     }
-    bn_cli_apply_threads(c);
 
     bn_study_opts_default(&o);
     {
@@ -228,6 +227,7 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
     if (max_iter)
         o.solve.max_iter = max_iter;
     o.trace.seed = c->seed;
+    o.threads = c->threads;
     if (spp)
         o.trace.spp = spp;
     if (rr_depth >= 0)
@@ -256,7 +256,7 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
              "# max_iter=%zu\n# formfactors=%s\n# seed=%llu\n# threads=%d\n# spp=%zu\n# ref=%s\n",
              c->cmdline ? c->cmdline : "bounce study", bn_version(), pos[0], bn_unit_name(o.load.unit), vary,
              bn_solve_method_name(o.solve.method), o.solve.tol, o.solve.max_iter, ffdesc,
-             (unsigned long long)c->seed, bn_threads_get(), o.trace.spp, bn_study_ref_name(o.ref));
+             (unsigned long long)c->seed, bn_threads_resolve(c->threads), o.trace.spp, bn_study_ref_name(o.ref));
     st = bn_study_write_csv(&res, out, prov, &err);
     if (st == BN_OK && plot)
         st = bn_study_plot(&res, plot, title, &err);

@@ -108,7 +108,6 @@ int bn_cmd_trace(int argc, char **argv, bn_cli_common *c)
     }
     if (bn_cli_given(&set, "spp"))
         spp = (size_t)co.spp;
-    bn_cli_apply_threads(c);
     st = bn_cli_load_scene(pos[0], &so, c, &s);
     if (st != BN_OK)
         return bn_status_exit_code(st);
@@ -124,6 +123,7 @@ int bn_cmd_trace(int argc, char **argv, bn_cli_common *c)
     to.strategy = (bn_trace_strategy)strategy;
     to.seed = c->seed;
     to.quiet = c->quiet;
+    to.threads = c->threads;
     {
         size_t np;
         bn_scene_patches(s, &np);

@@ -321,4 +321,3 @@ int bn_cli_interrupted(void)
     return s == BN_OK ? 0 : bn_status_exit_code(s);
 }
 
-void bn_cli_apply_threads(const bn_cli_common *c) { bn_threads_set(c->threads); }

@@ -628,7 +628,7 @@ static size_t bn__scratch_bytes(size_t S, size_t n, int threads)
 
 static size_t bn__work_bytes(const bn_formfactor_opts *o, size_t n)
 {
-    return bn__scratch_bytes((size_t)bn__samples(o), o->method == BN_FF_HEMISPHERE ? n : 0, bn_threads_get());
+    return bn__scratch_bytes((size_t)bn__samples(o), o->method == BN_FF_HEMISPHERE ? n : 0, bn_threads_resolve(o->threads));
 }
 
 size_t bn_formfactor_bytes_needed(const bn_scene *scene, const bn_formfactor_opts *o)
@@ -961,7 +961,7 @@ static bn_status bn__ff_opts(const bn_scene *scene, const bn_rt *rt, const bn_fo
     return BN_OK;
 }
 
-bn_status bn_formfactor_build(const bn_scene *scene, const bn_rt *rt, const bn_formfactor_opts *o_in,
+static bn_status bn__formfactor_build_body(const bn_scene *scene, const bn_rt *rt, const bn_formfactor_opts *o_in,
                               bn_transport **out, bn_ff_diagnostics *diag, bn_error *err)
 {
     bn_formfactor_opts o;
@@ -1025,6 +1025,15 @@ bn_status bn_formfactor_build(const bn_scene *scene, const bn_rt *rt, const bn_f
             bn_logf(&o.log, BN_LOG_WARN, "cannot write the form-factor cache: %s", cerr.msg);
     }
     return BN_OK;
+}
+
+bn_status bn_formfactor_build(const bn_scene *scene, const bn_rt *rt, const bn_formfactor_opts *o,
+                              bn_transport **out, bn_ff_diagnostics *diag, bn_error *err)
+{
+    int prev = bn__threads_begin(o->threads);
+    bn_status st = bn__formfactor_build_body(scene, rt, o, out, diag, err);
+    bn__threads_end(prev);
+    return st;
 }
 
 double bn_ff_point_to_polygon(const double x[3], const double n[3], const double *v, size_t nv)

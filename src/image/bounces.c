@@ -43,7 +43,7 @@ static bn_status bn__bounces_render(const bn_scene *scene, const bn_rt *rt, cons
     if (st == BN_OK && o->smooth)
         st = bn_bake_create(scene, o->crease, &bake, err);
     if (st == BN_OK)
-        st = bn_image_render(rt, cam, layers, nl, bake, o->seed, imgs, err);
+        st = bn_image_render(rt, cam, layers, nl, bake, o->seed, o->threads, imgs, err);
     bn_bake_destroy(bake);
     return st;
 }

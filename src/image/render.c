@@ -40,7 +40,7 @@ static void bn__strata(int n, int *sx, int *sy)
     *sy = n / a;
 }
 
-bn_status bn_image_render(const bn_rt *rt, const bn_camera *cam, const double *const *values, size_t nlayers,
+static bn_status bn__image_render_body(const bn_rt *rt, const bn_camera *cam, const double *const *values, size_t nlayers,
                           const struct bn_bake *smooth, uint64_t seed, bn_image *out, bn_error *err)
 {
     bn_status st = bn_camera_validate(cam, err);
@@ -128,4 +128,13 @@ bn_status bn_image_render(const bn_rt *rt, const bn_camera *cam, const double *c
     if (stop || bn_interrupted() != BN_OK)
         return bn_error_set(err, bn_interrupted() != BN_OK ? bn_interrupted() : BN_EINTR, "interrupted");
     return BN_OK;
+}
+
+bn_status bn_image_render(const bn_rt *rt, const bn_camera *cam, const double *const *values, size_t nlayers,
+                          const struct bn_bake *smooth, uint64_t seed, int threads, bn_image *out, bn_error *err)
+{
+    int prev = bn__threads_begin(threads);
+    bn_status st = bn__image_render_body(rt, cam, values, nlayers, smooth, seed, out, err);
+    bn__threads_end(prev);
+    return st;
 }

@@ -38,10 +38,13 @@ bn_status bn_pipeline_scene(const char *path, const bn_pipeline_opts *o, bn_pipe
 
 bn_status bn_pipeline_operator(const bn_pipeline_opts *o, bn_pipeline *p, bn_error *err)
 {
+    bn_formfactor_opts fo = o->ff;
     double t0 = bn__now();
     bn_status st = bn_rt_create(p->scene, o->threads, &p->rt, err);
+    if (!fo.threads)
+        fo.threads = o->threads;
     if (st == BN_OK)
-        st = bn_formfactor_build(p->scene, p->rt, &o->ff, &p->k, &p->ff, err);
+        st = bn_formfactor_build(p->scene, p->rt, &fo, &p->k, &p->ff, err);
     if (st != BN_OK || !o->keep_rt) {
         bn_rt_destroy(p->rt);
         p->rt = NULL;
@@ -54,6 +57,8 @@ bn_status bn_pipeline_solve(const bn_pipeline_opts *o, bn_pipeline *p, bn_error 
 {
     bn_solve_opts so = o->solve;
     double t0 = bn__now();
+    if (!so.threads)
+        so.threads = o->threads;
     bn_status st;
     p->E = bn__malloc_array(p->n ? 3 * p->n : 1, sizeof(double));
     if (!p->E)

@@ -653,7 +653,7 @@ static void bn__solve_record(bn__solve *S)
     res->error_bound = S->row.error_bound;
 }
 
-bn_status bn_solve(const bn_transport *k, const double *E, const bn_solve_opts *o, bn_solve_result *res,
+static bn_status bn__solve_body(const bn_transport *k, const double *E, const bn_solve_opts *o, bn_solve_result *res,
                    bn_error *err)
 {
     bn__solve S;
@@ -700,5 +700,14 @@ bn_status bn_solve(const bn_transport *k, const double *E, const bn_solve_opts *
     free(S.Lprev);
     if (st != BN_OK && st != BN_ENOTCONV)
         bn_solve_result_free(res);   /* no NaN and no half answer leaves a failed solve */
+    return st;
+}
+
+bn_status bn_solve(const bn_transport *k, const double *E, const bn_solve_opts *o, bn_solve_result *res,
+                   bn_error *err)
+{
+    int prev = bn__threads_begin(o->threads);
+    bn_status st = bn__solve_body(k, E, o, res, err);
+    bn__threads_end(prev);
     return st;
 }

@@ -801,7 +801,7 @@ static bn_status bn__trace_solution(const bn_scene *sc, const bn_trace_opts *bas
     to.spp = spp;
     to.seed = seed;
     to.quiet = 1;
-    st = bn_rt_create(sc, bn_threads_get(), &rt, err);
+    st = bn_rt_create(sc, bn_threads_resolve(0), &rt, err);
     if (st == BN_OK)
         st = bn_trace_patches_run(rt, &to, &tp, err);
     *seconds = bn__now() - t0;
@@ -1184,7 +1184,7 @@ static bn_status bn__study_settings(bn__study *S, bn_error *err)
     return st;
 }
 
-bn_status bn_study_run(const char *path, const bn_study_opts *o, bn_study_result *res, bn_error *err)
+static bn_status bn__study_run_body(const char *path, const bn_study_opts *o, bn_study_result *res, bn_error *err)
 {
     bn__study S;
     bn_scene *probe = NULL;
@@ -1267,6 +1267,14 @@ bn_status bn_study_run(const char *path, const bn_study_opts *o, bn_study_result
         st = bn__study_settings(&S, err);
     if (st != BN_OK)
         bn_study_result_free(res);
+    return st;
+}
+
+bn_status bn_study_run(const char *path, const bn_study_opts *o, bn_study_result *res, bn_error *err)
+{
+    int prev = bn__threads_begin(o->threads);   /* every phase inherits it */
+    bn_status st = bn__study_run_body(path, o, res, err);
+    bn__threads_end(prev);
     return st;
 }
 

@@ -18,7 +18,7 @@ size_t bn_trace_image_bytes(const bn_camera *cam, int bounces)
     return b;
 }
 
-bn_status bn_trace_image_run(const bn_rt *rt, const bn_camera *cam, const bn_trace_opts *o, bn_trace_image *out,
+static bn_status bn__trace_image_run_body(const bn_rt *rt, const bn_camera *cam, const bn_trace_opts *o, bn_trace_image *out,
                              bn_error *err)
 {
     bn__tracer t;
@@ -129,6 +129,15 @@ bn_status bn_trace_image_run(const bn_rt *rt, const bn_camera *cam, const bn_tra
             return BN_ENUMERIC;
         }
     return BN_OK;
+}
+
+bn_status bn_trace_image_run(const bn_rt *rt, const bn_camera *cam, const bn_trace_opts *o, bn_trace_image *out,
+                             bn_error *err)
+{
+    int prev = bn__threads_begin(o->threads);
+    bn_status st = bn__trace_image_run_body(rt, cam, o, out, err);
+    bn__threads_end(prev);
+    return st;
 }
 
 void bn_trace_image_free(bn_trace_image *r)

@@ -10,7 +10,7 @@
 #include <omp.h>
 #include <string.h>
 
-bn_status bn_trace_patches_run(const bn_rt *rt, const bn_trace_opts *o, bn_trace_patches *out, bn_error *err)
+static bn_status bn__trace_patches_run_body(const bn_rt *rt, const bn_trace_opts *o, bn_trace_patches *out, bn_error *err)
 {
     bn__tracer t;
     bn_status st;
@@ -113,6 +113,14 @@ bn_status bn_trace_patches_run(const bn_rt *rt, const bn_trace_opts *o, bn_trace
                 }
             }
     return BN_OK;
+}
+
+bn_status bn_trace_patches_run(const bn_rt *rt, const bn_trace_opts *o, bn_trace_patches *out, bn_error *err)
+{
+    int prev = bn__threads_begin(o->threads);
+    bn_status st = bn__trace_patches_run_body(rt, o, out, err);
+    bn__threads_end(prev);
+    return st;
 }
 
 void bn_trace_patches_free(bn_trace_patches *r)
