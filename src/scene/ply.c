@@ -162,6 +162,10 @@ static bn_status bn__ply_element(bn__ply *P, const char *ln, bn_error *err)
                             P->line, ln);
     if (P->nelems == BN__PLY_MAXELEMS)
         return bn_error_set(err, BN_EINPUT, "%s:%u: more than %d elements", P->path, P->line, BN__PLY_MAXELEMS);
+    if (strcmp(name, "vertex") == 0 || strcmp(name, "face") == 0)
+        for (size_t k = 0; k < P->nelems; k++)
+            if (strcmp(P->elems[k].name, name) == 0)
+                return bn_error_set(err, BN_EINPUT, "%s:%u: a second '%s' element", P->path, P->line, name);
     e = &P->elems[P->nelems++];
     memset(e, 0, sizeof *e);
     snprintf(e->name, sizeof e->name, "%s", name);
