@@ -103,6 +103,9 @@ const char *bn_precision_name(bn_precision p);            /* "float", "double" *
 int         bn_precision_parse(const char *s, bn_precision *out);   /* 0 on success */
 /* Relative rounding of one stored value: 2^-24 (float), 2^-53 (double). */
 double      bn_precision_epsilon(bn_precision p);
+/* Bytes of one stored value (4, 8) and the significant digits that print it exactly (9, 17). */
+unsigned    bn_precision_bytes(bn_precision p);
+int         bn_precision_digits(bn_precision p);
 
 #define BN_STORAGE_DEFAULT "dense"
 /* The storage names, "|"-separated ("dense|sparse"), for help texts and choices. */
@@ -114,6 +117,9 @@ int bn_storage_needs_pattern(const char *name);
 /* Bytes the storage needs for n rows holding nnz entries (dense: nnz is ignored); SIZE_MAX on
  * overflow or an unknown name. */
 size_t bn_storage_bytes(const char *name, size_t n, size_t nnz, bn_precision prec);
+/* The options that keep F in less memory than `name` in `prec` (", --storage sparse, --precision
+ * float"; empty when none), for messages that name remedies. */
+void bn_storage_smaller(const char *name, bn_precision prec, char *buf, size_t size);
 
 /* Row i's possible columns, in increasing order, written to cols (room for n) unless cols is NULL;
  * returns their count. Called from several threads at once, for distinct rows. */

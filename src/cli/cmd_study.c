@@ -65,12 +65,10 @@ static int bn__conv_ff(const char *s, double *x)
 }
 static int bn__conv_prec(const char *s, double *x)
 {
-    if (strcmp(s, "float") == 0)
-        *x = BN_PRECISION_FLOAT;
-    else if (strcmp(s, "double") == 0)
-        *x = BN_PRECISION_DOUBLE;
-    else
+    bn_precision p;
+    if (bn_precision_parse(s, &p) != 0)
         return 0;
+    *x = (double)p;
     return 1;
 }
 static int bn__conv_method(const char *s, double *x)

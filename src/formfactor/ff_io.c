@@ -93,7 +93,7 @@ static bn_status bn__write_csv(FILE *fp, const bn_transport *k, const bn_scene *
             if (v == 0)
                 fputs(",0", fp);
             else
-                fprintf(fp, prec == BN_PRECISION_FLOAT ? ",%.9g" : ",%.17g", v);
+                fprintf(fp, ",%.*g", bn_precision_digits(prec), v);
         }
         fputc('\n', fp);
         if ((i & 63) == 0 && bn_interrupted() != BN_OK)
@@ -138,7 +138,7 @@ static bn_status bn__write_bnff(FILE *fp, const bn_transport *k, const bn_scene 
     memset(head, 0, sizeof head);
     h.n = n;
     h.nnz = nnz;
-    h.vbytes = prec == BN_PRECISION_FLOAT ? 4 : 8;
+    h.vbytes = bn_precision_bytes(prec);
     h.layout = nnz == (uint64_t)n * n ? 0 : 1;
     h.klen = key ? strlen(key) : 0;
     h.tlen = provenance ? strlen(provenance) : 0;
@@ -333,7 +333,7 @@ bn_status bn__ff_read_cache(const char *path, const char *key, size_t n, const c
     }
     if (!bn__read_head(fp, &h, why, why_size))
         goto done;
-    if (h.n != n || strcmp(h.storage, storage) != 0 || h.vbytes != (prec == BN_PRECISION_FLOAT ? 4u : 8u) ||
+    if (h.n != n || strcmp(h.storage, storage) != 0 || h.vbytes != bn_precision_bytes(prec) ||
         h.layout > 1 || h.klen != strlen(key) || h.tlen > BN__BNFF_TEXT_MAX ||
         (h.layout == 0 && h.nnz != (uint64_t)n * n) || h.nnz > (uint64_t)n * n) {
         snprintf(why, why_size, "its patch count, storage, precision or layout differ");

@@ -652,18 +652,18 @@ static bn_status bn__memory_error(size_t n, size_t need, size_t limit, const bn_
     char a[32], b[32], c[32];
     double ratio = need == SIZE_MAX ? 1e30 : (double)need / (double)limit;
     size_t dense = bn_storage_bytes("dense", n, 0, o->precision);
-    int is_dense = strcmp(o->storage, "dense") == 0;
+    char smaller[96];
+    bn_storage_smaller(o->storage, o->precision, smaller, sizeof smaller);
     bn__gib(need == SIZE_MAX ? 1.8e19 : (double)need, a, sizeof a);
     bn__gib((double)limit, b, sizeof b);
     bn__gib(dense == SIZE_MAX ? 1.8e19 : (double)dense, c, sizeof c);
     return bn_error_set(err, BN_ENOMEM,
                         "%s F for %zu patches needs %s (dense N^2 alone is %s), above the limit of %s (--max-memory%s). "
                         "Remedies: a coarser mesh (about %zu patches would fit: raise --patch-size by %.2gx or lower "
-                        "--patches)%s%s, or raise --max-memory",
+                        "--patches)%s, or raise --max-memory",
                         o->storage, n, a, c, b, o->max_memory ? "" : "; default 80% of physical memory",
                         (size_t)((double)n / sqrt(ratio) * 0.95), sqrt(sqrt(ratio)) * 1.05,
-                        is_dense ? ", --storage sparse" : "",
-                        o->precision == BN_PRECISION_DOUBLE ? ", --precision float" : "");
+                        smaller);
 }
 
 /* ---- diagnostics over the stored F (through the operator: any storage) ---- */
@@ -765,8 +765,9 @@ static bn_status bn__diagnose(const bn_scene *scene, const bn_transport *k, cons
 
 static double bn__rowsum_tol(const bn_formfactor_opts *o)
 {
-    /* float: 2^-24 rounding per entry, a row of up to ~16 of them; double: far below any method */
-    double round = o->precision == BN_PRECISION_FLOAT ? 1e-6 : 1e-12;
+    /* the stored values' rounding over a row (16 entries' worth: 1e-6 in float), and never below
+     * 1e-12: double sums of many hemisphere fractions k/S carry that much */
+    double round = fmax(16 * bn_precision_epsilon(o->precision), 1e-12);
     if (o->method == BN_FF_ANALYTIC)   /* quadrature; sampled visibility may add noise */
         return 10 * (o->tolerance > 0 ? o->tolerance : 1e-5) + round;
     if (o->method == BN_FF_HEMISPHERE)

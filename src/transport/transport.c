@@ -250,3 +250,5 @@ int bn_precision_parse(const char *s, bn_precision *out)
 }
 
 double bn_precision_epsilon(bn_precision p) { return p == BN_PRECISION_DOUBLE ? 0x1p-53 : 0x1p-24; }
+unsigned bn_precision_bytes(bn_precision p) { return p == BN_PRECISION_DOUBLE ? 8 : 4; }
+int bn_precision_digits(bn_precision p) { return p == BN_PRECISION_DOUBLE ? 17 : 9; }
