@@ -17,6 +17,7 @@
 #include "bounce/formfactor.h"
 #include "bounce/solve.h"
 #include "bounce/layers.h"
+#include "bounce/trace.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -69,6 +70,39 @@ void bn_pipeline_free(bn_pipeline *p);
 /* The solver's settings as one provenance line: "gauss-seidel tol=1e-06 max_iter=100000:
  * converged-rtol after 10 iterations, residual 7.3e-06". */
 void bn_pipeline_describe_solve(const bn_pipeline_opts *o, const bn_pipeline *p, char *buf, size_t size);
+
+/* ---- the cross-check: radiosity against the independent path tracer on the same patches ----
+ * The pipeline at the mesh asked (the rays kept for the tracer), the tracer's per-patch estimates,
+ * a second mesh level for the discretisation tolerance (two-level grid-convergence estimate,
+ * Roache 1994, order 1), then bn_crosscheck_compare. The tracer shares only the scene and the rays. */
+typedef enum bn_disc { BN_DISC_COARSE, BN_DISC_FINE, BN_DISC_NONE } bn_disc;
+
+typedef struct bn_crosscheck_opts {
+    bn_pipeline_opts pipeline;   /* scene, meshing, form factors; its solve's tol and bounces are set here */
+    bn_trace_opts trace;         /* spp, strategy, seed, threads (bounces set here) */
+    int    bounces;              /* terms compared one by one, then rest and L (default 3) */
+    double solve_tol;            /* radiosity's tolerance (default 1e-10: far below the tracer's noise) */
+    bn_disc disc;                /* second level: patch size x ratio, / ratio, or none (default coarse) */
+    double ratio;                /* patch-size ratio of the levels (default 2) */
+    double tol_scale;            /* safety factor Fs of the two-level estimate (default 3) */
+    double rtol, alpha;          /* a further relative allowance (0); family-wise false-failure rate (0.01) */
+    int    worst;                /* worst entries listed (default 10) */
+} bn_crosscheck_opts;
+void bn_crosscheck_opts_default(bn_crosscheck_opts *o);
+
+typedef struct bn_crosscheck_run {
+    bn_pipeline fine, other;     /* the mesh asked, and the second level (other.scene NULL: none) */
+    double seconds_fine, seconds_other;
+    double *layers_fine, *layers_other;   /* bn_layers_stack of each level */
+    double *tol, *power_tol;     /* the discretisation tolerances (NULL without a second level) */
+    bn_trace_patches trace;
+    bn_crosscheck_input in;      /* what was compared (borrowing the above) */
+    bn_crosscheck_result result; /* result.pass: the verdict */
+} bn_crosscheck_run;
+
+bn_status bn_crosscheck_run_scene(const char *path, const bn_crosscheck_opts *o, bn_crosscheck_run *run,
+                                  bn_error *err);
+void bn_crosscheck_run_free(bn_crosscheck_run *run);
 
 #ifdef __cplusplus
 }

@@ -61,6 +61,11 @@ typedef struct bn_trace_patches {
  * BN_ENOMEM, BN_ENUMERIC (a non-finite estimate, naming the patch), BN_EINTR/BN_ETERM. */
 bn_status bn_trace_patches_run(const bn_rt *rt, const bn_trace_opts *o, bn_trace_patches *out, bn_error *err);
 void bn_trace_patches_free(bn_trace_patches *r);   /* NULL or zeroed is a no-op */
+/* Per-patch estimates as CSV: `header` ('#' provenance lines), then
+ * patch,face,material,area_m2,cx,cy,cz and each layer's R, G, B and their standard errors
+ * (`<layer>.R ... <layer>.B_se`), one row per patch. Atomic. */
+bn_status bn_trace_patches_write_csv(const char *path, const bn_scene *s, const bn_trace_patches *r,
+                                     const char *header, bn_error *err);
 
 /* Power of one layer: watts[c] = pi * sum_i A_i mean_i (A in m^2 from the scene's unit), and its
  * standard error se[c] = pi * sqrt(sum_i (A_i se_i)^2) (patches are independent). */
@@ -82,6 +87,10 @@ size_t bn_trace_image_bytes(const bn_camera *cam, int bounces);
 bn_status bn_trace_image_run(const bn_rt *rt, const bn_camera *cam, const bn_trace_opts *o, bn_trace_image *out,
                              bn_error *err);
 void bn_trace_image_free(bn_trace_image *r);
+/* The image as one multi-layer EXR: layers E .. L, then <layer>_var (the variance of each pixel's
+ * mean); attrs are written as header attributes. Atomic. */
+bn_status bn_trace_image_write(const bn_trace_image *img, const char *path, const bn_attr *attrs, size_t nattrs,
+                               int half, const bn_log *log, bn_error *err);
 
 /* ---- the cross-check: radiosity against the per-patch tracer ---- */
 

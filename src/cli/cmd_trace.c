@@ -7,39 +7,6 @@
 #include <math.h>
 #include <string.h>
 
-/* Per-patch estimates as CSV: provenance lines `# key=value`, then one row per patch with each
- * layer's R, G, B and their standard errors. Atomic. */
-static bn_status bn__write_patches_csv(const char *path, const bn_scene *s, const bn_trace_patches *r,
-                                       const char *header, bn_error *err)
-{
-    bn__outfile f;
-    bn_status st = bn__outfile_open(&f, path, "w", err);
-    size_t n;
-    const bn_patch *p = bn_scene_patches(s, &n);
-    const bn_material *mats = bn_scene_materials(s, NULL);
-    double m = bn_unit_to_metres(bn_scene_unit(s));
-    char name[16];
-    if (st != BN_OK)
-        return st;
-    fputs(header, f.fp);
-    fprintf(f.fp, "patch,face,material,area_m2,cx,cy,cz");
-    for (int l = 0; l < r->nlayers; l++) {
-        bn_layer_name(l, r->bounces, name, sizeof name);
-        fprintf(f.fp, ",%s.R,%s.G,%s.B,%s.R_se,%s.G_se,%s.B_se", name, name, name, name, name, name);
-    }
-    fputc('\n', f.fp);
-    for (size_t i = 0; i < r->n; i++) {
-        fprintf(f.fp, "%zu,%zu,%s,%.10g,%.10g,%.10g,%.10g", i, p[i].face, mats[p[i].material].name, p[i].area * m * m,
-                p[i].centroid[0], p[i].centroid[1], p[i].centroid[2]);
-        for (int l = 0; l < r->nlayers; l++) {
-            const double *v = r->mean + ((size_t)l * r->n + i) * 3, *e = r->se + ((size_t)l * r->n + i) * 3;
-            fprintf(f.fp, ",%.9g,%.9g,%.9g,%.6g,%.6g,%.6g", v[0], v[1], v[2], e[0], e[1], e[2]);
-        }
-        fputc('\n', f.fp);
-    }
-    return bn__outfile_commit(&f, err);
-}
-
 static void bn__log_stderr(void *user, bn_log_level level, const char *msg)
 {
     const bn_cli_common *c = user;
@@ -141,7 +108,7 @@ int bn_cmd_trace(int argc, char **argv, bn_cli_common *c)
             rc = bn_cli_fail(&err);
             goto done;
         }
-        st = bn__write_patches_csv(patches_out, s, &r, header, &err);
+        st = bn_trace_patches_write_csv(patches_out, s, &r, header, &err);
         if (st != BN_OK) {
             bn_trace_patches_free(&r);
             rc = bn_cli_fail(&err);
@@ -165,9 +132,6 @@ int bn_cmd_trace(int argc, char **argv, bn_cli_common *c)
     if (out) {
         bn_camera cam;
         bn_trace_image img;
-        bn_layer *layers = NULL;
-        bn_image *views = NULL;
-        char (*names)[24] = NULL;
         bn_log lg = {bn__log_stderr, c, c->quiet};
         char spp_s[32], n_s[16];
         bn_attr attrs[6];
@@ -178,40 +142,19 @@ int bn_cmd_trace(int argc, char **argv, bn_cli_common *c)
             rc = bn_cli_fail(&err);
             goto done;
         }
-        layers = calloc((size_t)img.nlayers * 2, sizeof *layers);
-        views = calloc((size_t)img.nlayers * 2, sizeof *views);
-        names = calloc((size_t)img.nlayers * 2, sizeof *names);
-        if (!layers || !views || !names) {
-            st = bn_error_set(&err, BN_ENOMEM, "out of memory");
-        } else {
-            size_t npx = (size_t)img.width * (size_t)img.height;
-            for (int l = 0; l < img.nlayers; l++) {
-                char name[16];
-                bn_layer_name(l, bounces, name, sizeof name);
-                snprintf(names[l], sizeof names[l], "%s", name);
-                snprintf(names[img.nlayers + l], sizeof names[0], "%s_var", name);
-                views[l] = (bn_image){img.width, img.height, img.mean + (size_t)l * npx * 3};
-                views[img.nlayers + l] = (bn_image){img.width, img.height, img.var + (size_t)l * npx * 3};
-            }
-            for (int l = 0; l < 2 * img.nlayers; l++)
-                layers[l] = (bn_layer){names[l], &views[l]};
-            snprintf(spp_s, sizeof spp_s, "%zu", spp);
-            snprintf(n_s, sizeof n_s, "%d", bounces);
-            attrs[0] = (bn_attr){"bounce:command", c->cmdline};
-            attrs[1] = (bn_attr){"bounce:version", bn_version()};
-            attrs[2] = (bn_attr){"bounce:method", "path tracer (NEE + cosine sampling, MIS power heuristic)"};
-            attrs[3] = (bn_attr){"bounce:spp", spp_s};
-            attrs[4] = (bn_attr){"bounce:bounces", n_s};
-            attrs[5] = (bn_attr){"bounce:units", "radiance W m^-2 sr^-1; *_var: variance of the pixel mean"};
-            st = bn_exr_write(out, layers, (size_t)img.nlayers * 2, attrs, 6, half, &lg, &err);
-        }
+        snprintf(spp_s, sizeof spp_s, "%zu", spp);
+        snprintf(n_s, sizeof n_s, "%d", bounces);
+        attrs[0] = (bn_attr){"bounce:command", c->cmdline};
+        attrs[1] = (bn_attr){"bounce:version", bn_version()};
+        attrs[2] = (bn_attr){"bounce:method", "path tracer (NEE + cosine sampling, MIS power heuristic)"};
+        attrs[3] = (bn_attr){"bounce:spp", spp_s};
+        attrs[4] = (bn_attr){"bounce:bounces", n_s};
+        attrs[5] = (bn_attr){"bounce:units", "radiance W m^-2 sr^-1; *_var: variance of the pixel mean"};
+        st = bn_trace_image_write(&img, out, attrs, 6, half, &lg, &err);
         if (st == BN_OK && !c->quiet)
             printf("image: %dx%d x %zu samples, %.3g rays in %.2f s (%.3g rays/s); wrote %s (layers E .. L and *_var)\n",
                    img.width, img.height, spp, (double)img.rays, img.seconds,
                    (double)img.rays / fmax(img.seconds, 1e-9), out);
-        free(layers);
-        free(views);
-        free(names);
         bn_trace_image_free(&img);
         if (st != BN_OK) {
             rc = bn_cli_fail(&err);

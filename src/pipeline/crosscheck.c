@@ -1,0 +1,123 @@
+/* The cross-check run (include/bounce/pipeline.h): radiosity at the mesh asked and at a second
+ * level, the path tracer on the same patches, the discretisation tolerance, the comparison. */
+#include "bounce/pipeline.h"
+#include "base/internal.h"
+
+#include <string.h>
+
+void bn_crosscheck_opts_default(bn_crosscheck_opts *o)
+{
+    memset(o, 0, sizeof *o);
+    bn_pipeline_opts_default(&o->pipeline);
+    bn_trace_opts_default(&o->trace);
+    o->trace.spp = 1024;
+    o->bounces = 3;
+    o->solve_tol = 1e-10;
+    o->disc = BN_DISC_COARSE;
+    o->ratio = 2;
+    o->tol_scale = 3;
+    o->alpha = 0.01;
+    o->worst = 10;
+}
+
+/* One level: the pipeline with mesh m (the rays kept), and its layers in the tracer's layout. */
+static bn_status bn__level(const char *path, const bn_crosscheck_opts *o, const bn_mesh_opts *m, bn_pipeline *p,
+                           double **layers, double *seconds, bn_error *err)
+{
+    bn_pipeline_opts po = o->pipeline;
+    double t0 = bn__now();
+    bn_status st;
+    po.mesh = *m;
+    po.keep_rt = 1;
+    po.solve.tol = o->solve_tol;
+    po.solve.bounces = o->bounces;
+    st = bn_pipeline_run(path, &po, p, err);
+    if (st != BN_OK)
+        return st;
+    *layers = bn__malloc_array(p->n * (size_t)bn_layer_count(o->bounces), 3 * sizeof(double));
+    if (!*layers)
+        return bn_error_set(err, BN_ENOMEM, "crosscheck: out of memory for %zu patches", p->n);
+    bn_layers_stack((const double *const *)p->res.terms, p->res.L, p->n, o->bounces, *layers);
+    *seconds = bn__now() - t0;
+    return BN_OK;
+}
+
+/* The second level's mesh: the patch size of the first times or over the ratio. */
+static bn_status bn__second_mesh(const bn_crosscheck_opts *o, const bn_pipeline *fine, bn_mesh_opts *m, bn_error *err)
+{
+    double h = bn_scene_patch_size(fine->scene);
+    *m = o->pipeline.mesh;
+    m->target_patches = 0;
+    m->no_subdivide = 0;
+    m->patch_size = h > 0 ? (o->disc == BN_DISC_COARSE ? h * o->ratio : h / o->ratio) : 0;
+    if (!(m->patch_size > 0) || o->pipeline.mesh.no_subdivide)
+        return bn_error_set(err, BN_EUSAGE, "crosscheck: --no-subdivide has no patch size to vary; use --disc none or "
+                                            "--patch-size");
+    return BN_OK;
+}
+
+/* The discretisation tolerance between the levels, per patch and per layer's power. */
+static bn_status bn__tolerance(const bn_crosscheck_opts *o, bn_crosscheck_run *run, bn_error *err)
+{
+    size_t nl = (size_t)bn_layer_count(o->bounces);
+    run->tol = bn__malloc_array(run->fine.n * nl, 3 * sizeof(double));
+    run->power_tol = bn__malloc_array(nl, 3 * sizeof(double));
+    if (!run->tol || !run->power_tol)
+        return bn_error_set(err, BN_ENOMEM, "crosscheck: out of memory");
+    return bn_crosscheck_mesh_tolerance(run->fine.scene, run->layers_fine, run->other.scene, run->layers_other,
+                                        o->bounces, run->tol, run->power_tol, err);
+}
+
+bn_status bn_crosscheck_run_scene(const char *path, const bn_crosscheck_opts *o, bn_crosscheck_run *run,
+                                  bn_error *err)
+{
+    bn_trace_opts to = o->trace;
+    bn_crosscheck_input *in = &run->in;
+    bn_mesh_opts m2;
+    bn_status st;
+    memset(run, 0, sizeof *run);
+    to.bounces = o->bounces;
+    st = bn__level(path, o, &o->pipeline.mesh, &run->fine, &run->layers_fine, &run->seconds_fine, err);
+    if (st == BN_OK)
+        st = bn_trace_patches_run(run->fine.rt, &to, &run->trace, err);
+    if (st == BN_OK && o->disc != BN_DISC_NONE) {
+        bn_crosscheck_opts o2 = *o;
+        o2.pipeline.ff.cache_path = NULL;   /* the cache holds the mesh asked for */
+        st = bn__second_mesh(o, &run->fine, &m2, err);
+        if (st == BN_OK)
+            st = bn__level(path, &o2, &m2, &run->other, &run->layers_other, &run->seconds_other, err);
+        if (st == BN_OK)
+            st = bn__tolerance(o, run, err);
+    }
+    if (st != BN_OK)
+        return st;
+    bn_crosscheck_input_default(in);
+    in->scene = run->fine.scene;
+    in->trace = &run->trace;
+    in->rad = run->layers_fine;
+    in->tol = run->tol;
+    in->power_tol = run->power_tol;
+    /* Two-level grid-convergence estimate with order p = 1 (patch-constant radiosity): the error of
+     * the mesh asked is |R_h - R_other| / (r - 1) when the other level is coarser by r, and
+     * r |R_h - R_other| / (r - 1) when it is finer; times the safety factor Fs. */
+    in->tol_scale = o->disc == BN_DISC_NONE ? 0
+                                            : o->tol_scale * (o->disc == BN_DISC_COARSE ? 1 / (o->ratio - 1)
+                                                                                        : o->ratio / (o->ratio - 1));
+    in->rtol = o->rtol;
+    in->alpha = o->alpha;
+    in->worst = o->worst;
+    return bn_crosscheck_compare(in, &run->result, err);
+}
+
+void bn_crosscheck_run_free(bn_crosscheck_run *run)
+{
+    bn_crosscheck_result_free(&run->result);
+    bn_trace_patches_free(&run->trace);
+    free(run->tol);
+    free(run->power_tol);
+    free(run->layers_fine);
+    free(run->layers_other);
+    bn_pipeline_free(&run->fine);
+    bn_pipeline_free(&run->other);
+    memset(run, 0, sizeof *run);
+}
