@@ -159,8 +159,9 @@ extern "C" bn_status bn__openmesh_write(const char *path, const bn__bake_mesh *m
 
 namespace {
 
-// The counts follow the keyword line as int32s: accept the header if one byte order fits the file
-// (OpenMesh reserves whatever the header announces). Reads the first bytes only.
+// The counts follow the keyword line as int32s in the host's byte order (OpenMesh reads them so):
+// refuse a header whose counts the file cannot hold (a vertex is 3 floats, a face at least a count
+// and 3 indices), since OpenMesh reserves whatever it announces. Reads the first bytes only.
 static bn_status off_check_binary(const char *path, bn_error *err)
 {
     std::ifstream in(path, std::ios::binary);
@@ -175,20 +176,12 @@ static bn_status off_check_binary(const char *path, bn_error *err)
     size_t p0 = head.find('\n');
     if (size < 16 || p0 == std::string::npos || p0 + 9 > head.size())
         return bn_error_set(err, BN_EINPUT, "%s: truncated binary OFF header", path);
-    const unsigned char *b = reinterpret_cast<const unsigned char *>(head.data() + p0 + 1);
-    auto fits = [&](bool big) {
-        for (int k = 0; k < 2; k++) {
-            const unsigned char *q = b + 4 * k;
-            uint32_t v = big ? (uint32_t)q[0] << 24 | (uint32_t)q[1] << 16 | (uint32_t)q[2] << 8 | q[3]
-                             : (uint32_t)q[3] << 24 | (uint32_t)q[2] << 16 | (uint32_t)q[1] << 8 | q[0];
-            if (v > size / 4)
-                return false;
-        }
-        return true;
-    };
-    if (!fits(true) && !fits(false))
-        return bn_error_set(err, BN_EINPUT, "%s: the binary OFF header announces more elements than a file of %llu "
-                                            "bytes can hold", path, size);
+    int32_t nv, nf;
+    std::memcpy(&nv, head.data() + p0 + 1, 4);
+    std::memcpy(&nf, head.data() + p0 + 5, 4);
+    if (nv < 0 || nf < 0 || (unsigned long long)nv > size / 12 || (unsigned long long)nf > size / 16)
+        return bn_error_set(err, BN_EINPUT, "%s: the binary OFF header announces %d vertices and %d faces, more than "
+                                            "a file of %llu bytes can hold", path, (int)nv, (int)nf, size);
     return BN_OK;
 }
 
