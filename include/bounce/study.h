@@ -87,7 +87,9 @@ typedef struct bn_study_row {
     int    ground;                   /* 0: same mesh as the reference, 1: reference patches by centroid */
     double err_inf;                  /* ||L - L_ref||_inf over patches and channels, W m^-2 sr^-1 */
     double err_inf_rel;              /* err_inf / ||L_ref||_inf */
-    double err_max_rel, err_rms_rel; /* per patch and channel |L - L_ref| / L_ref (RMS area-weighted) */
+    double err_max_rel, err_rms_rel; /* per patch and channel e = |L - L_ref| / max(|L_ref|, mean L_ref):
+                                        the largest, and the area-weighted RMS (L2) */
+    double err_l1_rel;               /* the area-weighted mean of e (L1) */
     double err_energy_rel;           /* reflected power pi sum A (L - E), max over channels */
     double err_surface_max;          /* max over surfaces (and channels) of the area-weighted mean's error */
     double err_surface_mean;         /* mean over surfaces */
@@ -143,7 +145,7 @@ void bn_study_result_free(bn_study_result *res);   /* NULL or zeroed is a no-op 
 
 /* The fixed columns of the CSV; per-surface columns `err_surf_<material>` follow. */
 #define BN_STUDY_CSV_COLUMNS                                                                              \
-    "param,method,value,x,patches,iterations,ground,err_inf,err_inf_rel,err_max_rel,err_rms_rel,"        \
+    "param,method,value,x,patches,iterations,ground,err_inf,err_inf_rel,err_max_rel,err_rms_rel,err_l1_rel," \
     "err_energy_rel,err_surface_max,err_surface_mean,bound,bound_ke,estimate,t_mesh,t_ff,t_solve,t_output,"       \
     "t_total,peak_mb,k_norm,se_surface_max,t_iterate"
 /* Writes the rows as CSV: `provenance` ('#'-prefixed `key=value` lines, may be NULL), then the

@@ -94,7 +94,7 @@ bn_status bn__study_ref_init(bn__study_ref *r, const bn_scene *s, const double *
                 m[c] += p[i].area * fabs(L[3 * i + (size_t)c]);
         }
         for (int c = 0; c < 3; c++)
-            r->floor[c] = a > 0 && m[c] > 0 ? 0.01 * m[c] / a : 1e-300;
+            r->floor[c] = a > 0 && m[c] > 0 ? m[c] / a : 1e-300;
     }
     return BN_OK;
 }
@@ -204,7 +204,7 @@ bn_status bn__study_compare(const bn__study_ref *ref, const bn_scene *s, const d
     size_t ns, nr = ref->n;
     const bn_patch *pr = bn_scene_patches(ref->scene, &nr);
     size_t *map = NULL;
-    double *E = NULL, *means = NULL, power[3], sum_a = 0, sum_e2 = 0;
+    double *E = NULL, *means = NULL, power[3], sum_a = 0, sum_e1 = 0, sum_e2 = 0;
     int same = bn__same_mesh(ref->scene, s);
     bn_scene_patches(s, &ns);
     row->ground = same ? 0 : 1;
@@ -227,9 +227,10 @@ bn_status bn__study_compare(const bn__study_ref *ref, const bn_scene *s, const d
             return st;
         }
     }
-    /* Relative errors divide by L_ref, floored at 1% of the scene's area-weighted mean radiance in
-     * that channel: patches that see no light (under a block) have L_ref ~ 0, and a relative error
-     * there says nothing; their absolute error still shows in err_inf. */
+    /* Per patch and channel the error relative to s_c = max(|L_ref|, the scene's area-weighted mean
+     * radiance in that channel): a scale that cannot vanish, so patches that see no light (under a
+     * block, L_ref ~ 0) count at the scene's typical brightness instead of blowing up. Then the
+     * largest, and the area-weighted L1 and L2 (RMS) norms. */
     row->err_inf = row->err_max_rel = 0;
     for (size_t i = 0; i < nr; i++) {
         size_t j = same ? i : map[i];
@@ -238,11 +239,13 @@ bn_status bn__study_compare(const bn__study_ref *ref, const bn_scene *s, const d
             double rel = d / fmax(fabs(lr), ref->floor[c]);
             row->err_inf = fmax(row->err_inf, d);
             row->err_max_rel = fmax(row->err_max_rel, rel);
+            sum_e1 += pr[i].area * rel;
             sum_e2 += pr[i].area * rel * rel;
         }
         sum_a += 3 * pr[i].area;
     }
     row->err_inf_rel = ref->norm_L > 0 ? row->err_inf / ref->norm_L : row->err_inf;
+    row->err_l1_rel = sum_a > 0 ? sum_e1 / sum_a : 0;
     row->err_rms_rel = sum_a > 0 ? sqrt(sum_e2 / sum_a) : 0;
 
     bn_scene_patch_emission(s, E);

@@ -59,7 +59,7 @@ bn_status bn_study_write_csv(const bn_study_result *r, const char *path, const c
     fputc('\n', fp);
     for (size_t i = 0; i < r->nrows; i++) {
         const bn_study_row *w = &r->rows[i];
-        const double v[] = {w->err_inf, w->err_inf_rel, w->err_max_rel, w->err_rms_rel, w->err_energy_rel,
+        const double v[] = {w->err_inf, w->err_inf_rel, w->err_max_rel, w->err_rms_rel, w->err_l1_rel, w->err_energy_rel,
                             w->err_surface_max, w->err_surface_mean, w->bound, w->bound_ke, w->estimate, w->t_mesh, w->t_ff,
                             w->t_solve, w->t_output, w->t_total, w->peak_mb, w->k_norm, w->se_surface_max, w->t_iterate};
         fprintf(fp, "%s,%s,%s,", bn_study_param_name(r->param), w->method, w->value);

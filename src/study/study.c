@@ -9,6 +9,7 @@
 #include "base/internal.h"
 #include "bounce/pipeline.h"
 
+#include <ctype.h>
 #include <float.h>
 #include <math.h>
 #include <stdarg.h>
@@ -785,7 +786,7 @@ static double bn__time_to(const bn_study_result *R, const char *method, double t
 
 /* Runs the tracer on scene sc (meshed) at spp with seed; *L receives the L layer (N*3, malloc'd);
  * rel_se_surf / rel_se_patch: the largest relative standard error per surface and per patch
- * (per patch floored like the comparison: 1% of the mean radiance). */
+ * (per patch scaled like the comparison: by max(L, the mean radiance)). */
 static bn_status bn__trace_solution(const bn_scene *sc, const bn_trace_opts *base, size_t spp, uint64_t seed, double **L,
                                     double *rel_se_surf, double *rel_se_patch, double *seconds, bn_error *err)
 {
@@ -832,7 +833,7 @@ static bn_status bn__trace_solution(const bn_scene *sc, const bn_trace_opts *bas
             for (size_t i = 0; i < n; i++)
                 for (int c = 0; c < 3; c++)
                     *rel_se_patch = fmax(*rel_se_patch, tp.se[(li * n + i) * 3 + (size_t)c] /
-                                                            fmax((*L)[3 * i + (size_t)c], 0.01 * mean[c] / a));
+                                                            fmax((*L)[3 * i + (size_t)c], mean[c] / a));
             for (size_t s = 0; s < nm; s++)
                 for (int c = 0; c < 3; c++)
                     if (sa[s] > 0 && sm[3 * s + (size_t)c] > 0)
@@ -1184,8 +1185,89 @@ static bn_status bn__study_settings(bn__study *S, bn_error *err)
     return st;
 }
 
-static bn_status bn__study_run_body(const char *path, const bn_study_opts *o, bn_study_result *res, bn_error *err)
+/* ---- warnings gathered: each kind said once per study, with its count and worst occurrence ----
+ * A study assembles form factors and solves once per setting, and each would repeat the same
+ * warning (rows of F above 1, ...). A kind is the message with its numbers masked; the worst
+ * occurrence is the one with the largest value after "largest", else the largest first number. */
+#define BN__WARN_KINDS 16
+typedef struct bn__warn_kind {
+    char key[192], worst[768];
+    double value;
+    size_t count;
+} bn__warn_kind;
+typedef struct bn__warnings {
+    bn_log out;   /* where they go in the end */
+    size_t nkinds;
+    bn__warn_kind kind[BN__WARN_KINDS];
+} bn__warnings;
+
+static void bn__warn_key(const char *msg, char *key, size_t n)
 {
+    size_t k = 0;
+    for (const char *p = msg; *p && k + 1 < n;) {
+        if (isdigit((unsigned char)*p)) {
+            key[k++] = '#';
+            while (*p && (isdigit((unsigned char)*p) || *p == '.' || *p == 'e' || *p == '-' || *p == '+'))
+                p++;
+        } else {
+            key[k++] = *p++;
+        }
+    }
+    key[k] = '\0';
+}
+
+static double bn__warn_value(const char *msg)
+{
+    const char *p = strstr(msg, "largest ");
+    p = p ? p + 8 : msg;
+    while (*p && !isdigit((unsigned char)*p))
+        p++;
+    return *p ? strtod(p, NULL) : 0;
+}
+
+static void bn__gather(void *user, bn_log_level level, const char *msg)
+{
+    bn__warnings *W = user;
+    char key[192];
+    size_t k;
+    if (level != BN_LOG_WARN) {
+        bn_logf(&W->out, level, "%s", msg);
+        return;
+    }
+    bn__warn_key(msg, key, sizeof key);
+    for (k = 0; k < W->nkinds && strcmp(W->kind[k].key, key) != 0; k++)
+        ;
+    if (k == W->nkinds) {
+        if (k == BN__WARN_KINDS) {   /* no room: say it now */
+            bn_logf(&W->out, level, "%s", msg);
+            return;
+        }
+        W->nkinds++;
+        snprintf(W->kind[k].key, sizeof W->kind[k].key, "%s", key);
+        W->kind[k].value = -INFINITY;
+    }
+    W->kind[k].count++;
+    if (bn__warn_value(msg) > W->kind[k].value) {
+        W->kind[k].value = bn__warn_value(msg);
+        snprintf(W->kind[k].worst, sizeof W->kind[k].worst, "%s", msg);
+    }
+}
+
+static void bn__warnings_flush(const bn__warnings *W)
+{
+    for (size_t k = 0; k < W->nkinds; k++) {
+        if (W->kind[k].count == 1)
+            bn_logf(&W->out, BN_LOG_WARN, "%s", W->kind[k].worst);
+        else
+            bn_logf(&W->out, BN_LOG_WARN, "%s [%zu times in this study; the worst shown]", W->kind[k].worst,
+                    W->kind[k].count);
+    }
+}
+
+static bn_status bn__study_run_body(const char *path, const bn_study_opts *o_in, bn_study_result *res, bn_error *err)
+{
+    bn_study_opts oo = *o_in, *o = &oo;
+    bn__warnings W;
     bn__study S;
     bn_scene *probe = NULL;
     const bn_material *mats;
@@ -1193,6 +1275,10 @@ static bn_status bn__study_run_body(const char *path, const bn_study_opts *o, bn
     bn_status st;
     memset(res, 0, sizeof *res);
     memset(&S, 0, sizeof S);
+    memset(&W, 0, sizeof W);
+    W.out = o_in->ff.log;
+    oo.ff.log = (bn_log){bn__gather, &W, o_in->ff.log.quiet};
+    oo.solve.log_sink = (bn_log){bn__gather, &W, o_in->solve.log_sink.quiet};
     S.o = o;
     S.path = path;
     S.res = res;
@@ -1265,6 +1351,7 @@ static bn_status bn__study_run_body(const char *path, const bn_study_opts *o, bn
         st = bn__study_operator(&S, err);
     else
         st = bn__study_settings(&S, err);
+    bn__warnings_flush(&W);
     if (st != BN_OK)
         bn_study_result_free(res);
     return st;

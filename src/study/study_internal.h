@@ -13,7 +13,7 @@ typedef struct bn__study_ref {
     double *surf_mean;       /* nsurf*3 area-weighted means (owned) */
     double power[3];         /* reflected power pi sum A (L - E), W */
     double norm_L;           /* ||L||_inf */
-    double floor[3];         /* per-patch relative errors divide by max(L_ref, floor): 1% of the
+    double floor[3];         /* per-patch relative errors divide by max(|L_ref|, floor): the
                                 area-weighted mean radiance per channel */
 } bn__study_ref;
 
