@@ -125,6 +125,9 @@ typedef struct bn_study_result {
     double ref_error;                /* its estimated error, in the err_surface_max metric (relative) */
     double ref_error_patch;          /* in the err_max_rel metric */
     char   ref_error_how[256];       /* how that estimate was made */
+    double ref_order;                /* mesh studies: the convergence order fitted by Richardson extrapolation
+                                        (NAN when the reference is not extrapolated) */
+    double ref_error_raw;            /* mesh studies: the unextrapolated reference's error (per surface) */
     size_t ref_patches;
     double ref_seconds;
     double norm_E, norm_L;           /* ||E||_inf, ||L_ref||_inf */

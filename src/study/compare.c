@@ -184,6 +184,27 @@ static bn_status bn__lookup(const bn_scene *ref, const bn_scene *s, size_t *map,
     return BN_OK;
 }
 
+bn_status bn__study_map_onto(const bn_scene *ref, const bn_scene *s, const double *L, double *out, bn_error *err)
+{
+    size_t nr, ns;
+    size_t *map;
+    bn_status st;
+    bn_scene_patches(ref, &nr);
+    bn_scene_patches(s, &ns);
+    if (ref == s) {
+        memcpy(out, L, 3 * nr * sizeof(double));
+        return BN_OK;
+    }
+    map = bn__malloc_array(nr + 1, sizeof(size_t));
+    if (!map)
+        return bn_error_set(err, BN_ENOMEM, "study: out of memory mapping %zu patches", nr);
+    st = bn__lookup(ref, s, map, err);
+    for (size_t i = 0; st == BN_OK && i < nr; i++)
+        memcpy(out + 3 * i, L + 3 * map[i], 3 * sizeof(double));
+    free(map);
+    return st;
+}
+
 static int bn__same_mesh(const bn_scene *a, const bn_scene *b)
 {
     size_t na, nb;

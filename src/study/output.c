@@ -37,6 +37,8 @@ bn_status bn_study_write_csv(const bn_study_result *r, const char *path, const c
     }
     fprintf(fp, "# study=%s\n# reference=%s\n# reference_patches=%zu\n# reference_seconds=%.6g\n", bn_study_param_name(r->param),
             r->reference, r->ref_patches, r->ref_seconds);
+    if (isfinite(r->ref_order))
+        fprintf(fp, "# reference_order=%.4g\n# reference_error_unextrapolated=%.6g\n", r->ref_order, r->ref_error_raw);
     fprintf(fp, "# reference_error=%.6g\n# reference_error_patch=%.6g\n# reference_error_how=%s\n", r->ref_error,
             r->ref_error_patch, r->ref_error_how);
     fprintf(fp, "# norm_E=%.9g\n# norm_L=%.9g\n", r->norm_E, r->norm_L);

@@ -31,6 +31,10 @@ void bn__study_reflected_power(const bn_scene *s, const double *L, const double 
 bn_status bn__study_compare(const bn__study_ref *ref, const bn_scene *s, const double *L, bn_study_row *row,
                             bn_error *err);
 
+/* The solution L on scene s seen on the reference mesh: out[3i+c] = L of the patch of s holding
+ * reference patch i's centroid (in the same face). out: 3 N_ref. */
+bn_status bn__study_map_onto(const bn_scene *ref, const bn_scene *s, const double *L, double *out, bn_error *err);
+
 /* Peak resident memory: reset the high-water mark (Linux clear_refs; no-op elsewhere), read it in MiB. */
 void bn__study_peak_reset(void);
 double bn__study_peak_mb(void);
