@@ -9,6 +9,8 @@
  *    up to float storage (~6e-8 per row); over the <= 40 applications in the study that is below 1e-5
  *    relative in K^k E = rho^k E. */
 #include "bn_test.h"
+
+#include <ctype.h>
 #include "bounce/study.h"
 
 #include <stdint.h>
@@ -385,4 +387,173 @@ BN_TEST(study_threads_identical)
         if (strcmp(a, b) != 0)
             BN_FAIL("errors differ between 1 and 2 threads:\n  %s\n  %s", a, b);
     }
+}
+
+/* ---- studies a reader can trust ---- */
+
+/* The Cornell box with the study's default arguments: every per-patch relative error below 1 (the
+ * scale cannot vanish under the blocks), the RMS falling with the mesh, the fitted order and the
+ * reference's error recorded, the reference at least 3x finer than the best setting (so the study
+ * does not warn about it), and each kind of warning said at most once. BN_SLOW: ~30 s. */
+BN_TEST(cornell_mesh_study_defaults) /* BN_SLOW */
+{
+    char args[1024], *out = NULL, *w;
+    csv *c;
+    double best = INFINITY, rms100 = NAN, rms800 = NAN;
+    BN_SKIP_IF_SLOW_RUN();
+    snprintf(args, sizeof args, "study %s --unit mm --vary patches=100,200,400,800 -o %s",
+             bn_test_path("meshes/cornell-box.obj"), bn_test_tmp("mesh.csv"));
+    if (bn_test_bounce(args, &out) != 0)
+        BN_FAIL("bounce study failed:\n%s", out ? out : "");
+    c = csv_read(bn_test_tmp("mesh.csv"));
+    BN_ASSERT_EQ(c->nrow, 4);
+    for (int r = 0; r < c->nrow; r++) {
+        BN_ASSERT_LT(csv_num(c, r, "err_max_rel"), 1);
+        BN_ASSERT_LE(csv_num(c, r, "err_l1_rel"), csv_num(c, r, "err_rms_rel"));   /* L1 <= L2 (same weights) */
+        BN_ASSERT_LE(csv_num(c, r, "err_rms_rel"), csv_num(c, r, "err_max_rel"));
+        best = fmin(best, csv_num(c, r, "err_surface_max"));
+        if (csv_num(c, r, "x") == 100)
+            rms100 = csv_num(c, r, "err_rms_rel");
+        if (csv_num(c, r, "x") == 800)
+            rms800 = csv_num(c, r, "err_rms_rel");
+    }
+    BN_ASSERT_LT(rms800, rms100);
+    BN_ASSERT_GT(meta_num(c, "reference_order"), 0.5);
+    BN_ASSERT_LE(meta_num(c, "reference_error") * 3, best);
+    BN_ASSERT(strstr(out, "not well below") == NULL);
+    /* each warning kind once: no two warning lines alike once their numbers are masked */
+    for (w = strstr(out, "warning:"); w; w = strstr(w + 1, "warning:")) {
+        char a[256], *b;
+        size_t n = strcspn(w, "\n");
+        snprintf(a, sizeof a, "%.*s", (int)(n < 60 ? n : 60), w);
+        for (char *q = a; *q; q++)
+            if (isdigit((unsigned char)*q))
+                *q = '#';
+        for (b = strstr(w + 1, "warning:"); b; b = strstr(b + 1, "warning:")) {
+            char d[256];
+            size_t m = strcspn(b, "\n");
+            snprintf(d, sizeof d, "%.*s", (int)(m < 60 ? m : 60), b);
+            for (char *q = d; *q; q++)
+                if (isdigit((unsigned char)*q))
+                    *q = '#';
+            if (strcmp(a, d) == 0)
+                BN_FAIL("the same kind of warning twice:\n%s", out);
+        }
+    }
+    csv_free(c);
+    free(out);
+}
+
+/* Gauss-Legendre nodes and weights on [0, 1] (Newton on P_n; Golub & Welsch's values to rounding). */
+static void gauss01(int n, double *x, double *w)
+{
+    for (int i = 0; i < n; i++) {
+        double z = cos(3.14159265358979323846 * (i + 0.75) / (n + 0.5)), p1, p2, p3, pp = 1;
+        for (int it = 0; it < 100; it++) {
+            double z1 = z;
+            p1 = 1, p2 = 0;
+            for (int j = 1; j <= n; j++) {
+                p3 = p2;
+                p2 = p1;
+                p1 = ((2.0 * j - 1) * z * p2 - (j - 1.0) * p3) / j;
+            }
+            pp = n * (z * p1 - p2) / (z * z - 1);
+            z = z1 - p1 / pp;
+            if (fabs(z - z1) < 1e-15)
+                break;
+        }
+        x[i] = 0.5 * (1 - z);
+        w[i] = 1.0 / ((1 - z * z) * pp * pp);   /* 2 / ((1 - z^2) P'^2), halved for [0, 1] */
+    }
+}
+
+/* Two unit squares facing each other at gap g, both reflecting rho, the lower emitting Le = 1: the
+ * continuum radiosity equation by Nystrom's method on n x n Gauss nodes a plate (the kernel
+ * g^2 / (pi r^4) is smooth for g > 0, so this converges spectrally). out: the area means of L on
+ * the emitter and the receiver; first: the receiver's first bounce (rho F Le). */
+static void plates_nystrom(double g, double rho, int n, double out[2], double *first)
+{
+    int m = n * n;
+    double x[64], w[64], *K = malloc((size_t)m * m * sizeof(double)), *LA = malloc(m * sizeof(double)),
+                         *LB = malloc(m * sizeof(double)), *t = malloc(m * sizeof(double));
+    gauss01(n, x, w);
+    for (int i = 0; i < m; i++)
+        for (int j = 0; j < m; j++) {
+            double dx = x[i / n] - x[j / n], dz = x[i % n] - x[j % n], r2 = dx * dx + dz * dz + g * g;
+            K[(size_t)i * m + j] = g * g / (3.14159265358979323846 * r2 * r2) * w[j / n] * w[j % n];
+        }
+    for (int i = 0; i < m; i++)
+        LA[i] = 1, LB[i] = 0;
+    for (int it = 0; it < 200; it++) {   /* L_B = rho K L_A; L_A = Le + rho K L_B (symmetric kernel) */
+        for (int i = 0; i < m; i++) {
+            double s = 0;
+            for (int j = 0; j < m; j++)
+                s += K[(size_t)i * m + j] * LA[j];
+            t[i] = rho * s;
+        }
+        memcpy(LB, t, m * sizeof(double));
+        if (it == 0) {
+            double s = 0;
+            for (int i = 0; i < m; i++)
+                s += w[i / n] * w[i % n] * LB[i];
+            *first = s;
+        }
+        for (int i = 0; i < m; i++) {
+            double s = 0;
+            for (int j = 0; j < m; j++)
+                s += K[(size_t)i * m + j] * LB[j];
+            LA[i] = 1 + rho * s;
+        }
+    }
+    out[0] = out[1] = 0;
+    for (int i = 0; i < m; i++) {
+        out[0] += w[i / n] * w[i % n] * LA[i];
+        out[1] += w[i / n] * w[i % n] * LB[i];
+    }
+    free(K);
+    free(LA);
+    free(LB);
+    free(t);
+}
+
+/* The extrapolated reference of a mesh study against a continuum answer computed here: two
+ * reflecting plates, close enough (gap 0.25) for the mesh to matter. The Nystrom solution is first
+ * checked against the published factor (Howell C-11 at X = Y = 4: F = 0.6188 ... for gap 0.25, whose
+ * first bounce is rho F Le), then the study's per-surface reference must lie within its own stated
+ * error of it (plus the analytic form factors' tolerance). */
+BN_TEST(plates_extrapolated_reference_within_its_error)
+{
+    const double g = 0.25, rho = 0.5;
+    char args[1024], *out = NULL, line[64];
+    double cont[2], first, Fpub, X = 1 / g;
+    FILE *fp = fopen(bn_test_tmp("plates.obj"), "w");
+    csv *c;
+    fprintf(fp, "mtllib plates.mtl\nv 1 0 0\nv 0 0 0\nv 0 0 1\nv 1 0 1\nv 1 %g 0\nv 1 %g 1\nv 0 %g 1\nv 0 %g 0\n"
+                "usemtl a\nf 1 2 3 4\nusemtl b\nf 5 6 7 8\n", g, g, g, g);
+    fclose(fp);
+    fp = fopen(bn_test_tmp("plates.mtl"), "w");
+    fprintf(fp, "newmtl a\nKd %g %g %g\nKe 1 1 1\nnewmtl b\nKd %g %g %g\nKe 0 0 0\n", rho, rho, rho, rho, rho, rho);
+    fclose(fp);
+    plates_nystrom(g, rho, 32, cont, &first);
+    /* Howell C-11, parallel equal squares of side a at gap c, X = Y = a / c */
+    Fpub = 2 / (3.14159265358979323846 * X * X) *
+           (0.5 * log((1 + X * X) * (1 + X * X) / (1 + 2 * X * X)) + 2 * X * sqrt(1 + X * X) * atan(X / sqrt(1 + X * X)) -
+            2 * X * atan(X));
+    BN_ASSERT_REL(first, rho * Fpub, 1e-9);
+    snprintf(args, sizeof args, "study %s --vary patches=8,32,128 -o %s -q", bn_test_tmp("plates.obj"),
+             bn_test_tmp("plates.csv"));
+    if (bn_test_bounce(args, &out) != 0)
+        BN_FAIL("bounce study failed:\n%s", out ? out : "");
+    c = csv_read(bn_test_tmp("plates.csv"));
+    for (int s = 0; s < 2; s++) {
+        double e = meta_num(c, "reference_error"), ref;
+        snprintf(line, sizeof line, "reference_mean_%c", "ab"[s]);
+        ref = meta_num(c, line);
+        fprintf(stderr, "surface %c: continuum %.9g, extrapolated reference %.9g (difference %.3g, stated error %.3g)\n",
+                "ab"[s], cont[s], ref, fabs(ref - cont[s]) / cont[s], e);
+        BN_ASSERT_LE(fabs(ref - cont[s]), (e + 5e-6) * cont[s]);   /* + the form factors' quadrature (~7e-7) */
+    }
+    BN_ASSERT_GT(meta_num(c, "reference_order"), 0.5);
+    csv_free(c);
+    free(out);
 }

@@ -121,10 +121,12 @@ typedef struct bn_study_result {
     size_t nsurfaces;
     char (*surface)[BN_NAME_MAX];    /* material names (owned) */
     double *surface_area;            /* m^2 (owned) */
+    double *ref_surface_mean;        /* the reference's area-weighted mean radiance per surface, nsurfaces*3
+                                        (extrapolated in mesh studies; owned; NULL when not measured) */
     char   reference[256];           /* what the reference is */
     double ref_error;                /* its estimated error, in the err_surface_max metric (relative) */
     double ref_error_patch;          /* in the err_max_rel metric */
-    char   ref_error_how[256];       /* how that estimate was made */
+    char   ref_error_how[512];       /* how that estimate was made */
     double ref_order;                /* mesh studies: the convergence order fitted by Richardson extrapolation
                                         (NAN when the reference is not extrapolated) */
     double ref_error_raw;            /* mesh studies: the unextrapolated reference's error (per surface) */

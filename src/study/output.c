@@ -42,6 +42,12 @@ bn_status bn_study_write_csv(const bn_study_result *r, const char *path, const c
     fprintf(fp, "# reference_error=%.6g\n# reference_error_patch=%.6g\n# reference_error_how=%s\n", r->ref_error,
             r->ref_error_patch, r->ref_error_how);
     fprintf(fp, "# norm_E=%.9g\n# norm_L=%.9g\n", r->norm_E, r->norm_L);
+    for (size_t s = 0; r->ref_surface_mean && s < r->nsurfaces; s++) {
+        fputs("# reference_mean_", fp);
+        bn__colname(fp, r->surface[s]);
+        fprintf(fp, "=%.9g %.9g %.9g\n", r->ref_surface_mean[3 * s], r->ref_surface_mean[3 * s + 1],
+                r->ref_surface_mean[3 * s + 2]);
+    }
     if (r->param == BN_STUDY_BOUNCES || r->param == BN_STUDY_MAX_ITER || r->param == BN_STUDY_TOL)
         fprintf(fp, "# k_norm_inf=%.9g\n# spectral_radius=%.9g\n", r->k_norm, r->spectral_radius);
     if (!isnan(r->t_radiosity) || !isnan(r->t_trace) || !isnan(r->best_trace))
