@@ -14,6 +14,7 @@ PACKAGES=(
   libplplot-dev plplot-driver-cairo      # study plots (PNG, SVG)
   fonts-dejavu-core          # labels on the contact sheet
   clang libclang-rt-14-dev   # libFuzzer harnesses
+  chromium                   # headless browser: tests open the study report page
 )
 
 missing=()

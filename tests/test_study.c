@@ -557,3 +557,54 @@ BN_TEST(plates_extrapolated_reference_within_its_error)
     csv_free(c);
     free(out);
 }
+
+/* The report opens in a browser (headless Chromium from Debian) and shows what it claims: the
+ * table with a row per setting and both plot panels, drawn (each panel an SVG with its axes' text),
+ * with nothing fetched from elsewhere. Skipped, saying so, where no browser can be found. */
+BN_TEST(report_opens_in_chromium)
+{
+    char args[2048], *out = NULL, *dom = NULL, *png;
+    const char *browser = NULL, *cands[] = {"chromium", "chromium-browser", "google-chrome"};
+    size_t npng = 0, rows = 0;
+    for (int k = 0; k < 3 && !browser; k++) {
+        snprintf(args, sizeof args, "command -v %s >/dev/null 2>&1", cands[k]);
+        if (bn_test_run(args, NULL) == 0)
+            browser = cands[k];
+    }
+    if (!browser)
+        BN_SKIP("no browser: install Debian's chromium (scripts/setup.sh does) to run this test");
+    snprintf(args, sizeof args, "study %s --patches 24 --ff hemisphere --vary bounces=0,1,2,3 --methods jacobi,direct "
+                                "-o %s --report %s -q",
+             bn_test_path("meshes/furnace-box.obj"), bn_test_tmp("r.csv"), bn_test_tmp("r.html"));
+    if (bn_test_bounce(args, &out) != 0)
+        BN_FAIL("bounce study failed:\n%s", out ? out : "");
+    free(out);
+    /* the page as the browser built it, and a picture of it; no network: every request refused */
+    snprintf(args, sizeof args,
+             "cd '%s' && timeout 120 %s --headless --no-sandbox --disable-gpu --disable-dev-shm-usage "
+             "--host-resolver-rules='MAP * ~NOTFOUND' --window-size=1500,1400 --dump-dom 'file://%s' 2>/dev/null",
+             bn_test_tmpdir(), browser, bn_test_tmp("r.html"));
+    BN_ASSERT_EQ(bn_test_run(args, &dom), 0);
+    BN_ASSERT(dom != NULL);
+    BN_ASSERT(strstr(dom, "<table>") != NULL);
+    for (const char *p = dom; (p = strstr(p, "<tr><td>")) != NULL; p++)
+        rows++;
+    BN_ASSERT_GE(rows, 4 + 2);   /* the truncated series at 0..3, and a row per method and tolerance */
+    BN_ASSERT(strstr(dom, "id=\"panel0\"") && strstr(dom, "id=\"panel1\""));
+    {
+        const char *a = strstr(dom, "id=\"panel0\""), *b = strstr(dom, "id=\"panel1\"");
+        BN_ASSERT(strstr(a, "<svg") && strstr(a, "<svg") < b);   /* each panel has its own drawing */
+        BN_ASSERT(strstr(b, "<svg") != NULL);
+    }
+    BN_ASSERT(strstr(dom, "How it was made") && strstr(dom, "# command="));
+    free(dom);
+    snprintf(args, sizeof args,
+             "cd '%s' && timeout 120 %s --headless --no-sandbox --disable-gpu --disable-dev-shm-usage "
+             "--host-resolver-rules='MAP * ~NOTFOUND' --window-size=1500,1400 --screenshot='%s' 'file://%s' "
+             ">/dev/null 2>&1",
+             bn_test_tmpdir(), browser, bn_test_tmp("r.png"), bn_test_tmp("r.html"));
+    BN_ASSERT_EQ(bn_test_run(args, NULL), 0);
+    png = bn_test_read_file(bn_test_tmp("r.png"), &npng);
+    BN_ASSERT(png && npng > 20000 && memcmp(png, "\x89PNG", 4) == 0);   /* a page with drawings, not a blank one */
+    free(png);
+}

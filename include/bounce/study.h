@@ -160,6 +160,11 @@ bn_status bn_study_write_csv(const bn_study_result *res, const char *path, const
  * line per method); right, error against the varied parameter, with the bound and the spectral
  * estimate for the truncated series and the reference's own error drawn as a floor. */
 bn_status bn_study_plot(const bn_study_result *res, const char *prefix, const char *title, bn_error *err);
+/* One self-contained HTML page (no file or network beside it): how the study was made (the
+ * provenance lines, the reference and its error, the fitted order), the table of every setting, and
+ * both plot panels as inline SVG. Atomic. */
+bn_status bn_study_write_report(const bn_study_result *res, const char *path, const char *provenance,
+                                const char *title, bn_error *err);
 /* A readable summary: reference, table, bound tightness, the equal-error verdict. */
 void bn_study_print(const bn_study_result *res, FILE *fp);
 

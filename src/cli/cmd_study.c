@@ -86,7 +86,7 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
     bn_optset set;
     bn_cli_scene so;
     bn_cli_ff ffo;
-    const char *pos[1], *vary = NULL, *out = "study.csv", *plot = NULL, *methods = NULL, *tols = NULL, *against = NULL;
+    const char *pos[1], *vary = NULL, *out = "study.csv", *plot = NULL, *report = NULL, *methods = NULL, *tols = NULL, *against = NULL;
     const char *title = NULL;
     size_t max_iter = 0, ref_patches = 0, spp = 0;
     int method = 3, ref_samples = 0, rr_depth = -1, refkind = 0;
@@ -119,6 +119,8 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
                                  "the parameter and its settings (required)"});
     bn_optset_add(&set, (bn_opt){"output", 'o', BN_OPT_STRING, &out, NULL, 0, 0, "FILE",
                                  "the CSV (default study.csv; written atomically)"});
+    bn_optset_add(&set, (bn_opt){"report", 0, BN_OPT_STRING, &report, NULL, 0, 0, "FILE.html",
+                                 "also one self-contained page: the plots, the table and how the study was made"});
     bn_optset_add(&set, (bn_opt){"plot", 0, BN_OPT_STRING, &plot, NULL, 0, 0, "PREFIX",
                                  "also write PREFIX.png and PREFIX.svg (error vs time; error vs the parameter)"});
     bn_optset_add(&set, (bn_opt){"title", 0, BN_OPT_STRING, &title, NULL, 0, 0, "TEXT", "a title for the plot"});
@@ -258,6 +260,8 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
     st = bn_study_write_csv(&res, out, prov, &err);
     if (st == BN_OK && plot)
         st = bn_study_plot(&res, plot, title, &err);
+    if (st == BN_OK && report)
+        st = bn_study_write_report(&res, report, prov, title, &err);
     if (st != BN_OK) {
         bn_study_result_free(&res);
         return bn_cli_fail(&err);

@@ -18,6 +18,7 @@ typedef struct bn__series {
     double x[BN__MAXPTS], y[BN__MAXPTS];   /* data units (logs taken when drawn) */
     int color, style, symbol;              /* symbol: 0 none */
     int vline;                             /* draw x[0] as a vertical line across the panel */
+    int band;                              /* shade from the panel's bottom up to y over the x range */
 } bn__series;
 
 typedef struct bn__panel {
@@ -32,6 +33,15 @@ typedef struct bn__panel {
 } bn__panel;
 
 /* One colour per method in both panels; other series by position. */
+#define BN__BAND_COLOR 10
+
+/* One marker shape per series of a panel, so series stay apart in grey print too. */
+static const char *bn__glyph(int index)
+{
+    static const char *const g[] = {"\u25CF", "\u25A0", "\u25B2", "\u25C6", "\u25BC", "\u2605", "\u25D0", "\u2B22"};
+    return g[index % 8];
+}
+
 static int bn__color(const char *label, int index)
 {
     static const char *const names[] = {"jacobi", "gauss-seidel", "neumann", "direct", "truncated", "radiosity", "trace"};
@@ -154,6 +164,21 @@ static void bn__draw(const bn__panel *p)
     }
     pllab(p->xlab, "", p->title);
     plmtex("l", 5.2, 0.5, 0.5, p->ylab);
+    for (int i = 0; i < p->nser; i++) {   /* bands first, under everything */
+        const bn__series *s = &p->ser[i];
+        if (s->band && s->n >= 2 && bn__ok(s->y[0], p->ylog) && bn__ok(s->x[0], p->xlog) &&
+            bn__ok(s->x[s->n - 1], p->xlog)) {
+            PLFLT bx[4], by[4], top = bn__tr(s->y[0], p->ylog);
+            bx[0] = bx[3] = bn__tr(s->x[0], p->xlog);
+            bx[1] = bx[2] = bn__tr(s->x[s->n - 1], p->xlog);
+            by[0] = by[1] = y0;
+            by[2] = by[3] = top > y0 ? top : y0;
+            plcol0(BN__BAND_COLOR);
+            plfill(4, bx, by);
+        }
+    }
+    plcol0(1);
+    plbox(p->xlog ? "bcgst" : "bcgst", 0, 0, p->ylog ? "bcgst" : "bcgst", 0, 0);   /* the grid over the band */
     for (int i = 0; i < p->nser; i++) {
         const bn__series *s = &p->ser[i];
         PLFLT xs[BN__MAXPTS], ys[BN__MAXPTS];
@@ -178,14 +203,14 @@ static void bn__draw(const bn__panel *p)
         if (m > 1 && s->style > 0)
             plline(m, xs, ys);
         if ((s->symbol || m == 1) && !s->vline)
-            plstring(m, xs, ys, "#(727)");   /* a filled circle */
+            plstring(m, xs, ys, bn__glyph(i));
         opts[nleg] = (s->style > 0 ? PL_LEGEND_LINE : 0) | ((s->symbol || m == 1) && !s->vline ? PL_LEGEND_SYMBOL : 0);
         colors[nleg] = s->color;
         styles[nleg] = s->style > 0 ? s->style : 1;
         widths[nleg] = 2.0;
         sscale[nleg] = 1.0;
-        snum[nleg] = 3;
-        syms[nleg] = "#(727)";
+        snum[nleg] = 1;
+        syms[nleg] = bn__glyph(i);
         text[nleg] = s->label;
         nleg++;
     }
@@ -223,6 +248,31 @@ static const char *bn__param_axis(bn_study_param p)
 }
 
 /* Fills the two panels from the result. */
+/* Mesh studies: the least-squares slope of log(per-surface error) against log(h), h the patch size
+ * (patch-size studies) or patches^(-1/2) (patches studies): the observed order p of err ~ h^p.
+ * NAN for other studies or fewer than two usable rows. */
+static double bn__fit_order(const bn_study_result *r)
+{
+    double sx = 0, sy = 0, sxx = 0, sxy = 0;
+    int m = 0;
+    if (r->param != BN_STUDY_PATCHES && r->param != BN_STUDY_PATCH_SIZE)
+        return NAN;
+    for (size_t i = 0; i < r->nrows; i++) {
+        const bn_study_row *w = &r->rows[i];
+        double h = r->param == BN_STUDY_PATCHES ? pow((double)w->patches, -0.5) : w->x, e = w->err_surface_max;
+        if (strcmp(w->method, "radiosity") != 0 || !(h > 0) || !(e > 0))
+            continue;
+        sx += log(h);
+        sy += log(e);
+        sxx += log(h) * log(h);
+        sxy += log(h) * log(e);
+        m++;
+    }
+    if (m < 2 || m * sxx - sx * sx <= 0)
+        return NAN;
+    return (m * sxy - sx * sy) / (m * sxx - sx * sx);
+}
+
 static void bn__panels(const bn_study_result *r, bn__panel *a, bn__panel *b)
 {
     const char *methods[BN__MAXSER];
@@ -340,12 +390,12 @@ static void bn__panels(const bn_study_result *r, bn__panel *a, bn__panel *b)
         int categorical = r->param == BN_STUDY_FF || r->param == BN_STUDY_PRECISION;
         bn__series *sm = bn__add(b, "max per-surface", 1, 1), *pm = bn__add(b, "max per-patch", 1, 1);
         bn__series *rm = bn__add(b, "RMS per-patch", 1, 1), *em = bn__add(b, "reflected power", 1, 1);
-        bn__series *fl = bn__add(b, "reference's own error (per surface)", 2, 0);
+        bn__series *fl = bn__add(b, "reference's own error, per surface (shaded)", 2, 0);
         double x0 = INFINITY, x1 = -INFINITY;
         int idx = 0;
         b->xlog = !categorical;
         snprintf(b->ylab, sizeof b->ylab, "relative error");
-        snprintf(b->title, sizeof b->title, "error against the %s (reference: %zu patches)", bn_study_param_name(r->param),
+        snprintf(b->title, sizeof b->title, "error vs %s (ref. %zu patches)", bn_study_param_name(r->param),
                  r->ref_patches);
         if (categorical)
             snprintf(b->xlab, sizeof b->xlab, "%s (setting)", bn__param_axis(r->param));
@@ -371,6 +421,12 @@ static void bn__panels(const bn_study_result *r, bn__panel *a, bn__panel *b)
         if (r->ref_error > 0 && isfinite(x0)) {
             bn__pt(fl, x0, r->ref_error);
             bn__pt(fl, x1, r->ref_error);
+            fl->band = 1;
+        }
+        {   /* the fitted convergence order of the per-surface error: err ~ h^p, h ~ patches^-1/2 */
+            double p = bn__fit_order(r);
+            if (isfinite(p))
+                snprintf(b->title + strlen(b->title), sizeof b->title - strlen(b->title), ", fitted order %.2f", p);
         }
     }
 }
@@ -382,6 +438,7 @@ static void bn__palette(void)
     plscolbg(255, 255, 255);
     for (int i = 0; i < 10; i++)
         plscol0(i, pal[i][0], pal[i][1], pal[i][2]);
+    plscol0(BN__BAND_COLOR, 221, 221, 221);   /* the reference's error band */
 }
 
 static bn_status bn__plot_one(const bn__panel *a, const bn__panel *b, const char *title, const char *path,
@@ -423,6 +480,34 @@ bn_status bn_study_plot(const bn_study_result *r, const char *prefix, const char
     if (st == BN_OK) {
         snprintf(path, sizeof path, "%s.svg", prefix);
         st = bn__plot_one(&a[0], &a[1], title, path, "svg", err);
+    }
+    free(a);
+    return st;
+}
+
+bn_status bn__study_panel_svg(const bn_study_result *r, int which, const char *beside, char **svg, bn_error *err)
+{
+    bn__panel *a = bn__calloc(2, sizeof *a);
+    char *tmp = NULL;
+    size_t n;
+    bn_status st;
+    *svg = NULL;
+    if (!a)
+        return bn_error_set(err, BN_ENOMEM, "study plot: out of memory");
+    bn__panels(r, &a[0], &a[1]);
+    st = bn__tmpname_reserve(beside, &tmp, err);   /* a temporary beside the report, removed below */
+    if (st == BN_OK) {
+        plsdev("svg");
+        plsfnam(tmp);
+        plspage(0, 0, 700, 560, 0, 0);
+        bn__palette();
+        plssub(1, 1);
+        plinit();
+        plfontld(1);
+        bn__draw(&a[which ? 1 : 0]);
+        plend();
+        st = bn__read_file(tmp, svg, &n, err);
+        bn__tmpname_abort(tmp);   /* removes it */
     }
     free(a);
     return st;

@@ -35,6 +35,10 @@ bn_status bn__study_compare(const bn__study_ref *ref, const bn_scene *s, const d
  * reference patch i's centroid (in the same face). out: 3 N_ref. */
 bn_status bn__study_map_onto(const bn_scene *ref, const bn_scene *s, const double *L, double *out, bn_error *err);
 
+/* One plot panel (0: error against time, 1: error against the varied parameter) as SVG text
+ * (malloc'd), for the HTML report; drawn through a temporary file beside `beside`. */
+bn_status bn__study_panel_svg(const bn_study_result *r, int which, const char *beside, char **svg, bn_error *err);
+
 /* Peak resident memory: reset the high-water mark (Linux clear_refs; no-op elsewhere), read it in MiB. */
 void bn__study_peak_reset(void);
 double bn__study_peak_mb(void);
