@@ -326,6 +326,11 @@ static bn_status bn__ref_error(bn__study *S, const bn__study_ref *ref, const bn_
     if (st == BN_OK)
         st = bn__study_compare(ref, c.scene, c.L, &row, err);
     if (st == BN_OK) {
+        /* a sampled reference against one with a quarter of its samples (independent streams): the
+         * difference is sqrt(5) standard errors of the reference; a mesh level differs by its error */
+        double scale = S->o->param == BN_STUDY_SAMPLES || S->o->param == BN_STUDY_FF ? 1 / sqrt(5.0) : 1;
+        row.err_surface_max *= scale;
+        row.err_max_rel *= scale;
         S->res->ref_error = row.err_surface_max;
         S->res->ref_error_patch = row.err_max_rel;
         snprintf(S->res->ref_error_how, sizeof S->res->ref_error_how, "%s (%zu patches): per-surface %.3g, per-patch %.3g",
@@ -966,7 +971,9 @@ static void bn__ref_levels(const bn_study_opts *o, bn__ref_plan *P)
         for (size_t v = 0; o->param == BN_STUDY_SAMPLES && v < o->nvalues; v++)
             top = (int)fmax(top, o->values[v]);
         fref.method = BN_FF_ANALYTIC;
-        fref.samples = o->ref_samples ? o->ref_samples : (8 * top > 256 ? 8 * top : 256);
+        /* 32x the largest setting: 1/sqrt(32) ~ 1/5.7 of its error, so the reference is well below
+         * what it measures even with the noise of its own estimate */
+        fref.samples = o->ref_samples ? o->ref_samples : (32 * top > 1024 ? 32 * top : 1024);
         /* Independent streams: a reference sharing the settings' seed (and stratification) would agree
          * with them by correlation, not accuracy. */
         fref.seed = bn__hash64(o->ff.seed ^ 0x7265666572656e63ULL);
@@ -1155,7 +1162,8 @@ static bn_status bn__build_reference(bn__study *S, const bn__ref_plan *P, bn__so
     } else {
         const char *how = mesh_study || o->param == BN_STUDY_SPP
                               ? "|reference - the same at half the patch density per axis| (first order in h: ~ its own error)"
-                              : "|reference - the same with a quarter of the shadow rays| (1/sqrt(N): ~2x its own error)";
+                              : "its standard error, |reference - the same with a quarter of the shadow rays| / sqrt(5) "
+                                "(independent streams at N and N/4: the difference's variance is (1 + 4) sigma^2 / N)";
         st = mesh_study ? bn__richardson(S, P, refp, rr, err) : BN_ENOTSUP;
         if (st == BN_OK)
             snprintf(R->reference + strlen(R->reference), sizeof R->reference - strlen(R->reference),
