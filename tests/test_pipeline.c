@@ -60,3 +60,51 @@ BN_TEST(stages_fail_cleanly)
     BN_ASSERT(p.scene != NULL && p.k == NULL);   /* the scene stage had run */
     bn_pipeline_free(&p);
 }
+
+/* F's precision by need: float's rounding 2^-24 amplified by 1 / (1 - rho_max) against the
+ * tolerance. rho 0.5: 1.2e-7 < 1e-6, float; rho 0.999: 6e-5 > 1e-6, double (and the answer then
+ * meets the tolerance the float storage could not); auto off keeps what was asked. */
+static bn_precision chosen(double rho, int auto_precision, double *L0)
+{
+    bn_pipeline_opts o;
+    bn_pipeline p;
+    bn_error err;
+    FILE *fp = fopen(bn_test_tmp("f.mtl"), "w");
+    char name[64];
+    bn_precision prec;
+    fprintf(fp, "newmtl furnace\nKd %.17g %.17g %.17g\nKe 1 1 1\n", rho, rho, rho);
+    fclose(fp);
+    fp = fopen(bn_test_tmp("f.obj"), "w");
+    /* the unit cube seen from inside, one quad a face */
+    fprintf(fp, "mtllib f.mtl\nusemtl furnace\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
+                "f 1 2 3 4\nf 5 8 7 6\nf 1 5 6 2\nf 2 6 7 3\nf 3 7 8 4\nf 4 8 5 1\n");
+    fclose(fp);
+    bn_pipeline_opts_default(&o);
+    o.load.log.quiet = 1;
+    o.mesh.target_patches = 54;
+    o.ff.quiet = 1;
+    o.ff.tolerance = 1e-9;   /* quadrature far below what float storage costs */
+    o.solve.quiet = 1;
+    o.solve.log_sink.quiet = 1;
+    o.solve.method = BN_SOLVE_DIRECT;
+    o.auto_precision = auto_precision;
+    if (bn_pipeline_run(bn_test_tmp("f.obj"), &o, &p, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    snprintf(name, sizeof name, "%s", bn_transport_name(p.k));
+    prec = strstr(name, "double") ? BN_PRECISION_DOUBLE : BN_PRECISION_FLOAT;
+    *L0 = p.res.L[0];
+    bn_pipeline_free(&p);
+    return prec;
+}
+
+BN_TEST(precision_by_need)
+{
+    double L;
+    BN_ASSERT_EQ(chosen(0.5, 1, &L), BN_PRECISION_FLOAT);
+    BN_ASSERT_REL(L, 2.0, 1e-6);
+    BN_ASSERT_EQ(chosen(0.999, 1, &L), BN_PRECISION_DOUBLE);
+    BN_ASSERT_REL(L, 1000.0, 1e-6);   /* Le / (1 - rho) to the tolerance */
+    BN_ASSERT_EQ(chosen(0.999, 0, &L), BN_PRECISION_FLOAT);   /* kept as asked ... */
+    fprintf(stderr, "rho 0.999 in float storage: L = %.9g (relative error %.3g)\n", L, fabs(L - 1000) / 1000);
+    BN_ASSERT_GT(fabs(L - 1000) / 1000, 2e-6);   /* ... and then it misses the tolerance: the need was real */
+}

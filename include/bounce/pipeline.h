@@ -31,6 +31,9 @@ typedef struct bn_pipeline_opts {
     int threads;               /* every stage's threads (0: the caller's), unless ff or solve set their own */
     int keep_rt;               /* keep the ray scene for images and the tracer (built even when F
                                   comes from the cache); else it is released after F */
+    int auto_precision;        /* choose F's precision by need (default 1): double when float's rounding,
+                                  2^-24 amplified by 1 / (1 - rho_max), would exceed solve.tol, else
+                                  ff.precision (said in a note); 0 keeps ff.precision as given */
     int tie_threshold;         /* raise solve.singular_threshold to F's measured row-sum excess
                                   (default 1: no row of F can sum above 1, so the excess is a
                                   measured part of F's error, and 1 - ||K|| below it leaves no

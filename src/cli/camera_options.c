@@ -74,8 +74,10 @@ void bn_cli_pipeline_opts(const bn_cli_scene *so, const bn_cli_ff *ff, const bn_
     if (so->patches)
         out->mesh.target_patches = so->patches;
     out->mesh.no_subdivide = so->no_subdivide;
-    if (ff)
+    if (ff) {
         bn_cli_ff_opts(ff, c, &out->ff);
+        out->auto_precision = ff->precision == 0;
+    }
     if (sol) {
         out->solve.method = (bn_solve_method)sol->method;
         if (sol->tol > 0)

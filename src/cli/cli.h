@@ -90,7 +90,7 @@ extern const char bn_cli_exit_codes[];
 typedef struct bn_cli_ff {
     int    method;            /* index into "analytic|montecarlo|hemisphere" */
     int    samples;           /* 0 = the method's default */
-    int    precision;         /* index into "float|double" */
+    int    precision;         /* index into "auto|float|double" */
     const char *storage;      /* a storage name (bn_storage_names()); NULL = the default */
     double sparse_threshold;
     size_t max_memory;        /* bytes, 0 = 80% of physical memory */

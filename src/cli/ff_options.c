@@ -10,8 +10,10 @@ void bn_cli_add_ff(bn_optset *s, bn_cli_ff *o)
     bn_optset_add(s, (bn_opt){"samples", 0, BN_OPT_INT, &o->samples, NULL, 1, 1 << 24, "N",
                               "analytic: shadow rays per pair an occluder may block (default 32); montecarlo: "
                               "point pairs per pair (64); hemisphere: rays per patch (4096)"});
-    bn_optset_add(s, (bn_opt){"precision", 0, BN_OPT_CHOICE, &o->precision, "float|double", 0, 0, "float|double",
-                              "storage precision of F (default float; sums are always double)"});
+    bn_optset_add(s, (bn_opt){"precision", 0, BN_OPT_CHOICE, &o->precision, "auto|float|double", 0, 0,
+                              "auto|float|double",
+                              "storage precision of F (default auto: float, or double when float's rounding times "
+                              "1/(1 - rho_max) would exceed --tol; sums are always double)"});
     bn_optset_add(s, (bn_opt){"storage", 0, BN_OPT_STRING, &o->storage, NULL, 0, 0, "dense|sparse",
                               "F storage: dense N^2 (default) or sparse CSR without the exact zeros"});
     bn_optset_add(s, (bn_opt){"sparse-threshold", 0, BN_OPT_DOUBLE, &o->sparse_threshold, NULL, 0, 0.999, "T",
@@ -29,7 +31,7 @@ void bn_cli_ff_opts(const bn_cli_ff *o, const bn_cli_common *c, bn_formfactor_op
     bn_formfactor_opts_default(out);
     out->method = (bn_ff_method)o->method;
     out->samples = o->samples;
-    out->precision = o->precision ? BN_PRECISION_DOUBLE : BN_PRECISION_FLOAT;
+    out->precision = o->precision == 2 ? BN_PRECISION_DOUBLE : BN_PRECISION_FLOAT;   /* auto starts from float */
     if (o->storage)
         out->storage = o->storage;
     out->sparse_threshold = o->sparse_threshold;

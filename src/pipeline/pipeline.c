@@ -4,6 +4,7 @@
 #include "bounce/pipeline.h"
 #include "base/internal.h"
 
+#include <math.h>
 #include <string.h>
 
 void bn_pipeline_opts_default(bn_pipeline_opts *o)
@@ -14,6 +15,21 @@ void bn_pipeline_opts_default(bn_pipeline_opts *o)
     bn_formfactor_opts_default(&o->ff);
     bn_solve_opts_default(&o->solve);
     o->tie_threshold = 1;
+    o->auto_precision = 1;
+}
+
+/* Float storage rounds each F_ij by 2^-24; the solve amplifies that by up to 1 / (1 - rho_max)
+ * (rho_max the largest reflectance): above the requested tolerance, F is kept in double. */
+static bn_precision bn__precision_by_need(const bn_pipeline_opts *o, const bn_scene *s, double *amplified)
+{
+    size_t nm;
+    const bn_material *m = bn_scene_materials(s, &nm);
+    double rho = 0;
+    for (size_t k = 0; k < nm; k++)
+        for (int c = 0; c < 3; c++)
+            rho = fmax(rho, m[k].rho[c]);
+    *amplified = rho < 1 ? bn_precision_epsilon(BN_PRECISION_FLOAT) / (1 - rho) : INFINITY;
+    return *amplified > o->solve.tol ? BN_PRECISION_DOUBLE : o->ff.precision;
 }
 
 bn_status bn_pipeline_scene(const char *path, const bn_pipeline_opts *o, bn_pipeline *p, bn_error *err)
@@ -39,7 +55,13 @@ bn_status bn_pipeline_scene(const char *path, const bn_pipeline_opts *o, bn_pipe
 bn_status bn_pipeline_operator(const bn_pipeline_opts *o, bn_pipeline *p, bn_error *err)
 {
     bn_formfactor_opts fo = o->ff;
-    double t0 = bn__now();
+    double t0 = bn__now(), amp;
+    if (o->auto_precision && fo.precision != bn__precision_by_need(o, p->scene, &amp)) {
+        fo.precision = BN_PRECISION_DOUBLE;
+        bn_logf(&o->solve.log_sink, BN_LOG_INFO,
+                "F stored in double: float's rounding (2^-24) amplified by 1 / (1 - rho_max) is %.2g, above the "
+                "tolerance %g (--precision float keeps float)", amp, o->solve.tol);
+    }
     bn_status st = bn_rt_create(p->scene, o->threads, &p->rt, err);
     if (!fo.threads)
         fo.threads = o->threads;
