@@ -801,3 +801,50 @@ BN_TEST(log_format)
     free(rho);
     free(E);
 }
+
+/* Emission over six orders of magnitude: two closed rooms that cannot see each other (two cubes,
+ * F block-diagonal), a bright one (Le 1e6, rho 0.5) and a dim one (Le 1, rho 0.99). Exact: L = Le /
+ * (1 - rho), 2e6 and 100. The default stop (residual <= tol ||E||_inf = 1) is met long before the
+ * slow dim room converges: its answer is far off. The patch stop holds every patch to tol of its
+ * own radiance: the dim room comes out to tol / (1 - rho). */
+BN_TEST(stop_patch_dim_light)
+{
+    double *cube = cube_F(), F[144] = {0}, rho[36], E[36];
+    bn_transport *k;
+    for (int b = 0; b < 2; b++)
+        for (int i = 0; i < 6; i++) {
+            for (int j = 0; j < 6; j++)
+                F[(6 * b + i) * 12 + 6 * b + j] = cube[i * 6 + j];
+            for (int c = 0; c < 3; c++) {
+                rho[3 * (6 * b + i) + c] = b ? 0.99 : 0.5;
+                E[3 * (6 * b + i) + c] = b ? 1 : 1e6;
+            }
+        }
+    k = make_k(12, F, rho, BN_PRECISION_DOUBLE);
+    for (int s = 0; s < 2; s++) {
+        bn_solve_opts o;
+        bn_solve_result res;
+        bn_error err;
+        double worst_dim = 0;
+        bn_solve_opts_default(&o);
+        o.method = BN_SOLVE_JACOBI;
+        o.stop = s ? BN_SOLVE_STOP_PATCH : BN_SOLVE_STOP_DEFAULT;
+        o.log_sink.quiet = 1;
+        o.quiet = 1;
+        BN_ASSERT_STATUS(bn_solve(k, E, &o, &res, &err), BN_OK);
+        for (int i = 6; i < 12; i++)
+            for (int c = 0; c < 3; c++)
+                worst_dim = fmax(worst_dim, fabs(res.L[3 * i + c] - 100) / 100);
+        for (int i = 0; i < 6; i++)
+            BN_ASSERT_REL(res.L[3 * i], 2e6, 1e-6);   /* the bright room is fine either way */
+        fprintf(stderr, "stop %s: %zu iterations, dim room's worst relative error %.3g\n", bn_solve_stop_name(o.stop),
+                res.iterations, worst_dim);
+        if (s)
+            BN_ASSERT_LE(worst_dim, 1e-6 / (1 - 0.99) * 1.01);
+        else
+            BN_ASSERT_GT(worst_dim, 0.1);   /* the need was real */
+        bn_solve_result_free(&res);
+    }
+    bn_transport_destroy(k);
+    free(cube);
+}

@@ -31,11 +31,15 @@ const char *bn_stop_reason_name(bn_stop_reason r);
 typedef enum bn_solve_stop {
     BN_SOLVE_STOP_DEFAULT,    /* residual for jacobi and gauss-seidel, bound for neumann */
     BN_SOLVE_STOP_RESIDUAL,   /* ||E - (I - K) L||_inf */
-    BN_SOLVE_STOP_BOUND       /* the a posteriori error bound ||r||_inf / (1 - ||K||_inf): a guarantee
+    BN_SOLVE_STOP_BOUND,      /* the a posteriori error bound ||r||_inf / (1 - ||K||_inf): a guarantee
                                  on ||L - L*||_inf (the series' tail bound); falls back to the residual
                                  when ||K||_inf >= 1 */
+    BN_SOLVE_STOP_PATCH       /* every patch's own: max_i,c |r_ic| / |L_ic| <= tol (entries with
+                                 |r_ic| <= atol count as met). For emission over many orders of
+                                 magnitude: a dim light's region is solved to tol of its own
+                                 radiance, where tol ||E||_inf may exceed that radiance itself */
 } bn_solve_stop;
-const char *bn_solve_stop_name(bn_solve_stop s);   /* "default", "residual", "bound" */
+const char *bn_solve_stop_name(bn_solve_stop s);   /* "default", "residual", "bound", "patch" */
 
 /* One row of the convergence table, handed to the monitor after every iteration (row 0 is the
  * initial guess L0 = E, before any sweep). Norms are infinity norms over patches. */

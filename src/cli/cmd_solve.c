@@ -104,9 +104,10 @@ static int bn__solve_parse(int argc, char **argv, bn_cli_common *c, bn__solve_cl
                                 "write the terms K^0 E .. K^N E as columns (default: none; 3 kept internally)"});
     bn_optset_add(set, (bn_opt){"symmetric", 0, BN_OPT_FLAG, &a->symmetric, NULL, 0, 0, NULL,
                                 "gauss-seidel: a forward then a backward sweep per iteration"});
-    bn_optset_add(set, (bn_opt){"stop", 0, BN_OPT_CHOICE, &a->stop, "default|residual|bound", 0, 0, "S",
-                                "what tol bounds: residual, or the error bound ||r||/(1-||K||) (default: bound for "
-                                "neumann, residual otherwise)"});
+    bn_optset_add(set, (bn_opt){"stop", 0, BN_OPT_CHOICE, &a->stop, "default|residual|bound|patch", 0, 0, "S",
+                                "what tol bounds: residual, the error bound ||r||/(1-||K||), or patch: every patch's "
+                                "residual relative to its own radiance, for lights orders of magnitude apart (default: "
+                                "bound for neumann, residual otherwise)"});
     bn_optset_add(set, (bn_opt){"singular-threshold", 0, BN_OPT_DOUBLE, &a->singular_threshold, NULL, 0, 0.5, "D",
                                 "refuse when rho(K) >= 1 - D; set D to F's row-sum error (default 1e-6)"});
     bn_optset_add(set, (bn_opt){"log", 0, BN_OPT_STRING, &a->log, NULL, 0, 0, "FILE",

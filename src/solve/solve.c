@@ -45,6 +45,7 @@ const char *bn_solve_stop_name(bn_solve_stop s)
     case BN_SOLVE_STOP_DEFAULT: return "default";
     case BN_SOLVE_STOP_RESIDUAL: return "residual";
     case BN_SOLVE_STOP_BOUND: return "bound";
+    case BN_SOLVE_STOP_PATCH: return "patch";
     }
     return "?";
 }
@@ -519,6 +520,19 @@ static void bn__solve_bounds(bn__solve *S, size_t it)
     S->row.seconds = bn__now() - S->t0;
 }
 
+/* The patch stop test's measure: the largest residual relative to its own patch's radiance, over
+ * the entries whose residual is above atol. */
+static double bn__patch_measure(const bn__solve *S)
+{
+    double m = 0;
+    for (size_t i = 0; i < S->m; i++) {
+        double r = fabs(S->r[i]), l = fabs(S->res->L[i]);
+        if (r > S->o->atol)
+            m = fmax(m, l > 0 ? r / l : INFINITY);
+    }
+    return m;
+}
+
 /* After a row: *done = 1 with the stop reason set (and the status of a failed stop), or 0 to go on. */
 static bn_status bn__solve_stop_test(bn__solve *S, int *done)
 {
@@ -528,7 +542,7 @@ static bn_status bn__solve_stop_test(bn__solve *S, int *done)
     size_t it = row->iteration;
     double measure = S->stop == BN_SOLVE_STOP_BOUND && S->knorm < 1 ? row->error_bound : row->residual_max;
     *done = 1;
-    if (measure <= S->target) {
+    if (S->stop == BN_SOLVE_STOP_PATCH ? bn__patch_measure(S) <= o->tol : measure <= S->target) {
         res->reason = BN_STOP_CONVERGED_RTOL;
         return BN_OK;
     }
