@@ -15,6 +15,7 @@
 #include "bounce/rt.h"
 #include "bounce/transport.h"
 #include "bounce/formfactor.h"
+#include "bounce/hierarchy.h"
 #include "bounce/solve.h"
 #include "bounce/layers.h"
 #include "bounce/trace.h"
@@ -26,9 +27,17 @@ extern "C" {
 typedef struct bn_pipeline_opts {
     bn_load_opts load;         /* how the file is read */
     bn_mesh_opts mesh;         /* how it is cut into patches */
-    bn_formfactor_opts ff;     /* how F is assembled and stored (and cached) */
+    const char *transport;     /* how K is made: "dense" or "sparse" (form factors of every pair, kept
+                                  so: overrides ff.storage), "hierarchical" (bn_hierarchy_build), "auto"
+                                  (hierarchical when dense F would not fit in memory or the scene has
+                                  more than BN_AUTO_HIERARCHY_PATCHES patches; says which and why);
+                                  NULL: ff.storage */
+    bn_formfactor_opts ff;     /* how F is assembled and stored (and cached); the hierarchy's leaf links */
+    bn_hierarchy_opts hier;    /* the hierarchy's options (its ff, threads and log are set from the above) */
     bn_solve_opts solve;       /* method, tolerance, terms kept (solve.bounces) */
     int threads;               /* every stage's threads (0: the caller's), unless ff or solve set their own */
+    int method_auto;           /* solve.method is a default: gauss-seidel where K has rows, else jacobi
+                                  (said in a note) */
     int keep_rt;               /* keep the ray scene for images and the tracer (built even when F
                                   comes from the cache); else it is released after F */
     int auto_precision;        /* choose F's precision by need (default 1): double when float's rounding,
@@ -40,15 +49,25 @@ typedef struct bn_pipeline_opts {
                                   accuracy) */
 } bn_pipeline_opts;
 void bn_pipeline_opts_default(bn_pipeline_opts *o);
+#define BN_AUTO_HIERARCHY_PATCHES 6000
+/* The transport names, "|"-separated, for help texts: "auto|dense|sparse|hierarchical". */
+const char *bn_pipeline_transports(void);
+/* Would `transport` (may be NULL or "auto") be the hierarchy for a scene of n patches, given the
+ * form-factor options? why (may be NULL) receives the reason. */
+int bn_pipeline_use_hierarchy(const bn_pipeline_opts *o, size_t n, char *why, size_t why_size);
 
 /* What the stages made; everything is owned and released by bn_pipeline_free. */
 typedef struct bn_pipeline {
     bn_scene *scene;           /* loaded and meshed */
     bn_rt *rt;                 /* NULL unless keep_rt */
     bn_transport *k;           /* K = diag(rho) F */
-    bn_ff_diagnostics ff;      /* the assembly's report (or the cache's) */
+    bn_ff_diagnostics ff;      /* the assembly's report (or the cache's); for the hierarchy: n, row sums,
+                                  k_norm_inf, nonzeros (links), rays, bytes, seconds */
+    int hierarchical;          /* K is the hierarchy; hier is its report */
+    bn_hierarchy_report hier;
     double *E;                 /* N*3 emitted radiance */
     bn_solve_result res;       /* L and the terms K^0 E .. K^b E (b = solve.bounces) */
+    bn_solve_method method_used;  /* the solver that ran (method_auto may have chosen it) */
     double *rest;              /* N*3: L - sum of the kept terms (NULL when none are kept) */
     size_t n;                  /* patches */
     double singular_threshold; /* the threshold the solve used */
@@ -63,6 +82,9 @@ typedef struct bn_pipeline {
 bn_status bn_pipeline_scene(const char *path, const bn_pipeline_opts *o, bn_pipeline *p, bn_error *err);
 /* Builds the ray scene and K for p->scene; fills p->ff. */
 bn_status bn_pipeline_operator(const bn_pipeline_opts *o, bn_pipeline *p, bn_error *err);
+/* The method the solve stage will use (after bn_pipeline_operator): solve.method, or under method_auto
+ * jacobi in place of gauss-seidel when K has no rows. */
+bn_solve_method bn_pipeline_method(const bn_pipeline_opts *o, const bn_pipeline *p);
 /* Solves (I - K) L = E keeping the terms, and rest. On BN_ENOTCONV the answer is kept (the caller
  * decides whether an unconverged answer is a result). */
 bn_status bn_pipeline_solve(const bn_pipeline_opts *o, bn_pipeline *p, bn_error *err);

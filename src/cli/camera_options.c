@@ -53,9 +53,11 @@ void bn_cli_camera_describe(const bn_camera *c, char *buf, size_t n)
 
 void bn_cli_add_solution(bn_optset *s, bn_cli_solution *o)
 {
-    o->method = 1;
-    bn_optset_add(s, (bn_opt){"method", 'm', BN_OPT_CHOICE, &o->method, "jacobi|gauss-seidel|neumann|direct", 0, 0,
-                              "METHOD", "jacobi, gauss-seidel (default), neumann or direct"});
+    o->method = 0;
+    bn_optset_add(s, (bn_opt){"method", 'm', BN_OPT_CHOICE, &o->method, "auto|jacobi|gauss-seidel|neumann|direct", 0,
+                              0, "METHOD",
+                              "jacobi, gauss-seidel, neumann or direct; auto (default): gauss-seidel, or jacobi where K "
+                              "has no rows (the hierarchy)"});
     bn_optset_add(s, (bn_opt){"tol", 0, BN_OPT_DOUBLE, &o->tol, NULL, 1e-300, 1, "T",
                               "stop when ||E - (I - K) L||_inf <= T ||E||_inf (default 1e-6)"});
     bn_optset_add(s, (bn_opt){"max-iter", 0, BN_OPT_SIZE, &o->max_iter, NULL, 1, 1e12, "N",
@@ -77,9 +79,20 @@ void bn_cli_pipeline_opts(const bn_cli_scene *so, const bn_cli_ff *ff, const bn_
     if (ff) {
         bn_cli_ff_opts(ff, c, &out->ff);
         out->auto_precision = ff->precision == 0;
+        {
+            static const char *names[] = {"auto", "dense", "sparse", "hierarchical"};
+            out->transport = ff->transport == 0 && ff->storage ? ff->storage : names[ff->transport];
+        }
+        if (ff->eps >= 0)
+            out->hier.eps = ff->eps;
+        out->hier.clusters = !ff->no_clusters;
+        if (ff->link_samples > 0)
+            out->hier.samples = ff->link_samples;
     }
     if (sol) {
-        out->solve.method = (bn_solve_method)sol->method;
+        out->method_auto = sol->method == 0;
+        if (sol->method > 0)
+            out->solve.method = (bn_solve_method)(sol->method - 1);
         if (sol->tol > 0)
             out->solve.tol = sol->tol;
         if (sol->max_iter > 0)

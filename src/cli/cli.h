@@ -96,6 +96,10 @@ typedef struct bn_cli_ff {
     size_t max_memory;        /* bytes, 0 = 80% of physical memory */
     double tolerance;         /* 0 = default */
     const char *cache;        /* NULL: no cache */
+    int    transport;         /* index into "auto|dense|sparse|hierarchical" (default auto) */
+    double eps;               /* hierarchy: link tolerance (< 0: the default) */
+    int    no_clusters;       /* hierarchy: start from every pair of polygons */
+    int    link_samples;      /* hierarchy: point pairs per link above the patches (0: default) */
 } bn_cli_ff;
 void bn_cli_add_ff(bn_optset *s, bn_cli_ff *o);
 /* Fills library options from the CLI groups. */
@@ -120,7 +124,7 @@ void bn_cli_camera_describe(const bn_camera *cam, char *buf, size_t n);
 #include "bounce/solve.h"
 #include "bounce/pipeline.h"
 typedef struct bn_cli_solution {
-    int    method;     /* index into "jacobi|gauss-seidel|neumann|direct" (default gauss-seidel) */
+    int    method;     /* index into "auto|jacobi|gauss-seidel|neumann|direct" (default auto) */
     double tol;        /* 0 = default 1e-6 */
     size_t max_iter;   /* 0 = default */
 } bn_cli_solution;

@@ -73,7 +73,7 @@ static int bn__solve_parse(int argc, char **argv, bn_cli_common *c, bn__solve_cl
     const char *pos[1];
     bn_error err;
     bn_solve_opts_default(&d);
-    a->method = (int)d.method;
+    a->method = 0;   /* auto */
     a->tol = d.tol;
     a->atol = d.atol;
     a->max_iter = d.max_iter;
@@ -92,8 +92,10 @@ static int bn__solve_parse(int argc, char **argv, bn_cli_common *c, bn__solve_cl
         "system (a closed scene with reflectance 1) is refused with exit code 5.";
     bn_cli_add_scene(set, &a->so);
     bn_cli_add_ff(set, &a->ffo);
-    bn_optset_add(set, (bn_opt){"method", 'm', BN_OPT_CHOICE, &a->method, "jacobi|gauss-seidel|neumann|direct", 0, 0,
-                                "M", "jacobi, gauss-seidel, neumann (series) or direct (LAPACK) (default gauss-seidel)"});
+    bn_optset_add(set, (bn_opt){"method", 'm', BN_OPT_CHOICE, &a->method,
+                                "auto|jacobi|gauss-seidel|neumann|direct", 0, 0, "M",
+                                "jacobi, gauss-seidel, neumann (series) or direct (LAPACK); auto (default): "
+                                "gauss-seidel, or jacobi where K has no rows (the hierarchy)"});
     bn_optset_add(set, (bn_opt){"tol", 0, BN_OPT_DOUBLE, &a->tol, NULL, 0, 1, "T",
                                 "stop when ||r||_inf <= T ||E||_inf (default 1e-6)"});
     bn_optset_add(set, (bn_opt){"atol", 0, BN_OPT_DOUBLE, &a->atol, NULL, 0, 1e300, "A",
@@ -131,7 +133,9 @@ static void bn__solve_opts(const bn__solve_cli *a, const bn_cli_common *c, bn_pi
 {
     bn_solve_opts *o = &po->solve;
     bn_cli_pipeline_opts(&a->so, &a->ffo, NULL, c, po);
-    o->method = (bn_solve_method)a->method;
+    po->method_auto = a->method == 0;
+    if (a->method > 0)
+        o->method = (bn_solve_method)(a->method - 1);
     o->tol = a->tol;
     o->atol = a->atol;
     o->max_iter = a->max_iter;
@@ -184,7 +188,7 @@ static void bn__solve_report(const bn_pipeline_opts *po, const bn_pipeline *p, b
     if (quiet && st == BN_OK)
         return;
     fprintf(stderr, "bounce: solve: %zu patches, %s, K %s (%.3g MiB); ||K||_inf %.6g, spectral radius %.6g (>= %.6g)\n",
-            p->n, bn_solve_method_name(o->method), bn_transport_name(p->k),
+            p->n, bn_solve_method_name(p->res.L ? p->method_used : o->method), bn_transport_name(p->k),
             (double)bn_transport_bytes(p->k) / 1048576.0, res->k_norm_inf, res->spectral_radius,
             res->spectral_radius_lower);
     if (res->reason != BN_STOP_NONE && res->reason != BN_STOP_SINGULAR)
@@ -257,6 +261,7 @@ int bn_cmd_solve(int argc, char **argv, bn_cli_common *c)
     if (st == BN_OK)
         st = bn_pipeline_operator(&po, &p, &err);
     if (st == BN_OK) {
+        po.solve.method = bn_pipeline_method(&po, &p);   /* what runs, for the provenance */
         bn__provenance_run(prov, sizeof prov, c, &po, &p);
         st = bn__solve_logged(&a, &po, &p, prov, &err);
         bn__solve_report(&po, &p, st, c->quiet);

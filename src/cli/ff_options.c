@@ -5,6 +5,20 @@
 
 void bn_cli_add_ff(bn_optset *s, bn_cli_ff *o)
 {
+    o->eps = -1;
+    bn_optset_add(s, (bn_opt){"transport", 0, BN_OPT_CHOICE, &o->transport, "auto|dense|sparse|hierarchical", 0, 0,
+                              "auto|dense|sparse|hierarchical",
+                              "how K is made: every pair's form factor kept dense or sparse, or hierarchical links "
+                              "between clusters and elements; auto (default): hierarchical when dense F would not fit "
+                              "or the scene has more than 6000 patches (--storage given: that storage)"});
+    bn_optset_add(s, (bn_opt){"eps", 0, BN_OPT_DOUBLE, &o->eps, NULL, 0, 1, "EPS",
+                              "hierarchy: split a link while rho x B_source x F_bound exceeds EPS x the largest "
+                              "emitted radiance (default 1e-3; 0: every link down to the patches)"});
+    bn_optset_add(s, (bn_opt){"no-clusters", 0, BN_OPT_FLAG, &o->no_clusters, NULL, 0, 0, NULL,
+                              "hierarchy: no volume clusters; start from every pair of input polygons"});
+    bn_optset_add(s, (bn_opt){"link-samples", 0, BN_OPT_INT, &o->link_samples, NULL, 1, 1 << 16, "N",
+                              "hierarchy: point pairs and rays per link above the patches (default 4; x4 when "
+                              "partly visible)"});
     bn_optset_add(s, (bn_opt){"ff", 0, BN_OPT_CHOICE, &o->method, "analytic|montecarlo|hemisphere", 0, 0,
                               "METHOD", "form factors: analytic (default), montecarlo or hemisphere"});
     bn_optset_add(s, (bn_opt){"samples", 0, BN_OPT_INT, &o->samples, NULL, 1, 1 << 24, "N",

@@ -7,6 +7,7 @@
 #include "bounce/formfactor.h"
 #include "formfactor/ff_internal.h"
 #include "formfactor/ff_io.h"
+#include "formfactor/ff_pair.h"
 #include "base/internal.h"
 #include "base/vec.h"
 
@@ -474,18 +475,19 @@ typedef struct bn__counts {
     size_t pairs_nonzero, pairs_culled, pairs_tested, pairs_blocked, rays, evals;
 } bn__counts;
 
-static void bn__analytic_or_mc_pair(const bn_rt *rt, const bn__ffg *g, const bn_formfactor_opts *o, double rtol,
-                                    const size_t *cand, size_t ncand, size_t i, size_t j, bn__scratch *s,
-                                    bn__sink *sink, bn__counts *cnt)
+/* A_i F_ij = A_j F_ji of the pair i < j, with visibility; 0 when they cannot see each other.
+ * cand: the faces that may occlude (row i's candidates), or NULL: always cast the rays. */
+static double bn__pair_value(const bn_rt *rt, const bn__ffg *g, const bn_formfactor_opts *o, double rtol,
+                             const size_t *cand, size_t ncand, size_t i, size_t j, bn__scratch *s, bn__counts *cnt)
 {
     bn__pair p;
     const double *ni = g->patch[i].normal, *nj = g->patch[j].normal;
     double I = 0, vis = 1;
     int maybe;
     if (!bn__pair_prep(g, i, j, &p))
-        return;   /* exactly 0: F is zeroed storage */
+        return 0;
     cnt->pairs_nonzero++;
-    maybe = bn__shaft_maybe(g, cand, ncand, i, j, &p);
+    maybe = cand ? bn__shaft_maybe(g, cand, ncand, i, j, &p) : 1;
     if (!maybe)
         cnt->pairs_culled++;
     if (o->method == BN_FF_ANALYTIC) {
@@ -543,6 +545,16 @@ static void bn__analytic_or_mc_pair(const bn_rt *rt, const bn__ffg *g, const bn_
             cnt->pairs_blocked++;
         I = p.Aa * p.Ab * sum / (double)s->S;
     }
+    return I;
+}
+
+static void bn__analytic_or_mc_pair(const bn_rt *rt, const bn__ffg *g, const bn_formfactor_opts *o, double rtol,
+                                    const size_t *cand, size_t ncand, size_t i, size_t j, bn__scratch *s,
+                                    bn__sink *sink, bn__counts *cnt)
+{
+    double I = bn__pair_value(rt, g, o, rtol, cand, ncand, i, j, s, cnt);
+    if (I == 0)
+        return;   /* exactly 0: F is zeroed storage */
     /* reciprocity: A_i F_ij = A_j F_ji = I */
     bn__sink_put(sink, i, j, I / g->patch[i].area);
     bn__sink_put(sink, j, i, I / g->patch[j].area);
@@ -1120,3 +1132,88 @@ void bn_ff_diagnostics_print(const bn_ff_diagnostics *d, FILE *fp)
     fprintf(fp, "bytes                %zu\n", d->bytes);
     fprintf(fp, "seconds              %.3f\n", d->seconds);
 }
+
+/* ---- one pair at a time, for operators that choose their own pairs (src/formfactor/ff_pair.h) ---- */
+
+struct bn__ff_pairs {
+    bn__ffg g;
+    const bn_rt *rt;
+    bn_formfactor_opts o;
+};
+
+struct bn__ff_worker {
+    bn__scratch s;
+    size_t *cand;
+    size_t cand_row;     /* the row cand holds (SIZE_MAX: none) */
+    size_t ncand;
+    bn__counts c;
+};
+
+bn_status bn__ff_pairs_create(const bn_scene *scene, const bn_rt *rt, const bn_formfactor_opts *o,
+                              bn__ff_pairs **out, bn_error *err)
+{
+    bn__ff_pairs *p;
+    bn_status st;
+    *out = NULL;
+    if (o->method == BN_FF_HEMISPHERE)
+        return bn_error_set(err, BN_EUSAGE, "hemisphere form factors come a row at a time, not per pair "
+                                            "(use --ff analytic or montecarlo)");
+    p = bn__calloc(1, sizeof *p);
+    if (!p)
+        return bn_error_set(err, BN_ENOMEM, "out of memory");
+    st = bn__ff_opts(scene, rt, o, &p->o, err);
+    if (st == BN_OK)
+        st = bn__ffg_init(&p->g, scene, bn_rt_epsilon(rt), err);
+    if (st != BN_OK) {
+        free(p);
+        return st;
+    }
+    p->rt = rt;
+    *out = p;
+    return BN_OK;
+}
+
+void bn__ff_pairs_destroy(bn__ff_pairs *p)
+{
+    if (!p)
+        return;
+    bn__ffg_free(&p->g);
+    free(p);
+}
+
+bn__ff_worker *bn__ff_worker_create(const bn__ff_pairs *p)
+{
+    bn__ff_worker *w = bn__calloc(1, sizeof *w);
+    if (!w)
+        return NULL;
+    w->cand = bn__malloc_array(p->g.nf ? p->g.nf : 1, sizeof(size_t));
+    w->cand_row = SIZE_MAX;
+    if (!w->cand || !bn__scratch_init(&w->s, (size_t)bn__samples(&p->o), 0)) {
+        bn__ff_worker_destroy(w);
+        return NULL;
+    }
+    return w;
+}
+
+void bn__ff_worker_destroy(bn__ff_worker *w)
+{
+    if (!w)
+        return;
+    bn__scratch_free(&w->s);
+    free(w->cand);
+    free(w);
+}
+
+double bn__ff_pair(const bn__ff_pairs *p, bn__ff_worker *w, size_t i, size_t j, int cull)
+{
+    size_t a = i < j ? i : j, b = i < j ? j : i;
+    if (i == j)
+        return 0;
+    if (cull && w->cand_row != a) {
+        w->ncand = bn__row_candidates(&p->g, a, w->cand);
+        w->cand_row = a;
+    }
+    return bn__pair_value(p->rt, &p->g, &p->o, p->o.tolerance, cull ? w->cand : NULL, w->ncand, a, b, &w->s, &w->c);
+}
+
+size_t bn__ff_worker_rays(const bn__ff_worker *w) { return w->c.rays; }

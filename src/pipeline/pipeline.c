@@ -14,6 +14,7 @@ void bn_pipeline_opts_default(bn_pipeline_opts *o)
     bn_mesh_opts_default(&o->mesh);
     bn_formfactor_opts_default(&o->ff);
     bn_solve_opts_default(&o->solve);
+    bn_hierarchy_opts_default(&o->hier);
     o->tie_threshold = 1;
     o->auto_precision = 1;
 }
@@ -52,11 +53,93 @@ bn_status bn_pipeline_scene(const char *path, const bn_pipeline_opts *o, bn_pipe
     return BN_OK;
 }
 
+const char *bn_pipeline_transports(void) { return "auto|dense|sparse|hierarchical"; }
+
+int bn_pipeline_use_hierarchy(const bn_pipeline_opts *o, size_t n, char *why, size_t why_size)
+{
+    const char *t = o->transport;
+    char tmp[8];
+    if (!why) {
+        why = tmp;
+        why_size = sizeof tmp;
+    }
+    why[0] = 0;
+    if (t && !strcmp(t, "hierarchical")) {
+        snprintf(why, why_size, "asked for");
+        return 1;
+    }
+    if (!t || strcmp(t, "auto"))
+        return 0;
+    size_t limit = o->ff.max_memory ? o->ff.max_memory : bn_memory_limit_default();
+    size_t dense = bn_storage_bytes("dense", n, 0, o->ff.precision);
+    if (dense == SIZE_MAX || dense > limit) {
+        snprintf(why, why_size, "dense F of %zu patches would need %.3g GiB, above the %.3g GiB limit", n,
+                 dense == SIZE_MAX ? INFINITY : (double)dense / (1 << 30), (double)limit / (1 << 30));
+        return 1;
+    }
+    if (n > BN_AUTO_HIERARCHY_PATCHES) {
+        snprintf(why, why_size, "%zu patches: above %d, every pair's form factor takes longer than the hierarchy", n,
+                 BN_AUTO_HIERARCHY_PATCHES);
+        return 1;
+    }
+    snprintf(why, why_size, "%zu patches: at most %d, every pair's form factor is affordable", n,
+             BN_AUTO_HIERARCHY_PATCHES);
+    return 0;
+}
+
+/* The hierarchy's report in the form-factor diagnostics the rest of the pipeline reads: row sums
+ * of F_H (F_H applied to ones) and ||K_H||_inf. */
+static bn_status bn__hierarchy_diag(bn_pipeline *p, bn_error *err)
+{
+    size_t n = p->n;
+    double *one = bn__malloc_array(3 * n, sizeof(double)), *y = bn__malloc_array(3 * n, sizeof(double));
+    const double *rho = bn_transport_rho(p->k);
+    bn_status st = BN_OK;
+    bn_ff_diagnostics *d = &p->ff;
+    memset(d, 0, sizeof *d);
+    if (!one || !y)
+        st = bn_error_set(err, BN_ENOMEM, "out of memory for %zu patches", n);
+    for (size_t k = 0; st == BN_OK && k < 3 * n; k++)
+        one[k] = 1;
+    if (st == BN_OK)
+        st = bn_transport_apply_F(p->k, one, y, err);
+    if (st == BN_OK) {
+        double ss = 0;
+        d->n = n;
+        d->row_sum_min = INFINITY;
+        d->row_sum_max = -INFINITY;
+        for (size_t i = 0; i < n; i++) {
+            double r = y[3 * i];
+            d->row_sum_min = fmin(d->row_sum_min, r);
+            d->row_sum_max = fmax(d->row_sum_max, r);
+            ss += (r - 1) * (r - 1);
+            for (int c = 0; c < 3; c++)
+                d->k_norm_inf = fmax(d->k_norm_inf, rho[3 * i + c] * r);
+        }
+        d->row_sum_rms_dev = n ? sqrt(ss / (double)n) : 0;
+        d->nonzeros = p->hier.links;
+        d->rays = p->hier.rays;
+        d->bytes = bn_transport_bytes(p->k);
+        d->seconds = p->hier.seconds_tree + p->hier.seconds_refine;
+        d->rays_per_second = d->seconds > 0 ? (double)d->rays / d->seconds : 0;
+    }
+    free(one);
+    free(y);
+    return st;
+}
+
 bn_status bn_pipeline_operator(const bn_pipeline_opts *o, bn_pipeline *p, bn_error *err)
 {
     bn_formfactor_opts fo = o->ff;
     double t0 = bn__now(), amp;
-    if (o->auto_precision && fo.precision != bn__precision_by_need(o, p->scene, &amp)) {
+    char why[160];
+    p->hierarchical = bn_pipeline_use_hierarchy(o, p->n, why, sizeof why);
+    if (o->transport && !strcmp(o->transport, "auto"))
+        bn_logf(&o->solve.log_sink, BN_LOG_INFO, "transport: %s (%s)", p->hierarchical ? "hierarchical" : "dense",
+                why);
+    if (o->transport && strcmp(o->transport, "auto") && strcmp(o->transport, "hierarchical"))
+        fo.storage = o->transport;
+    if (!p->hierarchical && o->auto_precision && fo.precision != bn__precision_by_need(o, p->scene, &amp)) {
         fo.precision = BN_PRECISION_DOUBLE;
         bn_logf(&o->solve.log_sink, BN_LOG_INFO,
                 "F stored in double: float's rounding (2^-24) amplified by 1 / (1 - rho_max) is %.2g, above the "
@@ -65,14 +148,36 @@ bn_status bn_pipeline_operator(const bn_pipeline_opts *o, bn_pipeline *p, bn_err
     bn_status st = bn_rt_create(p->scene, o->threads, &p->rt, err);
     if (!fo.threads)
         fo.threads = o->threads;
-    if (st == BN_OK)
+    if (st == BN_OK && p->hierarchical) {
+        bn_hierarchy_opts ho = o->hier;
+        ho.ff = fo;
+        ho.ff.cache_path = NULL;
+        if (!ho.threads)
+            ho.threads = fo.threads;
+        if (!ho.max_memory)
+            ho.max_memory = fo.max_memory;
+        ho.quiet = ho.quiet || fo.quiet;
+        if (!ho.log.fn)
+            ho.log = fo.log;
+        st = bn_hierarchy_build(p->scene, p->rt, &ho, &p->k, &p->hier, err);
+        if (st == BN_OK)
+            st = bn__hierarchy_diag(p, err);
+    } else if (st == BN_OK) {
         st = bn_formfactor_build(p->scene, p->rt, &fo, &p->k, &p->ff, err);
+    }
     if (st != BN_OK || !o->keep_rt) {
         bn_rt_destroy(p->rt);
         p->rt = NULL;
     }
     p->seconds_operator = bn__now() - t0;
     return st;
+}
+
+bn_solve_method bn_pipeline_method(const bn_pipeline_opts *o, const bn_pipeline *p)
+{
+    if (o->method_auto && o->solve.method == BN_SOLVE_GAUSS_SEIDEL && p->k && !(bn_transport_caps(p->k) & BN_OP_ROWS))
+        return BN_SOLVE_JACOBI;
+    return o->solve.method;
 }
 
 bn_status bn_pipeline_solve(const bn_pipeline_opts *o, bn_pipeline *p, bn_error *err)
@@ -93,6 +198,12 @@ bn_status bn_pipeline_solve(const bn_pipeline_opts *o, bn_pipeline *p, bn_error 
         so.singular_threshold = p->ff.row_sum_max - 1.0;
     }
     p->singular_threshold = so.singular_threshold;
+    if (so.method != bn_pipeline_method(o, p)) {
+        so.method = bn_pipeline_method(o, p);
+        bn_logf(&so.log_sink, BN_LOG_INFO, "solver: %s (K is %s, which keeps no rows for gauss-seidel)",
+                bn_solve_method_name(so.method), bn_transport_name(p->k));
+    }
+    p->method_used = so.method;
     st = bn_solve(p->k, p->E, &so, &p->res, err);
     if ((st == BN_OK || st == BN_ENOTCONV) && p->res.nterms > 0) {
         p->rest = bn__malloc_array(3 * p->n + 1, sizeof(double));
@@ -130,8 +241,14 @@ void bn_pipeline_free(bn_pipeline *p)
 
 void bn_pipeline_describe_solve(const bn_pipeline_opts *o, const bn_pipeline *p, char *buf, size_t size)
 {
-    snprintf(buf, size, "%s%s tol=%g max_iter=%zu: %s after %zu iterations, residual %.3g",
-             bn_solve_method_name(o->solve.method),
-             o->solve.symmetric && o->solve.method == BN_SOLVE_GAUSS_SEIDEL ? "-symmetric" : "", o->solve.tol,
-             o->solve.max_iter, bn_stop_reason_name(p->res.reason), p->res.iterations, p->res.residual_max);
+    bn_solve_method m = p->res.L ? p->method_used : o->solve.method;
+    snprintf(buf, size, "%s%s tol=%g max_iter=%zu: %s after %zu iterations, residual %.3g%s%s",
+             bn_solve_method_name(m), o->solve.symmetric && m == BN_SOLVE_GAUSS_SEIDEL ? "-symmetric" : "",
+             o->solve.tol, o->solve.max_iter, bn_stop_reason_name(p->res.reason), p->res.iterations,
+             p->res.residual_max, p->hierarchical ? "; K: hierarchy, " : "", p->hierarchical ? "" : "");
+    if (p->hierarchical) {
+        size_t len = strlen(buf);
+        snprintf(buf + len, size > len ? size - len : 0, "eps=%g (%.3g absolute), %zu links, %zu nodes",
+                 o->hier.eps, p->hier.eps_abs, p->hier.links, p->hier.nodes);
+    }
 }

@@ -1,0 +1,77 @@
+/* bounce: hierarchical radiosity with clustering, as one more transport operator.
+ *
+ * The scene's patches are the leaves. Above them: a binary tree over each input polygon's patches
+ * (planar nodes), and volume clusters over the polygons up to one root. Links join a receiver node
+ * to a source node at whatever level an error oracle accepts (Hanrahan, Salzman, Aupperle 1991;
+ * clusters after Smits, Arvo, Greenberg 1994 and Sillion 1995), starting from the root's self-link.
+ * The oracle is brightness-weighted: a link is split while rho_receiver x B_source x F_bound
+ * exceeds eps x the largest emitted radiance. Refinement alternates with gathers until the link
+ * set settles; then the set is frozen, and
+ *     y = F_H x = push(gather along links(pull(x)))
+ * is one linear map on the patches (pull: area-weighted means up the tree; push: every node's
+ * gathered value added to all leaves below it). K_H = diag(rho) F_H serves the operator interface
+ * (apply and a zero diagonal: no link joins a node to itself or to its own subtree), so Jacobi, the
+ * Neumann series and every bounce term K_H^k E run on it as on dense K. Gauss-Seidel needs rows,
+ * which a hierarchy does not keep. */
+#ifndef BOUNCE_HIERARCHY_H
+#define BOUNCE_HIERARCHY_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+#include "bounce/scene.h"
+#include "bounce/rt.h"
+#include "bounce/transport.h"
+#include "bounce/formfactor.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define BN_HIERARCHY_EPS_DEFAULT 1e-3
+
+typedef struct bn_hierarchy_opts {
+    double eps;          /* link tolerance relative to the largest emitted radiance (default 1e-3);
+                            0 refines every link down to the patches */
+    int    clusters;     /* 1 (default): start from the root's self-link; 0: from every pair of input
+                            polygons (k^2 links before any refinement) */
+    int    samples;      /* point pairs (and rays) per link above the patches (default 4; partly
+                            visible links get 4x as many) */
+    int    max_passes;   /* refine-gather passes before the link set is frozen (default 8) */
+    bn_formfactor_opts ff;   /* links between two patches: exactly the dense assembly's pair (method,
+                                samples, tolerance, seed); its storage is unused */
+    int    cull_leaf_rays;   /* leaf links skip rays where no face can lie between (1, as the dense
+                                assembly does: identical values, costs a pass over the faces per
+                                patch); default 0: always cast */
+    size_t max_memory;   /* bytes for links and nodes; 0 = 80% of physical memory */
+    int    threads;      /* 0 = the caller's; results do not depend on it */
+    int    quiet;        /* no progress bars */
+    bn_log log;
+} bn_hierarchy_opts;
+void bn_hierarchy_opts_default(bn_hierarchy_opts *o);
+
+typedef struct bn_hierarchy_report {
+    size_t patches, nodes, clusters, planar_nodes;  /* leaves = patches; planar: inside one polygon */
+    size_t links, leaf_links, cluster_links;        /* leaf: patch to patch; cluster: a cluster at either end */
+    size_t passes;                                  /* refine-gather passes */
+    int    settled;                                 /* 1 if the last pass split no link */
+    size_t rays;
+    size_t bytes;                                   /* the frozen operator: nodes and links */
+    double bytes_per_link;                          /* link storage alone / links */
+    double eps_abs;                                 /* eps x the largest emitted radiance */
+    double seconds_tree, seconds_refine;
+} bn_hierarchy_report;
+
+/* Builds K_H for the meshed `scene` with `rt` (both borrowed; rt must outlive nothing: the operator
+ * keeps neither). Fails with BN_EINPUT for a bad option, BN_ENOMEM above max_memory, BN_EINTR /
+ * BN_ETERM when interrupted. rep may be NULL. */
+bn_status bn_hierarchy_build(const bn_scene *scene, const bn_rt *rt, const bn_hierarchy_opts *o,
+                             bn_transport **out, bn_hierarchy_report *rep, bn_error *err);
+
+/* The report as `key value` lines. */
+void bn_hierarchy_report_print(const bn_hierarchy_report *r, FILE *fp);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

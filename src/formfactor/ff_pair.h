@@ -1,0 +1,25 @@
+/* One form factor at a time, computed exactly as the dense assembly computes it (the same
+ * quadrature, the same seeded shadow rays), for operators that choose their own pairs: the
+ * hierarchy's leaf links. Not installed. */
+#ifndef BN_FF_PAIR_H
+#define BN_FF_PAIR_H
+
+#include "bounce/formfactor.h"
+
+typedef struct bn__ff_pairs bn__ff_pairs;     /* geometry, rays and options; read-only once made */
+typedef struct bn__ff_worker bn__ff_worker;   /* one thread's scratch */
+
+/* o: method analytic or montecarlo (hemisphere has no pairs: BN_EUSAGE). */
+bn_status bn__ff_pairs_create(const bn_scene *scene, const bn_rt *rt, const bn_formfactor_opts *o,
+                              bn__ff_pairs **out, bn_error *err);
+void bn__ff_pairs_destroy(bn__ff_pairs *p);
+bn__ff_worker *bn__ff_worker_create(const bn__ff_pairs *p);   /* NULL: out of memory */
+void bn__ff_worker_destroy(bn__ff_worker *w);
+/* A_i F_ij (= A_j F_ji) of patches i and j with visibility; 0 when they cannot see each other.
+ * cull 1: skip the rays when no face can lie between them (as the dense assembly does; costs a
+ * pass over the faces per new row); 0: always cast them (an unblocked pair gets exactly the same
+ * value). */
+double bn__ff_pair(const bn__ff_pairs *p, bn__ff_worker *w, size_t i, size_t j, int cull);
+size_t bn__ff_worker_rays(const bn__ff_worker *w);   /* rays cast so far */
+
+#endif

@@ -1,0 +1,602 @@
+/* Links by a brightness-weighted error oracle, refined and gathered until they settle, then
+ * frozen into the operator (include/bounce/hierarchy.h). */
+#include "transport/hierarchy/hierarchy_internal.h"
+#include "formfactor/ff_internal.h"
+#include "formfactor/ff_pair.h"
+#include "base/vec.h"
+
+#include <math.h>
+#include <omp.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Levels a work item is refined in one go before the rest is queued for the next round (so one
+ * root self-link becomes enough independent items to share among threads). */
+#define BN__DEPTH_PER_ROUND 6
+
+void bn_hierarchy_opts_default(bn_hierarchy_opts *o)
+{
+    memset(o, 0, sizeof *o);
+    o->eps = BN_HIERARCHY_EPS_DEFAULT;
+    o->clusters = 1;
+    o->samples = 4;
+    o->max_passes = 8;
+    bn_formfactor_opts_default(&o->ff);
+}
+
+/* ---- what refinement reads ---- */
+
+typedef struct bn__ref {
+    const bn__tree *t;
+    const bn_scene *scene;
+    const bn_rt *rt;
+    const bn_hierarchy_opts *o;
+    const bn_patch *patch;
+    const double *pverts;
+    const double *fn, *fp;    /* per face: unit normal and a point of its plane */
+    double *Bmax;             /* 3 per node: the largest radiance estimate below (oracle) */
+    double eps_abs;
+    int force;                /* eps == 0: refine every link to the patches */
+    double tol, ray_eps;
+    bn__ff_pairs *pairs;
+} bn__ref;
+
+typedef struct bn__vec {
+    bn__link *a;
+    size_t n, cap;
+    int oom;
+} bn__vec;
+
+static void bn__vec_push(bn__vec *v, uint32_t r, uint32_t s, float F)
+{
+    if (v->n == v->cap) {
+        size_t cap = v->cap ? 2 * v->cap : 256;
+        bn__link *a = bn__realloc_array(v->a, cap, sizeof *a);
+        if (!a) {
+            v->oom = 1;
+            return;
+        }
+        v->a = a;
+        v->cap = cap;
+    }
+    v->a[v->n].r = r;
+    v->a[v->n].s = s;
+    v->a[v->n++].F = F;
+}
+
+typedef struct bn__worker {
+    bn__vec links, pending;
+    bn__ff_worker *ff;
+    size_t rays, splits, mc_links;
+} bn__worker;
+
+/* ---- geometry of nodes ---- */
+
+static void bn__centre(const bn__tree *t, uint32_t v, double c[3], double *rad)
+{
+    const double *b = t->box + 6 * (size_t)v;
+    double h[3];
+    for (int k = 0; k < 3; k++) {
+        c[k] = 0.5 * (b[k] + b[3 + k]);
+        h[k] = 0.5 * (b[3 + k] - b[k]);
+    }
+    *rad = bn_v3_len(h);
+}
+
+/* 1 if the box of node v lies on or behind the plane (n, p). */
+static int bn__box_behind(const bn__tree *t, uint32_t v, const double n[3], const double p[3], double tol)
+{
+    const double *b = t->box + 6 * (size_t)v;
+    double m = 0;
+    for (int k = 0; k < 3; k++)
+        m += n[k] * ((n[k] > 0 ? b[3 + k] : b[k]) - p[k]);
+    return m <= tol;
+}
+
+/* Can r and s exchange light at all? Same polygon, or one wholly behind the other's plane: no. */
+static int bn__culled(const bn__ref *R, uint32_t r, uint32_t s)
+{
+    const bn__tree *t = R->t;
+    int32_t fr = t->face[r], fs = t->face[s];
+    if (fr >= 0 && fr == fs)
+        return 1;
+    if (fr >= 0 && bn__box_behind(t, s, R->fn + 3 * fr, R->fp + 3 * fr, R->tol))
+        return 1;
+    if (fs >= 0 && bn__box_behind(t, r, R->fn + 3 * fs, R->fp + 3 * fs, R->tol))
+        return 1;
+    return 0;
+}
+
+/* An upper bound of the area-averaged form factor from r to s: A_s / (pi d_min^2) between their
+ * bounding spheres, and never above 1 (no receiver sees more than its hemisphere). */
+static double bn__F_bound(const bn__tree *t, uint32_t r, uint32_t s)
+{
+    double cr[3], cs[3], rr, rs, d;
+    bn__centre(t, r, cr, &rr);
+    bn__centre(t, s, cs, &rs);
+    d = bn_v3_dist(cr, cs) - rr - rs;
+    if (!(d > 0))
+        return 1;
+    return fmin(1.0, t->area[s] / (BN_PI * d * d));
+}
+
+/* The oracle: the most a link could carry to the receiver's radiance, rho_r B_s F_bound. */
+static double bn__link_error(const bn__ref *R, uint32_t r, uint32_t s)
+{
+    const float *rho = R->t->rho_max + 3 * (size_t)r;
+    const double *B = R->Bmax + 3 * (size_t)s;
+    double m = 0;
+    for (int c = 0; c < 3; c++)
+        m = fmax(m, (double)rho[c] * B[c]);
+    return m > 0 ? m * bn__F_bound(R->t, r, s) : 0;
+}
+
+/* A point of node v, uniform in area, from (u1, u2, u3) in [0,1)^3; its patch's normal. */
+static void bn__node_point(const bn__ref *R, uint32_t v, double u1, double u2, double u3, double x[3], const double **n)
+{
+    const bn__tree *t = R->t;
+    size_t lo = t->lo[v], hi = t->hi[v];
+    double a = t->cum_area[lo] + u1 * (t->cum_area[hi] - t->cum_area[lo]);
+    while (hi - lo > 1) {   /* the last k with cum_area[k] <= a */
+        size_t mid = lo + (hi - lo) / 2;
+        if (t->cum_area[mid] <= a)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    const bn_patch *p = &R->patch[t->order[lo]];
+    double v4[12];
+    for (unsigned k = 0; k < p->ncorners; k++)
+        memcpy(v4 + 3 * k, R->pverts + 3 * p->corner[k], 3 * sizeof(double));
+    bn__poly_sample(v4, p->ncorners, u2, u3, x);
+    *n = p->normal;
+}
+
+/* Area-averaged F from r to s by S stratified point pairs with one shadow ray each (Wallace's
+ * disk regulariser keeps every term bounded); S x 4 when the first S find partial visibility. */
+static double bn__F_sampled(const bn__ref *R, uint32_t r, uint32_t s, bn__worker *w)
+{
+    int S = R->o->samples > 0 ? R->o->samples : 4;
+    for (int round = 0; round < 2; round++) {
+        bn__rng g = bn__rng_make(R->o->ff.seed ^ 0x6869657261726368ull, ((uint64_t)r << 32) | s, (uint64_t)round);
+        double a = R->t->area[s] / S, sum = 0, inv = 1.0 / S;
+        int seen = 0, blocked = 0;
+        for (int k = 0; k < S; k++) {
+            double x[3], y[3], d[3], o[3], e[3], r2, len, cr, cs;
+            const double *nx, *ny;
+            bn__node_point(R, r, (k + bn__rng_uniform(&g)) * inv, bn__rng_uniform(&g), bn__rng_uniform(&g), x, &nx);
+            bn__node_point(R, s, (((k * 7 + 3) % S) + bn__rng_uniform(&g)) * inv, bn__rng_uniform(&g),
+                           bn__rng_uniform(&g), y, &ny);
+            bn_v3_sub(y, x, d);
+            r2 = bn_v3_dot(d, d);
+            len = sqrt(r2);
+            if (!(len > 0))
+                continue;
+            cr = bn_v3_dot(nx, d) / len;
+            cs = -bn_v3_dot(ny, d) / len;
+            if (!(cr > 0 && cs > 0))
+                continue;
+            bn_v3_madd(x, R->ray_eps, nx, o);
+            bn_v3_madd(y, R->ray_eps, ny, e);
+            bn_v3_sub(e, o, d);
+            len = bn_v3_len(d);
+            seen++;
+            w->rays++;
+            if (len > 4 * R->ray_eps && bn_rt_occluded(R->rt, o, d, 0, 1.0 - R->ray_eps / len)) {
+                blocked++;
+                continue;
+            }
+            sum += cr * cs * a / (BN_PI * r2 + a);
+        }
+        if (round == 1 || blocked == 0 || blocked == seen)
+            return sum;
+        S *= 4;
+    }
+    return 0;
+}
+
+static float bn__link_F(const bn__ref *R, uint32_t r, uint32_t s, bn__worker *w)
+{
+    const bn__tree *t = R->t;
+    double F;
+    if (bn__tree_is_leaf(t, r) && bn__tree_is_leaf(t, s)) {
+        uint32_t i = bn__tree_patch(t, r), j = bn__tree_patch(t, s);
+        F = bn__ff_pair(R->pairs, w->ff, i, j, R->o->cull_leaf_rays) / R->patch[i].area;
+    } else {
+        F = bn__F_sampled(R, r, s, w);
+        w->mc_links++;
+    }
+    return (float)fmin(fmax(F, 0.0), 1.0);
+}
+
+/* Refines the pair (r, s) (F: its coefficient when it is an existing link, else < 0) up to
+ * `depth` more levels: accepted links go to w->links, deeper work to w->pending. */
+static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int depth, bn__worker *w)
+{
+    const bn__tree *t = R->t;
+    int lr = bn__tree_is_leaf(t, r), ls = bn__tree_is_leaf(t, s);
+    if (r == s) {
+        if (lr)
+            return;   /* a planar patch does not see itself */
+        if (depth == 0) {
+            bn__vec_push(&w->pending, r, s, -1);
+            return;
+        }
+        for (uint32_t a = t->child[r]; a < t->child[r] + 2; a++)
+            for (uint32_t b = t->child[r]; b < t->child[r] + 2; b++)
+                bn__visit(R, a, b, -1, depth - 1, w);
+        return;
+    }
+    if (F < 0 && bn__culled(R, r, s))
+        return;
+    if ((!lr || !ls) && (R->force || bn__link_error(R, r, s) > R->eps_abs)) {
+        double cr[3], cs[3], rr, rs;
+        if (depth == 0) {
+            bn__vec_push(&w->pending, r, s, -1);
+            return;
+        }
+        if (F >= 0)
+            w->splits++;
+        bn__centre(t, r, cr, &rr);
+        bn__centre(t, s, cs, &rs);
+        if (!lr && (ls || rr >= rs)) {
+            bn__visit(R, t->child[r], s, -1, depth - 1, w);
+            bn__visit(R, t->child[r] + 1, s, -1, depth - 1, w);
+        } else {
+            bn__visit(R, r, t->child[s], -1, depth - 1, w);
+            bn__visit(R, r, t->child[s] + 1, -1, depth - 1, w);
+        }
+        return;
+    }
+    if (F < 0)
+        F = bn__link_F(R, r, s, w);
+    bn__vec_push(&w->links, r, s, F);
+}
+
+static int bn__link_cmp(const void *a, const void *b)
+{
+    const bn__link *x = a, *y = b;
+    if (x->r != y->r)
+        return x->r < y->r ? -1 : 1;
+    return x->s < y->s ? -1 : x->s > y->s;
+}
+
+/* One pass: every item of *work refined (rounds of BN__DEPTH_PER_ROUND levels); the accepted
+ * links replace *work, sorted. *splits: existing links that were split. */
+static bn_status bn__pass(const bn__ref *R, bn__worker *W, int nt, bn__vec *work, size_t *splits, size_t *rays,
+                          const char *label, bn_error *err)
+{
+    bn__vec out = {0};
+    bn__progress prog;
+    size_t done = 0, round = 0;
+    *splits = 0;
+    while (work->n) {
+        volatile int oom = 0;
+        long ln = (long)work->n;
+        done = 0;
+        bn__progress_begin(&prog, label, work->n, R->o->quiet || round > 0);
+#pragma omp parallel num_threads(nt)
+        {
+            bn__worker *w = &W[omp_get_thread_num()];
+#pragma omp for schedule(dynamic, 64)
+            for (long l = 0; l < ln; l++) {
+                if (oom || bn_interrupted() != BN_OK)
+                    continue;
+                bn__link it = work->a[l];
+                bn__visit(R, it.r, it.s, it.F, BN__DEPTH_PER_ROUND, w);
+                if (w->links.oom || w->pending.oom)
+                    oom = 1;
+                bn__progress_step(&prog, &done, 1);
+            }
+        }
+        bn__progress_end(&prog);
+        if (bn_interrupted() != BN_OK) {
+            free(out.a);
+            return bn_error_set(err, bn_interrupted(), "hierarchy refinement interrupted");
+        }
+        work->n = 0;
+        for (int k = 0; k < nt && !oom; k++) {
+            bn__vec *v[2] = {&W[k].links, &W[k].pending};
+            bn__vec *dst[2] = {&out, work};
+            for (int q = 0; q < 2; q++) {
+                if (dst[q]->n + v[q]->n > dst[q]->cap) {
+                    size_t cap = (dst[q]->n + v[q]->n) * 3 / 2 + 256;
+                    bn__link *a = bn__realloc_array(dst[q]->a, cap, sizeof *a);
+                    if (!a) {
+                        oom = 1;
+                        break;
+                    }
+                    dst[q]->a = a;
+                    dst[q]->cap = cap;
+                }
+                memcpy(dst[q]->a + dst[q]->n, v[q]->a, v[q]->n * sizeof *v[q]->a);
+                dst[q]->n += v[q]->n;
+                v[q]->n = 0;
+            }
+            *splits += W[k].splits;
+            W[k].splits = 0;
+        }
+        if (oom) {
+            free(out.a);
+            return bn_error_set(err, BN_ENOMEM, "out of memory for the hierarchy's links (%zu so far): raise --eps",
+                                out.n);
+        }
+        round++;
+    }
+    for (int k = 0; k < nt; k++) {
+        *rays += W[k].rays + bn__ff_worker_rays(W[k].ff);
+        W[k].rays = 0;
+    }
+    qsort(out.a, out.n, sizeof *out.a, bn__link_cmp);
+    free(work->a);
+    *work = out;
+    return BN_OK;
+}
+
+/* Bmax from per-patch radiances L (N*3): the largest below each node. */
+static void bn__bmax(const bn__tree *t, const double *L, double *Bmax)
+{
+    for (size_t v = t->n; v-- > 0;) {
+        uint32_t c = t->child[v];
+        if (c == BN__NONE)
+            memcpy(Bmax + 3 * v, L + 3 * (size_t)bn__tree_patch(t, (uint32_t)v), 3 * sizeof(double));
+        else
+            for (int k = 0; k < 3; k++)
+                Bmax[3 * v + k] = fmax(Bmax[3 * (size_t)c + k], Bmax[3 * ((size_t)c + 1) + k]);
+    }
+}
+
+/* Links with F > 0, in place. */
+static size_t bn__compact(bn__vec *v)
+{
+    size_t m = 0;
+    for (size_t l = 0; l < v->n; l++)
+        if (v->a[l].F > 0)
+            v->a[m++] = v->a[l];
+    return m;
+}
+
+/* L ~ E + K_H L by a few Jacobi sweeps over the current links: the brightness the next pass's
+ * oracle weighs links by. */
+static bn_status bn__estimate(const bn__tree *t, bn__vec *links, const double *E, const double *rho, double eps_abs,
+                              double *L, bn_error *err)
+{
+    bn__vec live = *links;
+    bn__hop *h = NULL;
+    size_t n3 = 3 * t->npatch;
+    bn__link *copy = bn__malloc_array(links->n ? links->n : 1, sizeof *copy);
+    double *y = bn__malloc_array(n3, sizeof(double));
+    bn_status st = BN_OK;
+    if (!copy || !y) {
+        free(copy);
+        free(y);
+        return bn_error_set(err, BN_ENOMEM, "out of memory for the hierarchy's gather");
+    }
+    memcpy(copy, links->a, links->n * sizeof *copy);
+    live.a = copy;
+    live.n = bn__compact(&live);
+    st = bn__hop_make(t, live.a, live.n, &h, err);
+    memcpy(L, E, n3 * sizeof(double));
+    for (int it = 0; st == BN_OK && it < 200; it++) {
+        double change = 0;
+        st = bn__hop_apply(h, L, y, err);
+        for (size_t k = 0; st == BN_OK && k < n3; k++) {
+            double v = E[k] + rho[k] * y[k];
+            change = fmax(change, fabs(v - L[k]));
+            L[k] = v;
+        }
+        if (change < 0.1 * eps_abs)
+            break;
+    }
+    bn__hop_destroy(h);
+    free(copy);
+    free(y);
+    return st;
+}
+
+/* Face planes for culling. */
+static bn_status bn__face_planes(const bn_scene *s, double **fn, double **fp, bn_error *err)
+{
+    size_t nf, nv, ni;
+    const bn_face *f = bn_scene_faces(s, &nf);
+    const double *v = bn_scene_vertices(s, &nv);
+    const size_t *idx = bn_scene_face_indices(s, &ni);
+    *fn = bn__malloc_array(3 * nf + 1, sizeof(double));
+    *fp = bn__malloc_array(3 * nf + 1, sizeof(double));
+    if (!*fn || !*fp)
+        return bn_error_set(err, BN_ENOMEM, "out of memory for %zu face planes", nf);
+    for (size_t k = 0; k < nf; k++) {
+        memcpy(*fn + 3 * k, f[k].normal, 3 * sizeof(double));
+        memcpy(*fp + 3 * k, v + 3 * idx[f[k].first], 3 * sizeof(double));
+    }
+    return BN_OK;
+}
+
+static bn_status bn__check_opts(const bn_hierarchy_opts *o, bn_error *err)
+{
+    if (!(o->eps >= 0 && isfinite(o->eps)))
+        return bn_error_set(err, BN_EINPUT, "hierarchy: eps %g is not a finite number >= 0", o->eps);
+    if (o->samples < 0 || o->samples > (1 << 20))
+        return bn_error_set(err, BN_EINPUT, "hierarchy: %d samples per link is outside [1, 2^20]", o->samples);
+    if (o->max_passes < 1)
+        return bn_error_set(err, BN_EINPUT, "hierarchy: %d passes (at least 1)", o->max_passes);
+    return BN_OK;
+}
+
+static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, const bn_hierarchy_opts *o,
+                                    bn_transport **out, bn_hierarchy_report *rep, bn_error *err)
+{
+    bn__tree t;
+    bn__ref R;
+    bn__vec work = {0};
+    bn__worker *W = NULL;
+    bn__hop *h = NULL;
+    double *E = NULL, *rho = NULL, *L = NULL, lo[3], hi[3], emax = 0, t0 = bn__now();
+    size_t np, limit = o->max_memory ? o->max_memory : bn_memory_limit_default();
+    int nt = omp_get_max_threads();
+    bn_status st;
+
+    *out = NULL;
+    memset(rep, 0, sizeof *rep);
+    memset(&R, 0, sizeof R);
+    if ((st = bn__check_opts(o, err)) != BN_OK)
+        return st;
+    if (!rt || bn_rt_scene(rt) != scene)
+        return bn_error_set(err, BN_EINTERNAL, "bn_hierarchy_build: rt was built for another scene");
+    st = bn__tree_build(scene, &t, err);
+    if (st != BN_OK)
+        return st;
+    rep->seconds_tree = bn__now() - t0;
+    t0 = bn__now();
+    bn_scene_patches(scene, &np);
+    R.t = &t;
+    R.scene = scene;
+    R.rt = rt;
+    R.o = o;
+    R.patch = bn_scene_patches(scene, &np);
+    {
+        size_t npv;
+        R.pverts = bn_scene_patch_vertices(scene, &npv);
+    }
+    bn_scene_bounds(scene, lo, hi);
+    R.tol = 1e-9 * fmax(bn_v3_dist(lo, hi), 1e-300);
+    R.ray_eps = bn_rt_epsilon(rt);
+    R.force = o->eps == 0;
+    E = bn__malloc_array(3 * np, sizeof(double));
+    rho = bn__malloc_array(3 * np, sizeof(double));
+    L = bn__malloc_array(3 * np, sizeof(double));
+    R.Bmax = bn__malloc_array(3 * t.n, sizeof(double));
+    W = bn__calloc((size_t)nt, sizeof *W);
+    if (!E || !rho || !L || !R.Bmax || !W) {
+        st = bn_error_set(err, BN_ENOMEM, "out of memory for the hierarchy of %zu patches", np);
+        goto done;
+    }
+    if ((st = bn__face_planes(scene, (double **)&R.fn, (double **)&R.fp, err)) != BN_OK)
+        goto done;
+    if ((st = bn__ff_pairs_create(scene, rt, &o->ff, &R.pairs, err)) != BN_OK)
+        goto done;
+    for (int k = 0; k < nt; k++)
+        if (!(W[k].ff = bn__ff_worker_create(R.pairs))) {
+            st = bn_error_set(err, BN_ENOMEM, "out of memory for per-thread buffers");
+            goto done;
+        }
+    bn_scene_patch_emission(scene, E);
+    bn_scene_patch_reflectance(scene, rho);
+    for (size_t k = 0; k < 3 * np; k++)
+        emax = fmax(emax, E[k]);
+    R.eps_abs = o->eps * emax;
+    rep->eps_abs = R.eps_abs;
+    bn__bmax(&t, E, R.Bmax);
+
+    /* the start: the root's self-link, or every pair of polygons */
+    if (o->clusters) {
+        bn__vec_push(&work, 0, 0, -1);
+    } else {
+        uint32_t *fnode = bn__malloc_array(t.n, sizeof(uint32_t));
+        size_t m = 0;
+        if (!fnode) {
+            st = bn_error_set(err, BN_ENOMEM, "out of memory");
+            goto done;
+        }
+        for (uint32_t v = 0; v < t.n; v++)   /* the topmost planar nodes: the polygons */
+            if (t.face[v] >= 0 && (v == 0 || t.face[t.parent[v]] < 0))
+                fnode[m++] = v;
+        for (size_t a = 0; a < m && !work.oom; a++)
+            for (size_t b = 0; b < m; b++)
+                if (a != b)
+                    bn__vec_push(&work, fnode[a], fnode[b], -1);
+        free(fnode);
+        if (work.oom) {
+            st = bn_error_set(err, BN_ENOMEM, "out of memory for %zu^2 polygon pairs (use clusters)", m);
+            goto done;
+        }
+    }
+    for (int pass = 0; pass < o->max_passes; pass++) {
+        size_t splits = 0;
+        char label[64];
+        snprintf(label, sizeof label, "hierarchy pass %d", pass + 1);
+        if ((st = bn__pass(&R, W, nt, &work, &splits, &rep->rays, label, err)) != BN_OK)
+            goto done;
+        rep->passes = (size_t)pass + 1;
+        if (work.n * sizeof(bn__link) + bn__tree_bytes(&t) > limit) {
+            st = bn_error_set(err, BN_ENOMEM,
+                              "the hierarchy needs %zu links (%.3g GiB) at eps %g, above the memory limit: raise --eps",
+                              work.n, (double)(work.n * sizeof(bn__link)) / (1 << 30), o->eps);
+            goto done;
+        }
+        bn_logf(&o->log, BN_LOG_INFO, "hierarchy pass %d: %zu links, %zu split", pass + 1, work.n, splits);
+        if (pass > 0 && splits == 0) {
+            rep->settled = 1;
+            break;
+        }
+        if (R.force || pass + 1 == o->max_passes)
+            break;   /* eps 0: the links are at the patches already; nothing can split */
+        if ((st = bn__estimate(&t, &work, E, rho, R.eps_abs, L, err)) != BN_OK)
+            goto done;
+        bn__bmax(&t, L, R.Bmax);
+    }
+    if (R.force)
+        rep->settled = 1;
+    if (!rep->settled)
+        bn_logf(&o->log, BN_LOG_WARN, "hierarchy: links still splitting after %d passes; frozen as they are",
+                o->max_passes);
+    work.n = bn__compact(&work);
+    for (size_t l = 0; l < work.n; l++) {
+        int lr = bn__tree_is_leaf(&t, work.a[l].r), ls = bn__tree_is_leaf(&t, work.a[l].s);
+        rep->leaf_links += lr && ls;
+        rep->cluster_links += t.face[work.a[l].r] < 0 || t.face[work.a[l].s] < 0;
+    }
+    if ((st = bn__hop_make(&t, work.a, work.n, &h, err)) != BN_OK)
+        goto done;
+    rep->patches = np;
+    rep->nodes = t.n;
+    for (size_t v = 0; v < t.n; v++) {
+        rep->clusters += t.face[v] < 0;
+        rep->planar_nodes += t.face[v] >= 0 && t.child[v] != BN__NONE;
+    }
+    rep->links = work.n;
+    rep->bytes = bn__hop_bytes(h);
+    rep->bytes_per_link = work.n ? (double)(sizeof(uint32_t) + sizeof(float)) : 0;
+    rep->seconds_refine = bn__now() - t0;
+    st = bn_transport_create(np, rho, &bn__hop_ops, h, out, err);
+    h = NULL;   /* owned by *out now, or destroyed */
+done:
+    if (W)
+        for (int k = 0; k < nt; k++) {
+            free(W[k].links.a);
+            free(W[k].pending.a);
+            bn__ff_worker_destroy(W[k].ff);
+        }
+    free(W);
+    bn__hop_destroy(h);
+    bn__ff_pairs_destroy(R.pairs);
+    free((void *)R.fn);
+    free((void *)R.fp);
+    free(R.Bmax);
+    free(work.a);
+    free(E);
+    free(rho);
+    free(L);
+    bn__tree_free(&t);
+    return st;
+}
+
+bn_status bn_hierarchy_build(const bn_scene *scene, const bn_rt *rt, const bn_hierarchy_opts *o, bn_transport **out,
+                             bn_hierarchy_report *rep, bn_error *err)
+{
+    bn_hierarchy_report local;
+    int prev = bn__threads_begin(o->threads);
+    bn_status st = bn__hierarchy_body(scene, rt, o, out, rep ? rep : &local, err);
+    bn__threads_end(prev);
+    return st;
+}
+
+void bn_hierarchy_report_print(const bn_hierarchy_report *r, FILE *fp)
+{
+    fprintf(fp, "patches %zu\nnodes %zu\nclusters %zu\nplanar_nodes %zu\nlinks %zu\nleaf_links %zu\n"
+                "cluster_links %zu\nlinks_per_patch %.3g\npasses %zu\nsettled %d\nrays %zu\nbytes %zu\n"
+                "bytes_per_link %.3g\neps_abs %.6g\nseconds_tree %.3f\nseconds_refine %.3f\n",
+            r->patches, r->nodes, r->clusters, r->planar_nodes, r->links, r->leaf_links, r->cluster_links,
+            r->patches ? (double)r->links / (double)r->patches : 0.0, r->passes, r->settled, r->rays, r->bytes,
+            r->bytes_per_link, r->eps_abs, r->seconds_tree, r->seconds_refine);
+}

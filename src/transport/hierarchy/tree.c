@@ -1,0 +1,258 @@
+/* The node tree over the patches: median splits along the longest axis, first of the input
+ * polygons (volume clusters), then of each polygon's patches (planar nodes). */
+#include "transport/hierarchy/hierarchy_internal.h"
+#include "base/vec.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef struct bn__key {
+    double k;
+    uint32_t id;
+} bn__key;
+
+static int bn__key_cmp(const void *a, const void *b)
+{
+    const bn__key *x = a, *y = b;
+    if (x->k != y->k)
+        return x->k < y->k ? -1 : 1;
+    return x->id < y->id ? -1 : x->id > y->id;
+}
+
+typedef struct bn__tb {
+    bn__tree *t;
+    const bn_patch *patch;
+    const bn_material *mat;
+    const double *pverts;
+    double *pc;               /* patch centroids */
+    double *fc;               /* face centroids (area-weighted), per face */
+    uint32_t *face_first, *face_count, *byface;
+    size_t cursor;            /* next free slot in order */
+    bn__key *keys;
+} bn__tb;
+
+static uint32_t bn__node_new(bn__tree *t, uint32_t parent)
+{
+    uint32_t v = (uint32_t)t->n++;
+    t->parent[v] = parent;
+    t->child[v] = BN__NONE;
+    return v;
+}
+
+/* Area, box, reflectance and face of v from its children (or its patch). */
+static void bn__node_finish(bn__tb *b, uint32_t v)
+{
+    bn__tree *t = b->t;
+    double *box = t->box + 6 * v;
+    if (t->child[v] == BN__NONE) {
+        const bn_patch *p = &b->patch[t->order[t->lo[v]]];
+        const double *rho = b->mat[p->material].rho;
+        for (int c = 0; c < 3; c++) {
+            box[c] = INFINITY;
+            box[3 + c] = -INFINITY;
+            t->rho_max[3 * v + c] = (float)rho[c];
+        }
+        for (unsigned k = 0; k < p->ncorners; k++)
+            for (int c = 0; c < 3; c++) {
+                double x = b->pverts[3 * p->corner[k] + c];
+                box[c] = fmin(box[c], x);
+                box[3 + c] = fmax(box[3 + c], x);
+            }
+        t->area[v] = p->area;
+        t->face[v] = (int32_t)p->face;
+        return;
+    }
+    uint32_t a = t->child[v], c2 = a + 1;
+    t->area[v] = t->area[a] + t->area[c2];
+    for (int c = 0; c < 3; c++) {
+        box[c] = fmin(t->box[6 * a + c], t->box[6 * c2 + c]);
+        box[3 + c] = fmax(t->box[6 * a + 3 + c], t->box[6 * c2 + 3 + c]);
+        t->rho_max[3 * v + c] = fmaxf(t->rho_max[3 * a + c], t->rho_max[3 * c2 + c]);
+    }
+    t->face[v] = t->face[a] == t->face[c2] ? t->face[a] : -1;
+    t->lo[v] = t->lo[a];
+    t->hi[v] = t->hi[c2];
+}
+
+/* Sorts ids[0..m) by the coordinate of cent (3 per id) along the longest axis of their extent. */
+static void bn__median_sort(bn__tb *b, uint32_t *ids, size_t m, const double *cent)
+{
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    int ax = 0;
+    for (size_t k = 0; k < m; k++)
+        for (int c = 0; c < 3; c++) {
+            lo[c] = fmin(lo[c], cent[3 * ids[k] + c]);
+            hi[c] = fmax(hi[c], cent[3 * ids[k] + c]);
+        }
+    for (int c = 1; c < 3; c++)
+        if (hi[c] - lo[c] > hi[ax] - lo[ax])
+            ax = c;
+    for (size_t k = 0; k < m; k++) {
+        b->keys[k].k = cent[3 * ids[k] + ax];
+        b->keys[k].id = ids[k];
+    }
+    qsort(b->keys, m, sizeof *b->keys, bn__key_cmp);
+    for (size_t k = 0; k < m; k++)
+        ids[k] = b->keys[k].id;
+}
+
+/* Planar nodes over order[lo..hi) (patches of one face). */
+static void bn__build_patches(bn__tb *b, uint32_t v, size_t lo, size_t hi)
+{
+    bn__tree *t = b->t;
+    t->lo[v] = (uint32_t)lo;
+    t->hi[v] = (uint32_t)hi;
+    if (hi - lo > 1) {
+        size_t mid = lo + (hi - lo) / 2;
+        bn__median_sort(b, t->order + lo, hi - lo, b->pc);
+        uint32_t a = bn__node_new(t, v);
+        bn__node_new(t, v);
+        t->child[v] = a;
+        bn__build_patches(b, a, lo, mid);
+        bn__build_patches(b, a + 1, mid, hi);
+    }
+    bn__node_finish(b, v);
+}
+
+/* Clusters over faces[0..m). */
+static void bn__build_faces(bn__tb *b, uint32_t v, uint32_t *faces, size_t m)
+{
+    bn__tree *t = b->t;
+    if (m == 1) {
+        uint32_t f = faces[0];
+        size_t lo = b->cursor;
+        memcpy(t->order + lo, b->byface + b->face_first[f], b->face_count[f] * sizeof(uint32_t));
+        b->cursor += b->face_count[f];
+        bn__build_patches(b, v, lo, b->cursor);
+        return;
+    }
+    size_t mid = m / 2;
+    bn__median_sort(b, faces, m, b->fc);
+    uint32_t a = bn__node_new(t, v);
+    bn__node_new(t, v);
+    t->child[v] = a;
+    bn__build_faces(b, a, faces, mid);
+    bn__build_faces(b, a + 1, faces + mid, m - mid);
+    bn__node_finish(b, v);
+}
+
+void bn__tree_free(bn__tree *t)
+{
+    free(t->parent);
+    free(t->child);
+    free(t->lo);
+    free(t->hi);
+    free(t->face);
+    free(t->area);
+    free(t->box);
+    free(t->rho_max);
+    free(t->order);
+    free(t->leaf);
+    free(t->cum_area);
+    memset(t, 0, sizeof *t);
+}
+
+size_t bn__tree_bytes(const bn__tree *t)
+{
+    return t->n * (5 * sizeof(uint32_t) + 7 * sizeof(double) + 3 * sizeof(float)) +
+           t->npatch * (2 * sizeof(uint32_t) + sizeof(double));
+}
+
+bn_status bn__tree_build(const bn_scene *s, bn__tree *t, bn_error *err)
+{
+    size_t np, nf, nm, npv, cap;
+    bn__tb b;
+    uint32_t *faces = NULL;
+    size_t nfaces = 0;
+    memset(t, 0, sizeof *t);
+    memset(&b, 0, sizeof b);
+    b.patch = bn_scene_patches(s, &np);
+    bn_scene_faces(s, &nf);
+    b.mat = bn_scene_materials(s, &nm);
+    b.pverts = bn_scene_patch_vertices(s, &npv);
+    if (np == 0)
+        return bn_error_set(err, BN_EINPUT, "%s: no patches (mesh the scene first)", bn_scene_path(s));
+    if (np >= (size_t)UINT32_MAX / 2)
+        return bn_error_set(err, BN_EINPUT, "%s: %zu patches; the hierarchy holds at most %u", bn_scene_path(s), np,
+                            UINT32_MAX / 2 - 1);
+    cap = 2 * np;
+    t->npatch = np;
+    b.t = t;
+    t->parent = bn__malloc_array(cap, sizeof(uint32_t));
+    t->child = bn__malloc_array(cap, sizeof(uint32_t));
+    t->lo = bn__malloc_array(cap, sizeof(uint32_t));
+    t->hi = bn__malloc_array(cap, sizeof(uint32_t));
+    t->face = bn__malloc_array(cap, sizeof(int32_t));
+    t->area = bn__malloc_array(cap, sizeof(double));
+    t->box = bn__malloc_array(6 * cap, sizeof(double));
+    t->rho_max = bn__malloc_array(3 * cap, sizeof(float));
+    t->order = bn__malloc_array(np, sizeof(uint32_t));
+    t->leaf = bn__malloc_array(np, sizeof(uint32_t));
+    t->cum_area = bn__malloc_array(np + 1, sizeof(double));
+    b.pc = bn__malloc_array(3 * np, sizeof(double));
+    b.fc = bn__calloc(3 * nf, sizeof(double));
+    b.face_first = bn__calloc(nf + 1, sizeof(uint32_t));
+    b.face_count = bn__calloc(nf + 1, sizeof(uint32_t));
+    b.byface = bn__malloc_array(np, sizeof(uint32_t));
+    b.keys = bn__malloc_array(np > nf ? np : nf, sizeof(bn__key));
+    faces = bn__malloc_array(nf + 1, sizeof(uint32_t));
+    double *farea = bn__calloc(nf + 1, sizeof(double));
+    bn_status st = BN_OK;
+    if (!t->parent || !t->child || !t->lo || !t->hi || !t->face || !t->area || !t->box || !t->rho_max || !t->order ||
+        !t->leaf || !t->cum_area || !b.pc || !b.fc || !b.face_first || !b.face_count || !b.byface || !b.keys || !faces ||
+        !farea) {
+        st = bn_error_set(err, BN_ENOMEM, "out of memory for the hierarchy of %zu patches", np);
+        goto done;
+    }
+    /* patches by face (counting sort keeps the mesher's order inside a face) */
+    for (size_t i = 0; i < np; i++) {
+        size_t f = b.patch[i].face;
+        b.face_count[f]++;
+        memcpy(b.pc + 3 * i, b.patch[i].centroid, 3 * sizeof(double));
+        for (int c = 0; c < 3; c++)
+            b.fc[3 * f + c] += b.patch[i].area * b.patch[i].centroid[c];
+        farea[f] += b.patch[i].area;
+    }
+    for (size_t f = 0, acc = 0; f < nf; f++) {
+        b.face_first[f] = (uint32_t)acc;
+        acc += b.face_count[f];
+        if (b.face_count[f]) {
+            faces[nfaces++] = (uint32_t)f;
+            for (int c = 0; c < 3; c++)
+                b.fc[3 * f + c] /= farea[f];
+        }
+    }
+    {
+        uint32_t *fill = bn__calloc(nf + 1, sizeof(uint32_t));
+        if (!fill) {
+            st = bn_error_set(err, BN_ENOMEM, "out of memory for the hierarchy of %zu patches", np);
+            goto done;
+        }
+        for (size_t i = 0; i < np; i++) {
+            size_t f = b.patch[i].face;
+            b.byface[b.face_first[f] + fill[f]++] = (uint32_t)i;
+        }
+        free(fill);
+    }
+    bn__node_new(t, BN__NONE);
+    bn__build_faces(&b, 0, faces, nfaces);
+    t->cum_area[0] = 0;
+    for (size_t k = 0; k < np; k++)
+        t->cum_area[k + 1] = t->cum_area[k] + b.patch[t->order[k]].area;
+    for (uint32_t v = 0; v < t->n; v++)
+        if (t->child[v] == BN__NONE)
+            t->leaf[t->order[t->lo[v]]] = v;
+done:
+    free(b.pc);
+    free(b.fc);
+    free(b.face_first);
+    free(b.face_count);
+    free(b.byface);
+    free(b.keys);
+    free(faces);
+    free(farea);
+    if (st != BN_OK)
+        bn__tree_free(t);
+    return st;
+}
