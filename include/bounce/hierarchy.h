@@ -35,11 +35,14 @@ typedef struct bn_hierarchy_opts {
                             0 refines every link down to the patches */
     int    clusters;     /* 1 (default): start from the root's self-link; 0: from every pair of input
                             polygons (k^2 links before any refinement) */
-    int    samples;      /* point pairs (and rays) per link above the patches (default 4; partly
+    int    samples;      /* point pairs (and rays) per link above the patches (default 8; partly
                             visible links get 4x as many) */
-    int    max_passes;   /* refine-gather passes before the link set is frozen (default 8) */
-    bn_formfactor_opts ff;   /* links between two patches: exactly the dense assembly's pair (method,
-                                samples, tolerance, seed); its storage is unused */
+    int    max_passes;   /* refine-gather passes before the link set is frozen (default 12) */
+    int    exact_leaf_links; /* links between two patches computed exactly as the dense assembly does
+                                (ff: method, samples, tolerance, seed); default 0 (1 when eps is 0): the
+                                exact point-to-polygon form factor at `samples` points of the receiver,
+                                each with one shadow ray */
+    bn_formfactor_opts ff;   /* the form-factor options (seed always; the rest for exact leaf links) */
     int    cull_leaf_rays;   /* leaf links skip rays where no face can lie between (1, as the dense
                                 assembly does: identical values, costs a pass over the faces per
                                 patch); default 0: always cast */
@@ -49,6 +52,10 @@ typedef struct bn_hierarchy_opts {
     bn_log log;
 } bn_hierarchy_opts;
 void bn_hierarchy_opts_default(bn_hierarchy_opts *o);
+
+/* The hierarchy's leaves are the patches: its default meshing cuts the large polygons finer than
+ * dense radiosity can afford, aiming at the input polygons plus this many patches. */
+#define BN_HIERARCHY_EXTRA_PATCHES 15000
 
 typedef struct bn_hierarchy_report {
     size_t patches, nodes, clusters, planar_nodes;  /* leaves = patches; planar: inside one polygon */

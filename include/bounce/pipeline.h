@@ -36,6 +36,8 @@ typedef struct bn_pipeline_opts {
     bn_hierarchy_opts hier;    /* the hierarchy's options (its ff, threads and log are set from the above) */
     bn_solve_opts solve;       /* method, tolerance, terms kept (solve.bounces) */
     int threads;               /* every stage's threads (0: the caller's), unless ff or solve set their own */
+    int mesh_auto;             /* mesh is a default: when K is the hierarchy, re-mesh aiming at the input
+                                  polygons + BN_HIERARCHY_EXTRA_PATCHES patches */
     int method_auto;           /* solve.method is a default: gauss-seidel where K has rows, else jacobi
                                   (said in a note) */
     int keep_rt;               /* keep the ray scene for images and the tracer (built even when F

@@ -17,7 +17,7 @@ void bn_cli_add_ff(bn_optset *s, bn_cli_ff *o)
     bn_optset_add(s, (bn_opt){"no-clusters", 0, BN_OPT_FLAG, &o->no_clusters, NULL, 0, 0, NULL,
                               "hierarchy: no volume clusters; start from every pair of input polygons"});
     bn_optset_add(s, (bn_opt){"link-samples", 0, BN_OPT_INT, &o->link_samples, NULL, 1, 1 << 16, "N",
-                              "hierarchy: point pairs and rays per link above the patches (default 4; x4 when "
+                              "hierarchy: point pairs and rays per link above the patches (default 8; x4 when "
                               "partly visible)"});
     bn_optset_add(s, (bn_opt){"ff", 0, BN_OPT_CHOICE, &o->method, "analytic|montecarlo|hemisphere", 0, 0,
                               "METHOD", "form factors: analytic (default), montecarlo or hemisphere"});

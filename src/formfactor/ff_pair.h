@@ -20,6 +20,14 @@ void bn__ff_worker_destroy(bn__ff_worker *w);
  * pass over the faces per new row); 0: always cast them (an unblocked pair gets exactly the same
  * value). */
 double bn__ff_pair(const bn__ff_pairs *p, bn__ff_worker *w, size_t i, size_t j, int cull);
+/* The largest sample count bn__ff_pair_quick uses. */
+#define BN__FF_QUICK_MAX 256
+/* F_ij (receiver i): the unoccluded form factor by the dense assembly's quadrature (to rtol) times the
+ * visible fraction from S shadow rays between point pairs drawn by the kernel (4S when the first S
+ * find partial visibility): the dense value but for fewer, freshly seeded rays. *sigma: the
+ * visibility estimate's standard error times the unoccluded F. */
+double bn__ff_pair_quick(const bn__ff_pairs *p, bn__ff_worker *w, size_t i, size_t j, int S, double rtol,
+                         double *sigma);
 size_t bn__ff_worker_rays(const bn__ff_worker *w);   /* rays cast so far */
 
 #endif

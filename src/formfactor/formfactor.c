@@ -1143,6 +1143,7 @@ struct bn__ff_pairs {
 
 struct bn__ff_worker {
     bn__scratch s;
+    size_t cap;          /* samples the scratch holds */
     size_t *cand;
     size_t cand_row;     /* the row cand holds (SIZE_MAX: none) */
     size_t ncand;
@@ -1188,7 +1189,8 @@ bn__ff_worker *bn__ff_worker_create(const bn__ff_pairs *p)
         return NULL;
     w->cand = bn__malloc_array(p->g.nf ? p->g.nf : 1, sizeof(size_t));
     w->cand_row = SIZE_MAX;
-    if (!w->cand || !bn__scratch_init(&w->s, (size_t)bn__samples(&p->o), 0)) {
+    w->cap = (size_t)bn__samples(&p->o) > BN__FF_QUICK_MAX ? (size_t)bn__samples(&p->o) : BN__FF_QUICK_MAX;
+    if (!w->cand || !bn__scratch_init(&w->s, w->cap, 0)) {
         bn__ff_worker_destroy(w);
         return NULL;
     }
@@ -1213,7 +1215,53 @@ double bn__ff_pair(const bn__ff_pairs *p, bn__ff_worker *w, size_t i, size_t j, 
         w->ncand = bn__row_candidates(&p->g, a, w->cand);
         w->cand_row = a;
     }
+    w->s.S = (size_t)bn__samples(&p->o);
     return bn__pair_value(p->rt, &p->g, &p->o, p->o.tolerance, cull ? w->cand : NULL, w->ncand, a, b, &w->s, &w->c);
+}
+
+double bn__ff_pair_quick(const bn__ff_pairs *p, bn__ff_worker *w, size_t i, size_t j, int S, double rtol,
+                         double *sigma)
+{
+    const bn__ffg *g = &p->g;
+    const double *ni = g->patch[i].normal, *nj = g->patch[j].normal;
+    bn__pair pp;
+    bn__quad_stats qs;
+    double I;
+    *sigma = 0;
+    if (i == j || !bn__pair_prep(g, i, j, &pp))
+        return 0;
+    if (S < 1)
+        S = 1;
+    I = bn__ff_polygon_integral(pp.a, pp.na, ni, pp.b, pp.nb, rtol, 1e-6 * rtol * fmin(pp.Aa, pp.Ab), &qs) /
+        g->patch[i].area;
+    w->c.evals += qs.evals;
+    for (int round = 0; round < 2; round++) {
+        size_t n = (size_t)S << (2 * round);
+        bn__rng r = bn__rng_make(p->o.seed ^ 0x717569636b6c6e6bull, ((uint64_t)i << 32) ^ j, (uint64_t)round);
+        double sw = 0, sv = 0;
+        size_t blocked = 0, seen = 0;
+        if (n > w->cap)
+            n = w->cap;
+        w->s.S = n;
+        bn__kernel_points(&r, &pp, ni, nj, &w->s);
+        w->c.rays += bn__pair_rays(p->rt, g, ni, nj, &w->s);
+        for (size_t k = 0; k < n; k++) {
+            sw += w->s.w[k];
+            seen += w->s.w[k] > 0;
+            if (w->s.w[k] > 0 && w->s.blocked[k])
+                blocked++;
+            else
+                sv += w->s.w[k];
+        }
+        if (round == 0 && blocked > 0 && blocked < seen)
+            continue;   /* partly visible: four times the rays */
+        {
+            double v = sw > 0 ? sv / sw : 1;
+            *sigma = I * sqrt((v * (1 - v) + 1.0 / (double)n) / (double)n);
+            return I * v;
+        }
+    }
+    return 0;
 }
 
 size_t bn__ff_worker_rays(const bn__ff_worker *w) { return w->c.rays; }

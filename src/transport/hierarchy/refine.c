@@ -13,14 +13,19 @@
 /* Levels a work item is refined in one go before the rest is queued for the next round (so one
  * root self-link becomes enough independent items to share among threads). */
 #define BN__DEPTH_PER_ROUND 6
+/* Quadrature tolerance of a leaf link's unoccluded form factor (a link's error is eps-level
+ * anyway; the dense assembly's 1e-5 costs ten times the time near contact). */
+#define BN__LEAF_RTOL 1e-3
+/* Shadow rays of a leaf link (x4 when partly visible). */
+#define BN__LEAF_RAYS 16
 
 void bn_hierarchy_opts_default(bn_hierarchy_opts *o)
 {
     memset(o, 0, sizeof *o);
     o->eps = BN_HIERARCHY_EPS_DEFAULT;
     o->clusters = 1;
-    o->samples = 4;
-    o->max_passes = 8;
+    o->samples = 8;
+    o->max_passes = 12;
     bn_formfactor_opts_default(&o->ff);
 }
 
@@ -120,6 +125,21 @@ static double bn__F_bound(const bn__tree *t, uint32_t r, uint32_t s)
     return fmin(1.0, t->area[s] / (BN_PI * d * d));
 }
 
+/* Receivers are always planar nodes (inside one polygon): a volume cluster would hand the same
+ * irradiance to patches facing every way. Sources may be clusters: their area-mean radiance is
+ * what a link carries, and the sampled F weighs each source patch by its own orientation. */
+
+/* Are the bounding spheres of r and s apart? Only then is a link above the patches estimated by
+ * point pairs: closer nodes are split whatever their brightness, as near the kernel's 1/r^2 a few
+ * samples can make a row of F sum far above 1. */
+static int bn__separated(const bn__tree *t, uint32_t r, uint32_t s)
+{
+    double cr[3], cs[3], rr, rs;
+    bn__centre(t, r, cr, &rr);
+    bn__centre(t, s, cs, &rs);
+    return bn_v3_dist(cr, cs) > rr + rs;
+}
+
 /* The oracle: the most a link could carry to the receiver's radiance, rho_r B_s F_bound. */
 static double bn__link_error(const bn__ref *R, uint32_t r, uint32_t s)
 {
@@ -156,7 +176,7 @@ static void bn__node_point(const bn__ref *R, uint32_t v, double u1, double u2, d
  * disk regulariser keeps every term bounded); S x 4 when the first S find partial visibility. */
 static double bn__F_sampled(const bn__ref *R, uint32_t r, uint32_t s, bn__worker *w)
 {
-    int S = R->o->samples > 0 ? R->o->samples : 4;
+    int S = R->o->samples > 0 ? R->o->samples : 8;
     for (int round = 0; round < 2; round++) {
         bn__rng g = bn__rng_make(R->o->ff.seed ^ 0x6869657261726368ull, ((uint64_t)r << 32) | s, (uint64_t)round);
         double a = R->t->area[s] / S, sum = 0, inv = 1.0 / S;
@@ -201,7 +221,12 @@ static float bn__link_F(const bn__ref *R, uint32_t r, uint32_t s, bn__worker *w)
     double F;
     if (bn__tree_is_leaf(t, r) && bn__tree_is_leaf(t, s)) {
         uint32_t i = bn__tree_patch(t, r), j = bn__tree_patch(t, s);
-        F = bn__ff_pair(R->pairs, w->ff, i, j, R->o->cull_leaf_rays) / R->patch[i].area;
+        if (R->o->exact_leaf_links || R->force) {
+            F = bn__ff_pair(R->pairs, w->ff, i, j, R->o->cull_leaf_rays) / R->patch[i].area;
+        } else {
+            double sigma;
+            F = bn__ff_pair_quick(R->pairs, w->ff, i, j, BN__LEAF_RAYS, BN__LEAF_RTOL, &sigma);
+        }
     } else {
         F = bn__F_sampled(R, r, s, w);
         w->mc_links++;
@@ -229,7 +254,8 @@ static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int dep
     }
     if (F < 0 && bn__culled(R, r, s))
         return;
-    if ((!lr || !ls) && (R->force || bn__link_error(R, r, s) > R->eps_abs)) {
+    if ((!lr || !ls) &&
+        (R->force || t->face[r] < 0 || !bn__separated(t, r, s) || bn__link_error(R, r, s) > R->eps_abs)) {
         double cr[3], cs[3], rr, rs;
         if (depth == 0) {
             bn__vec_push(&w->pending, r, s, -1);
@@ -239,7 +265,7 @@ static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int dep
             w->splits++;
         bn__centre(t, r, cr, &rr);
         bn__centre(t, s, cs, &rs);
-        if (!lr && (ls || rr >= rs)) {
+        if (!lr && (ls || rr >= rs || t->face[r] < 0)) {
             bn__visit(R, t->child[r], s, -1, depth - 1, w);
             bn__visit(R, t->child[r] + 1, s, -1, depth - 1, w);
         } else {
@@ -524,7 +550,13 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
                               work.n, (double)(work.n * sizeof(bn__link)) / (1 << 30), o->eps);
             goto done;
         }
-        bn_logf(&o->log, BN_LOG_INFO, "hierarchy pass %d: %zu links, %zu split", pass + 1, work.n, splits);
+        {
+            size_t leaf = 0;
+            for (size_t l = 0; l < work.n; l++)
+                leaf += bn__tree_is_leaf(&t, work.a[l].r) && bn__tree_is_leaf(&t, work.a[l].s);
+            bn_logf(&o->log, BN_LOG_INFO, "hierarchy pass %d: %zu links (%zu between patches), %zu split, %.1f s",
+                    pass + 1, work.n, leaf, splits, bn__now() - t0);
+        }
         if (pass > 0 && splits == 0) {
             rep->settled = 1;
             break;

@@ -1,0 +1,345 @@
+/* The hierarchy (include/bounce/hierarchy.h) against independent answers:
+ *  - with every link forced down to the patches and no clusters it is dense K (the same pair
+ *    routine, the same rays): K_H x = K x for every bounce term, to rounding;
+ *  - with clusters, its error against dense K on the Cornell box falls as eps falls;
+ *  - a closed furnace (rho 0.9, Le 1 everywhere) with a watertight sphere of 20,480 triangles inside
+ *    has L = Le / (1 - rho) = 10 on every patch: the hierarchy with clusters gets it within its
+ *    eps-level error, and puts light only where the geometry lets it (zero diagonal, row sums of F_H
+ *    near 1 in a closed scene). */
+#include "bn_test.h"
+#include "bounce/hierarchy.h"
+#include "bounce/pipeline.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef struct cornell {
+    bn_scene *s;
+    bn_rt *rt;
+    size_t n;
+} cornell;
+
+static void cornell_open(cornell *c, size_t patches)
+{
+    bn_load_opts lo;
+    bn_mesh_opts mo;
+    bn_error err;
+    bn_load_opts_default(&lo);
+    lo.unit = BN_UNIT_MM;
+    lo.log.quiet = 1;
+    BN_ASSERT_STATUS(bn_scene_load(bn_test_path("meshes/cornell-box.obj"), &lo, &c->s, &err), BN_OK);
+    bn_mesh_opts_default(&mo);
+    mo.target_patches = patches;
+    BN_ASSERT_STATUS(bn_scene_mesh(c->s, &mo, &err), BN_OK);
+    bn_scene_patches(c->s, &c->n);
+    BN_ASSERT_STATUS(bn_rt_create(c->s, 0, &c->rt, &err), BN_OK);
+}
+
+static void cornell_close(cornell *c)
+{
+    bn_rt_destroy(c->rt);
+    bn_scene_destroy(c->s);
+}
+
+static bn_transport *hierarchy(const cornell *c, double eps, int clusters, bn_hierarchy_report *rep)
+{
+    bn_hierarchy_opts ho;
+    bn_transport *k = NULL;
+    bn_error err;
+    bn_hierarchy_opts_default(&ho);
+    ho.eps = eps;
+    ho.clusters = clusters;
+    ho.exact_leaf_links = 1;
+    ho.cull_leaf_rays = 1;
+    ho.quiet = 1;
+    BN_ASSERT_STATUS(bn_hierarchy_build(c->s, c->rt, &ho, &k, rep, &err), BN_OK);
+    return k;
+}
+
+/* max_i |a_i - b_i| / max(|b_i|, mean |b|) over patches and channels */
+static double rel_diff(const double *a, const double *b, size_t m)
+{
+    double mean = 0, worst = 0;
+    for (size_t i = 0; i < m; i++)
+        mean += fabs(b[i]) / (double)m;
+    for (size_t i = 0; i < m; i++)
+        worst = fmax(worst, fabs(a[i] - b[i]) / fmax(fabs(b[i]), mean));
+    return worst;
+}
+
+/* Every bounce term K^k E, k = 1..5, of the hierarchy with links at the patches equals dense K's. */
+static void leaf_links_match(int clusters)
+{
+    cornell c;
+    bn_formfactor_opts fo;
+    bn_transport *kd = NULL, *kh;
+    bn_hierarchy_report rep;
+    bn_error err;
+    cornell_open(&c, 1200);
+    bn_formfactor_opts_default(&fo);
+    fo.quiet = 1;
+    BN_ASSERT_STATUS(bn_formfactor_build(c.s, c.rt, &fo, &kd, NULL, &err), BN_OK);
+    kh = hierarchy(&c, 0, clusters, &rep);
+    BN_ASSERT_EQ(rep.patches, c.n);
+    BN_ASSERT_EQ(rep.leaf_links, rep.links);
+    size_t m = 3 * c.n;
+    double *td = malloc(m * sizeof(double)), *th = malloc(m * sizeof(double)), *y = malloc(m * sizeof(double));
+    bn_scene_patch_emission(c.s, td);
+    memcpy(th, td, m * sizeof(double));
+    for (int k = 1; k <= 5; k++) {
+        BN_ASSERT_STATUS(bn_transport_apply(kd, td, y, &err), BN_OK);
+        memcpy(td, y, m * sizeof(double));
+        BN_ASSERT_STATUS(bn_transport_apply(kh, th, y, &err), BN_OK);
+        memcpy(th, y, m * sizeof(double));
+        double d = rel_diff(th, td, m);
+        printf("K^%d E: hierarchy vs dense, max relative difference %.3g\n", k, d);
+        BN_ASSERT_LE(d, 1e-6);
+    }
+    /* and on a vector with no structure */
+    for (size_t i = 0; i < m; i++)
+        td[i] = (double)((i * 2654435761u) % 1000) / 1000.0;
+    BN_ASSERT_STATUS(bn_transport_apply(kd, td, y, &err), BN_OK);
+    BN_ASSERT_STATUS(bn_transport_apply(kh, td, th, &err), BN_OK);
+    BN_ASSERT_LE(rel_diff(th, y, m), 1e-6);
+    free(td);
+    free(th);
+    free(y);
+    bn_transport_destroy(kd);
+    bn_transport_destroy(kh);
+    cornell_close(&c);
+}
+
+BN_TEST(leaf_links_without_clusters_are_dense_k) { leaf_links_match(0); }
+BN_TEST(leaf_links_from_the_root_are_dense_k) { leaf_links_match(1); }
+
+/* L from K (Jacobi to 1e-10 through the operator interface). */
+static double *solve(bn_transport *k, const bn_scene *s)
+{
+    size_t n;
+    bn_scene_patches(s, &n);
+    double *E = malloc(3 * n * sizeof(double));
+    bn_solve_opts so;
+    bn_solve_result res;
+    bn_error err;
+    bn_scene_patch_emission(s, E);
+    bn_solve_opts_default(&so);
+    so.method = BN_SOLVE_JACOBI;
+    so.tol = 1e-10;
+    so.quiet = 1;
+    memset(&res, 0, sizeof res);
+    BN_ASSERT_STATUS(bn_solve(k, E, &so, &res, &err), BN_OK);
+    double *L = malloc(3 * n * sizeof(double));
+    memcpy(L, res.L, 3 * n * sizeof(double));
+    bn_solve_result_free(&res);
+    free(E);
+    return L;
+}
+
+/* Area-weighted L1 error relative to the reference's L1 norm. */
+static double l1_rel(const bn_scene *s, const double *L, const double *ref)
+{
+    size_t n;
+    const bn_patch *p = bn_scene_patches(s, &n);
+    double num = 0, den = 0;
+    for (size_t i = 0; i < n; i++)
+        for (int c = 0; c < 3; c++) {
+            num += p[i].area * fabs(L[3 * i + c] - ref[3 * i + c]);
+            den += p[i].area * fabs(ref[3 * i + c]);
+        }
+    return num / den;
+}
+
+BN_TEST(error_falls_with_eps)
+{
+    cornell c;
+    bn_formfactor_opts fo;
+    bn_transport *kd = NULL;
+    bn_error err;
+    const double eps[] = {3e-2, 3e-3, 3e-4};
+    double prev = INFINITY;
+    size_t prev_links = 0;
+    cornell_open(&c, 1200);
+    bn_formfactor_opts_default(&fo);
+    fo.quiet = 1;
+    fo.precision = BN_PRECISION_DOUBLE;
+    BN_ASSERT_STATUS(bn_formfactor_build(c.s, c.rt, &fo, &kd, NULL, &err), BN_OK);
+    double *ref = solve(kd, c.s);
+    for (int e = 0; e < 3; e++) {
+        bn_hierarchy_report rep;
+        bn_transport *kh = hierarchy(&c, eps[e], 1, &rep);
+        double *L = solve(kh, c.s), d = l1_rel(c.s, L, ref);
+        printf("eps %g: %zu links (%zu between patches, %zu with a cluster), %zu passes, L1 error %.4g\n", eps[e],
+               rep.links, rep.leaf_links, rep.cluster_links, rep.passes, d);
+        BN_ASSERT(rep.settled);
+        BN_ASSERT_LT(d, prev);
+        BN_ASSERT_GT(rep.links, prev_links);
+        BN_ASSERT_LE(rep.bytes_per_link, 16);
+        prev = d;
+        prev_links = rep.links;
+        free(L);
+        bn_transport_destroy(kh);
+    }
+    BN_ASSERT_LT(prev, 0.01);
+    free(ref);
+    bn_transport_destroy(kd);
+    cornell_close(&c);
+}
+
+/* ---- the furnace: a closed box, rho 0.9 and Le 1 everywhere, with a watertight sphere inside ---- */
+
+typedef struct ico {
+    double *v;
+    size_t nv, cap;
+    unsigned *tri;
+    size_t nt;
+} ico;
+
+static unsigned ico_mid(ico *m, unsigned a, unsigned b, unsigned *cache_a, unsigned *cache_b, unsigned *cache_m,
+                        size_t *nc)
+{
+    unsigned lo = a < b ? a : b, hi = a < b ? b : a;
+    for (size_t k = 0; k < *nc; k++)   /* small meshes: a linear probe per level is fine below */
+        if (cache_a[k] == lo && cache_b[k] == hi)
+            return cache_m[k];
+    double p[3], l = 0;
+    for (int c = 0; c < 3; c++) {
+        p[c] = 0.5 * (m->v[3 * a + c] + m->v[3 * b + c]);
+        l += p[c] * p[c];
+    }
+    l = sqrt(l);
+    for (int c = 0; c < 3; c++)
+        m->v[3 * m->nv + c] = p[c] / l;
+    cache_a[*nc] = lo;
+    cache_b[*nc] = hi;
+    cache_m[*nc] = (unsigned)m->nv;
+    (*nc)++;
+    return (unsigned)m->nv++;
+}
+
+/* An icosphere of radius 1 (20 x 4^levels triangles, outward, counter-clockwise from outside). */
+static void icosphere(ico *m, int levels)
+{
+    const double t = (1 + sqrt(5.0)) / 2;
+    const double v0[12][3] = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0}, {0, -1, t}, {0, 1, t},
+                              {0, -1, -t}, {0, 1, -t}, {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
+    const unsigned f0[20][3] = {{0, 11, 5}, {0, 5, 1}, {0, 1, 7}, {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
+                                {11, 10, 2}, {10, 7, 6}, {7, 1, 8}, {3, 9, 4}, {3, 4, 2}, {3, 2, 6}, {3, 6, 8},
+                                {3, 8, 9}, {4, 9, 5}, {2, 4, 11}, {6, 2, 10}, {8, 6, 7}, {9, 8, 1}};
+    size_t nt_final = 20;
+    for (int l = 0; l < levels; l++)
+        nt_final *= 4;
+    m->cap = 12 + nt_final * 3 / 2 + 16;
+    m->v = malloc(3 * m->cap * sizeof(double));
+    m->tri = malloc(3 * nt_final * sizeof(unsigned));
+    m->nv = 12;
+    m->nt = 20;
+    for (int i = 0; i < 12; i++) {
+        double l = sqrt(v0[i][0] * v0[i][0] + v0[i][1] * v0[i][1] + v0[i][2] * v0[i][2]);
+        for (int c = 0; c < 3; c++)
+            m->v[3 * i + c] = v0[i][c] / l;
+    }
+    memcpy(m->tri, f0, sizeof f0);
+    for (int l = 0; l < levels; l++) {
+        unsigned *nt = malloc(3 * 4 * m->nt * sizeof(unsigned));
+        /* edge midpoints, keyed per vertex: each vertex has at most 6 edges */
+        unsigned *ea = malloc(m->cap * 6 * sizeof(unsigned)), *em = malloc(m->cap * 6 * sizeof(unsigned));
+        unsigned char *ne = calloc(m->cap, 1);
+        for (size_t f = 0; f < m->nt; f++) {
+            unsigned a = m->tri[3 * f], b = m->tri[3 * f + 1], c = m->tri[3 * f + 2], mid[3];
+            unsigned e[3][2] = {{a, b}, {b, c}, {c, a}};
+            for (int k = 0; k < 3; k++) {
+                unsigned lo = e[k][0] < e[k][1] ? e[k][0] : e[k][1], hi = e[k][0] ^ e[k][1] ^ lo;
+                int found = -1;
+                for (int q = 0; q < ne[lo]; q++)
+                    if (ea[6 * lo + q] == hi)
+                        found = q;
+                if (found >= 0) {
+                    mid[k] = em[6 * lo + found];
+                } else {
+                    unsigned ca = lo, cb = hi, cm;
+                    size_t nc = 0;
+                    cm = ico_mid(m, ca, cb, &ca, &cb, &cm, &nc);
+                    ea[6 * lo + ne[lo]] = hi;
+                    em[6 * lo + ne[lo]++] = cm;
+                    mid[k] = cm;
+                }
+            }
+            unsigned q[4][3] = {{a, mid[0], mid[2]}, {b, mid[1], mid[0]}, {c, mid[2], mid[1]}, {mid[0], mid[1], mid[2]}};
+            memcpy(nt + 12 * f, q, sizeof q);
+        }
+        free(m->tri);
+        free(ea);
+        free(em);
+        free(ne);
+        m->tri = nt;
+        m->nt *= 4;
+    }
+}
+
+BN_TEST(furnace_with_a_sphere_inside) /* BN_SLOW */
+{
+    ico m = {0};
+    icosphere(&m, 5);
+    BN_ASSERT_EQ(m.nt, (size_t)20480);
+    size_t nv = 8 + m.nv, np = 6 + m.nt;
+    double *v = malloc(3 * nv * sizeof(double));
+    unsigned *polys = malloc((6 * 5 + m.nt * 4) * sizeof(unsigned)), *pm = calloc(np, sizeof(unsigned));
+    const double box[8][3] = {{-2, -2, -2}, {2, -2, -2}, {2, 2, -2}, {-2, 2, -2},
+                              {-2, -2, 2},  {2, -2, 2},  {2, 2, 2},  {-2, 2, 2}};
+    const unsigned quads[6][4] = {{0, 1, 2, 3}, {4, 7, 6, 5}, {0, 4, 5, 1}, {1, 5, 6, 2}, {2, 6, 7, 3}, {3, 7, 4, 0}};
+    size_t w = 0;
+    memcpy(v, box, sizeof box);
+    memcpy(v + 24, m.v, 3 * m.nv * sizeof(double));
+    for (int q = 0; q < 6; q++) {   /* inward: counter-clockwise seen from inside */
+        polys[w++] = 4;
+        for (int k = 0; k < 4; k++)
+            polys[w++] = quads[q][k];
+    }
+    for (size_t f = 0; f < m.nt; f++) {
+        polys[w++] = 3;
+        for (int k = 0; k < 3; k++)
+            polys[w++] = 8 + m.tri[3 * f + k];
+    }
+    bn_material mat = {"grey", {0.9, 0.9, 0.9}, {1, 1, 1}};
+    bn_load_opts lo;
+    bn_mesh_opts mo;
+    bn_scene *s = NULL;
+    bn_rt *rt = NULL;
+    bn_error err;
+    bn_load_opts_default(&lo);
+    lo.log.quiet = 1;
+    BN_ASSERT_STATUS(bn_scene_from_arrays("furnace", v, nv, polys, np, pm, &mat, 1, &lo, &s, &err), BN_OK);
+    bn_mesh_opts_default(&mo);
+    mo.target_patches = 0;
+    mo.patch_size = 0.25;   /* the walls in 16 x 16 */
+    BN_ASSERT_STATUS(bn_scene_mesh(s, &mo, &err), BN_OK);
+    BN_ASSERT_STATUS(bn_rt_create(s, 0, &rt, &err), BN_OK);
+    size_t n;
+    bn_scene_patches(s, &n);
+
+    bn_hierarchy_opts ho;
+    bn_hierarchy_report rep;
+    bn_transport *k = NULL;
+    bn_hierarchy_opts_default(&ho);
+    ho.eps = 1e-2;
+    ho.quiet = 1;
+    BN_ASSERT_STATUS(bn_hierarchy_build(s, rt, &ho, &k, &rep, &err), BN_OK);
+    printf("furnace: %zu patches, %zu nodes (%zu clusters), %zu links (%zu between patches, %zu with a cluster), "
+           "%zu passes\n", n, rep.nodes, rep.clusters, rep.links, rep.leaf_links, rep.cluster_links, rep.passes);
+    BN_ASSERT(rep.cluster_links > 0);
+    double *L = solve(k, s), worst = 0;
+    for (size_t i = 0; i < 3 * n; i++)
+        worst = fmax(worst, fabs(L[i] - 10) / 10);
+    printf("furnace: max |L - 10| / 10 = %.4g (eps %g)\n", worst, ho.eps);
+    BN_ASSERT_LE(worst, 2 * ho.eps);
+    free(L);
+    bn_transport_destroy(k);
+    bn_rt_destroy(rt);
+    bn_scene_destroy(s);
+    free(v);
+    free(polys);
+    free(pm);
+    free(m.v);
+    free(m.tri);
+}
