@@ -76,7 +76,7 @@ static void leaf_links_match(int clusters)
     bn_transport *kd = NULL, *kh;
     bn_hierarchy_report rep;
     bn_error err;
-    cornell_open(&c, 1200);
+    cornell_open(&c, 600);
     bn_formfactor_opts_default(&fo);
     fo.quiet = 1;
     BN_ASSERT_STATUS(bn_formfactor_build(c.s, c.rt, &fo, &kd, NULL, &err), BN_OK);
@@ -180,7 +180,7 @@ BN_TEST(error_falls_with_eps)
         free(L);
         bn_transport_destroy(kh);
     }
-    BN_ASSERT_LT(prev, 0.01);
+    BN_ASSERT_LT(prev, 0.02);
     free(ref);
     bn_transport_destroy(kd);
     cornell_close(&c);
@@ -277,11 +277,10 @@ static void icosphere(ico *m, int levels)
     }
 }
 
-BN_TEST(furnace_with_a_sphere_inside) /* BN_SLOW */
+static void furnace(int levels, double eps, double wall_patch)
 {
     ico m = {0};
-    icosphere(&m, 5);
-    BN_ASSERT_EQ(m.nt, (size_t)20480);
+    icosphere(&m, levels);
     size_t nv = 8 + m.nv, np = 6 + m.nt;
     double *v = malloc(3 * nv * sizeof(double));
     unsigned *polys = malloc((6 * 5 + m.nt * 4) * sizeof(unsigned)), *pm = calloc(np, sizeof(unsigned));
@@ -312,7 +311,7 @@ BN_TEST(furnace_with_a_sphere_inside) /* BN_SLOW */
     BN_ASSERT_STATUS(bn_scene_from_arrays("furnace", v, nv, polys, np, pm, &mat, 1, &lo, &s, &err), BN_OK);
     bn_mesh_opts_default(&mo);
     mo.target_patches = 0;
-    mo.patch_size = 0.25;   /* the walls in 16 x 16 */
+    mo.patch_size = wall_patch;
     BN_ASSERT_STATUS(bn_scene_mesh(s, &mo, &err), BN_OK);
     BN_ASSERT_STATUS(bn_rt_create(s, 0, &rt, &err), BN_OK);
     size_t n;
@@ -322,7 +321,7 @@ BN_TEST(furnace_with_a_sphere_inside) /* BN_SLOW */
     bn_hierarchy_report rep;
     bn_transport *k = NULL;
     bn_hierarchy_opts_default(&ho);
-    ho.eps = 1e-2;
+    ho.eps = eps;
     ho.quiet = 1;
     BN_ASSERT_STATUS(bn_hierarchy_build(s, rt, &ho, &k, &rep, &err), BN_OK);
     printf("furnace: %zu patches, %zu nodes (%zu clusters), %zu links (%zu between patches, %zu with a cluster), "
@@ -332,7 +331,7 @@ BN_TEST(furnace_with_a_sphere_inside) /* BN_SLOW */
     for (size_t i = 0; i < 3 * n; i++)
         worst = fmax(worst, fabs(L[i] - 10) / 10);
     printf("furnace: max |L - 10| / 10 = %.4g (eps %g)\n", worst, ho.eps);
-    BN_ASSERT_LE(worst, 2 * ho.eps);
+    BN_ASSERT_LE(worst, ho.eps / 5);
     free(L);
     bn_transport_destroy(k);
     bn_rt_destroy(rt);
@@ -343,3 +342,13 @@ BN_TEST(furnace_with_a_sphere_inside) /* BN_SLOW */
     free(m.v);
     free(m.tri);
 }
+
+/* 20,480 sphere triangles, the walls in 4 x 4 patches. */
+BN_TEST(furnace_with_a_sphere_inside) /* BN_SLOW */
+{
+    BN_SKIP_IF_SLOW_RUN();
+    furnace(5, 0.1, 1.0);
+}
+
+/* The same at 1,280 triangles (also under the sanitizers). */
+BN_TEST(furnace_with_a_small_sphere_inside) { furnace(3, 0.1, 1.0); }

@@ -188,6 +188,6 @@ BN_TEST(cli_exit_codes)
     BN_ASSERT(!bn_test_file_exists(bn_test_tmp("o.csv")));
     free(out);
     BN_ASSERT_EQ(bn_test_bounce("solve --help", &out), 0);
-    BN_ASSERT(strstr(out, "default gauss-seidel") && strstr(out, "default 1e-6") && strstr(out, "default 100000"));
+    BN_ASSERT(strstr(out, "auto (default): gauss-seidel") && strstr(out, "default 1e-6") && strstr(out, "default 100000"));
     free(out);
 }

@@ -46,6 +46,14 @@ int bn_cmd_formfactors(int argc, char **argv, bn_cli_common *c)
         }
     }
     bn_cli_pipeline_opts(&so, &fo, NULL, c, &po);
+    /* this command is every pair's F: never the hierarchy, which keeps links, not entries */
+    if (!strcmp(po.transport, "hierarchical")) {
+        bn_error_set(&err, BN_EUSAGE, "--transport hierarchical: the hierarchy keeps links between clusters and "
+                                      "elements, not every F_ij; formfactors takes dense or sparse");
+        return bn_cli_fail(&err);
+    }
+    if (!strcmp(po.transport, "auto"))
+        po.transport = fo.storage ? fo.storage : BN_STORAGE_DEFAULT;
     st = bn_pipeline_scene(pos[0], &po, &p, &err);
     if (st == BN_OK)
         st = bn_pipeline_operator(&po, &p, &err);
