@@ -13,6 +13,7 @@
 #include <stdio.h>
 #include "bounce/scene.h"
 #include "bounce/formfactor.h"
+#include "bounce/hierarchy.h"
 #include "bounce/solve.h"
 #include "bounce/trace.h"
 
@@ -30,9 +31,10 @@ typedef enum bn_study_param {
     BN_STUDY_SAMPLES,     /* form-factor samples (shadow rays per pair, point pairs, hemisphere rays) */
     BN_STUDY_FF,          /* form-factor method: values are bn_ff_method */
     BN_STUDY_SPP,         /* path-tracer samples per patch */
-    BN_STUDY_PRECISION    /* storage precision of F: values are bn_precision */
+    BN_STUDY_PRECISION,   /* storage precision of F: values are bn_precision */
+    BN_STUDY_EPS          /* the hierarchy's link tolerance (K_H on the fixed mesh against dense K) */
 } bn_study_param;
-#define BN_STUDY_PARAM_COUNT 9
+#define BN_STUDY_PARAM_COUNT 10
 const char *bn_study_param_name(bn_study_param p);        /* "bounces", "max-iter", ... */
 int bn_study_param_parse(const char *s, bn_study_param *out);   /* 0 on success */
 
@@ -55,6 +57,10 @@ typedef struct bn_study_opts {
     bn_load_opts load;           /* how the scene file is read */
     bn_mesh_opts mesh;           /* fixed meshing (the varied one overrides) */
     bn_formfactor_opts ff;       /* fixed form-factor options */
+    const char *transport;       /* K of every setting: NULL or "dense"/"sparse" (ff.storage), "hierarchical"
+                                    (K_H with hier; solved by jacobi to 1e-10 where the method needs what K_H
+                                    lacks); references stay dense. The eps study is always hierarchical. */
+    bn_hierarchy_opts hier;
     bn_solve_opts solve;         /* fixed solve options; method used for mesh, samples, ff and precision
                                     settings (default direct: no iteration error mixed in) */
     bn_trace_opts trace;         /* spp settings and the equal-error comparison */
@@ -83,6 +89,8 @@ typedef struct bn_study_row {
     char   value[BN_STUDY_LABEL];    /* the setting as given ("20", "1e-06", "analytic", "float") */
     double x;                        /* the setting as a number (ff, precision: 0, 1, 2 by index) */
     size_t patches;
+    size_t k_entries;                /* stored entries of F (dense, sparse) or links (hierarchy); 0 n/a */
+    double k_mb;                     /* K's memory, MiB (0 n/a) */
     size_t iterations;               /* sweeps, bounces or K applications (0 for direct) */
     int    ground;                   /* 0: same mesh as the reference, 1: reference patches by centroid */
     double err_inf;                  /* ||L - L_ref||_inf over patches and channels, W m^-2 sr^-1 */
@@ -152,7 +160,7 @@ void bn_study_result_free(bn_study_result *res);   /* NULL or zeroed is a no-op 
 #define BN_STUDY_CSV_COLUMNS                                                                              \
     "param,method,value,x,patches,iterations,ground,err_inf,err_inf_rel,err_max_rel,err_rms_rel,err_l1_rel," \
     "err_energy_rel,err_surface_max,err_surface_mean,bound,bound_ke,estimate,t_mesh,t_ff,t_solve,t_output,"       \
-    "t_total,peak_mb,k_norm,se_surface_max,t_iterate"
+    "t_total,peak_mb,k_norm,se_surface_max,t_iterate,k_entries,k_mb"
 /* Writes the rows as CSV: `provenance` ('#'-prefixed `key=value` lines, may be NULL), then the
  * study's own `# key=value` lines (reference, its error, norms), then the header and rows. Atomic. */
 bn_status bn_study_write_csv(const bn_study_result *res, const char *path, const char *provenance, bn_error *err);

@@ -108,7 +108,9 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
         "Measures how the error falls and the cost grows as one parameter varies. PARAM is the option it varies:\n"
         "bounces (the truncated series S_n, beside the bound ||K||^(n+1)/(1-||K||) ||E||, and Jacobi, Gauss-Seidel,\n"
         "Neumann and direct to each --tols), max-iter, tol, patches, patch-size, samples, ff (analytic,montecarlo,\n"
-        "hemisphere), spp (path tracer) or precision (float,double). Each setting is compared with a stated, more\n"
+        "hemisphere), spp (path tracer), precision (float,double) or eps (the hierarchy's link tolerance: K_H on\n"
+        "the fixed mesh against dense K with --ref-samples rays). --transport hierarchical makes every setting's K\n"
+        "the hierarchy (references stay dense). Each setting is compared with a stated, more\n"
         "accurate reference whose own error is estimated and printed: bounces/max-iter/tol/precision: a direct solve\n"
         "of the same K (double for precision); patches/patch-size/spp: a finer mesh (--ref-patches) or the path\n"
         "tracer (--ref trace; automatic with --against-spp, the equal-error comparison); samples/ff:\n"
@@ -160,7 +162,7 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
     }
     if (!vary || !strchr(vary, '=')) {
         bn_error_set(&err, BN_EUSAGE, "study needs --vary PARAM=V1,V2,... (PARAM: bounces, max-iter, tol, patches, "
-                                      "patch-size, samples, ff, spp, precision)");
+                                      "patch-size, samples, ff, spp, precision, eps)");
         return bn_cli_fail(&err);
     }
 
@@ -175,7 +177,7 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
         pname[len] = '\0';
         if (bn_study_param_parse(pname, &o.param) != 0) {
             bn_error_set(&err, BN_EUSAGE, "--vary: unknown parameter '%s' (bounces, max-iter, tol, patches, patch-size, "
-                                          "samples, ff, spp, precision)", pname);
+                                          "samples, ff, spp, precision, eps)", pname);
             return bn_cli_fail(&err);
         }
         if (o.param == BN_STUDY_FF)
@@ -223,6 +225,15 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
     bn_cli_ff_opts(&ffo, c, &o.ff);
     o.ff.quiet = 1;
     o.ff.cache_path = NULL;   /* every setting is built and timed */
+    {
+        static const char *tn[] = {NULL, "dense", "sparse", "hierarchical"};
+        o.transport = ffo.transport == 0 ? ffo.storage : tn[ffo.transport];
+        if (ffo.eps >= 0)
+            o.hier.eps = ffo.eps;
+        o.hier.clusters = !ffo.no_clusters;
+        if (ffo.link_samples > 0)
+            o.hier.samples = ffo.link_samples;
+    }
     o.solve.method = (bn_solve_method)method;
     if (max_iter)
         o.solve.max_iter = max_iter;

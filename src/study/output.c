@@ -69,7 +69,8 @@ bn_status bn_study_write_csv(const bn_study_result *r, const char *path, const c
         const bn_study_row *w = &r->rows[i];
         const double v[] = {w->err_inf, w->err_inf_rel, w->err_max_rel, w->err_rms_rel, w->err_l1_rel, w->err_energy_rel,
                             w->err_surface_max, w->err_surface_mean, w->bound, w->bound_ke, w->estimate, w->t_mesh, w->t_ff,
-                            w->t_solve, w->t_output, w->t_total, w->peak_mb, w->k_norm, w->se_surface_max, w->t_iterate};
+                            w->t_solve, w->t_output, w->t_total, w->peak_mb, w->k_norm, w->se_surface_max, w->t_iterate,
+                            (double)w->k_entries, w->k_mb};
         fprintf(fp, "%s,%s,%s,", bn_study_param_name(r->param), w->method, w->value);
         bn__num(fp, w->x);
         fprintf(fp, ",%zu,", w->patches);
@@ -107,7 +108,7 @@ void bn_study_print(const bn_study_result *r, FILE *fp)
     if (bounces || r->param == BN_STUDY_MAX_ITER)
         fprintf(fp, " %10s %10s %9s %9s %9s", "err_inf", "bound", "bound/err", "bKE/err", "est/err");
     else
-        fprintf(fp, " %8s", "peak_MiB");
+        fprintf(fp, " %8s %10s %8s", "peak_MiB", "K_entries", "K_MiB");
     fputc('\n', fp);
     for (size_t i = 0; i < r->nrows; i++) {
         const bn_study_row *w = &r->rows[i];
@@ -130,7 +131,7 @@ void bn_study_print(const bn_study_result *r, FILE *fp)
                 hi2 = fmax(hi2, r2);
             }
         } else
-            fprintf(fp, " %8.1f", w->peak_mb);
+            fprintf(fp, " %8.1f %10zu %8.1f", w->peak_mb, w->k_entries, w->k_mb);
         fputc('\n', fp);
     }
     if (bounces && hi > 0)

@@ -17,7 +17,7 @@
 #include <strings.h>
 
 static const char *const bn__param_names[BN_STUDY_PARAM_COUNT] = {
-    "bounces", "max-iter", "tol", "patches", "patch-size", "samples", "ff", "spp", "precision"};
+    "bounces", "max-iter", "tol", "patches", "patch-size", "samples", "ff", "spp", "precision", "eps"};
 
 const char *bn_study_param_name(bn_study_param p)
 {
@@ -49,6 +49,7 @@ void bn_study_opts_default(bn_study_opts *o)
     o->ff.quiet = 1;
     bn_solve_opts_default(&o->solve);
     o->solve.method = BN_SOLVE_DIRECT;
+    bn_hierarchy_opts_default(&o->hier);
     o->solve.quiet = 1;
     bn_trace_opts_default(&o->trace);
     o->trace.quiet = 1;
@@ -169,7 +170,8 @@ static bn_status bn__scene(bn__study *S, const bn_mesh_opts *m, bn_scene **out, 
 
 /* The pipeline's second stage for a scene the study keeps: K, the ray caster released after the
  * assembly (its time counts as form-factor time). */
-static bn_status bn__build_k(const bn_scene *s, const bn_formfactor_opts *ffo, bn_transport **K, double *seconds,
+static bn_status bn__build_k(const bn_scene *s, const bn_formfactor_opts *ffo, const char *transport,
+                             const bn_hierarchy_opts *hier, bn_transport **K, size_t *links, double *seconds,
                              bn_error *err)
 {
     bn_pipeline_opts po;
@@ -177,11 +179,18 @@ static bn_status bn__build_k(const bn_scene *s, const bn_formfactor_opts *ffo, b
     bn_status st;
     bn_pipeline_opts_default(&po);
     po.ff = *ffo;
+    po.transport = transport;
+    if (hier) {
+        po.hier = *hier;
+        po.hier.quiet = 1;
+    }
     memset(&p, 0, sizeof p);
     p.scene = (bn_scene *)s;   /* borrowed: taken back below */
     bn_scene_patches(s, &p.n);
     st = bn_pipeline_operator(&po, &p, err);
     *K = p.k;
+    if (links)
+        *links = p.hierarchical ? p.hier.links : p.ff.nonzeros;
     *seconds = p.seconds_operator;
     return st;
 }
@@ -200,6 +209,11 @@ static bn_status bn__solve(const bn_transport *K, const double *E, const bn_solv
     o.quiet = 1;
     o.log = NULL;
     o.log_sink.fn = bn__drop_log;
+    if ((o.method == BN_SOLVE_DIRECT && !(bn_transport_caps(K) & BN_OP_ENTRIES)) ||
+        (o.method == BN_SOLVE_GAUSS_SEIDEL && !(bn_transport_caps(K) & BN_OP_ROWS))) {
+        o.method = BN_SOLVE_JACOBI;   /* K_H: apply only; converged far below any error measured */
+        o.tol = fmin(o.tol, 1e-10);
+    }
     st = bn_solve(K, E, &o, &res, err);
     *seconds = bn__now() - t0;
     if (st == BN_ENOTCONV && res.L) {
@@ -274,8 +288,15 @@ static bn_status bn__radiosity(bn__study *S, const bn_mesh_opts *m, const bn_for
     if (row)
         bn__study_peak_reset();
     st = bn__scene(S, m, &out->scene, &tm, err);
-    if (st == BN_OK)
-        st = bn__build_k(out->scene, ffo, &K, &tf, err);
+    if (st == BN_OK) {   /* settings (a row) in the study's transport; references dense */
+        const char *tr = row ? S->o->transport : NULL;
+        bn_hierarchy_opts h = S->o->hier;
+        if (row && S->o->param == BN_STUDY_EPS) {
+            tr = "hierarchical";
+            h.eps = row->x;
+        }
+        st = bn__build_k(out->scene, ffo, tr, &h, &K, row ? &row->k_entries : NULL, &tf, err);
+    }
     if (st == BN_OK) {
         bn_scene_patches(out->scene, &out->n);
         E = bn__malloc_array(3 * out->n + 1, sizeof(double));
@@ -298,6 +319,7 @@ static bn_status bn__radiosity(bn__study *S, const bn_mesh_opts *m, const bn_for
         row->t_output = bn__output_time(out->scene, out->L);
         bn__row_total(row);
         row->peak_mb = bn__study_peak_mb();
+        row->k_mb = (double)bn_transport_bytes(K) / 1048576.0;
     }
     out->seconds = tm + tf + ts;
     bn_transport_destroy(K);
@@ -702,7 +724,7 @@ static bn_status bn__study_operator(bn__study *S, bn_error *err)
 
     st = bn__scene(S, &o->mesh, &sc, &tm, err);
     if (st == BN_OK)
-        st = bn__build_k(sc, &o->ff, &K, &tf, err);
+        st = bn__build_k(sc, &o->ff, NULL, NULL, &K, NULL, &tf, err);
     if (st != BN_OK)
         goto done;
     bn_scene_patches(sc, &n);
@@ -966,6 +988,15 @@ static void bn__ref_levels(const bn_study_opts *o, bn__ref_plan *P)
         mcoarse = mref;
         mcoarse.patch_size = lo;
         fcoarse = fref;
+    } else if (o->param == BN_STUDY_EPS) {
+        /* dense K on the same mesh, its visibility from many rays: what K_H approximates */
+        fref.method = BN_FF_ANALYTIC;
+        fref.samples = o->ref_samples ? o->ref_samples : 256;
+        fref.seed = bn__hash64(o->ff.seed ^ 0x7265666572656e63ULL);
+        mcoarse = mref;
+        fcoarse = fref;
+        fcoarse.samples = fref.samples / 4 > 0 ? fref.samples / 4 : 1;
+        fcoarse.seed = bn__hash64(fref.seed + 1);
     } else if (o->param == BN_STUDY_SAMPLES || o->param == BN_STUDY_FF) {
         int top = 0;
         for (size_t v = 0; o->param == BN_STUDY_SAMPLES && v < o->nvalues; v++)
@@ -1209,6 +1240,10 @@ static void bn__setting(const bn_study_opts *o, size_t v, bn_mesh_opts *mo, bn_f
         snprintf(val, nval, "%s", bn_ff_method_name(f.method));
         method = val;
         break;
+    case BN_STUDY_EPS:
+        snprintf(val, nval, "%g", o->values[v]);
+        method = "hierarchy";
+        break;
     default:   /* precision */
         f.precision = (bn_precision)(int)o->values[v];
         snprintf(val, nval, "%s", bn_precision_name(f.precision));
@@ -1444,6 +1479,10 @@ static bn_status bn__study_run_body(const char *path, const bn_study_opts *o_in,
         case BN_STUDY_PRECISION:
             if (!whole || x < 0 || x > 1)
                 return bn_error_set(err, BN_EUSAGE, "study: bad precision index %g", x);
+            break;
+        case BN_STUDY_EPS:
+            if (!(x > 0 && x < 1))
+                return bn_error_set(err, BN_EUSAGE, "study: eps must be in (0, 1) (got %g)", x);
             break;
         }
     }
