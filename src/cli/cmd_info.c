@@ -1,5 +1,6 @@
 /* `bounce info SCENE`: faces, patches, emitters, materials, bounds, area, power, memory. */
 #include "cli/cli.h"
+#include "bounce/pipeline.h"
 #include "base/internal.h"
 
 #include <math.h>
@@ -80,6 +81,28 @@ int bn_cmd_info(int argc, char **argv, bn_cli_common *c)
            bn_unit_name(bn_scene_unit(s)));
     bn__bytes((double)np * (double)np * 4.0, buf, sizeof buf);
     printf("dense K     %s as float (N^2 x 4 bytes; F is stored once for all channels)\n", buf);
+    {
+        /* the hierarchy: its nodes exactly, its links as the range measured on the Cornell box and
+         * the bunny box at the default eps (15 and 235 links per patch; ~4 us per link on 2 cores) */
+        bn_pipeline_opts po;
+        char why[200], b1[32], b2[32], b3[32];
+        size_t nh = np;
+        int mesh_given = so.patch_size > 0 || so.patches || so.no_subdivide;
+        bn_cli_pipeline_opts(&so, NULL, NULL, c, &po);
+        po.transport = "auto";
+        int h = bn_pipeline_use_hierarchy(&po, np, why, sizeof why);
+        printf("transport   auto chooses %s: %s\n", h ? "hierarchical" : "dense", why);
+        if (!mesh_given && nh < nf + BN_HIERARCHY_EXTRA_PATCHES)
+            nh = nf + BN_HIERARCHY_EXTRA_PATCHES;   /* its default mesh aims at this */
+        bn__bytes((double)(2 * nh) * 88.0, b1, sizeof b1);
+        bn__bytes((double)nh * 15 * 8.0, b2, sizeof b2);
+        bn__bytes((double)nh * 250 * 8.0, b3, sizeof b3);
+        printf("hierarchy   %s%zu patches, %zu nodes (%s); at eps %g typically 15 to 250 links per patch (%s to %s "
+               "at 8 bytes a link, twice that while refining), ~4 us a link on 2 cores: %.2g to %.2g s\n",
+               mesh_given ? "" : "about ", nh, 2 * nh - 1, b1, BN_HIERARCHY_EPS_DEFAULT, b2, b3,
+               (double)nh * 15 * 4e-6 * 2 / bn_threads_resolve(c->threads),
+               (double)nh * 250 * 4e-6 * 2 / bn_threads_resolve(c->threads));
+    }
 
     printf("\nmaterials   %zu\n", nm);
     printf("  %-3s %-20s %-26s %-26s %6s %14s\n", "id", "name", "rho (Kd)", "Le (Ke, W m^-2 sr^-1)", "faces", "area");

@@ -37,6 +37,17 @@ static void bn__provenance_run(char *buf, size_t n, const bn_cli_common *c, cons
              c->cmdline ? c->cmdline : "bounce solve", bn_scene_path(s), bn_unit_name(bn_scene_unit(s)),
              (unsigned long long)c->seed, bn_threads_resolve(c->threads), bn_ff_method_name(po->ff.method), d->row_sum_min,
              d->row_sum_max, d->reciprocity_residual, d->seconds);
+    if (p->hierarchical) {
+        size_t len = strlen(buf);
+        const bn_hierarchy_report *h = &p->hier;
+        snprintf(buf + len, n > len ? n - len : 0,
+                 "# hierarchy_eps=%.9g\n# hierarchy_eps_abs=%.9g\n# hierarchy_clusters=%d\n# hierarchy_nodes=%zu\n"
+                 "# hierarchy_links=%zu\n# hierarchy_leaf_links=%zu\n# hierarchy_cluster_links=%zu\n"
+                 "# hierarchy_passes=%zu\n# hierarchy_settled=%d\n# hierarchy_rays=%zu\n# hierarchy_bytes=%zu\n"
+                 "# hierarchy_seconds=%.3f\n",
+                 po->hier.eps, h->eps_abs, po->hier.clusters, h->nodes, h->links, h->leaf_links, h->cluster_links,
+                 h->passes, h->settled, h->rays, h->bytes, h->seconds_tree + h->seconds_refine);
+    }
 }
 
 static void bn__provenance_solve(FILE *fp, const bn_solve_opts *o, const bn_pipeline *p)

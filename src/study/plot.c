@@ -243,7 +243,7 @@ static const char *bn__param_axis(bn_study_param p)
     case BN_STUDY_FF: return "form-factor method";
     case BN_STUDY_SPP: return "path-tracer samples per patch (spp)";
     case BN_STUDY_PRECISION: return "storage precision of F";
-    case BN_STUDY_EPS: return "hierarchy link tolerance eps (relative to the largest emission)";
+    case BN_STUDY_EPS: return "hierarchy eps (x largest emission)";
     }
     return "";
 }

@@ -22,6 +22,7 @@ typedef struct bn__tree {
     double *area;             /* surface area below (scene units^2) */
     double *box;              /* 6 per node: lo xyz, hi xyz */
     float *rho_max;           /* 3 per node: largest reflectance below */
+    double *normal;           /* 3 per node: the polygon's unit normal (planar nodes), 0 for clusters */
     uint32_t *order;          /* npatch: patches in depth-first order */
     uint32_t *leaf;           /* npatch: each patch's leaf node */
     double *cum_area;         /* npatch + 1: prefix sums of the areas in `order` */
@@ -39,15 +40,28 @@ typedef struct bn__link {
     float F;                  /* < 0: not computed yet */
 } bn__link;
 
+/* Directions a cluster receiver tells apart: the 26 of {-1, 0, 1}^3 \ 0, normalised. A link into a
+ * cluster carries its direction's bin; what the cluster gathers from bin b reaches each polygon p
+ * below it in proportion to max(0, n_p . u_b) (the link's F divided by the cluster's area-mean of
+ * that cosine, so the cluster as a whole receives F x its area: light goes to the surfaces that face
+ * the source, not to every surface of the group alike). */
+#define BN__BINS 26
+extern const double bn__bin_dir[BN__BINS][3];
+int bn__bin_of(const double u[3]);   /* the nearest bin of a unit vector */
+
 /* The frozen operator: the tree's topology and areas, links by receiver. Owns its arrays. */
 typedef struct bn__hop {
-    size_t n, npatch, nlinks;
+    size_t n, npatch, nlinks, nclusters;
     uint32_t *child, *parent, *leaf_patch;   /* leaf_patch: BN__NONE for inner nodes */
+    uint32_t *cl;             /* per node: its index among the clusters, BN__NONE for planar nodes */
     double *area;
+    float *normal;            /* 3 per node: planar nodes' unit normal */
     size_t *start;            /* n + 1 */
     uint32_t *src;
-    float *F;
+    float *F;                 /* cluster receivers: F / (the cluster's mean cosine toward the bin) */
+    uint8_t *bin;             /* per link: its direction bin (cluster receivers) */
     double *Bn, *G;           /* 3n each: scratch of apply */
+    double *Gb;               /* 3 x BN__BINS per cluster: what clusters gather, by direction */
 } bn__hop;
 
 /* Takes links (sorted by r then s; F > 0 only) and the tree's topology (copied). */

@@ -125,9 +125,9 @@ static double bn__F_bound(const bn__tree *t, uint32_t r, uint32_t s)
     return fmin(1.0, t->area[s] / (BN_PI * d * d));
 }
 
-/* Receivers are always planar nodes (inside one polygon): a volume cluster would hand the same
- * irradiance to patches facing every way. Sources may be clusters: their area-mean radiance is
- * what a link carries, and the sampled F weighs each source patch by its own orientation. */
+/* Sources and receivers may be clusters. A source cluster gives its area-mean radiance, the sampled
+ * F weighing each source patch by its own orientation; a receiver cluster hands what it gathers to
+ * its polygons by their orientation toward the source (operator.c). */
 
 /* Are the bounding spheres of r and s apart? Only then is a link above the patches estimated by
  * point pairs: closer nodes are split whatever their brightness, as near the kernel's 1/r^2 a few
@@ -255,7 +255,7 @@ static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int dep
     if (F < 0 && bn__culled(R, r, s))
         return;
     if ((!lr || !ls) &&
-        (R->force || t->face[r] < 0 || !bn__separated(t, r, s) || bn__link_error(R, r, s) > R->eps_abs)) {
+        (R->force || !bn__separated(t, r, s) || bn__link_error(R, r, s) > R->eps_abs)) {
         double cr[3], cs[3], rr, rs;
         if (depth == 0) {
             bn__vec_push(&w->pending, r, s, -1);
@@ -265,7 +265,7 @@ static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int dep
             w->splits++;
         bn__centre(t, r, cr, &rr);
         bn__centre(t, s, cs, &rs);
-        if (!lr && (ls || rr >= rs || t->face[r] < 0)) {
+        if (!lr && (ls || rr >= rs)) {
             bn__visit(R, t->child[r], s, -1, depth - 1, w);
             bn__visit(R, t->child[r] + 1, s, -1, depth - 1, w);
         } else {
@@ -588,7 +588,7 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
     }
     rep->links = work.n;
     rep->bytes = bn__hop_bytes(h);
-    rep->bytes_per_link = work.n ? (double)(sizeof(uint32_t) + sizeof(float)) : 0;
+    rep->bytes_per_link = work.n ? (double)(sizeof(uint32_t) + sizeof(float) + 1) : 0;
     rep->seconds_refine = bn__now() - t0;
     st = bn_transport_create(np, rho, &bn__hop_ops, h, out, err);
     h = NULL;   /* owned by *out now, or destroyed */
