@@ -38,6 +38,7 @@ size_t bn__tree_bytes(const bn__tree *t);
 typedef struct bn__link {
     uint32_t r, s;
     float F;                  /* < 0: not computed yet */
+    uint8_t partial;          /* its shadow rays found partial visibility */
 } bn__link;
 
 /* Directions a cluster receiver tells apart: the 26 of {-1, 0, 1}^3 \ 0, normalised. A link into a

@@ -18,6 +18,8 @@
 #define BN__LEAF_RTOL 1e-3
 /* Shadow rays of a leaf link (x4 when partly visible). */
 #define BN__LEAF_RAYS 16
+/* Partly visible links are split down to this fraction of eps. */
+#define BN__PARTIAL 0.125
 
 void bn_hierarchy_opts_default(bn_hierarchy_opts *o)
 {
@@ -52,7 +54,7 @@ typedef struct bn__vec {
     int oom;
 } bn__vec;
 
-static void bn__vec_push(bn__vec *v, uint32_t r, uint32_t s, float F)
+static void bn__vec_push(bn__vec *v, uint32_t r, uint32_t s, float F, int partial)
 {
     if (v->n == v->cap) {
         size_t cap = v->cap ? 2 * v->cap : 256;
@@ -66,6 +68,7 @@ static void bn__vec_push(bn__vec *v, uint32_t r, uint32_t s, float F)
     }
     v->a[v->n].r = r;
     v->a[v->n].s = s;
+    v->a[v->n].partial = (uint8_t)partial;
     v->a[v->n++].F = F;
 }
 
@@ -122,7 +125,7 @@ static double bn__F_bound(const bn__tree *t, uint32_t r, uint32_t s)
     d = bn_v3_dist(cr, cs) - rr - rs;
     if (!(d > 0))
         return 1;
-    return fmin(1.0, t->area[s] / (BN_PI * d * d));
+    return fmin(1.0, fmax(t->area[s], t->area[r]) / (BN_PI * d * d));
 }
 
 /* Sources and receivers may be clusters. A source cluster gives its area-mean radiance, the sampled
@@ -174,7 +177,7 @@ static void bn__node_point(const bn__ref *R, uint32_t v, double u1, double u2, d
 
 /* Area-averaged F from r to s by S stratified point pairs with one shadow ray each (Wallace's
  * disk regulariser keeps every term bounded); S x 4 when the first S find partial visibility. */
-static double bn__F_sampled(const bn__ref *R, uint32_t r, uint32_t s, bn__worker *w)
+static double bn__F_sampled(const bn__ref *R, uint32_t r, uint32_t s, bn__worker *w, int *partial)
 {
     int S = R->o->samples > 0 ? R->o->samples : 8;
     for (int round = 0; round < 2; round++) {
@@ -208,17 +211,19 @@ static double bn__F_sampled(const bn__ref *R, uint32_t r, uint32_t s, bn__worker
             }
             sum += cr * cs * a / (BN_PI * r2 + a);
         }
-        if (round == 1 || blocked == 0 || blocked == seen)
+        *partial = blocked > 0 && blocked < seen;
+        if (round == 1 || !*partial)
             return sum;
         S *= 4;
     }
     return 0;
 }
 
-static float bn__link_F(const bn__ref *R, uint32_t r, uint32_t s, bn__worker *w)
+static float bn__link_F(const bn__ref *R, uint32_t r, uint32_t s, bn__worker *w, int *partial)
 {
     const bn__tree *t = R->t;
     double F;
+    *partial = 0;
     if (bn__tree_is_leaf(t, r) && bn__tree_is_leaf(t, s)) {
         uint32_t i = bn__tree_patch(t, r), j = bn__tree_patch(t, s);
         if (R->o->exact_leaf_links || R->force) {
@@ -228,37 +233,49 @@ static float bn__link_F(const bn__ref *R, uint32_t r, uint32_t s, bn__worker *w)
             F = bn__ff_pair_quick(R->pairs, w->ff, i, j, BN__LEAF_RAYS, BN__LEAF_RTOL, &sigma);
         }
     } else {
-        F = bn__F_sampled(R, r, s, w);
+        F = bn__F_sampled(R, r, s, w, partial);
         w->mc_links++;
     }
     return (float)fmin(fmax(F, 0.0), 1.0);
 }
 
-/* Refines the pair (r, s) (F: its coefficient when it is an existing link, else < 0) up to
- * `depth` more levels: accepted links go to w->links, deeper work to w->pending. */
-static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int depth, bn__worker *w)
+/* Refines the pair (r, s) (F: its coefficient when it is an existing link, else < 0; partial: its
+ * rays found partial visibility) up to `depth` more levels: accepted links go to w->links, deeper
+ * work to w->pending. Partly visible links are held to BN__PARTIAL x eps: a shadow's edge crosses
+ * them, and only smaller receivers resolve it. */
+static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int partial, int depth, bn__worker *w)
 {
     const bn__tree *t = R->t;
-    int lr = bn__tree_is_leaf(t, r), ls = bn__tree_is_leaf(t, s);
+    int lr = bn__tree_is_leaf(t, r), ls = bn__tree_is_leaf(t, s), split;
     if (r == s) {
         if (lr)
             return;   /* a planar patch does not see itself */
         if (depth == 0) {
-            bn__vec_push(&w->pending, r, s, -1);
+            bn__vec_push(&w->pending, r, s, -1, 0);
             return;
         }
         for (uint32_t a = t->child[r]; a < t->child[r] + 2; a++)
             for (uint32_t b = t->child[r]; b < t->child[r] + 2; b++)
-                bn__visit(R, a, b, -1, depth - 1, w);
+                bn__visit(R, a, b, -1, 0, depth - 1, w);
         return;
     }
     if (F < 0 && bn__culled(R, r, s))
         return;
-    if ((!lr || !ls) &&
-        (R->force || !bn__separated(t, r, s) || bn__link_error(R, r, s) > R->eps_abs)) {
+    split = 0;
+    if (!lr || !ls) {
+        double e = R->force || !bn__separated(t, r, s) ? INFINITY : bn__link_error(R, r, s);
+        split = e > (F >= 0 && partial ? BN__PARTIAL : 1.0) * R->eps_abs;
+        if (!split && F < 0) {   /* accepted as it stands: its F, and a second look if partly visible */
+            F = bn__link_F(R, r, s, w, &partial);
+            split = partial && e > BN__PARTIAL * R->eps_abs;
+            if (split)
+                F = -1;   /* computed, but split: not an existing link */
+        }
+    }
+    if (split) {
         double cr[3], cs[3], rr, rs;
         if (depth == 0) {
-            bn__vec_push(&w->pending, r, s, -1);
+            bn__vec_push(&w->pending, r, s, -1, 0);
             return;
         }
         if (F >= 0)
@@ -266,17 +283,17 @@ static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int dep
         bn__centre(t, r, cr, &rr);
         bn__centre(t, s, cs, &rs);
         if (!lr && (ls || rr >= rs)) {
-            bn__visit(R, t->child[r], s, -1, depth - 1, w);
-            bn__visit(R, t->child[r] + 1, s, -1, depth - 1, w);
+            bn__visit(R, t->child[r], s, -1, 0, depth - 1, w);
+            bn__visit(R, t->child[r] + 1, s, -1, 0, depth - 1, w);
         } else {
-            bn__visit(R, r, t->child[s], -1, depth - 1, w);
-            bn__visit(R, r, t->child[s] + 1, -1, depth - 1, w);
+            bn__visit(R, r, t->child[s], -1, 0, depth - 1, w);
+            bn__visit(R, r, t->child[s] + 1, -1, 0, depth - 1, w);
         }
         return;
     }
     if (F < 0)
-        F = bn__link_F(R, r, s, w);
-    bn__vec_push(&w->links, r, s, F);
+        F = bn__link_F(R, r, s, w, &partial);
+    bn__vec_push(&w->links, r, s, F, partial);
 }
 
 static int bn__link_cmp(const void *a, const void *b)
@@ -309,7 +326,7 @@ static bn_status bn__pass(const bn__ref *R, bn__worker *W, int nt, bn__vec *work
                 if (oom || bn_interrupted() != BN_OK)
                     continue;
                 bn__link it = work->a[l];
-                bn__visit(R, it.r, it.s, it.F, BN__DEPTH_PER_ROUND, w);
+                bn__visit(R, it.r, it.s, it.F, it.partial, BN__DEPTH_PER_ROUND, w);
                 if (w->links.oom || w->pending.oom)
                     oom = 1;
                 bn__progress_step(&prog, &done, 1);
@@ -516,7 +533,7 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
 
     /* the start: the root's self-link, or every pair of polygons */
     if (o->clusters) {
-        bn__vec_push(&work, 0, 0, -1);
+        bn__vec_push(&work, 0, 0, -1, 0);
     } else {
         uint32_t *fnode = bn__malloc_array(t.n, sizeof(uint32_t));
         size_t m = 0;
@@ -530,7 +547,7 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
         for (size_t a = 0; a < m && !work.oom; a++)
             for (size_t b = 0; b < m; b++)
                 if (a != b)
-                    bn__vec_push(&work, fnode[a], fnode[b], -1);
+                    bn__vec_push(&work, fnode[a], fnode[b], -1, 0);
         free(fnode);
         if (work.oom) {
             st = bn_error_set(err, BN_ENOMEM, "out of memory for %zu^2 polygon pairs (use clusters)", m);
