@@ -327,11 +327,20 @@ static void furnace(int levels, double eps, double wall_patch)
     printf("furnace: %zu patches, %zu nodes (%zu clusters), %zu links (%zu between patches, %zu with a cluster), "
            "%zu passes\n", n, rep.nodes, rep.clusters, rep.links, rep.leaf_links, rep.cluster_links, rep.passes);
     BN_ASSERT(rep.cluster_links > 0);
-    double *L = solve(k, s), worst = 0;
-    for (size_t i = 0; i < 3 * n; i++)
-        worst = fmax(worst, fabs(L[i] - 10) / 10);
-    printf("furnace: max |L - 10| / 10 = %.4g (eps %g)\n", worst, ho.eps);
-    BN_ASSERT_LE(worst, ho.eps / 5);
+    double *L = solve(k, s), worst = 0, mean = 0, area = 0;
+    const bn_patch *pa = bn_scene_patches(s, &n);
+    for (size_t i = 0; i < n; i++) {
+        for (int c = 0; c < 3; c++)
+            worst = fmax(worst, fabs(L[3 * i + c] - 10) / 10);
+        mean += pa[i].area * L[3 * i];
+        area += pa[i].area;
+    }
+    mean /= area;
+    printf("furnace: max |L - 10| / 10 = %.4g, area-weighted mean L = %.6g (eps %g)\n", worst, mean, ho.eps);
+    /* conservation: the mean to eps/10; every polygon within the links' sampling noise (a few
+     * percent at eps 0.03: cluster receivers' F from 8 point pairs) */
+    BN_ASSERT_LE(fabs(mean - 10) / 10, ho.eps / 10);
+    BN_ASSERT_LE(worst, 0.15);
     free(L);
     bn_transport_destroy(k);
     bn_rt_destroy(rt);
@@ -347,8 +356,8 @@ static void furnace(int levels, double eps, double wall_patch)
 BN_TEST(furnace_with_a_sphere_inside) /* BN_SLOW */
 {
     BN_SKIP_IF_SLOW_RUN();
-    furnace(5, 0.1, 1.0);
+    furnace(5, 0.03, 1.0);
 }
 
 /* The same at 1,280 triangles (also under the sanitizers). */
-BN_TEST(furnace_with_a_small_sphere_inside) { furnace(3, 0.1, 1.0); }
+BN_TEST(furnace_with_a_small_sphere_inside) { furnace(3, 0.03, 1.0); }

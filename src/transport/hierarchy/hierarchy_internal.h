@@ -22,7 +22,9 @@ typedef struct bn__tree {
     double *area;             /* surface area below (scene units^2) */
     double *box;              /* 6 per node: lo xyz, hi xyz */
     float *rho_max;           /* 3 per node: largest reflectance below */
-    double *normal;           /* 3 per node: the polygon's unit normal (planar nodes), 0 for clusters */
+    double *normal;           /* 3 per node: the axis of the normals below (area-weighted mean, unit;
+                                 the polygon's normal for planar nodes) */
+    double *spread;           /* per node: the largest angle between that axis and a normal below */
     uint32_t *order;          /* npatch: patches in depth-first order */
     uint32_t *leaf;           /* npatch: each patch's leaf node */
     double *cum_area;         /* npatch + 1: prefix sums of the areas in `order` */
@@ -41,14 +43,14 @@ typedef struct bn__link {
     uint8_t partial;          /* its shadow rays found partial visibility */
 } bn__link;
 
-/* Directions a cluster receiver tells apart: the 26 of {-1, 0, 1}^3 \ 0, normalised. A link into a
- * cluster carries its direction's bin; what the cluster gathers from bin b reaches each polygon p
- * below it in proportion to max(0, n_p . u_b) (the link's F divided by the cluster's area-mean of
- * that cosine, so the cluster as a whole receives F x its area: light goes to the surfaces that face
- * the source, not to every surface of the group alike). */
-#define BN__BINS 26
-extern const double bn__bin_dir[BN__BINS][3];
-int bn__bin_of(const double u[3]);   /* the nearest bin of a unit vector */
+/* A cluster receives only when it is nearly flat (its normals within BN__FLAT of their axis) and
+ * every surface below faces the source (see refine.c): then each polygon p gets K max(0, n_p . u) =
+ * K n_p . u exactly, with K the link's F per unit cosine and u the unit direction to the source, and
+ * the cluster can gather one vector per channel, sum K B u, that each polygon dots with its normal.
+ * u is kept per link in 16 bits (octahedral encoding, ~1 degree). */
+#define BN__FLAT 0.5236   /* 30 degrees */
+uint16_t bn__oct_encode(const double u[3]);
+void bn__oct_decode(uint16_t e, double u[3]);
 
 /* The frozen operator: the tree's topology and areas, links by receiver. Owns its arrays. */
 typedef struct bn__hop {
@@ -59,10 +61,10 @@ typedef struct bn__hop {
     float *normal;            /* 3 per node: planar nodes' unit normal */
     size_t *start;            /* n + 1 */
     uint32_t *src;
-    float *F;                 /* cluster receivers: F / (the cluster's mean cosine toward the bin) */
-    uint8_t *bin;             /* per link: its direction bin (cluster receivers) */
+    float *F;                 /* cluster receivers: F per unit cosine */
+    uint16_t *dir;            /* per link: the direction to the source (cluster receivers) */
     double *Bn, *G;           /* 3n each: scratch of apply */
-    double *Gb;               /* 3 x BN__BINS per cluster: what clusters gather, by direction */
+    double *Gv;               /* 9 per cluster: what it gathers, per channel as a vector */
 } bn__hop;
 
 /* Takes links (sorted by r then s; F > 0 only) and the tree's topology (copied). */

@@ -1,6 +1,6 @@
 /* The frozen hierarchical operator: y = F_H x = push(gather(pull(x))). Planar receivers gather
- * one value per channel; clusters gather by direction bin and hand each polygon below them the
- * share its orientation sees (hierarchy_internal.h). */
+ * one value per channel; (nearly flat) clusters one vector per channel, which each polygon below
+ * dots with its normal (hierarchy_internal.h). */
 #include "transport/hierarchy/hierarchy_internal.h"
 #include "base/vec.h"
 
@@ -8,35 +8,31 @@
 #include <stdlib.h>
 #include <string.h>
 
-#define BN__S 0.57735026918962576   /* 1/sqrt(3) */
-#define BN__E 0.70710678118654752   /* 1/sqrt(2) */
-const double bn__bin_dir[BN__BINS][3] = {
-    {1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1},
-    {BN__E, BN__E, 0}, {BN__E, -BN__E, 0}, {-BN__E, BN__E, 0}, {-BN__E, -BN__E, 0},
-    {BN__E, 0, BN__E}, {BN__E, 0, -BN__E}, {-BN__E, 0, BN__E}, {-BN__E, 0, -BN__E},
-    {0, BN__E, BN__E}, {0, BN__E, -BN__E}, {0, -BN__E, BN__E}, {0, -BN__E, -BN__E},
-    {BN__S, BN__S, BN__S}, {BN__S, BN__S, -BN__S}, {BN__S, -BN__S, BN__S}, {BN__S, -BN__S, -BN__S},
-    {-BN__S, BN__S, BN__S}, {-BN__S, BN__S, -BN__S}, {-BN__S, -BN__S, BN__S}, {-BN__S, -BN__S, -BN__S}};
-
-int bn__bin_of(const double u[3])
+/* Octahedral encoding of a unit vector in 8 + 8 bits (Meyer et al. 2010): ~1 degree. */
+uint16_t bn__oct_encode(const double u[3])
 {
-    int best = 0;
-    double bd = -2;
-    for (int b = 0; b < BN__BINS; b++) {
-        double d = bn_v3_dot(u, bn__bin_dir[b]);
-        if (d > bd) {
-            bd = d;
-            best = b;
-        }
+    double l1 = fabs(u[0]) + fabs(u[1]) + fabs(u[2]), x = u[0] / l1, y = u[1] / l1;
+    if (u[2] < 0) {
+        double ox = x;
+        x = (1 - fabs(y)) * (ox >= 0 ? 1 : -1);
+        y = (1 - fabs(ox)) * (y >= 0 ? 1 : -1);
     }
-    return best;
+    long qx = lround((x * 0.5 + 0.5) * 255), qy = lround((y * 0.5 + 0.5) * 255);
+    return (uint16_t)((qx & 255) | ((qy & 255) << 8));
 }
 
-/* max(0, n . u_b) for every bin. */
-static void bn__cosines(const float n[3], double c[BN__BINS])
+void bn__oct_decode(uint16_t e, double u[3])
 {
-    for (int b = 0; b < BN__BINS; b++)
-        c[b] = fmax(0.0, n[0] * bn__bin_dir[b][0] + n[1] * bn__bin_dir[b][1] + n[2] * bn__bin_dir[b][2]);
+    double x = (double)(e & 255) / 255 * 2 - 1, y = (double)(e >> 8) / 255 * 2 - 1, z = 1 - fabs(x) - fabs(y);
+    if (z < 0) {
+        double ox = x;
+        x = (1 - fabs(y)) * (ox >= 0 ? 1 : -1);
+        y = (1 - fabs(ox)) * (y >= 0 ? 1 : -1);
+    }
+    u[0] = x;
+    u[1] = y;
+    u[2] = z;
+    bn_v3_normalize(u);
 }
 
 void bn__hop_destroy(void *ctx)
@@ -53,10 +49,10 @@ void bn__hop_destroy(void *ctx)
     free(h->start);
     free(h->src);
     free(h->F);
-    free(h->bin);
+    free(h->dir);
     free(h->Bn);
     free(h->G);
-    free(h->Gb);
+    free(h->Gv);
     free(h);
 }
 
@@ -64,7 +60,7 @@ size_t bn__hop_bytes(const void *ctx)
 {
     const bn__hop *h = ctx;
     return h->n * (4 * sizeof(uint32_t) + sizeof(double) + 3 * sizeof(float) + sizeof(size_t) + 6 * sizeof(double)) +
-           h->nclusters * 3 * BN__BINS * sizeof(double) + h->nlinks * (sizeof(uint32_t) + sizeof(float) + 1);
+           h->nclusters * 9 * sizeof(double) + h->nlinks * (sizeof(uint32_t) + sizeof(float) + sizeof(uint16_t));
 }
 
 static void bn__centre(const bn__tree *t, uint32_t v, double c[3])
@@ -78,7 +74,6 @@ bn_status bn__hop_make(const bn__tree *t, const bn__link *links, size_t nlinks, 
 {
     bn__hop *h = bn__calloc(1, sizeof *h);
     size_t n = t->n;
-    float *cbar = NULL;   /* BN__BINS per cluster: the area-mean of max(0, n . u_b) below it */
     *out = NULL;
     if (!h)
         return bn_error_set(err, BN_ENOMEM, "out of memory for the hierarchy");
@@ -94,11 +89,11 @@ bn_status bn__hop_make(const bn__tree *t, const bn__link *links, size_t nlinks, 
     h->start = bn__calloc(n + 1, sizeof(size_t));
     h->src = bn__malloc_array(nlinks ? nlinks : 1, sizeof(uint32_t));
     h->F = bn__malloc_array(nlinks ? nlinks : 1, sizeof(float));
-    h->bin = bn__calloc(nlinks ? nlinks : 1, 1);
+    h->dir = bn__calloc(nlinks ? nlinks : 1, sizeof(uint16_t));
     h->Bn = bn__malloc_array(3 * n, sizeof(double));
     h->G = bn__malloc_array(3 * n, sizeof(double));
     if (!h->child || !h->parent || !h->leaf_patch || !h->cl || !h->area || !h->normal || !h->start || !h->src ||
-        !h->F || !h->bin || !h->Bn || !h->G)
+        !h->F || !h->dir || !h->Bn || !h->G)
         goto oom;
     memcpy(h->child, t->child, n * sizeof(uint32_t));
     memcpy(h->parent, t->parent, n * sizeof(uint32_t));
@@ -109,27 +104,9 @@ bn_status bn__hop_make(const bn__tree *t, const bn__link *links, size_t nlinks, 
         for (int c = 0; c < 3; c++)
             h->normal[3 * v + c] = (float)t->normal[3 * v + c];
     }
-    h->Gb = bn__malloc_array(h->nclusters ? 3 * BN__BINS * h->nclusters : 1, sizeof(double));
-    cbar = bn__malloc_array(h->nclusters ? BN__BINS * h->nclusters : 1, sizeof(float));
-    if (!h->Gb || !cbar)
+    h->Gv = bn__malloc_array(h->nclusters ? 9 * h->nclusters : 1, sizeof(double));
+    if (!h->Gv)
         goto oom;
-    /* the clusters' mean cosines, children before parents (children of a cluster: two nodes) */
-    for (size_t v = n; v-- > 0;) {
-        if (h->cl[v] == BN__NONE)
-            continue;
-        double acc[BN__BINS] = {0}, cs[BN__BINS];
-        for (uint32_t c = h->child[v]; c < h->child[v] + 2; c++) {
-            if (h->cl[c] == BN__NONE)
-                bn__cosines(h->normal + 3 * (size_t)c, cs);
-            else
-                for (int b = 0; b < BN__BINS; b++)
-                    cs[b] = cbar[(size_t)BN__BINS * h->cl[c] + (size_t)b];
-            for (int b = 0; b < BN__BINS; b++)
-                acc[b] += h->area[c] * cs[b];
-        }
-        for (int b = 0; b < BN__BINS; b++)
-            cbar[(size_t)BN__BINS * h->cl[v] + (size_t)b] = (float)(acc[b] / h->area[v]);
-    }
     for (size_t l = 0; l < nlinks; l++) {
         uint32_t r = links[l].r;
         h->start[r + 1]++;
@@ -141,19 +118,14 @@ bn_status bn__hop_make(const bn__tree *t, const bn__link *links, size_t nlinks, 
             bn__centre(t, links[l].s, cs);
             bn_v3_sub(cs, cr, u);
             bn_v3_normalize(u);
-            int b = bn__bin_of(u);
-            double m = cbar[(size_t)BN__BINS * h->cl[r] + (size_t)b];
-            h->bin[l] = (uint8_t)b;
-            h->F[l] = m > 1e-6 ? (float)(links[l].F / m) : 0.0f;
+            h->dir[l] = bn__oct_encode(u);   /* F is per unit cosine (refine.c) */
         }
     }
     for (size_t v = 0; v < n; v++)
         h->start[v + 1] += h->start[v];
-    free(cbar);
     *out = h;
     return BN_OK;
 oom:
-    free(cbar);
     bn__hop_destroy(h);
     return bn_error_set(err, BN_ENOMEM, "out of memory for %zu links of the hierarchy", nlinks);
 }
@@ -162,7 +134,7 @@ bn_status bn__hop_apply(void *ctx, const double *x, double *y, bn_error *err)
 {
     bn__hop *h = ctx;
     size_t n = h->n;
-    double *B = h->Bn, *G = h->G, *Gb = h->Gb;
+    double *B = h->Bn, *G = h->G, *Gv = h->Gv;
     /* pull: area-weighted means, children before parents */
     for (size_t v = n; v-- > 0;) {
         uint32_t c = h->child[v];
@@ -195,35 +167,33 @@ bn_status bn__hop_apply(void *ctx, const double *x, double *y, bn_error *err)
             G[3 * v + 1] = g1;
             G[3 * v + 2] = g2;
         } else {
-            double *gb = Gb + (size_t)3 * BN__BINS * h->cl[v];
-            memset(gb, 0, 3 * BN__BINS * sizeof(double));
+            double *gv = Gv + (size_t)9 * h->cl[v];
+            memset(gv, 0, 9 * sizeof(double));
             G[3 * v] = G[3 * v + 1] = G[3 * v + 2] = 0;
             for (size_t l = h->start[v]; l < h->start[v + 1]; l++) {
                 const double *b = B + 3 * (size_t)h->src[l];
-                double f = h->F[l], *g = gb + 3 * h->bin[l];
-                g[0] += f * b[0];
-                g[1] += f * b[1];
-                g[2] += f * b[2];
+                double f = h->F[l], u[3];
+                bn__oct_decode(h->dir[l], u);
+                for (int c = 0; c < 3; c++)
+                    for (int k = 0; k < 3; k++)
+                        gv[3 * c + k] += f * b[c] * u[k];
             }
         }
     }
-    /* push: clusters pass their bins down to clusters; a polygon's topmost node takes from its
-     * cluster parent the share of each bin its normal sees; planar nodes pass values down */
+    /* push: clusters pass their vectors down to clusters; a polygon's topmost node dots its cluster
+     * parent's vectors with its normal; planar nodes pass values down */
     for (size_t v = 1; v < n; v++) {
         size_t p = h->parent[v];
         if (h->cl[v] != BN__NONE) {
-            double *gv = Gb + (size_t)3 * BN__BINS * h->cl[v];
-            const double *gp = Gb + (size_t)3 * BN__BINS * h->cl[p];
-            for (int k = 0; k < 3 * BN__BINS; k++)
+            double *gv = Gv + (size_t)9 * h->cl[v];
+            const double *gp = Gv + (size_t)9 * h->cl[p];
+            for (int k = 0; k < 9; k++)
                 gv[k] += gp[k];
         } else if (h->cl[p] != BN__NONE) {
-            double cs[BN__BINS];
-            const double *gp = Gb + (size_t)3 * BN__BINS * h->cl[p];
-            bn__cosines(h->normal + 3 * v, cs);
-            for (int b = 0; b < BN__BINS; b++)
-                if (cs[b] > 0)
-                    for (int k = 0; k < 3; k++)
-                        G[3 * v + k] += cs[b] * gp[3 * b + k];
+            const double *gp = Gv + (size_t)9 * h->cl[p];
+            const float *nv = h->normal + 3 * v;
+            for (int c = 0; c < 3; c++)
+                G[3 * v + c] += nv[0] * gp[3 * c] + nv[1] * gp[3 * c + 1] + nv[2] * gp[3 * c + 2];
         } else {
             G[3 * v] += G[3 * p];
             G[3 * v + 1] += G[3 * p + 1];

@@ -115,8 +115,10 @@ static int bn__culled(const bn__ref *R, uint32_t r, uint32_t s)
     return 0;
 }
 
-/* An upper bound of the area-averaged form factor from r to s: A_s / (pi d_min^2) between their
- * bounding spheres, and never above 1 (no receiver sees more than its hemisphere). */
+/* What splitting can still reduce of the form factor between r and s: A / (pi d_min^2) between
+ * their bounding spheres, never above 1, with A the larger area of the sides that can still be split
+ * (A_s bounds the area-averaged F from r to s; A_r bounds how much that F varies across a large
+ * receiver, whose patches all get the mean; a patch's own size is final). */
 static double bn__F_bound(const bn__tree *t, uint32_t r, uint32_t s)
 {
     double cr[3], cs[3], rr, rs, d;
@@ -125,12 +127,13 @@ static double bn__F_bound(const bn__tree *t, uint32_t r, uint32_t s)
     d = bn_v3_dist(cr, cs) - rr - rs;
     if (!(d > 0))
         return 1;
-    return fmin(1.0, fmax(t->area[s], t->area[r]) / (BN_PI * d * d));
+    return fmin(1.0, fmax(bn__tree_is_leaf(t, s) ? 0 : t->area[s], bn__tree_is_leaf(t, r) ? 0 : t->area[r]) /
+                         (BN_PI * d * d));
 }
 
-/* Sources and receivers may be clusters. A source cluster gives its area-mean radiance, the sampled
- * F weighing each source patch by its own orientation; a receiver cluster hands what it gathers to
- * its polygons by their orientation toward the source (operator.c). */
+/* Sources may be clusters: a link carries their area-mean radiance, the sampled F weighing each
+ * source patch by its own orientation. Receivers are polygons' nodes, or nearly flat clusters facing
+ * the source, which hand each polygon its own cosine's share (operator.c). */
 
 /* Are the bounding spheres of r and s apart? Only then is a link above the patches estimated by
  * point pairs: closer nodes are split whatever their brightness, as near the kernel's 1/r^2 a few
@@ -141,6 +144,24 @@ static int bn__separated(const bn__tree *t, uint32_t r, uint32_t s)
     bn__centre(t, r, cr, &rr);
     bn__centre(t, s, cs, &rs);
     return bn_v3_dist(cr, cs) > rr + rs;
+}
+
+/* May r receive from s as one node? A polygon's nodes may; a cluster only when nearly flat and
+ * every surface below faces the direction to s (hierarchy_internal.h). */
+static int bn__can_receive(const bn__tree *t, uint32_t r, uint32_t s)
+{
+    double cr[3], cs[3], rr, rs, u[3], d;
+    if (t->face[r] >= 0)
+        return 1;
+    if (t->spread[r] > BN__FLAT)
+        return 0;
+    bn__centre(t, r, cr, &rr);
+    bn__centre(t, s, cs, &rs);
+    bn_v3_sub(cs, cr, u);
+    if (!(bn_v3_normalize(u) > 0))
+        return 0;
+    d = fmax(-1.0, fmin(1.0, bn_v3_dot(u, t->normal + 3 * (size_t)r)));
+    return acos(d) + t->spread[r] < 0.5 * BN_PI;
 }
 
 /* The oracle: the most a link could carry to the receiver's radiance, rho_r B_s F_bound. */
@@ -175,14 +196,14 @@ static void bn__node_point(const bn__ref *R, uint32_t v, double u1, double u2, d
     *n = p->normal;
 }
 
-/* Area-averaged F from r to s by S stratified point pairs with one shadow ray each (Wallace's
+/* Area-averaged F from r to s (per unit cosine when r is a cluster) by S stratified point pairs with one shadow ray each (Wallace's
  * disk regulariser keeps every term bounded); S x 4 when the first S find partial visibility. */
 static double bn__F_sampled(const bn__ref *R, uint32_t r, uint32_t s, bn__worker *w, int *partial)
 {
     int S = R->o->samples > 0 ? R->o->samples : 8;
     for (int round = 0; round < 2; round++) {
         bn__rng g = bn__rng_make(R->o->ff.seed ^ 0x6869657261726368ull, ((uint64_t)r << 32) | s, (uint64_t)round);
-        double a = R->t->area[s] / S, sum = 0, inv = 1.0 / S;
+        double a = R->t->area[s] / S, sum = 0, inv = 1.0 / S, cos_sum = 0;
         int seen = 0, blocked = 0;
         for (int k = 0; k < S; k++) {
             double x[3], y[3], d[3], o[3], e[3], r2, len, cr, cs;
@@ -197,6 +218,8 @@ static double bn__F_sampled(const bn__ref *R, uint32_t r, uint32_t s, bn__worker
                 continue;
             cr = bn_v3_dot(nx, d) / len;
             cs = -bn_v3_dot(ny, d) / len;
+            if (cr > 0)
+                cos_sum += cr;
             if (!(cr > 0 && cs > 0))
                 continue;
             bn_v3_madd(x, R->ray_eps, nx, o);
@@ -213,7 +236,9 @@ static double bn__F_sampled(const bn__ref *R, uint32_t r, uint32_t s, bn__worker
         }
         *partial = blocked > 0 && blocked < seen;
         if (round == 1 || !*partial)
-            return sum;
+            /* a cluster receiver: F per unit of cosine, K = F / (the receiver's mean cosine toward s,
+             * from the same points), handed to each polygon as K max(0, n . u) (operator.c) */
+            return R->t->face[r] < 0 ? (cos_sum > 0 ? sum / (cos_sum * inv) : 0) : sum;
         S *= 4;
     }
     return 0;
@@ -263,7 +288,8 @@ static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int par
         return;
     split = 0;
     if (!lr || !ls) {
-        double e = R->force || !bn__separated(t, r, s) ? INFINITY : bn__link_error(R, r, s);
+        double e = R->force || !bn__separated(t, r, s) || !bn__can_receive(t, r, s) ? INFINITY
+                                                                                    : bn__link_error(R, r, s);
         split = e > (F >= 0 && partial ? BN__PARTIAL : 1.0) * R->eps_abs;
         if (!split && F < 0) {   /* accepted as it stands: its F, and a second look if partly visible */
             F = bn__link_F(R, r, s, w, &partial);
@@ -282,7 +308,7 @@ static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int par
             w->splits++;
         bn__centre(t, r, cr, &rr);
         bn__centre(t, s, cs, &rs);
-        if (!lr && (ls || rr >= rs)) {
+        if (!lr && (ls || rr >= rs || !bn__can_receive(t, r, s))) {
             bn__visit(R, t->child[r], s, -1, 0, depth - 1, w);
             bn__visit(R, t->child[r] + 1, s, -1, 0, depth - 1, w);
         } else {

@@ -62,6 +62,7 @@ static void bn__node_finish(bn__tb *b, uint32_t v)
         t->area[v] = p->area;
         t->face[v] = (int32_t)p->face;
         memcpy(t->normal + 3 * v, p->normal, 3 * sizeof(double));
+        t->spread[v] = 0;
         return;
     }
     uint32_t a = t->child[v], c2 = a + 1;
@@ -72,8 +73,24 @@ static void bn__node_finish(bn__tb *b, uint32_t v)
         t->rho_max[3 * v + c] = fmaxf(t->rho_max[3 * a + c], t->rho_max[3 * c2 + c]);
     }
     t->face[v] = t->face[a] == t->face[c2] ? t->face[a] : -1;
-    for (int c = 0; c < 3; c++)
-        t->normal[3 * v + c] = t->face[v] >= 0 ? t->normal[3 * a + c] : 0;
+    {   /* the normal cone: axis the area-weighted mean, spread bounded through the children's cones */
+        double *nv = t->normal + 3 * v, len;
+        for (int c = 0; c < 3; c++)
+            nv[c] = t->area[a] * t->normal[3 * a + c] + t->area[c2] * t->normal[3 * c2 + c];
+        len = bn_v3_len(nv);
+        if (t->face[v] >= 0 || !(len > 1e-12 * t->area[v])) {
+            memcpy(nv, t->normal + 3 * a, 3 * sizeof(double));
+            t->spread[v] = t->face[v] >= 0 ? 0 : BN_PI;
+        } else {
+            bn_v3_scale(nv, 1 / len, nv);
+            t->spread[v] = 0;
+            for (uint32_t k = a; k <= c2; k++) {
+                double d = fmax(-1.0, fmin(1.0, bn_v3_dot(nv, t->normal + 3 * k)));
+                t->spread[v] = fmax(t->spread[v], acos(d) + t->spread[k]);
+            }
+            t->spread[v] = fmin(t->spread[v], BN_PI);
+        }
+    }
     t->lo[v] = t->lo[a];
     t->hi[v] = t->hi[c2];
 }
@@ -151,6 +168,7 @@ void bn__tree_free(bn__tree *t)
     free(t->box);
     free(t->rho_max);
     free(t->normal);
+    free(t->spread);
     free(t->order);
     free(t->leaf);
     free(t->cum_area);
@@ -159,7 +177,7 @@ void bn__tree_free(bn__tree *t)
 
 size_t bn__tree_bytes(const bn__tree *t)
 {
-    return t->n * (5 * sizeof(uint32_t) + 10 * sizeof(double) + 3 * sizeof(float)) +
+    return t->n * (5 * sizeof(uint32_t) + 11 * sizeof(double) + 3 * sizeof(float)) +
            t->npatch * (2 * sizeof(uint32_t) + sizeof(double));
 }
 
@@ -192,6 +210,7 @@ bn_status bn__tree_build(const bn_scene *s, bn__tree *t, bn_error *err)
     t->box = bn__malloc_array(6 * cap, sizeof(double));
     t->rho_max = bn__malloc_array(3 * cap, sizeof(float));
     t->normal = bn__malloc_array(3 * cap, sizeof(double));
+    t->spread = bn__malloc_array(cap, sizeof(double));
     t->order = bn__malloc_array(np, sizeof(uint32_t));
     t->leaf = bn__malloc_array(np, sizeof(uint32_t));
     t->cum_area = bn__malloc_array(np + 1, sizeof(double));
@@ -204,7 +223,7 @@ bn_status bn__tree_build(const bn_scene *s, bn__tree *t, bn_error *err)
     faces = bn__malloc_array(nf + 1, sizeof(uint32_t));
     double *farea = bn__calloc(nf + 1, sizeof(double));
     bn_status st = BN_OK;
-    if (!t->parent || !t->child || !t->lo || !t->hi || !t->face || !t->area || !t->box || !t->rho_max || !t->normal || !t->order ||
+    if (!t->parent || !t->child || !t->lo || !t->hi || !t->face || !t->area || !t->box || !t->rho_max || !t->normal || !t->spread || !t->order ||
         !t->leaf || !t->cum_area || !b.pc || !b.fc || !b.face_first || !b.face_count || !b.byface || !b.keys || !faces ||
         !farea) {
         st = bn_error_set(err, BN_ENOMEM, "out of memory for the hierarchy of %zu patches", np);
