@@ -248,6 +248,72 @@ if [ -s "$work/fail" ]; then
     echo "Failed study runs:" >>"$report"
     sed 's/^/- /' "$work/fail" >>"$report"
 fi
+# ---- the hierarchy: error and links against eps, links against patches, equal error ----
+if [ "$quick" = 1 ]; then
+    epsl="1e-2,1e-3"; hnp="1000 2000"; hmesh="$mesh"
+else
+    epsl="3e-2,1e-2,3e-3,1e-3,3e-4,1e-4"; hnp="1000 2000 4000 8000 16000"; hmesh="$mesh"
+fi
+note "hierarchy: eps study, links against patches, equal error"
+{
+    echo "## Hierarchy: error, links and time against eps; links against patches; equal error"
+    echo
+} >>"$report"
+if timeout "$timeout_s" "$bounce" study "$scene" --unit mm --patches 1200 --vary eps="$epsl" -o "$work/eps.csv" \
+    --plot "$root/bench/hierarchy-eps" -q >/dev/null 2>"$work/eps.err"; then
+    {
+        echo "\`bounce study --patches 1200 --vary eps=$epsl\` (plot: bench/hierarchy-eps.svg). Reference: $(metaget "$work/eps.csv" reference);"
+        echo "its error: $(metaget "$work/eps.csv" reference_error_how). err = per patch and channel |L - L_ref| / max(|L_ref|, mean)."
+        echo
+        echo "| eps | links | K MiB | err RMS | err max | max per surface | t_K s | t_total s |"
+        echo "|---|---|---|---|---|---|---|---|"
+        awk -F, '/^#/ { next } !h { for (i = 1; i <= NF; i++) c[$i] = i; h = 1; next }
+            { printf "| %s | %d | %.2f | %.3g | %.3g | %.3g | %.3g | %.3g |\n", $(c["value"]), $(c["k_entries"]), $(c["k_mb"]),
+              $(c["err_rms_rel"]), $(c["err_max_rel"]), $(c["err_surface_max"]), $(c["t_ff"]), $(c["t_total"]) }' "$work/eps.csv"
+        echo
+    } >>"$report"
+else
+    echo "_eps study failed: $(tail -1 "$work/eps.err")_" >>"$report"
+fi
+: >"$work/links"
+for n in $hnp; do
+    if timeout "$timeout_s" "$bounce" solve "$scene" --unit mm --transport hierarchical --patches "$n" -q \
+        -o "$work/h$n.csv" 2>/dev/null; then
+        echo "$(metaget "$work/h$n.csv" patches) $(metaget "$work/h$n.csv" hierarchy_links) $(metaget "$work/h$n.csv" hierarchy_seconds)" >>"$work/links"
+    fi
+done
+{
+    echo "Links against patches at the default eps (1e-3), \`bounce solve --transport hierarchical --patches N\`:"
+    echo
+    echo "| patches | links | links per patch | refinement s |"
+    echo "|---|---|---|---|"
+    awk '{ printf "| %d | %d | %.1f | %.2f |\n", $1, $2, $2 / $1, $3 }' "$work/links"
+    awk '{ x = log($1); y = log($2); n++; sx += x; sy += y; sxx += x * x; sxy += x * y }
+        END { if (n > 1) printf "\nLog-log slope of links against patches (least squares): %.3f (1 = linear).\n", (n * sxy - sx * sy) / (n * sxx - sx * sx) }' "$work/links"
+    echo
+} >>"$report"
+refopt=""
+[ "$ref_spp" != 0 ] && refopt="--ref-spp $ref_spp"
+# shellcheck disable=SC2086
+if timeout "$timeout_s" "$bounce" study "$scene" --unit mm --vary patches="$hmesh" --transport hierarchical \
+    --against-spp "$spp" $refopt --target 0.01 -o "$work/heq.csv" -q >/dev/null 2>"$work/heq.err"; then
+    : >"$work/hrad"; metaget "$work/heq.csv" seconds_radiosity >"$work/hrad"
+    : >"$work/hpt"; metaget "$work/heq.csv" seconds_trace >"$work/hpt"
+    {
+        echo "Time to 1% per-surface error on the Cornell box (the equal-error study above, once more with"
+        echo "\`--transport hierarchical\`; each against its own tracer reference):"
+        echo
+        echo "| method | time to 1% per-surface error |"
+        echo "|---|---|"
+        echo "| hierarchy (whole pipeline) | $(cat "$work/hrad") s |"
+        echo "| dense radiosity (whole pipeline, median above) | $(stats "$work/rad" | cut -d' ' -f1) s |"
+        echo "| path tracer (median above) | $(stats "$work/pt" | cut -d' ' -f1) s |"
+        echo
+    } >>"$report"
+else
+    echo "_hierarchical equal-error study failed: $(tail -1 "$work/heq.err")_" >>"$report"
+fi
+
 end=$(date +%s)
 echo >>"$report"
 echo "_Total: $((end - start)) s, the build excluded (bench/run.sh$( [ "$quick" = 1 ] && echo " --quick"))._" >>"$report"
