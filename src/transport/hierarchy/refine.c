@@ -28,6 +28,7 @@ void bn_hierarchy_opts_default(bn_hierarchy_opts *o)
     o->clusters = 1;
     o->samples = 8;
     o->max_passes = 12;
+    o->flat_clusters = 1;
     bn_formfactor_opts_default(&o->ff);
 }
 
@@ -115,10 +116,9 @@ static int bn__culled(const bn__ref *R, uint32_t r, uint32_t s)
     return 0;
 }
 
-/* What splitting can still reduce of the form factor between r and s: A / (pi d_min^2) between
- * their bounding spheres, never above 1, with A the larger area of the sides that can still be split
- * (A_s bounds the area-averaged F from r to s; A_r bounds how much that F varies across a large
- * receiver, whose patches all get the mean; a patch's own size is final). */
+/* A bound of the form factor between r and s: A / (pi d_min^2) between their bounding spheres,
+ * never above 1, with A the larger of the two areas (A_s bounds the area-averaged F from r to s;
+ * A_r how much that F varies across a large receiver, whose patches all get the mean). */
 static double bn__F_bound(const bn__tree *t, uint32_t r, uint32_t s)
 {
     double cr[3], cs[3], rr, rs, d;
@@ -127,8 +127,7 @@ static double bn__F_bound(const bn__tree *t, uint32_t r, uint32_t s)
     d = bn_v3_dist(cr, cs) - rr - rs;
     if (!(d > 0))
         return 1;
-    return fmin(1.0, fmax(bn__tree_is_leaf(t, s) ? 0 : t->area[s], bn__tree_is_leaf(t, r) ? 0 : t->area[r]) /
-                         (BN_PI * d * d));
+    return fmin(1.0, fmax(t->area[s], t->area[r]) / (BN_PI * d * d));
 }
 
 /* Sources may be clusters: a link carries their area-mean radiance, the sampled F weighing each
@@ -146,14 +145,15 @@ static int bn__separated(const bn__tree *t, uint32_t r, uint32_t s)
     return bn_v3_dist(cr, cs) > rr + rs;
 }
 
-/* May r receive from s as one node? A polygon's nodes may; a cluster only when nearly flat and
- * every surface below faces the direction to s (hierarchy_internal.h). */
-static int bn__can_receive(const bn__tree *t, uint32_t r, uint32_t s)
+/* May r receive from s as one node? A polygon's nodes may; a cluster only with flat_clusters, when
+ * nearly flat and every surface below faces the direction to s (hierarchy_internal.h). */
+static int bn__can_receive(const bn__ref *R, uint32_t r, uint32_t s)
 {
+    const bn__tree *t = R->t;
     double cr[3], cs[3], rr, rs, u[3], d;
     if (t->face[r] >= 0)
         return 1;
-    if (t->spread[r] > BN__FLAT)
+    if (!R->o->flat_clusters || t->spread[r] > BN__FLAT)
         return 0;
     bn__centre(t, r, cr, &rr);
     bn__centre(t, s, cs, &rs);
@@ -288,7 +288,7 @@ static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int par
         return;
     split = 0;
     if (!lr || !ls) {
-        double e = R->force || !bn__separated(t, r, s) || !bn__can_receive(t, r, s) ? INFINITY
+        double e = R->force || !bn__separated(t, r, s) || !bn__can_receive(R, r, s) ? INFINITY
                                                                                     : bn__link_error(R, r, s);
         split = e > (F >= 0 && partial ? BN__PARTIAL : 1.0) * R->eps_abs;
         if (!split && F < 0) {   /* accepted as it stands: its F, and a second look if partly visible */
@@ -308,7 +308,7 @@ static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int par
             w->splits++;
         bn__centre(t, r, cr, &rr);
         bn__centre(t, s, cs, &rs);
-        if (!lr && (ls || rr >= rs || !bn__can_receive(t, r, s))) {
+        if (!lr && (ls || rr >= rs || !bn__can_receive(R, r, s))) {
             bn__visit(R, t->child[r], s, -1, 0, depth - 1, w);
             bn__visit(R, t->child[r] + 1, s, -1, 0, depth - 1, w);
         } else {
