@@ -378,7 +378,8 @@ static bn_status bn__pass(const bn__ref *R, bn__worker *W, int nt, bn__vec *work
                     dst[q]->a = a;
                     dst[q]->cap = cap;
                 }
-                memcpy(dst[q]->a + dst[q]->n, v[q]->a, v[q]->n * sizeof *v[q]->a);
+                if (v[q]->n)
+                    memcpy(dst[q]->a + dst[q]->n, v[q]->a, v[q]->n * sizeof *v[q]->a);
                 dst[q]->n += v[q]->n;
                 v[q]->n = 0;
             }
@@ -441,7 +442,8 @@ static bn_status bn__estimate(const bn__tree *t, bn__vec *links, const double *E
         free(y);
         return bn_error_set(err, BN_ENOMEM, "out of memory for the hierarchy's gather");
     }
-    memcpy(copy, links->a, links->n * sizeof *copy);
+    if (links->n)
+        memcpy(copy, links->a, links->n * sizeof *copy);
     live.a = copy;
     live.n = bn__compact(&live);
     st = bn__hop_make(t, live.a, live.n, &h, err);
