@@ -35,6 +35,8 @@ void bn__tree_free(bn__tree *t);
 static inline int bn__tree_is_leaf(const bn__tree *t, uint32_t v) { return t->child[v] == BN__NONE; }
 static inline uint32_t bn__tree_patch(const bn__tree *t, uint32_t v) { return t->order[t->lo[v]]; }
 size_t bn__tree_bytes(const bn__tree *t);
+/* The bounding sphere of node v: its box's centre and half diagonal. */
+void bn__tree_sphere(const bn__tree *t, uint32_t v, double c[3], double *rad);
 
 /* A link: receiver r gathers F x (the area mean of the values below s). */
 typedef struct bn__link {

@@ -63,12 +63,6 @@ size_t bn__hop_bytes(const void *ctx)
            h->nclusters * 9 * sizeof(double) + h->nlinks * (sizeof(uint32_t) + sizeof(float) + sizeof(uint16_t));
 }
 
-static void bn__centre(const bn__tree *t, uint32_t v, double c[3])
-{
-    const double *b = t->box + 6 * (size_t)v;
-    for (int k = 0; k < 3; k++)
-        c[k] = 0.5 * (b[k] + b[3 + k]);
-}
 
 bn_status bn__hop_make(const bn__tree *t, const bn__link *links, size_t nlinks, bn__hop **out, bn_error *err)
 {
@@ -113,9 +107,9 @@ bn_status bn__hop_make(const bn__tree *t, const bn__link *links, size_t nlinks, 
         h->src[l] = links[l].s;
         h->F[l] = links[l].F;
         if (h->cl[r] != BN__NONE) {
-            double cr[3], cs[3], u[3];
-            bn__centre(t, r, cr);
-            bn__centre(t, links[l].s, cs);
+            double cr[3], cs[3], u[3], rad;
+            bn__tree_sphere(t, r, cr, &rad);
+            bn__tree_sphere(t, links[l].s, cs, &rad);
             bn_v3_sub(cs, cr, u);
             bn_v3_normalize(u);
             h->dir[l] = bn__oct_encode(u);   /* F is per unit cosine (refine.c) */

@@ -81,17 +81,6 @@ typedef struct bn__worker {
 
 /* ---- geometry of nodes ---- */
 
-static void bn__centre(const bn__tree *t, uint32_t v, double c[3], double *rad)
-{
-    const double *b = t->box + 6 * (size_t)v;
-    double h[3];
-    for (int k = 0; k < 3; k++) {
-        c[k] = 0.5 * (b[k] + b[3 + k]);
-        h[k] = 0.5 * (b[3 + k] - b[k]);
-    }
-    *rad = bn_v3_len(h);
-}
-
 /* 1 if the box of node v lies on or behind the plane (n, p). */
 static int bn__box_behind(const bn__tree *t, uint32_t v, const double n[3], const double p[3], double tol)
 {
@@ -122,8 +111,8 @@ static int bn__culled(const bn__ref *R, uint32_t r, uint32_t s)
 static double bn__F_bound(const bn__tree *t, uint32_t r, uint32_t s)
 {
     double cr[3], cs[3], rr, rs, d;
-    bn__centre(t, r, cr, &rr);
-    bn__centre(t, s, cs, &rs);
+    bn__tree_sphere(t, r, cr, &rr);
+    bn__tree_sphere(t, s, cs, &rs);
     d = bn_v3_dist(cr, cs) - rr - rs;
     if (!(d > 0))
         return 1;
@@ -140,8 +129,8 @@ static double bn__F_bound(const bn__tree *t, uint32_t r, uint32_t s)
 static int bn__separated(const bn__tree *t, uint32_t r, uint32_t s)
 {
     double cr[3], cs[3], rr, rs;
-    bn__centre(t, r, cr, &rr);
-    bn__centre(t, s, cs, &rs);
+    bn__tree_sphere(t, r, cr, &rr);
+    bn__tree_sphere(t, s, cs, &rs);
     return bn_v3_dist(cr, cs) > rr + rs;
 }
 
@@ -155,8 +144,8 @@ static int bn__can_receive(const bn__ref *R, uint32_t r, uint32_t s)
         return 1;
     if (!R->o->flat_clusters || t->spread[r] > BN__FLAT)
         return 0;
-    bn__centre(t, r, cr, &rr);
-    bn__centre(t, s, cs, &rs);
+    bn__tree_sphere(t, r, cr, &rr);
+    bn__tree_sphere(t, s, cs, &rs);
     bn_v3_sub(cs, cr, u);
     if (!(bn_v3_normalize(u) > 0))
         return 0;
@@ -306,8 +295,8 @@ static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int par
         }
         if (F >= 0)
             w->splits++;
-        bn__centre(t, r, cr, &rr);
-        bn__centre(t, s, cs, &rs);
+        bn__tree_sphere(t, r, cr, &rr);
+        bn__tree_sphere(t, s, cs, &rs);
         if (!lr && (ls || rr >= rs || !bn__can_receive(R, r, s))) {
             bn__visit(R, t->child[r], s, -1, 0, depth - 1, w);
             bn__visit(R, t->child[r] + 1, s, -1, 0, depth - 1, w);

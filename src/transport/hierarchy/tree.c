@@ -280,3 +280,14 @@ done:
         bn__tree_free(t);
     return st;
 }
+
+void bn__tree_sphere(const bn__tree *t, uint32_t v, double c[3], double *rad)
+{
+    const double *b = t->box + 6 * (size_t)v;
+    double h[3];
+    for (int k = 0; k < 3; k++) {
+        c[k] = 0.5 * (b[k] + b[3 + k]);
+        h[k] = 0.5 * (b[3 + k] - b[k]);
+    }
+    *rad = bn_v3_len(h);
+}
