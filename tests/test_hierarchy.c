@@ -277,13 +277,52 @@ static void icosphere(ico *m, int levels)
     }
 }
 
-static void furnace(int levels, double eps, double wall_patch, int flat)
+/* Cuts every triangle of (v, polys) into 4 at its edge midpoints, in its own plane (not pushed back
+ * onto the sphere): the same surface in 4x the triangles, as a subdivided scan. Quads stay. Returns
+ * the new counts through the pointers; the arrays are reallocated. */
+static void cut_coplanar(double **v, size_t *nv, unsigned **polys, size_t *np)
+{
+    size_t nv2 = *nv, w = 0, r = 0;
+    double *V = malloc(3 * (*nv + 3 * *np) * sizeof(double));
+    unsigned *P = malloc(*np * 4 * 4 * sizeof(unsigned));
+    memcpy(V, *v, 3 * *nv * sizeof(double));
+    for (size_t f = 0; f < *np; f++) {
+        unsigned k = (*polys)[r++], *c = *polys + r;
+        r += k;
+        if (k == 4) {   /* quads (the walls) as they are */
+            P[w++] = 4;
+            for (int e = 0; e < 4; e++)
+                P[w++] = c[e];
+        } else {
+            unsigned m[3];
+            for (int e = 0; e < 3; e++) {
+                m[e] = (unsigned)nv2++;
+                for (int d = 0; d < 3; d++)
+                    V[3 * m[e] + d] = 0.5 * (V[3 * c[e] + d] + V[3 * c[(e + 1) % 3] + d]);
+            }
+            unsigned t[4][3] = {{c[0], m[0], m[2]}, {m[0], c[1], m[1]}, {m[2], m[1], c[2]}, {m[0], m[1], m[2]}};
+            for (int q = 0; q < 4; q++) {
+                P[w++] = 3;
+                for (int d = 0; d < 3; d++)
+                    P[w++] = t[q][d];
+            }
+        }
+    }
+    free(*v);
+    free(*polys);
+    *v = V;
+    *polys = P;
+    *nv = nv2;
+    *np = (*np - 6) * 4 + 6;
+}
+
+static void furnace_cut(int levels, double eps, double wall_patch, int flat, int cut)
 {
     ico m = {0};
     icosphere(&m, levels);
-    size_t nv = 8 + m.nv, np = 6 + m.nt;
+    size_t nv = 8 + m.nv, np = 6 + m.nt, np0 = np;
     double *v = malloc(3 * nv * sizeof(double));
-    unsigned *polys = malloc((6 * 5 + m.nt * 4) * sizeof(unsigned)), *pm = calloc(np, sizeof(unsigned));
+    unsigned *polys = malloc((6 * 5 + m.nt * 4) * sizeof(unsigned)), *pm;
     const double box[8][3] = {{-2, -2, -2}, {2, -2, -2}, {2, 2, -2}, {-2, 2, -2},
                               {-2, -2, 2},  {2, -2, 2},  {2, 2, 2},  {-2, 2, 2}};
     const unsigned quads[6][4] = {{0, 1, 2, 3}, {4, 7, 6, 5}, {0, 4, 5, 1}, {1, 5, 6, 2}, {2, 6, 7, 3}, {3, 7, 4, 0}};
@@ -300,6 +339,24 @@ static void furnace(int levels, double eps, double wall_patch, int flat)
         for (int k = 0; k < 3; k++)
             polys[w++] = 8 + m.tri[3 * f + k];
     }
+    double tri_max = 0;   /* the largest uncut sphere triangle */
+    for (size_t f = 0; f < m.nt; f++) {
+        double e1[3], e2[3], c[3];
+        const double *a = m.v + 3 * m.tri[3 * f], *b = m.v + 3 * m.tri[3 * f + 1], *d = m.v + 3 * m.tri[3 * f + 2];
+        for (int k = 0; k < 3; k++) {
+            e1[k] = b[k] - a[k];
+            e2[k] = d[k] - a[k];
+        }
+        c[0] = e1[1] * e2[2] - e1[2] * e2[1];
+        c[1] = e1[2] * e2[0] - e1[0] * e2[2];
+        c[2] = e1[0] * e2[1] - e1[1] * e2[0];
+        tri_max = fmax(tri_max, 0.5 * sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]));
+    }
+    if (cut) {
+        cut_coplanar(&v, &nv, &polys, &np);
+        np0 = 6 + m.nt;   /* the planes: the walls and the uncut triangles */
+    }
+    pm = calloc(np, sizeof(unsigned));
     bn_material mat = {"grey", {0.9, 0.9, 0.9}, {1, 1, 1}};
     bn_load_opts lo;
     bn_mesh_opts mo;
@@ -324,10 +381,14 @@ static void furnace(int levels, double eps, double wall_patch, int flat)
     ho.eps = eps;
     ho.flat_clusters = flat;
     ho.quiet = 1;
+    if (cut)   /* the smallest element: an uncut triangle, as for the uncut sphere */
+        ho.min_area = 1.01 * tri_max;
     BN_ASSERT_STATUS(bn_hierarchy_build(s, rt, &ho, &k, &rep, &err), BN_OK);
     printf("furnace: %zu patches, %zu nodes (%zu clusters), %zu links (%zu between patches, %zu with a cluster), "
            "%zu passes\n", n, rep.nodes, rep.clusters, rep.links, rep.leaf_links, rep.cluster_links, rep.passes);
     BN_ASSERT(rep.cluster_links > 0);
+    BN_ASSERT_EQ(rep.polygons, np);
+    BN_ASSERT_EQ(rep.planes, np0);   /* cut or not, the planes are the uncut polygons */
     double *L = solve(k, s), worst = 0, mean = 0, area = 0;
     const bn_patch *pa = bn_scene_patches(s, &n);
     for (size_t i = 0; i < n; i++) {
@@ -353,6 +414,11 @@ static void furnace(int levels, double eps, double wall_patch, int flat)
     free(m.tri);
 }
 
+static void furnace(int levels, double eps, double wall_patch, int flat)
+{
+    furnace_cut(levels, eps, wall_patch, flat, 0);
+}
+
 /* 20,480 sphere triangles, the walls in 16 x 16 patches. */
 BN_TEST(furnace_with_a_sphere_inside) /* BN_SLOW */
 {
@@ -365,3 +431,8 @@ BN_TEST(furnace_with_a_small_sphere_inside) { furnace(3, 0.03, 0.25, 1); }
 
 /* Receivers only polygons' nodes (hierarchy.h: flat_clusters 0). */
 BN_TEST(furnace_without_cluster_receivers) { furnace(3, 0.03, 0.25, 0); }
+
+/* The small sphere's furnace with every sphere triangle cut into 4 in its own plane (5,126
+ * polygons): the planes are the uncut polygons again, and with the smallest element an uncut
+ * triangle (min_area) L = 10 still holds on every patch. */
+BN_TEST(furnace_with_coplanar_cuts) { furnace_cut(3, 0.03, 0.25, 1, 1); }

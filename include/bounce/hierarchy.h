@@ -12,7 +12,12 @@
  * gathered value added to all leaves below it). K_H = diag(rho) F_H serves the operator interface
  * (apply and a zero diagonal: no link joins a node to itself or to its own subtree), so Jacobi, the
  * Neumann series and every bounce term K_H^k E run on it as on dense K. Gauss-Seidel needs rows,
- * which a hierarchy does not keep. */
+ * which a hierarchy does not keep.
+ *
+ * Polygons that share an edge and lie in one plane (within 1e-3 rad) form one planar subtree, so a
+ * surface cut finer (a scan subdivided 16 times) gets the same clusters above its planes, and with
+ * min_area the same smallest elements, as the coarse cut: its link count follows the light, not the
+ * polygon count. */
 #ifndef BOUNCE_HIERARCHY_H
 #define BOUNCE_HIERARCHY_H
 
@@ -42,6 +47,9 @@ typedef struct bn_hierarchy_opts {
                                 polygons' nodes only (bunny box: 22.7 M links and 140 s against
                                 19.3 M and 118 s) */
     int    max_passes;   /* refine-gather passes before the link set is frozen (default 12) */
+    double min_area;     /* planar nodes smaller than this (scene units^2) are not split: the
+                            smallest element refinement makes; 0 (default): 2^-20 (about a millionth)
+                            of the scene's surface area; < 0: down to the patches (always so at eps 0) */
     int    exact_leaf_links; /* links between two patches computed exactly as the dense assembly does
                                 (ff: method, samples, tolerance, seed); default 0 (1 when eps is 0): the
                                 exact point-to-polygon form factor at `samples` points of the receiver,
@@ -62,7 +70,9 @@ void bn_hierarchy_opts_default(bn_hierarchy_opts *o);
 #define BN_HIERARCHY_EXTRA_PATCHES 15000
 
 typedef struct bn_hierarchy_report {
-    size_t patches, nodes, clusters, planar_nodes;  /* leaves = patches; planar: inside one polygon */
+    size_t patches, nodes, clusters, planar_nodes;  /* leaves = patches; planar: inside one plane */
+    size_t polygons, planes;                        /* input polygons, and the planes they form */
+    double min_area;                                /* the smallest element split (scene units^2) */
     size_t links, leaf_links, cluster_links;        /* leaf: patch to patch; cluster: a cluster at either end */
     size_t passes;                                  /* refine-gather passes */
     int    settled;                                 /* 1 if the last pass split no link */

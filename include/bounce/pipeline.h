@@ -114,6 +114,8 @@ typedef struct bn_crosscheck_opts {
     double tol_scale;            /* safety factor Fs of the two-level estimate (default 3) */
     double rtol, alpha;          /* a further relative allowance (0); family-wise false-failure rate (0.01) */
     int    worst;                /* worst entries listed (default 10) */
+    size_t regions;              /* compare on about this many regions of whole polygons (bn_partition_regions),
+                                    traced with trace.spp samples each; 0 (default): per patch */
 } bn_crosscheck_opts;
 void bn_crosscheck_opts_default(bn_crosscheck_opts *o);
 
@@ -123,6 +125,8 @@ typedef struct bn_crosscheck_run {
     double *layers_fine, *layers_other;   /* bn_layers_stack of each level */
     double *tol, *power_tol;     /* the discretisation tolerances (NULL without a second level) */
     bn_trace_patches trace;
+    bn_partition part;           /* with regions: the partition (of the fine level's patches) */
+    double *rad_regions;         /* with regions: the fine level's region means */
     bn_crosscheck_input in;      /* what was compared (borrowing the above) */
     bn_crosscheck_result result; /* result.pass: the verdict */
 } bn_crosscheck_run;

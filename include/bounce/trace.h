@@ -71,6 +71,32 @@ bn_status bn_trace_patches_write_csv(const char *path, const bn_scene *s, const 
  * standard error se[c] = pi * sqrt(sum_i (A_i se_i)^2) (patches are independent). */
 void bn_trace_patches_power(const bn_scene *s, const bn_trace_patches *r, int layer, double watts[3], double se[3]);
 
+/* A reporting partition: the patches grouped into regions, each a union of whole input polygons of
+ * one material (so every meshing of one scene has the same regions). Made by splitting each
+ * material's polygons at the area median along the longest axis of their centroids until the
+ * material has its share (by area) of the regions asked; at least one region per material. */
+typedef struct bn_partition {
+    size_t n;             /* regions */
+    size_t npatch;
+    uint32_t *of_patch;   /* npatch: each patch's region */
+    size_t *start;        /* n + 1: region g holds patch[start[g] .. start[g + 1]) */
+    uint32_t *patch;      /* npatch */
+    double *cum;          /* npatch: running area inside its region over `patch`, the last of each = 1 */
+    double *area;         /* n: scene units^2 */
+    unsigned *material;   /* n */
+    double *centroid;     /* 3n: area-weighted */
+} bn_partition;
+bn_status bn_partition_regions(const bn_scene *s, size_t nregions, bn_partition *out, bn_error *err);
+void bn_partition_free(bn_partition *p);
+/* Area-weighted means per region of per-patch layers (nlayers * npatch * 3, bn_layers_stack layout)
+ * into out (nlayers * n * 3). */
+void bn_partition_mean(const bn_partition *p, const bn_scene *s, const double *layers, int nlayers, double *out);
+
+/* The tracer's estimates per region: the area mean of the outgoing radiance over each region, points
+ * uniform in area over the whole region; the same layout as bn_trace_patches with n = regions. */
+bn_status bn_trace_regions_run(const bn_rt *rt, const bn_partition *part, const bn_trace_opts *o,
+                               bn_trace_patches *out, bn_error *err);
+
 /* Camera images: per pixel the mean over `spp` independent jittered samples of the radiance leaving
  * the surface seen, per layer, and the variance of that mean (unbiased sample variance / spp). */
 typedef struct bn_trace_image {
@@ -105,7 +131,8 @@ bn_status bn_crosscheck_mesh_tolerance(const bn_scene *fine, const double *fine_
 
 typedef struct bn_crosscheck_input {
     const bn_scene *scene;             /* borrowed, meshed like the tracer's */
-    const bn_trace_patches *trace;     /* borrowed */
+    const bn_trace_patches *trace;     /* borrowed: per patch, or per region of part */
+    const bn_partition *part;          /* regions (borrowed; rad, tol per region), or NULL: per patch */
     const double *rad;                 /* radiosity layers, nlayers * N * 3 (bn_layers_stack) */
     const double *tol;                 /* discretisation tolerance, same layout, or NULL for none */
     const double *power_tol;           /* nlayers * 3 watts, or NULL */

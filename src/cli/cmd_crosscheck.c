@@ -16,7 +16,7 @@ int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c)
     bn_crosscheck_opts xo;
     bn_crosscheck_run run;
     const char *pos[1];
-    size_t spp = 1024;
+    size_t spp = 1024, regions = 0;
     int bounces = 3, disc = 0, worst = 10, rc = 0, strategy = 0;
     double alpha = 0.01, ratio = 2, tol_scale = 3, rtol = 0, solve_tol = 1e-10;
     bn_error err;
@@ -38,6 +38,10 @@ int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c)
         "way. The last line is the machine-readable verdict; exit code 6 when it fails.";
     bn_optset_add(&set, (bn_opt){"spp", 0, BN_OPT_SIZE, &spp, NULL, 2, 1e9, "N",
                                  "path-tracer samples per patch (default 1024; fewer make skewed patches' t-tests unreliable)"});
+    bn_optset_add(&set, (bn_opt){"regions", 0, BN_OPT_SIZE, &regions, NULL, 1, 1e6, "N",
+                                 "compare area means over about N regions of whole polygons, one material each "
+                                 "(split at area medians), --spp samples each, instead of every patch: for scenes "
+                                 "with more patches than the tracer can resolve (default: per patch)"});
     bn_optset_add(&set, (bn_opt){"bounces", 'n', BN_OPT_INT, &bounces, NULL, 0, 64, "K",
                                  "terms E .. K{K}E compared one by one, then rest and L (default 3)"});
     bn_optset_add(&set, (bn_opt){"alpha", 0, BN_OPT_DOUBLE, &alpha, NULL, 1e-12, 0.5, "A",
@@ -85,6 +89,7 @@ int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c)
     xo.rtol = rtol;
     xo.alpha = alpha;
     xo.worst = worst;
+    xo.regions = regions;
     st = bn_crosscheck_run_scene(pos[0], &xo, &run, &err);
     if (st != BN_OK) {
         rc = bn_cli_fail(&err);
@@ -102,8 +107,11 @@ int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c)
                run.seconds_other, tol_scale, disc == 0 ? "" : "r ", run.in.tol_scale);
     else
         printf("# discretisation: no allowance (--disc none)\n");
-    printf("# path tracer: %zu samples per patch, %s, rr_depth %d, seed %llu, %.3g rays in %.2f s (%.3g rays/s)\n",
-           spp, bn_trace_strategy_name(xo.trace.strategy), xo.trace.rr_depth, (unsigned long long)c->seed,
+    if (regions)
+        printf("# regions: %zu regions of whole polygons (asked %zu), one material each, area-balanced\n",
+               run.part.n, regions);
+    printf("# path tracer: %zu samples per %s, %s, rr_depth %d, seed %llu, %.3g rays in %.2f s (%.3g rays/s)\n",
+           spp, regions ? "region" : "patch", bn_trace_strategy_name(xo.trace.strategy), xo.trace.rr_depth, (unsigned long long)c->seed,
            (double)run.trace.rays, run.trace.seconds, (double)run.trace.rays / fmax(run.trace.seconds, 1e-9));
     bn_crosscheck_print(&run.in, &run.result, stdout);
     fflush(stdout);

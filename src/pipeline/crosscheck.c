@@ -2,7 +2,9 @@
  * level, the path tracer on the same patches, the discretisation tolerance, the comparison. */
 #include "bounce/pipeline.h"
 #include "base/internal.h"
+#include "base/vec.h"
 
+#include <math.h>
 #include <string.h>
 
 void bn_crosscheck_opts_default(bn_crosscheck_opts *o)
@@ -56,7 +58,7 @@ static bn_status bn__second_mesh(const bn_crosscheck_opts *o, const bn_pipeline 
     return BN_OK;
 }
 
-/* The discretisation tolerance between the levels, per patch and per layer's power. */
+/* The discretisation tolerance between the levels, per patch (or region) and per layer's power. */
 static bn_status bn__tolerance(const bn_crosscheck_opts *o, bn_crosscheck_run *run, bn_error *err)
 {
     size_t nl = (size_t)bn_layer_count(o->bounces);
@@ -64,8 +66,39 @@ static bn_status bn__tolerance(const bn_crosscheck_opts *o, bn_crosscheck_run *r
     run->power_tol = bn__malloc_array(nl, 3 * sizeof(double));
     if (!run->tol || !run->power_tol)
         return bn_error_set(err, BN_ENOMEM, "crosscheck: out of memory");
-    return bn_crosscheck_mesh_tolerance(run->fine.scene, run->layers_fine, run->other.scene, run->layers_other,
-                                        o->bounces, run->tol, run->power_tol, err);
+    if (!o->regions)
+        return bn_crosscheck_mesh_tolerance(run->fine.scene, run->layers_fine, run->other.scene, run->layers_other,
+                                            o->bounces, run->tol, run->power_tol, err);
+    {   /* regions are whole polygons, so both levels have the same ones: compare their means */
+        bn_partition q;
+        size_t n = run->part.n;
+        double m = bn_unit_to_metres(bn_scene_unit(run->fine.scene)), *b;
+        bn_status st = bn_partition_regions(run->other.scene, o->regions, &q, err);
+        if (st != BN_OK)
+            return st;
+        b = bn__malloc_array(n * nl, 3 * sizeof(double));
+        if (!b || q.n != n) {
+            free(b);
+            bn_partition_free(&q);
+            return b ? bn_error_set(err, BN_EINTERNAL, "crosscheck: the levels have %zu and %zu regions", n, q.n)
+                     : bn_error_set(err, BN_ENOMEM, "crosscheck: out of memory");
+        }
+        bn_partition_mean(&q, run->other.scene, run->layers_other, (int)nl, b);
+        for (size_t l = 0; l < nl; l++)
+            for (int c = 0; c < 3; c++) {
+                double pa = 0, pb = 0;
+                for (size_t g = 0; g < n; g++) {
+                    size_t k = (l * n + g) * 3 + (size_t)c;
+                    run->tol[k] = fabs(run->rad_regions[k] - b[k]);
+                    pa += run->part.area[g] * run->rad_regions[k];
+                    pb += q.area[g] * b[k];
+                }
+                run->power_tol[3 * l + (size_t)c] = BN_PI * m * m * fabs(pa - pb);
+            }
+        free(b);
+        bn_partition_free(&q);
+        return BN_OK;
+    }
 }
 
 bn_status bn_crosscheck_run_scene(const char *path, const bn_crosscheck_opts *o, bn_crosscheck_run *run,
@@ -78,7 +111,16 @@ bn_status bn_crosscheck_run_scene(const char *path, const bn_crosscheck_opts *o,
     memset(run, 0, sizeof *run);
     to.bounces = o->bounces;
     st = bn__level(path, o, &o->pipeline.mesh, &run->fine, &run->layers_fine, &run->seconds_fine, err);
-    if (st == BN_OK)
+    if (st == BN_OK && o->regions) {
+        size_t nl = (size_t)bn_layer_count(o->bounces);
+        st = bn_partition_regions(run->fine.scene, o->regions, &run->part, err);
+        if (st == BN_OK && !(run->rad_regions = bn__malloc_array(run->part.n * nl, 3 * sizeof(double))))
+            st = bn_error_set(err, BN_ENOMEM, "crosscheck: out of memory");
+        if (st == BN_OK) {
+            bn_partition_mean(&run->part, run->fine.scene, run->layers_fine, (int)nl, run->rad_regions);
+            st = bn_trace_regions_run(run->fine.rt, &run->part, &to, &run->trace, err);
+        }
+    } else if (st == BN_OK)
         st = bn_trace_patches_run(run->fine.rt, &to, &run->trace, err);
     if (st == BN_OK && o->disc != BN_DISC_NONE) {
         bn_crosscheck_opts o2 = *o;
@@ -94,7 +136,8 @@ bn_status bn_crosscheck_run_scene(const char *path, const bn_crosscheck_opts *o,
     bn_crosscheck_input_default(in);
     in->scene = run->fine.scene;
     in->trace = &run->trace;
-    in->rad = run->layers_fine;
+    in->rad = o->regions ? run->rad_regions : run->layers_fine;
+    in->part = o->regions ? &run->part : NULL;
     in->tol = run->tol;
     in->power_tol = run->power_tol;
     /* Two-level grid-convergence estimate with order p = 1 (patch-constant radiosity): the error of
@@ -117,6 +160,8 @@ void bn_crosscheck_run_free(bn_crosscheck_run *run)
     free(run->power_tol);
     free(run->layers_fine);
     free(run->layers_other);
+    free(run->rad_regions);
+    bn_partition_free(&run->part);
     bn_pipeline_free(&run->fine);
     bn_pipeline_free(&run->other);
     memset(run, 0, sizeof *run);

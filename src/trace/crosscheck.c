@@ -56,6 +56,45 @@ static void bn__layer_power(const bn_scene *s, const double *layers, size_t n, s
         w[c] *= BN_PI;
 }
 
+/* Per compared item (patch, or region of in->part): area (m^2) and material. */
+static void bn__item(const bn_crosscheck_input *in, size_t i, double *area_m2, unsigned *mat)
+{
+    size_t np;
+    const bn_patch *p = bn_scene_patches(in->scene, &np);
+    double m = bn_unit_to_metres(bn_scene_unit(in->scene));
+    if (in->part) {
+        *area_m2 = in->part->area[i] * m * m;
+        *mat = in->part->material[i];
+    } else {
+        *area_m2 = p[i].area * m * m;
+        *mat = p[i].material;
+    }
+}
+
+/* Power of layer l of per-item values, and (se given) its standard error. */
+static void bn__item_power(const bn_crosscheck_input *in, const double *v, const double *se, size_t n, size_t l,
+                           double w[3], double ws[3])
+{
+    double var[3] = {0, 0, 0};
+    w[0] = w[1] = w[2] = 0;
+    for (size_t i = 0; i < n; i++) {
+        double a;
+        unsigned mat;
+        bn__item(in, i, &a, &mat);
+        for (int c = 0; c < 3; c++) {
+            size_t k = (l * n + i) * 3 + (size_t)c;
+            w[c] += a * v[k];
+            if (se)
+                var[c] += (a * se[k]) * (a * se[k]);
+        }
+    }
+    for (int c = 0; c < 3; c++) {
+        w[c] *= BN_PI;
+        if (ws)
+            ws[c] = BN_PI * sqrt(var[c]);
+    }
+}
+
 bn_status bn_crosscheck_mesh_tolerance(const bn_scene *fine, const double *fine_layers, const bn_scene *other,
                                        const double *other_layers, int bounces, double *tol, double *power_tol,
                                        bn_error *err)
@@ -168,15 +207,15 @@ bn_status bn_crosscheck_compare(const bn_crosscheck_input *in, bn_crosscheck_res
 {
     const bn_trace_patches *tr = in->trace;
     size_t n = tr->n, nl = (size_t)tr->nlayers, np, nmat, m;
-    const bn_patch *patches = bn_scene_patches(in->scene, &np);
-    double unit = bn_unit_to_metres(bn_scene_unit(in->scene));
     bn_crosscheck_entry *all;
     double scale = in->tol_scale >= 0 ? in->tol_scale : 1;
 
     memset(out, 0, sizeof *out);
     bn_scene_materials(in->scene, &nmat);
-    if (np != n)
-        return bn_error_set(err, BN_EINPUT, "crosscheck: the tracer has %zu patches, the scene %zu", n, np);
+    bn_scene_patches(in->scene, &np);
+    if (in->part ? in->part->n != n || in->part->npatch != np : np != n)
+        return bn_error_set(err, BN_EINPUT, "crosscheck: the tracer has %zu %s, the scene %zu", n,
+                            in->part ? "regions" : "patches", in->part ? in->part->n : np);
     if (!(in->alpha > 0 && in->alpha < 1))
         return bn_error_set(err, BN_EUSAGE, "crosscheck: alpha %g is not in (0, 1)", in->alpha);
     m = n * nl * 3;
@@ -252,8 +291,8 @@ bn_status bn_crosscheck_compare(const bn_crosscheck_input *in, bn_crosscheck_res
     out->power_crit = bn_normal_quantile_upper(-expm1(log1p(-in->alpha) / (double)out->power_family) / 2);
     for (size_t l = 0; l < nl; l++) {
         double w[3], se[3];
-        bn__layer_power(in->scene, in->rad, n, l, out->power_rad + 3 * l);
-        bn_trace_patches_power(in->scene, tr, (int)l, w, se);
+        bn__item_power(in, in->rad, NULL, n, l, out->power_rad + 3 * l, NULL);
+        bn__item_power(in, tr->mean, tr->se, n, l, w, se);
         for (int c = 0; c < 3; c++) {
             size_t k = 3 * l + (size_t)c;
             double z, zx;
@@ -270,8 +309,9 @@ bn_status bn_crosscheck_compare(const bn_crosscheck_input *in, bn_crosscheck_res
     {
         size_t l = nl - 1;
         for (size_t i = 0; i < n; i++) {
-            size_t s = patches[i].material;
-            double a = patches[i].area * unit * unit;
+            double a;
+            unsigned s;
+            bn__item(in, i, &a, &s);
             out->surf_area[s] += a;
             for (int c = 0; c < 3; c++) {
                 size_t k = (l * n + i) * 3 + (size_t)c;
@@ -319,12 +359,15 @@ void bn_crosscheck_print(const bn_crosscheck_input *in, const bn_crosscheck_resu
     int bounces = tr->bounces;
     size_t n = tr->n, nmat;
     const bn_material *mats = bn_scene_materials(in->scene, &nmat);
-    const bn_patch *patches = bn_scene_patches(in->scene, &n);
+    size_t np;
+    const bn_patch *patches = bn_scene_patches(in->scene, &np);
+    const char *item = in->part ? "region" : "patch";
     char name[16];
 
-    fprintf(fp, "\nper-patch test: %zu patches x %d layers x 3 channels = %zu tests; alpha %g (family-wise), "
+    fprintf(fp, "\nper-%s test: %zu %s x %d layers x 3 channels = %zu tests; alpha %g (family-wise), "
                 "Sidak per test %.3g, bound |z| <= %.3f (Student t, %zu dof)\n",
-            n, r->nlayers, r->family, r->alpha, r->alpha_each, r->crit, tr->spp - 1);
+            item, n, in->part ? "regions" : "patches", r->nlayers, r->family, r->alpha, r->alpha_each, r->crit,
+            tr->spp - 1);
     fprintf(fp, "  z = (radiosity - trace) / se;  z_excess = max(0, |radiosity - trace| - tol) / se,  tol = "
                 "%g x discretisation estimate%s\n",
             in->tol_scale, in->rtol > 0 ? " + rtol |radiosity|" : "");
@@ -336,12 +379,13 @@ void bn_crosscheck_print(const bn_crosscheck_input *in, const bn_crosscheck_resu
             100.0 * (double)r->within / (double)r->family, r->worst_z, 100.0 * (double)r->within_raw / (double)r->family,
             r->worst_z_raw);
     if (r->nworst > 0) {
-        fprintf(fp, "\nworst entries:\n  %7s %6s %-6s %2s %13s %13s %11s %11s %9s %9s\n", "patch", "face", "layer", "ch",
-                "radiosity", "trace", "se", "tol", "z", "z_excess");
+        fprintf(fp, "\nworst entries:\n  %7s %6s %-6s %2s %13s %13s %11s %11s %9s %9s\n", item,
+                in->part ? "mat" : "face", "layer", "ch", "radiosity", "trace", "se", "tol", "z", "z_excess");
         for (int k = 0; k < r->nworst; k++) {
             const bn_crosscheck_entry *e = &r->worst[k];
             fprintf(fp, "  %7zu %6zu %-6s %2c %13.6g %13.6g %11.4g %11.4g %9.3f %9.3f\n", e->patch,
-                    patches[e->patch].face, bn_layer_name(e->layer, bounces, name, sizeof name),
+                    in->part ? (size_t)in->part->material[e->patch] : patches[e->patch].face,
+                    bn_layer_name(e->layer, bounces, name, sizeof name),
                     bn__ch[e->channel], e->radiosity, e->trace, e->se, e->tol, e->z, e->z_excess);
         }
     }

@@ -10,7 +10,11 @@
 #include <omp.h>
 #include <string.h>
 
-static bn_status bn__trace_patches_run_body(const bn_rt *rt, const bn_trace_opts *o, bn_trace_patches *out, bn_error *err)
+#define BN__TRACE_TAG_REGION 0x726567696f6eULL   /* "region" */
+
+/* part NULL: one item per patch; else one per region, its points uniform in area over the region. */
+static bn_status bn__trace_items_run_body(const bn_rt *rt, const bn_partition *part, const bn_trace_opts *o,
+                                          bn_trace_patches *out, bn_error *err)
 {
     bn__tracer t;
     bn_status st;
@@ -25,7 +29,11 @@ static bn_status bn__trace_patches_run_body(const bn_rt *rt, const bn_trace_opts
     st = bn__tracer_init(&t, rt, o, err);
     if (st != BN_OK)
         return st;
-    n = t.np;
+    n = part ? part->n : t.np;
+    if (part && part->npatch != t.np) {
+        bn__tracer_free(&t);
+        return bn_error_set(err, BN_EINTERNAL, "trace: a partition of %zu patches for a scene of %zu", part->npatch, t.np);
+    }
     nl = (size_t)bn_layer_count(o->bounces);
     if (!bn__mul_size(n, nl * 3 * sizeof(double), &bytes)) {
         bn__tracer_free(&t);
@@ -42,7 +50,7 @@ static bn_status bn__trace_patches_run_body(const bn_rt *rt, const bn_trace_opts
         bn_trace_patches_free(out);
         return bn_error_set(err, BN_ENOMEM, "trace: out of memory for 2 x %zu bytes of per-patch estimates", bytes);
     }
-    bn__progress_begin(&prog, "path tracing", n, o->quiet);
+    bn__progress_begin(&prog, part ? "path tracing regions" : "path tracing", n, o->quiet);
 
 #pragma omp parallel reduction(+ : rays)
     {
@@ -61,15 +69,28 @@ static bn_status bn__trace_patches_run_body(const bn_rt *rt, const bn_trace_opts
             memset(mean, 0, m * sizeof(double));
             memset(m2, 0, m * sizeof(double));
             for (size_t s = 0; s < o->spp; s++) {
-                bn__rng rng = bn__rng_make(o->seed ^ BN__TRACE_TAG_PATCH, i, s);
+                bn__rng rng = bn__rng_make(o->seed ^ (part ? BN__TRACE_TAG_REGION : BN__TRACE_TAG_PATCH), i, s);
+                size_t p = i;
+                if (part) {   /* the region's patch by area (independent draws: se from the samples) */
+                    double u0 = bn__rng_uniform(&rng);
+                    size_t lo = part->start[i], hi = part->start[i + 1] - 1;
+                    while (lo < hi) {
+                        size_t mid = lo + (hi - lo) / 2;
+                        if (part->cum[mid] > u0)
+                            hi = mid;
+                        else
+                            lo = mid + 1;
+                    }
+                    p = part->patch[lo];
+                }
                 double x[3], u1 = bn__rng_uniform(&rng), u2 = bn__rng_uniform(&rng), u3 = bn__rng_uniform(&rng);
                 double *L = sample + 3 * (nl - 1);
                 memset(sample, 0, m * sizeof(double));
-                bn__tracer_patch_point(&t, i, u1, u2, u3, x);
+                bn__tracer_patch_point(&t, p, u1, u2, u3, x);
                 /* Bin 0: the patch's own emission, seen directly. */
                 for (int c = 0; c < 3; c++)
-                    sample[c] = t.Le[3 * i + c];
-                bn__tracer_path(&t, x, i, &rng, sample, &rays);
+                    sample[c] = t.Le[3 * p + c];
+                bn__tracer_path(&t, x, p, &rng, sample, &rays);
                 for (size_t l = 0; l + 1 < nl; l++)
                     for (int c = 0; c < 3; c++)
                         L[c] += sample[3 * l + c];
@@ -105,8 +126,8 @@ static bn_status bn__trace_patches_run_body(const bn_rt *rt, const bn_trace_opts
                 size_t k = (l * n + i) * 3 + (size_t)c;
                 if (!isfinite(out->mean[k]) || !isfinite(out->se[k])) {
                     char name[16];
-                    bn_error_set(err, BN_ENUMERIC, "trace: non-finite estimate %g (se %g) for patch %zu, layer %s, "
-                                 "channel %d", out->mean[k], out->se[k], i,
+                    bn_error_set(err, BN_ENUMERIC, "trace: non-finite estimate %g (se %g) for %s %zu, layer %s, "
+                                 "channel %d", out->mean[k], out->se[k], part ? "region" : "patch", i,
                                  bn_layer_name((int)l, o->bounces, name, sizeof name), c);
                     bn_trace_patches_free(out);
                     return BN_ENUMERIC;
@@ -118,7 +139,16 @@ static bn_status bn__trace_patches_run_body(const bn_rt *rt, const bn_trace_opts
 bn_status bn_trace_patches_run(const bn_rt *rt, const bn_trace_opts *o, bn_trace_patches *out, bn_error *err)
 {
     int prev = bn__threads_begin(o->threads);
-    bn_status st = bn__trace_patches_run_body(rt, o, out, err);
+    bn_status st = bn__trace_items_run_body(rt, NULL, o, out, err);
+    bn__threads_end(prev);
+    return st;
+}
+
+bn_status bn_trace_regions_run(const bn_rt *rt, const bn_partition *part, const bn_trace_opts *o,
+                               bn_trace_patches *out, bn_error *err)
+{
+    int prev = bn__threads_begin(o->threads);
+    bn_status st = bn__trace_items_run_body(rt, part, o, out, err);
     bn__threads_end(prev);
     return st;
 }

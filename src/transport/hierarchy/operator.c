@@ -94,7 +94,7 @@ bn_status bn__hop_make(const bn__tree *t, const bn__link *links, size_t nlinks, 
     memcpy(h->area, t->area, n * sizeof(double));
     for (size_t v = 0; v < n; v++) {
         h->leaf_patch[v] = t->child[v] == BN__NONE ? t->order[t->lo[v]] : BN__NONE;
-        h->cl[v] = t->face[v] < 0 ? (uint32_t)h->nclusters++ : BN__NONE;
+        h->cl[v] = t->plane[v] < 0 ? (uint32_t)h->nclusters++ : BN__NONE;
         for (int c = 0; c < 3; c++)
             h->normal[3 * v + c] = (float)t->normal[3 * v + c];
     }

@@ -41,9 +41,9 @@ typedef struct bn__ref {
     const bn_hierarchy_opts *o;
     const bn_patch *patch;
     const double *pverts;
-    const double *fn, *fp;    /* per face: unit normal and a point of its plane */
     double *Bmax;             /* 3 per node: the largest radiance estimate below (oracle) */
     double eps_abs;
+    double min_area;          /* planar nodes below this area are not split */
     int force;                /* eps == 0: refine every link to the patches */
     double tol, ray_eps;
     bn__ff_pairs *pairs;
@@ -91,16 +91,17 @@ static int bn__box_behind(const bn__tree *t, uint32_t v, const double n[3], cons
     return m <= tol;
 }
 
-/* Can r and s exchange light at all? Same polygon, or one wholly behind the other's plane: no. */
+/* Can r and s exchange light at all? Same plane, or one wholly behind the other's plane (by more
+ * than that plane's polygons stray from it): no. */
 static int bn__culled(const bn__ref *R, uint32_t r, uint32_t s)
 {
     const bn__tree *t = R->t;
-    int32_t fr = t->face[r], fs = t->face[s];
+    int32_t fr = t->plane[r], fs = t->plane[s];
     if (fr >= 0 && fr == fs)
         return 1;
-    if (fr >= 0 && bn__box_behind(t, s, R->fn + 3 * fr, R->fp + 3 * fr, R->tol))
+    if (fr >= 0 && bn__box_behind(t, s, t->pn + 3 * fr, t->pp + 3 * fr, R->tol - t->pthick[fr]))
         return 1;
-    if (fs >= 0 && bn__box_behind(t, r, R->fn + 3 * fs, R->fp + 3 * fs, R->tol))
+    if (fs >= 0 && bn__box_behind(t, r, t->pn + 3 * fs, t->pp + 3 * fs, R->tol - t->pthick[fs]))
         return 1;
     return 0;
 }
@@ -140,7 +141,7 @@ static int bn__can_receive(const bn__ref *R, uint32_t r, uint32_t s)
 {
     const bn__tree *t = R->t;
     double cr[3], cs[3], rr, rs, u[3], d;
-    if (t->face[r] >= 0)
+    if (t->plane[r] >= 0)
         return 1;
     if (!R->o->flat_clusters || t->spread[r] > BN__FLAT)
         return 0;
@@ -151,6 +152,13 @@ static int bn__can_receive(const bn__ref *R, uint32_t r, uint32_t s)
         return 0;
     d = fmax(-1.0, fmin(1.0, bn_v3_dot(u, t->normal + 3 * (size_t)r)));
     return acos(d) + t->spread[r] < 0.5 * BN_PI;
+}
+
+/* May refinement split node v? Clusters always; planar nodes down to min_area; patches never. */
+static int bn__splittable(const bn__ref *R, uint32_t v)
+{
+    const bn__tree *t = R->t;
+    return !bn__tree_is_leaf(t, v) && (t->plane[v] < 0 || R->force || t->area[v] >= R->min_area);
 }
 
 /* The oracle: the most a link could carry to the receiver's radiance, rho_r B_s F_bound. */
@@ -189,7 +197,7 @@ static void bn__node_point(const bn__ref *R, uint32_t v, double u1, double u2, d
  * disk regulariser keeps every term bounded); S x 4 when the first S find partial visibility. */
 static double bn__F_sampled(const bn__ref *R, uint32_t r, uint32_t s, bn__worker *w, int *partial)
 {
-    int S = R->o->samples > 0 ? R->o->samples : 8;
+    int S = (R->o->samples > 0 ? R->o->samples : 8) * (bn__separated(R->t, r, s) ? 1 : 4);
     for (int round = 0; round < 2; round++) {
         bn__rng g = bn__rng_make(R->o->ff.seed ^ 0x6869657261726368ull, ((uint64_t)r << 32) | s, (uint64_t)round);
         double a = R->t->area[s] / S, sum = 0, inv = 1.0 / S, cos_sum = 0;
@@ -227,7 +235,7 @@ static double bn__F_sampled(const bn__ref *R, uint32_t r, uint32_t s, bn__worker
         if (round == 1 || !*partial)
             /* a cluster receiver: F per unit of cosine, K = F / (the receiver's mean cosine toward s,
              * from the same points), handed to each polygon as K max(0, n . u) (operator.c) */
-            return R->t->face[r] < 0 ? (cos_sum > 0 ? sum / (cos_sum * inv) : 0) : sum;
+            return R->t->plane[r] < 0 ? (cos_sum > 0 ? sum / (cos_sum * inv) : 0) : sum;
         S *= 4;
     }
     return 0;
@@ -260,10 +268,10 @@ static float bn__link_F(const bn__ref *R, uint32_t r, uint32_t s, bn__worker *w,
 static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int partial, int depth, bn__worker *w)
 {
     const bn__tree *t = R->t;
-    int lr = bn__tree_is_leaf(t, r), ls = bn__tree_is_leaf(t, s), split;
+    int lr = bn__tree_is_leaf(t, r), sr = bn__splittable(R, r), ss = bn__splittable(R, s), split;
     if (r == s) {
-        if (lr)
-            return;   /* a planar patch does not see itself */
+        if (lr || t->plane[r] >= 0)
+            return;   /* a plane does not see itself */
         if (depth == 0) {
             bn__vec_push(&w->pending, r, s, -1, 0);
             return;
@@ -276,7 +284,7 @@ static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int par
     if (F < 0 && bn__culled(R, r, s))
         return;
     split = 0;
-    if (!lr || !ls) {
+    if (sr || ss) {
         double e = R->force || !bn__separated(t, r, s) || !bn__can_receive(R, r, s) ? INFINITY
                                                                                     : bn__link_error(R, r, s);
         split = e > (F >= 0 && partial ? BN__PARTIAL : 1.0) * R->eps_abs;
@@ -297,7 +305,7 @@ static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int par
             w->splits++;
         bn__tree_sphere(t, r, cr, &rr);
         bn__tree_sphere(t, s, cs, &rs);
-        if (!lr && (ls || rr >= rs || !bn__can_receive(R, r, s))) {
+        if (sr && (!ss || rr >= rs || !bn__can_receive(R, r, s))) {
             bn__visit(R, t->child[r], s, -1, 0, depth - 1, w);
             bn__visit(R, t->child[r] + 1, s, -1, 0, depth - 1, w);
         } else {
@@ -454,24 +462,6 @@ static bn_status bn__estimate(const bn__tree *t, bn__vec *links, const double *E
     return st;
 }
 
-/* Face planes for culling. */
-static bn_status bn__face_planes(const bn_scene *s, double **fn, double **fp, bn_error *err)
-{
-    size_t nf, nv, ni;
-    const bn_face *f = bn_scene_faces(s, &nf);
-    const double *v = bn_scene_vertices(s, &nv);
-    const size_t *idx = bn_scene_face_indices(s, &ni);
-    *fn = bn__malloc_array(3 * nf + 1, sizeof(double));
-    *fp = bn__malloc_array(3 * nf + 1, sizeof(double));
-    if (!*fn || !*fp)
-        return bn_error_set(err, BN_ENOMEM, "out of memory for %zu face planes", nf);
-    for (size_t k = 0; k < nf; k++) {
-        memcpy(*fn + 3 * k, f[k].normal, 3 * sizeof(double));
-        memcpy(*fp + 3 * k, v + 3 * idx[f[k].first], 3 * sizeof(double));
-    }
-    return BN_OK;
-}
-
 static bn_status bn__check_opts(const bn_hierarchy_opts *o, bn_error *err)
 {
     if (!(o->eps >= 0 && isfinite(o->eps)))
@@ -503,7 +493,7 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
         return st;
     if (!rt || bn_rt_scene(rt) != scene)
         return bn_error_set(err, BN_EINTERNAL, "bn_hierarchy_build: rt was built for another scene");
-    st = bn__tree_build(scene, &t, err);
+    st = bn__tree_build(scene, !(o->eps == 0 || o->exact_leaf_links), &t, err);
     if (st != BN_OK)
         return st;
     rep->seconds_tree = bn__now() - t0;
@@ -522,6 +512,7 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
     R.tol = 1e-9 * fmax(bn_v3_dist(lo, hi), 1e-300);
     R.ray_eps = bn_rt_epsilon(rt);
     R.force = o->eps == 0;
+    R.min_area = o->min_area > 0 ? o->min_area : o->min_area == 0 ? ldexp(t.area[0], -20) : 0;
     E = bn__malloc_array(3 * np, sizeof(double));
     rho = bn__malloc_array(3 * np, sizeof(double));
     L = bn__malloc_array(3 * np, sizeof(double));
@@ -531,8 +522,6 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
         st = bn_error_set(err, BN_ENOMEM, "out of memory for the hierarchy of %zu patches", np);
         goto done;
     }
-    if ((st = bn__face_planes(scene, (double **)&R.fn, (double **)&R.fp, err)) != BN_OK)
-        goto done;
     if ((st = bn__ff_pairs_create(scene, rt, &o->ff, &R.pairs, err)) != BN_OK)
         goto done;
     for (int k = 0; k < nt; k++)
@@ -558,8 +547,8 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
             st = bn_error_set(err, BN_ENOMEM, "out of memory");
             goto done;
         }
-        for (uint32_t v = 0; v < t.n; v++)   /* the topmost planar nodes: the polygons */
-            if (t.face[v] >= 0 && (v == 0 || t.face[t.parent[v]] < 0))
+        for (uint32_t v = 0; v < t.n; v++)   /* the topmost planar nodes: the planes */
+            if (t.plane[v] >= 0 && (v == 0 || t.plane[t.parent[v]] < 0))
                 fnode[m++] = v;
         for (size_t a = 0; a < m && !work.oom; a++)
             for (size_t b = 0; b < m; b++)
@@ -610,15 +599,18 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
     for (size_t l = 0; l < work.n; l++) {
         int lr = bn__tree_is_leaf(&t, work.a[l].r), ls = bn__tree_is_leaf(&t, work.a[l].s);
         rep->leaf_links += lr && ls;
-        rep->cluster_links += t.face[work.a[l].r] < 0 || t.face[work.a[l].s] < 0;
+        rep->cluster_links += t.plane[work.a[l].r] < 0 || t.plane[work.a[l].s] < 0;
     }
     if ((st = bn__hop_make(&t, work.a, work.n, &h, err)) != BN_OK)
         goto done;
     rep->patches = np;
     rep->nodes = t.n;
+    bn_scene_faces(scene, &rep->polygons);
+    rep->planes = t.nplanes;
+    rep->min_area = R.min_area;
     for (size_t v = 0; v < t.n; v++) {
-        rep->clusters += t.face[v] < 0;
-        rep->planar_nodes += t.face[v] >= 0 && t.child[v] != BN__NONE;
+        rep->clusters += t.plane[v] < 0;
+        rep->planar_nodes += t.plane[v] >= 0 && t.child[v] != BN__NONE;
     }
     rep->links = work.n;
     rep->bytes = bn__hop_bytes(h);
@@ -636,8 +628,6 @@ done:
     free(W);
     bn__hop_destroy(h);
     bn__ff_pairs_destroy(R.pairs);
-    free((void *)R.fn);
-    free((void *)R.fp);
     free(R.Bmax);
     free(work.a);
     free(E);
@@ -659,6 +649,7 @@ bn_status bn_hierarchy_build(const bn_scene *scene, const bn_rt *rt, const bn_hi
 
 void bn_hierarchy_report_print(const bn_hierarchy_report *r, FILE *fp)
 {
+    fprintf(fp, "polygons %zu\nplanes %zu\nmin_area %.6g\n", r->polygons, r->planes, r->min_area);
     fprintf(fp, "patches %zu\nnodes %zu\nclusters %zu\nplanar_nodes %zu\nlinks %zu\nleaf_links %zu\n"
                 "cluster_links %zu\nlinks_per_patch %.3g\npasses %zu\nsettled %d\nrays %zu\nbytes %zu\n"
                 "bytes_per_link %.3g\neps_abs %.6g\nseconds_tree %.3f\nseconds_refine %.3f\n",

@@ -1,5 +1,6 @@
-/* The node tree over the patches: median splits along the longest axis, first of the input
- * polygons (volume clusters), then of each polygon's patches (planar nodes). */
+/* The node tree over the patches: median splits along the longest axis, first of the planes
+ * (volume clusters), then of each plane's patches (planar nodes). A plane is an input polygon or a
+ * connected group of coplanar ones (hierarchy_internal.h). */
 #include "transport/hierarchy/hierarchy_internal.h"
 #include "base/vec.h"
 
@@ -26,8 +27,9 @@ typedef struct bn__tb {
     const bn_material *mat;
     const double *pverts;
     double *pc;               /* patch centroids */
-    double *fc;               /* face centroids (area-weighted), per face */
-    uint32_t *face_first, *face_count, *byface;
+    double *fc;               /* plane centroids (area-weighted), per plane */
+    const uint32_t *plane_of; /* per input face: its plane */
+    uint32_t *face_first, *face_count, *byface;   /* per plane */
     size_t cursor;            /* next free slot in order */
     bn__key *keys;
 } bn__tb;
@@ -60,7 +62,7 @@ static void bn__node_finish(bn__tb *b, uint32_t v)
                 box[3 + c] = fmax(box[3 + c], x);
             }
         t->area[v] = p->area;
-        t->face[v] = (int32_t)p->face;
+        t->plane[v] = (int32_t)b->plane_of[p->face];
         memcpy(t->normal + 3 * v, p->normal, 3 * sizeof(double));
         t->spread[v] = 0;
         return;
@@ -72,15 +74,15 @@ static void bn__node_finish(bn__tb *b, uint32_t v)
         box[3 + c] = fmax(t->box[6 * a + 3 + c], t->box[6 * c2 + 3 + c]);
         t->rho_max[3 * v + c] = fmaxf(t->rho_max[3 * a + c], t->rho_max[3 * c2 + c]);
     }
-    t->face[v] = t->face[a] == t->face[c2] ? t->face[a] : -1;
+    t->plane[v] = t->plane[a] == t->plane[c2] ? t->plane[a] : -1;
     {   /* the normal cone: axis the area-weighted mean, spread bounded through the children's cones */
         double *nv = t->normal + 3 * v, len;
         for (int c = 0; c < 3; c++)
             nv[c] = t->area[a] * t->normal[3 * a + c] + t->area[c2] * t->normal[3 * c2 + c];
         len = bn_v3_len(nv);
-        if (t->face[v] >= 0 || !(len > 1e-12 * t->area[v])) {
+        if (t->plane[v] >= 0 || !(len > 1e-12 * t->area[v])) {
             memcpy(nv, t->normal + 3 * a, 3 * sizeof(double));
-            t->spread[v] = t->face[v] >= 0 ? 0 : BN_PI;
+            t->spread[v] = t->plane[v] >= 0 ? 0 : BN_PI;
         } else {
             bn_v3_scale(nv, 1 / len, nv);
             t->spread[v] = 0;
@@ -117,7 +119,7 @@ static void bn__median_sort(bn__tb *b, uint32_t *ids, size_t m, const double *ce
         ids[k] = b->keys[k].id;
 }
 
-/* Planar nodes over order[lo..hi) (patches of one face). */
+/* Planar nodes over order[lo..hi) (patches of one plane). */
 static void bn__build_patches(bn__tb *b, uint32_t v, size_t lo, size_t hi)
 {
     bn__tree *t = b->t;
@@ -135,7 +137,7 @@ static void bn__build_patches(bn__tb *b, uint32_t v, size_t lo, size_t hi)
     bn__node_finish(b, v);
 }
 
-/* Clusters over faces[0..m). */
+/* Clusters over planes[0..m). */
 static void bn__build_faces(bn__tb *b, uint32_t v, uint32_t *faces, size_t m)
 {
     bn__tree *t = b->t;
@@ -163,7 +165,10 @@ void bn__tree_free(bn__tree *t)
     free(t->child);
     free(t->lo);
     free(t->hi);
-    free(t->face);
+    free(t->plane);
+    free(t->pn);
+    free(t->pp);
+    free(t->pthick);
     free(t->area);
     free(t->box);
     free(t->rho_max);
@@ -178,14 +183,150 @@ void bn__tree_free(bn__tree *t)
 size_t bn__tree_bytes(const bn__tree *t)
 {
     return t->n * (5 * sizeof(uint32_t) + 11 * sizeof(double) + 3 * sizeof(float)) +
-           t->npatch * (2 * sizeof(uint32_t) + sizeof(double));
+           t->npatch * (2 * sizeof(uint32_t) + sizeof(double)) + t->nplanes * 7 * sizeof(double);
 }
 
-bn_status bn__tree_build(const bn_scene *s, bn__tree *t, bn_error *err)
+typedef struct bn__edge {
+    size_t a, b;              /* vertex indices, a < b */
+    uint32_t f;
+} bn__edge;
+
+static int bn__edge_cmp(const void *x, const void *y)
+{
+    const bn__edge *p = x, *q = y;
+    if (p->a != q->a)
+        return p->a < q->a ? -1 : 1;
+    if (p->b != q->b)
+        return p->b < q->b ? -1 : 1;
+    return p->f < q->f ? -1 : p->f > q->f;
+}
+
+/* Does face f lie within BN__COPLANAR of the plane (n, p)? *thick: the largest distance seen. */
+static int bn__on_plane(const bn_face *f, const size_t *idx, const double *v, const double n[3], const double p[3],
+                        double tol, double *thick)
+{
+    double d[3], h = 0;
+    if (bn_v3_dot(f->normal, n) < cos(BN__COPLANAR))
+        return 0;
+    for (unsigned k = 0; k < f->nverts; k++) {
+        const double *x = v + 3 * idx[f->first + k];
+        bn_v3_sub(x, p, d);
+        double off = fabs(bn_v3_dot(d, n));
+        if (off > BN__COPLANAR * bn_v3_len(d) + tol)
+            return 0;
+        h = fmax(h, off);
+    }
+    *thick = fmax(*thick, h);
+    return 1;
+}
+
+/* plane_of[f] for every face, and the planes' normal, point and thickness: with merge, faces that
+ * share an edge join the plane of the face that started it while they lie within BN__COPLANAR of
+ * it (measured against that first face, so a finely cut curved surface cannot creep into one plane). */
+static bn_status bn__planes(const bn_scene *s, int merge, bn__tree *t, uint32_t *plane_of, bn_error *err)
+{
+    size_t nf, nv, ni, ne = 0, ng = 0;
+    const bn_face *f = bn_scene_faces(s, &nf);
+    const double *v = bn_scene_vertices(s, &nv);
+    const size_t *idx = bn_scene_face_indices(s, &ni);
+    double lo[3], hi[3], tol;
+    bn__edge *e = NULL;
+    size_t *adj_start = NULL;
+    uint32_t *adj = NULL, *queue = NULL;
+    bn_status st = BN_OK;
+    bn_scene_bounds(s, lo, hi);
+    tol = 1e-9 * fmax(bn_v3_dist(lo, hi), 1e-300);
+    t->pn = bn__malloc_array(3 * nf + 1, sizeof(double));
+    t->pp = bn__malloc_array(3 * nf + 1, sizeof(double));
+    t->pthick = bn__calloc(nf + 1, sizeof(double));
+    if (!t->pn || !t->pp || !t->pthick)
+        goto oom;
+    for (size_t k = 0; k < nf; k++)
+        plane_of[k] = UINT32_MAX;
+    if (merge) {
+        e = bn__malloc_array(4 * nf + 1, sizeof *e);
+        adj_start = bn__calloc(nf + 1, sizeof *adj_start);
+        queue = bn__malloc_array(nf + 1, sizeof *queue);
+        if (!e || !adj_start || !queue)
+            goto oom;
+        for (size_t k = 0; k < nf; k++)
+            for (unsigned j = 0; j < f[k].nverts; j++) {
+                size_t x = idx[f[k].first + j], y = idx[f[k].first + (j + 1) % f[k].nverts];
+                e[ne].a = x < y ? x : y;
+                e[ne].b = x < y ? y : x;
+                e[ne++].f = (uint32_t)k;
+            }
+        qsort(e, ne, sizeof *e, bn__edge_cmp);
+        /* faces sharing an edge: count, then fill (both directions) */
+        for (int fill = 0; fill < 2; fill++) {
+            size_t *pos = NULL;
+            if (fill) {
+                for (size_t k = 0; k < nf; k++)
+                    adj_start[k + 1] += adj_start[k];
+                adj = bn__malloc_array(adj_start[nf] + 1, sizeof *adj);
+                pos = bn__malloc_array(nf + 1, sizeof *pos);
+                if (!adj || !pos) {
+                    free(pos);
+                    goto oom;
+                }
+                memcpy(pos, adj_start, nf * sizeof *pos);
+            }
+            for (size_t i = 0, j; i < ne; i = j) {
+                for (j = i + 1; j < ne && e[j].a == e[i].a && e[j].b == e[i].b; j++)
+                    ;
+                for (size_t p = i; p < j; p++)
+                    for (size_t q = i; q < j; q++)
+                        if (e[p].f != e[q].f) {
+                            if (fill)
+                                adj[pos[e[p].f]++] = e[q].f;
+                            else
+                                adj_start[e[p].f + 1]++;
+                        }
+            }
+            free(pos);
+        }
+    }
+    for (size_t k = 0; k < nf; k++) {
+        if (plane_of[k] != UINT32_MAX)
+            continue;
+        double *n = t->pn + 3 * ng, *p = t->pp + 3 * ng;
+        memcpy(n, f[k].normal, 3 * sizeof(double));
+        memcpy(p, v + 3 * idx[f[k].first], 3 * sizeof(double));
+        plane_of[k] = (uint32_t)ng;
+        if (merge) {
+            size_t head = 0, tail = 0;
+            bn__on_plane(&f[k], idx, v, n, p, tol, &t->pthick[ng]);
+            queue[tail++] = (uint32_t)k;
+            while (head < tail) {
+                uint32_t g = queue[head++];
+                for (size_t a = adj_start[g]; a < adj_start[g + 1]; a++) {
+                    uint32_t h = adj[a];
+                    if (plane_of[h] == UINT32_MAX && bn__on_plane(&f[h], idx, v, n, p, tol, &t->pthick[ng])) {
+                        plane_of[h] = (uint32_t)ng;
+                        queue[tail++] = h;
+                    }
+                }
+            }
+        }
+        ng++;
+    }
+    t->nplanes = ng;
+    goto done;
+oom:
+    st = bn_error_set(err, BN_ENOMEM, "out of memory for the planes of %zu polygons", nf);
+done:
+    free(e);
+    free(adj_start);
+    free(adj);
+    free(queue);
+    return st;
+}
+
+bn_status bn__tree_build(const bn_scene *s, int merge, bn__tree *t, bn_error *err)
 {
     size_t np, nf, nm, npv, cap;
     bn__tb b;
-    uint32_t *faces = NULL;
+    uint32_t *faces = NULL, *plane_of = NULL;
     size_t nfaces = 0;
     memset(t, 0, sizeof *t);
     memset(&b, 0, sizeof b);
@@ -205,7 +346,7 @@ bn_status bn__tree_build(const bn_scene *s, bn__tree *t, bn_error *err)
     t->child = bn__malloc_array(cap, sizeof(uint32_t));
     t->lo = bn__malloc_array(cap, sizeof(uint32_t));
     t->hi = bn__malloc_array(cap, sizeof(uint32_t));
-    t->face = bn__malloc_array(cap, sizeof(int32_t));
+    t->plane = bn__malloc_array(cap, sizeof(int32_t));
     t->area = bn__malloc_array(cap, sizeof(double));
     t->box = bn__malloc_array(6 * cap, sizeof(double));
     t->rho_max = bn__malloc_array(3 * cap, sizeof(float));
@@ -222,23 +363,27 @@ bn_status bn__tree_build(const bn_scene *s, bn__tree *t, bn_error *err)
     b.keys = bn__malloc_array(np > nf ? np : nf, sizeof(bn__key));
     faces = bn__malloc_array(nf + 1, sizeof(uint32_t));
     double *farea = bn__calloc(nf + 1, sizeof(double));
+    plane_of = bn__malloc_array(nf + 1, sizeof(uint32_t));
+    b.plane_of = plane_of;
     bn_status st = BN_OK;
-    if (!t->parent || !t->child || !t->lo || !t->hi || !t->face || !t->area || !t->box || !t->rho_max || !t->normal || !t->spread || !t->order ||
+    if (!plane_of || !t->parent || !t->child || !t->lo || !t->hi || !t->plane || !t->area || !t->box || !t->rho_max || !t->normal || !t->spread || !t->order ||
         !t->leaf || !t->cum_area || !b.pc || !b.fc || !b.face_first || !b.face_count || !b.byface || !b.keys || !faces ||
         !farea) {
         st = bn_error_set(err, BN_ENOMEM, "out of memory for the hierarchy of %zu patches", np);
         goto done;
     }
-    /* patches by face (counting sort keeps the mesher's order inside a face) */
+    if ((st = bn__planes(s, merge, t, plane_of, err)) != BN_OK)
+        goto done;
+    /* patches by plane (counting sort keeps the mesher's order inside a plane) */
     for (size_t i = 0; i < np; i++) {
-        size_t f = b.patch[i].face;
+        size_t f = plane_of[b.patch[i].face];
         b.face_count[f]++;
         memcpy(b.pc + 3 * i, b.patch[i].centroid, 3 * sizeof(double));
         for (int c = 0; c < 3; c++)
             b.fc[3 * f + c] += b.patch[i].area * b.patch[i].centroid[c];
         farea[f] += b.patch[i].area;
     }
-    for (size_t f = 0, acc = 0; f < nf; f++) {
+    for (size_t f = 0, acc = 0; f < t->nplanes; f++) {
         b.face_first[f] = (uint32_t)acc;
         acc += b.face_count[f];
         if (b.face_count[f]) {
@@ -254,7 +399,7 @@ bn_status bn__tree_build(const bn_scene *s, bn__tree *t, bn_error *err)
             goto done;
         }
         for (size_t i = 0; i < np; i++) {
-            size_t f = b.patch[i].face;
+            size_t f = plane_of[b.patch[i].face];
             b.byface[b.face_first[f] + fill[f]++] = (uint32_t)i;
         }
         free(fill);
@@ -276,6 +421,7 @@ done:
     free(b.keys);
     free(faces);
     free(farea);
+    free(plane_of);
     if (st != BN_OK)
         bn__tree_free(t);
     return st;

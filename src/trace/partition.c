@@ -1,0 +1,207 @@
+/* A reporting partition (include/bounce/trace.h): regions of whole input polygons, one material
+ * each, area-balanced by median splits, for a cross-check coarse enough for the tracer. */
+#include "bounce/trace.h"
+#include "base/internal.h"
+#include "base/vec.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef struct bn__pkey {
+    double k;
+    uint32_t f;
+} bn__pkey;
+
+static int bn__pkey_cmp(const void *a, const void *b)
+{
+    const bn__pkey *x = a, *y = b;
+    if (x->k != y->k)
+        return x->k < y->k ? -1 : 1;
+    return x->f < y->f ? -1 : x->f > y->f;
+}
+
+typedef struct bn__split {
+    const double *fc, *fa;   /* per face: centroid, area */
+    uint32_t *region;        /* per face */
+    bn__pkey *keys;
+    size_t next;             /* next region id */
+} bn__split;
+
+/* faces[0..m) into k regions by area-median splits along the longest axis of their centroids. */
+static void bn__split_faces(bn__split *S, uint32_t *faces, size_t m, size_t k)
+{
+    if (k <= 1 || m <= 1) {
+        for (size_t i = 0; i < m; i++)
+            S->region[faces[i]] = (uint32_t)S->next;
+        S->next++;
+        return;
+    }
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY}, total = 0, acc = 0;
+    int ax = 0;
+    for (size_t i = 0; i < m; i++) {
+        for (int c = 0; c < 3; c++) {
+            lo[c] = fmin(lo[c], S->fc[3 * faces[i] + c]);
+            hi[c] = fmax(hi[c], S->fc[3 * faces[i] + c]);
+        }
+        total += S->fa[faces[i]];
+    }
+    for (int c = 1; c < 3; c++)
+        if (hi[c] - lo[c] > hi[ax] - lo[ax])
+            ax = c;
+    for (size_t i = 0; i < m; i++) {
+        S->keys[i].k = S->fc[3 * faces[i] + ax];
+        S->keys[i].f = faces[i];
+    }
+    qsort(S->keys, m, sizeof *S->keys, bn__pkey_cmp);
+    for (size_t i = 0; i < m; i++)
+        faces[i] = S->keys[i].f;
+    size_t k1 = k / 2, cut = 1;
+    for (size_t i = 0; i + 1 < m; i++) {   /* the first cut with k1/k of the area before it */
+        acc += S->fa[faces[i]];
+        cut = i + 1;
+        if (acc >= total * (double)k1 / (double)k)
+            break;
+    }
+    bn__split_faces(S, faces, cut, k1);
+    bn__split_faces(S, faces + cut, m - cut, k - k1);
+}
+
+void bn_partition_free(bn_partition *p)
+{
+    if (!p)
+        return;
+    free(p->of_patch);
+    free(p->start);
+    free(p->patch);
+    free(p->cum);
+    free(p->area);
+    free(p->material);
+    free(p->centroid);
+    memset(p, 0, sizeof *p);
+}
+
+bn_status bn_partition_regions(const bn_scene *s, size_t nregions, bn_partition *out, bn_error *err)
+{
+    size_t np, nf, nm, nv, ni;
+    const bn_patch *pa = bn_scene_patches(s, &np);
+    const bn_face *f = bn_scene_faces(s, &nf);
+    const double *v = bn_scene_vertices(s, &nv);
+    const size_t *idx = bn_scene_face_indices(s, &ni);
+    bn_scene_materials(s, &nm);
+    bn__split S = {0};
+    double *fc = NULL, *marea = NULL, total = 0;
+    uint32_t *faces = NULL;
+    size_t *mcount = NULL;
+    bn_status st = BN_OK;
+
+    memset(out, 0, sizeof *out);
+    if (nregions < 1)
+        return bn_error_set(err, BN_EUSAGE, "partition: %zu regions (at least 1)", nregions);
+    if (np == 0 || nf == 0)
+        return bn_error_set(err, BN_EINPUT, "%s: no patches to partition", bn_scene_path(s));
+    fc = bn__malloc_array(3 * nf, sizeof(double));
+    S.region = bn__malloc_array(nf, sizeof(uint32_t));
+    S.keys = bn__malloc_array(nf, sizeof *S.keys);
+    faces = bn__malloc_array(nf, sizeof(uint32_t));
+    marea = bn__calloc(nm + 1, sizeof(double));
+    mcount = bn__calloc(nm + 1, sizeof(size_t));
+    double *fa = bn__malloc_array(nf, sizeof(double));
+    if (!fc || !S.region || !S.keys || !faces || !marea || !mcount || !fa)
+        goto oom;
+    for (size_t k = 0; k < nf; k++) {
+        double c[3] = {0, 0, 0};
+        for (unsigned j = 0; j < f[k].nverts; j++)
+            bn_v3_add(c, v + 3 * idx[f[k].first + j], c);
+        bn_v3_scale(c, 1.0 / f[k].nverts, fc + 3 * k);
+        fa[k] = f[k].area;
+        marea[f[k].material] += f[k].area;
+        total += f[k].area;
+    }
+    S.fc = fc;
+    S.fa = fa;
+    for (size_t m = 0; m < nm; m++) {   /* each material's faces, in file order, then split */
+        size_t cnt = 0, k;
+        if (!(marea[m] > 0))
+            continue;
+        for (size_t q = 0; q < nf; q++)
+            if (f[q].material == m)
+                faces[cnt++] = (uint32_t)q;
+        k = (size_t)llround((double)nregions * marea[m] / total);
+        bn__split_faces(&S, faces, cnt, k < 1 ? 1 : k);
+    }
+    out->n = S.next;
+    out->npatch = np;
+    out->of_patch = bn__malloc_array(np, sizeof(uint32_t));
+    out->start = bn__calloc(out->n + 1, sizeof(size_t));
+    out->patch = bn__malloc_array(np, sizeof(uint32_t));
+    out->cum = bn__malloc_array(np, sizeof(double));
+    out->area = bn__calloc(out->n, sizeof(double));
+    out->material = bn__calloc(out->n, sizeof(unsigned));
+    out->centroid = bn__calloc(3 * out->n, sizeof(double));
+    if (!out->of_patch || !out->start || !out->patch || !out->cum || !out->area || !out->material || !out->centroid)
+        goto oom;
+    for (size_t i = 0; i < np; i++) {
+        uint32_t g = S.region[pa[i].face];
+        out->of_patch[i] = g;
+        out->start[g + 1]++;
+        out->area[g] += pa[i].area;
+        out->material[g] = pa[i].material;
+        for (int c = 0; c < 3; c++)
+            out->centroid[3 * g + c] += pa[i].area * pa[i].centroid[c];
+    }
+    for (size_t g = 0; g < out->n; g++) {
+        out->start[g + 1] += out->start[g];
+        for (int c = 0; c < 3; c++)
+            out->centroid[3 * g + c] /= out->area[g] > 0 ? out->area[g] : 1;
+    }
+    {
+        size_t *fill = bn__malloc_array(out->n + 1, sizeof(size_t));
+        if (!fill)
+            goto oom;
+        memcpy(fill, out->start, out->n * sizeof(size_t));
+        for (size_t i = 0; i < np; i++) {
+            size_t at = fill[out->of_patch[i]]++;
+            out->patch[at] = (uint32_t)i;
+        }
+        free(fill);
+    }
+    for (size_t g = 0; g < out->n; g++) {
+        double acc = 0;
+        for (size_t k = out->start[g]; k < out->start[g + 1]; k++) {
+            acc += pa[out->patch[k]].area;
+            out->cum[k] = acc / out->area[g];
+        }
+        if (out->start[g + 1] > out->start[g])
+            out->cum[out->start[g + 1] - 1] = 1;
+    }
+    goto done;
+oom:
+    st = bn_error_set(err, BN_ENOMEM, "out of memory for a partition of %zu polygons", nf);
+    bn_partition_free(out);
+done:
+    free(fc);
+    free(fa);
+    free(S.region);
+    free(S.keys);
+    free(faces);
+    free(marea);
+    free(mcount);
+    return st;
+}
+
+void bn_partition_mean(const bn_partition *p, const bn_scene *s, const double *layers, int nlayers, double *out)
+{
+    size_t np;
+    const bn_patch *pa = bn_scene_patches(s, &np);
+    memset(out, 0, (size_t)nlayers * p->n * 3 * sizeof(double));
+    for (int l = 0; l < nlayers; l++)
+        for (size_t i = 0; i < p->npatch && i < np; i++)
+            for (int c = 0; c < 3; c++)
+                out[((size_t)l * p->n + p->of_patch[i]) * 3 + c] +=
+                    pa[i].area * layers[((size_t)l * p->npatch + i) * 3 + c];
+    for (int l = 0; l < nlayers; l++)
+        for (size_t g = 0; g < p->n; g++)
+            for (int c = 0; c < 3; c++)
+                out[((size_t)l * p->n + g) * 3 + c] /= p->area[g] > 0 ? p->area[g] : 1;
+}
