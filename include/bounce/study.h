@@ -4,7 +4,8 @@
  *
  * Errors are measured on common ground: per patch when the setting and the reference share the
  * mesh; otherwise per patch of the reference (each reference patch looks up the setting's patch in
- * the same face that contains its centroid), and per surface (material) as area-weighted means.
+ * the same face that contains its centroid; a finer setting gives each reference patch the area
+ * mean of its patches whose centroids fall in it), and per surface (material) as area-weighted means.
  * Radiance is W m^-2 sr^-1; norms and sums are in double. */
 #ifndef BOUNCE_STUDY_H
 #define BOUNCE_STUDY_H
@@ -77,6 +78,10 @@ typedef struct bn_study_opts {
     const size_t *against_spp;   /* patches, patch-size: path-tracer runs for the equal-error comparison */
     size_t nagainst;
     double target;               /* equal-error target: per-surface relative error (default 0.01) */
+    int    metric_patch;         /* 1: the equal-error target is on err_rms_rel (RMS relative error per
+                                    patch, on the reference's patches) instead of err_surface_max; the
+                                    tracer's runs are on the reference's mesh, and a tracer reference's
+                                    pilot aims at a per-patch standard error of target / 4 */
     bn_log log;                  /* progress notes (one per setting) */
     int threads;                 /* every phase's threads (0: the caller's); results do not depend on it */
 } bn_study_opts;
@@ -92,7 +97,8 @@ typedef struct bn_study_row {
     size_t k_entries;                /* stored entries of F (dense, sparse) or links (hierarchy); 0 n/a */
     double k_mb;                     /* K's memory, MiB (0 n/a) */
     size_t iterations;               /* sweeps, bounces or K applications (0 for direct) */
-    int    ground;                   /* 0: same mesh as the reference, 1: reference patches by centroid */
+    int    ground;                   /* 0: same mesh as the reference, 1: reference patches by centroid,
+                                        2: area means of a finer setting's patches over each reference patch */
     double err_inf;                  /* ||L - L_ref||_inf over patches and channels, W m^-2 sr^-1 */
     double err_inf_rel;              /* err_inf / ||L_ref||_inf */
     double err_max_rel, err_rms_rel; /* per patch and channel e = |L - L_ref| / max(|L_ref|, mean L_ref):
@@ -145,8 +151,10 @@ typedef struct bn_study_result {
     size_t ncurves;
     bn_study_curve *curves;          /* owned */
     /* The equal-error comparison (patches/patch-size with against_spp): seconds to reach `target`
-     * in err_surface_max, by log-log interpolation; NAN when a method never reached it. */
+     * in err_surface_max (err_rms_rel with metric_patch), by log-log interpolation; NAN when a method
+     * never reached it. */
     double target, t_radiosity, t_trace, ratio;   /* ratio = t_trace / t_radiosity */
+    int    metric_patch;                          /* the target is on err_rms_rel (opts) */
     double best_radiosity, best_trace;            /* smallest error each reached */
     /* The same at the finest error the reference allows: 3x its own estimated error. */
     double fine_target, t_radiosity_fine, t_trace_fine, ratio_fine;

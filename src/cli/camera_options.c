@@ -84,12 +84,9 @@ void bn_cli_pipeline_opts(const bn_cli_scene *so, const bn_cli_ff *ff, const bn_
             static const char *names[] = {"auto", "dense", "sparse", "hierarchical"};
             out->transport = ff->transport == 0 && ff->storage ? ff->storage : names[ff->transport];
         }
-        if (ff->eps >= 0)
-            out->hier.eps = ff->eps;
-        out->hier.clusters = !ff->no_clusters;
-        if (ff->link_samples > 0)
-            out->hier.samples = ff->link_samples;
+        bn_cli_hier_opts(ff, &out->hier);
     }
+    out->method_auto = 1;   /* no solver options given: the default method, chosen by K's capabilities */
     if (sol) {
         out->method_auto = sol->method == 0;
         if (sol->method > 0)

@@ -100,6 +100,7 @@ typedef struct bn_cli_ff {
     double eps;               /* hierarchy: link tolerance (< 0: the default) */
     int    no_clusters;       /* hierarchy: start from every pair of polygons */
     int    link_samples;      /* hierarchy: point pairs per link above the patches (0: default) */
+    double min_area;          /* hierarchy: smallest element split (0: default; < 0: none) */
 } bn_cli_ff;
 void bn_cli_add_ff(bn_optset *s, bn_cli_ff *o);
 /* Fills library options from the CLI groups. */
@@ -123,6 +124,8 @@ void bn_cli_camera_describe(const bn_camera *cam, char *buf, size_t n);
  * running the whole pipeline with the bounce terms kept. */
 #include "bounce/solve.h"
 #include "bounce/pipeline.h"
+/* The hierarchy's options given (eps, clusters, link samples, min area) onto h. */
+void bn_cli_hier_opts(const bn_cli_ff *ff, bn_hierarchy_opts *h);
 typedef struct bn_cli_solution {
     int    method;     /* index into "auto|jacobi|gauss-seidel|neumann|direct" (default auto) */
     double tol;        /* 0 = default 1e-6 */

@@ -44,9 +44,11 @@ static void bn__provenance_run(char *buf, size_t n, const bn_cli_common *c, cons
                  "# hierarchy_eps=%.9g\n# hierarchy_eps_abs=%.9g\n# hierarchy_clusters=%d\n# hierarchy_nodes=%zu\n"
                  "# hierarchy_links=%zu\n# hierarchy_leaf_links=%zu\n# hierarchy_cluster_links=%zu\n"
                  "# hierarchy_passes=%zu\n# hierarchy_settled=%d\n# hierarchy_rays=%zu\n# hierarchy_bytes=%zu\n"
-                 "# hierarchy_seconds=%.3f\n",
+                 "# hierarchy_seconds=%.3f\n# hierarchy_polygons=%zu\n# hierarchy_planes=%zu\n"
+                 "# hierarchy_min_area=%.9g\n",
                  po->hier.eps, h->eps_abs, po->hier.clusters, h->nodes, h->links, h->leaf_links, h->cluster_links,
-                 h->passes, h->settled, h->rays, h->bytes, h->seconds_tree + h->seconds_refine);
+                 h->passes, h->settled, h->rays, h->bytes, h->seconds_tree + h->seconds_refine, h->polygons,
+                 h->planes, h->min_area);
     }
 }
 

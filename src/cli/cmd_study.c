@@ -91,6 +91,7 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
     size_t max_iter = 0, ref_patches = 0, spp = 0;
     int method = 3, ref_samples = 0, rr_depth = -1, refkind = 0;
     size_t ref_spp = 0;
+    int metric = 0;
     double target = 0.01, values[BN__MAXV], tolv[BN__MAXV], againstv[BN__MAXV];
     size_t against_spp[BN__MAXV];
     bn_error err;
@@ -153,6 +154,10 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
                                  "patches/patch-size: also run the path tracer at these spp (equal-error comparison)"});
     bn_optset_add(&set, (bn_opt){"target", 0, BN_OPT_DOUBLE, &target, NULL, 1e-9, 1, "E",
                                  "equal-error target, per-surface relative error (default 0.01)"});
+    bn_optset_add(&set, (bn_opt){"metric", 0, BN_OPT_CHOICE, &metric, "surface|patch", 0, 0, "surface|patch",
+                                 "what --target bounds: the largest per-surface error (default), or the RMS error "
+                                 "per patch on the reference's patches (the tracer then runs on the reference's mesh: "
+                                 "give --ref-patches)"});
     bn_cli_add_common(&set, c);
     bn_error_clear(&err);
     {
@@ -228,11 +233,7 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
     {
         static const char *tn[] = {NULL, "dense", "sparse", "hierarchical"};
         o.transport = ffo.transport == 0 ? ffo.storage : tn[ffo.transport];
-        if (ffo.eps >= 0)
-            o.hier.eps = ffo.eps;
-        o.hier.clusters = !ffo.no_clusters;
-        if (ffo.link_samples > 0)
-            o.hier.samples = ffo.link_samples;
+        bn_cli_hier_opts(&ffo, &o.hier);
     }
     o.solve.method = (bn_solve_method)method;
     if (max_iter)
@@ -253,6 +254,7 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
     o.against_spp = na ? against_spp : NULL;
     o.nagainst = (size_t)na;
     o.target = target;
+    o.metric_patch = metric == 1;
     o.log.fn = bn__study_log;
     o.log.user = c;
     o.log.quiet = c->quiet;

@@ -3,6 +3,17 @@
 
 #include <string.h>
 
+void bn_cli_hier_opts(const bn_cli_ff *ff, bn_hierarchy_opts *h)
+{
+    if (ff->eps >= 0)
+        h->eps = ff->eps;
+    h->clusters = !ff->no_clusters;
+    if (ff->link_samples > 0)
+        h->samples = ff->link_samples;
+    if (ff->min_area != 0)
+        h->min_area = ff->min_area;
+}
+
 void bn_cli_add_ff(bn_optset *s, bn_cli_ff *o)
 {
     o->eps = -1;
@@ -19,6 +30,9 @@ void bn_cli_add_ff(bn_optset *s, bn_cli_ff *o)
     bn_optset_add(s, (bn_opt){"link-samples", 0, BN_OPT_INT, &o->link_samples, NULL, 1, 1 << 16, "N",
                               "hierarchy: point pairs and rays per link above the patches (default 8; x4 when "
                               "partly visible)"});
+    bn_optset_add(s, (bn_opt){"min-area", 0, BN_OPT_DOUBLE, &o->min_area, NULL, -1, 1e300, "A",
+                              "hierarchy: planar elements smaller than A (scene units^2) are not split (default: "
+                              "2^-20 of the scene's surface area; a negative value: down to the patches)"});
     bn_optset_add(s, (bn_opt){"ff", 0, BN_OPT_CHOICE, &o->method, "analytic|montecarlo|hemisphere", 0, 0,
                               "METHOD", "form factors: analytic (default), montecarlo or hemisphere"});
     bn_optset_add(s, (bn_opt){"samples", 0, BN_OPT_INT, &o->samples, NULL, 1, 1 << 24, "N",

@@ -30,6 +30,8 @@ static bn_status bn__level(const char *path, const bn_crosscheck_opts *o, const 
     double t0 = bn__now();
     bn_status st;
     po.mesh = *m;
+    if (m != &o->pipeline.mesh)
+        po.mesh_auto = 0;   /* the second level: the patch size asked, not the hierarchy's default mesh */
     po.keep_rt = 1;
     po.solve.tol = o->solve_tol;
     po.solve.bounces = o->bounces;

@@ -262,7 +262,9 @@ void bn_pipeline_describe_solve(const bn_pipeline_opts *o, const bn_pipeline *p,
              p->res.residual_max, p->hierarchical ? "; K: hierarchy, " : "", p->hierarchical ? "" : "");
     if (p->hierarchical) {
         size_t len = strlen(buf);
-        snprintf(buf + len, size > len ? size - len : 0, "eps=%g (%.3g absolute), %zu links, %zu nodes",
-                 o->hier.eps, p->hier.eps_abs, p->hier.links, p->hier.nodes);
+        snprintf(buf + len, size > len ? size - len : 0,
+                 "eps=%g (%.3g absolute), min area %.3g, %zu links, %zu nodes, %zu planes of %zu polygons",
+                 o->hier.eps, p->hier.eps_abs, p->hier.min_area, p->hier.links, p->hier.nodes, p->hier.planes,
+                 p->hier.polygons);
     }
 }

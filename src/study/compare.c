@@ -1,4 +1,5 @@
-/* Errors on common ground: per patch (same mesh, or the reference's patches by centroid lookup),
+/* Errors on common ground: per patch (same mesh; the reference's patches by centroid lookup in a
+ * coarser setting; area means of a finer setting's patches over each reference patch),
  * per surface (area-weighted means per material) and in the total reflected power. */
 #include "study/study_internal.h"
 #include "base/internal.h"
@@ -225,9 +226,9 @@ bn_status bn__study_compare(const bn__study_ref *ref, const bn_scene *s, const d
     size_t ns, nr = ref->n;
     const bn_patch *pr = bn_scene_patches(ref->scene, &nr);
     size_t *map = NULL;
-    double *E = NULL, *means = NULL, power[3], sum_a = 0, sum_e1 = 0, sum_e2 = 0;
+    double *E = NULL, *means = NULL, *avg = NULL, power[3], sum_a = 0, sum_e1 = 0, sum_e2 = 0;
     int same = bn__same_mesh(ref->scene, s);
-    bn_scene_patches(s, &ns);
+    const bn_patch *ps = bn_scene_patches(s, &ns);
     row->ground = same ? 0 : 1;
     E = bn__malloc_array(3 * ns + 1, sizeof(double));
     means = bn__malloc_array(3 * ref->nsurf + 1, sizeof(double));
@@ -248,6 +249,37 @@ bn_status bn__study_compare(const bn__study_ref *ref, const bn_scene *s, const d
             return st;
         }
     }
+    if (!same && ns > nr) {
+        /* A finer setting is read as what it says about each reference patch: the area mean of its
+         * patches whose centroids fall in it (a point value at the reference's centroid would add
+         * the variation across the coarse patch as error). Reference patches no centroid falls in
+         * keep the centroid lookup. */
+        size_t *back = bn__malloc_array(ns + 1, sizeof(size_t));
+        double *acc = bn__calloc(4 * nr + 1, sizeof(double));
+        bn_status st = back && acc ? bn__lookup(s, ref->scene, back, err)
+                                   : bn_error_set(err, BN_ENOMEM, "study: out of memory comparing %zu patches", ns);
+        if (st != BN_OK) {
+            free(back);
+            free(acc);
+            free(E);
+            free(means);
+            free(map);
+            return st;
+        }
+        for (size_t j = 0; j < ns; j++) {
+            double *a = acc + 4 * back[j];
+            a[3] += ps[j].area;
+            for (int c = 0; c < 3; c++)
+                a[c] += ps[j].area * L[3 * j + (size_t)c];
+        }
+        avg = acc;
+        for (size_t i = 0; i < nr; i++)
+            for (int c = 0; c < 3; c++)
+                avg[4 * i + (size_t)c] = acc[4 * i + 3] > 0 ? acc[4 * i + (size_t)c] / acc[4 * i + 3]
+                                                            : L[3 * map[i] + (size_t)c];
+        free(back);
+        row->ground = 2;
+    }
     /* Per patch and channel the error relative to s_c = max(|L_ref|, the scene's area-weighted mean
      * radiance in that channel): a scale that cannot vanish, so patches that see no light (under a
      * block, L_ref ~ 0) count at the scene's typical brightness instead of blowing up. Then the
@@ -256,7 +288,8 @@ bn_status bn__study_compare(const bn__study_ref *ref, const bn_scene *s, const d
     for (size_t i = 0; i < nr; i++) {
         size_t j = same ? i : map[i];
         for (int c = 0; c < 3; c++) {
-            double lr = ref->L[3 * i + (size_t)c], d = fabs(L[3 * j + (size_t)c] - lr);
+            double v = avg ? avg[4 * i + (size_t)c] : L[3 * j + (size_t)c];
+            double lr = ref->L[3 * i + (size_t)c], d = fabs(v - lr);
             double rel = d / fmax(fabs(lr), ref->floor[c]);
             row->err_inf = fmax(row->err_inf, d);
             row->err_max_rel = fmax(row->err_max_rel, rel);
@@ -305,5 +338,6 @@ bn_status bn__study_compare(const bn__study_ref *ref, const bn_scene *s, const d
     free(E);
     free(means);
     free(map);
+    free(avg);
     return BN_OK;
 }

@@ -51,14 +51,15 @@ bn_status bn_study_write_csv(const bn_study_result *r, const char *path, const c
     if (r->param == BN_STUDY_BOUNCES || r->param == BN_STUDY_MAX_ITER || r->param == BN_STUDY_TOL)
         fprintf(fp, "# k_norm_inf=%.9g\n# spectral_radius=%.9g\n", r->k_norm, r->spectral_radius);
     if (!isnan(r->t_radiosity) || !isnan(r->t_trace) || !isnan(r->best_trace))
-        fprintf(fp, "# target=%.6g\n# seconds_radiosity=%.6g\n# seconds_trace=%.6g\n# ratio_trace_over_radiosity=%.6g\n",
-                r->target, r->t_radiosity, r->t_trace, r->ratio);
+        fprintf(fp, "# target=%.6g\n# target_metric=%s\n# seconds_radiosity=%.6g\n# seconds_trace=%.6g\n"
+                    "# ratio_trace_over_radiosity=%.6g\n",
+                r->target, r->metric_patch ? "err_rms_rel" : "err_surface_max", r->t_radiosity, r->t_trace, r->ratio);
     if (!isnan(r->fine_target))
         fprintf(fp, "# fine_target=%.6g\n# seconds_radiosity_fine=%.6g\n# seconds_trace_fine=%.6g\n"
                     "# ratio_trace_over_radiosity_fine=%.6g\n",
                 r->fine_target, r->t_radiosity_fine, r->t_trace_fine, r->ratio_fine);
     fprintf(fp, "# units: err_inf W m^-2 sr^-1; err_* relative; bound and estimate W m^-2 sr^-1; t_* seconds; "
-                "peak_mb MiB; ground 0 same mesh, 1 reference patches by centroid\n");
+                "peak_mb MiB; ground 0 same mesh, 1 reference patches by centroid, 2 area means of the setting's patches over each reference patch\n");
     fputs(BN_STUDY_CSV_COLUMNS, fp);
     for (size_t s = 0; s < r->nsurfaces; s++) {
         fputs(",err_surf_", fp);
@@ -141,8 +142,9 @@ void bn_study_print(const bn_study_result *r, FILE *fp)
         fprintf(fp, "             from the first reflection, ||K||^n/(1-||K||) ||KE||, it is %.3g to %.3g times; the "
                     "looseness grows like (||K||_inf / rho(K))^n = (%.4g / %.4g)^n\n", lo2, hi2, r->k_norm, r->spectral_radius);
     if (!isnan(r->best_trace) || !isnan(r->best_radiosity)) {
-        fprintf(fp, "\nequal error  target %.3g per-surface relative error (reference's own ~%.3g)\n", r->target,
-                r->ref_error);
+        fprintf(fp, "\nequal error  target %.3g %s (reference's own ~%.3g)\n", r->target,
+                r->metric_patch ? "RMS relative error per patch, on the reference's patches" : "per-surface relative error",
+                r->metric_patch ? r->ref_error_patch : r->ref_error);
         if (isnan(r->t_radiosity))
             fprintf(fp, "  radiosity  not reached (best %.3g)\n", r->best_radiosity);
         else

@@ -781,13 +781,19 @@ done:
 
 /* log-log interpolation of the time at which err falls to target along rows of one method
  * (in the order of increasing time); NAN if never. */
+/* The error the equal-error comparison reads. */
+static double bn__row_err(const bn_study_result *R, const bn_study_row *r)
+{
+    return R->metric_patch ? r->err_rms_rel : r->err_surface_max;
+}
+
 static double bn__time_to(const bn_study_result *R, const char *method, double target, double *best)
 {
     double tprev = NAN, eprev = NAN, found = NAN;
     size_t idx[256], k = 0;
     *best = INFINITY;
     for (size_t i = 0; i < R->nrows && k < 256; i++)
-        if (strcmp(R->rows[i].method, method) == 0 && isfinite(R->rows[i].err_surface_max))
+        if (strcmp(R->rows[i].method, method) == 0 && isfinite(bn__row_err(R, &R->rows[i])))
             idx[k++] = i;
     for (size_t a = 1; a < k; a++)   /* insertion sort by time */
         for (size_t b = a; b > 0 && R->rows[idx[b]].t_total < R->rows[idx[b - 1]].t_total; b--) {
@@ -797,7 +803,7 @@ static double bn__time_to(const bn_study_result *R, const char *method, double t
         }
     for (size_t a = 0; a < k; a++) {
         const bn_study_row *r = &R->rows[idx[a]];
-        double e = r->err_surface_max, t = r->t_total;
+        double e = bn__row_err(R, r), t = r->t_total;
         *best = fmin(*best, e);
         if (isnan(found) && e <= target) {
             if (a == 0 || !(eprev > target) || !(e > 0) || !(tprev > 0))
@@ -904,10 +910,17 @@ static bn_status bn__trace_reference(bn__study *S, const bn_mesh_opts *m, bn__so
             bn__sol_free(out);
             return st;
         }
-        spp = (size_t)ceil(64.0 * (se_s / (target / 8)) * (se_s / (target / 8)));
-        spp = spp < 64 ? 64 : spp > 65536 ? 65536 : spp;
-        bn__note(S, "reference: a 64-spp pilot gives a per-surface standard error of %.3g: %zu spp for %.3g", se_s,
-                 spp, target / 8);
+        if (o->metric_patch) {
+            spp = (size_t)ceil(64.0 * (se_p / (target / 4)) * (se_p / (target / 4)));
+            spp = spp < 64 ? 64 : spp > 65536 ? 65536 : spp;
+            bn__note(S, "reference: a 64-spp pilot gives a per-patch standard error of %.3g (largest): %zu spp for %.3g",
+                     se_p, spp, target / 4);
+        } else {
+            spp = (size_t)ceil(64.0 * (se_s / (target / 8)) * (se_s / (target / 8)));
+            spp = spp < 64 ? 64 : spp > 65536 ? 65536 : spp;
+            bn__note(S, "reference: a 64-spp pilot gives a per-surface standard error of %.3g: %zu spp for %.3g", se_s,
+                     spp, target / 8);
+        }
     }
     st = bn__trace_solution(out->scene, &o->trace, spp, seed, &out->L, &se_s, &se_p, &t, err);
     if (st != BN_OK) {
@@ -1269,16 +1282,18 @@ static void bn__warn_reference(const bn__study *S)
                 R->ref_error, best);
 }
 
-/* The equal-error comparison: the tracer on the first setting's mesh, and the times at which each
- * method reaches the target error. */
-static bn_status bn__equal_error(bn__study *S, const bn__study_ref *rr, bn_error *err)
+/* The equal-error comparison: the tracer on the first setting's mesh (per patch: on the reference's,
+ * mref), and the times at which each method reaches the target error. */
+static bn_status bn__equal_error(bn__study *S, const bn__study_ref *rr, const bn_mesh_opts *mref, bn_error *err)
 {
     const bn_study_opts *o = S->o;
     bn_study_result *R = S->res;
     bn_mesh_opts m = o->mesh;
     bn_status st = BN_OK;
     double b;
-    if (o->param == BN_STUDY_PATCHES) {
+    if (o->metric_patch) {
+        m = *mref;
+    } else if (o->param == BN_STUDY_PATCHES) {
         m.patch_size = 0;
         m.target_patches = (size_t)o->values[0];
     } else {
@@ -1294,7 +1309,7 @@ static bn_status bn__equal_error(bn__study *S, const bn__study_ref *rr, bn_error
     R->t_radiosity = bn__time_to(R, "radiosity", R->target, &R->best_radiosity);
     R->t_trace = bn__time_to(R, "trace", R->target, &R->best_trace);
     R->ratio = R->t_trace / R->t_radiosity;
-    R->fine_target = 3 * R->ref_error;
+    R->fine_target = 3 * (o->metric_patch ? R->ref_error_patch : R->ref_error);
     if (R->fine_target > 0 && R->fine_target < R->target) {
         R->t_radiosity_fine = bn__time_to(R, "radiosity", R->fine_target, &b);
         R->t_trace_fine = bn__time_to(R, "trace", R->fine_target, &b);
@@ -1339,7 +1354,7 @@ static bn_status bn__study_settings(bn__study *S, bn_error *err)
     if (st == BN_OK)
         bn__warn_reference(S);
     if (st == BN_OK && P.mesh_study && o->nagainst > 0)
-        st = bn__equal_error(S, &rr, err);
+        st = bn__equal_error(S, &rr, &P.mref, err);
     bn__study_ref_free(&rr);
     bn__sol_free(&ref);
     return st;
@@ -1446,6 +1461,7 @@ static bn_status bn__study_run_body(const char *path, const bn_study_opts *o_in,
     S.load.log.fn = bn__drop_log;
     res->param = o->param;
     res->target = o->target > 0 ? o->target : 0.01;
+    res->metric_patch = o->metric_patch;
     res->t_radiosity = res->t_trace = res->ratio = res->best_radiosity = res->best_trace = NAN;
     res->fine_target = res->t_radiosity_fine = res->t_trace_fine = res->ratio_fine = NAN;
     res->ref_error = res->ref_error_patch = res->ref_order = res->ref_error_raw = NAN;

@@ -31,6 +31,8 @@ typedef struct bn__split {
 /* faces[0..m) into k regions by area-median splits along the longest axis of their centroids. */
 static void bn__split_faces(bn__split *S, uint32_t *faces, size_t m, size_t k)
 {
+    if (k > m)
+        k = m;
     if (k <= 1 || m <= 1) {
         for (size_t i = 0; i < m; i++)
             S->region[faces[i]] = (uint32_t)S->next;
@@ -63,6 +65,11 @@ static void bn__split_faces(bn__split *S, uint32_t *faces, size_t m, size_t k)
         if (acc >= total * (double)k1 / (double)k)
             break;
     }
+    /* at most one region per polygon on each side; what one side cannot use goes to the other */
+    if (k1 > cut)
+        k1 = cut;
+    if (k - k1 > m - cut)
+        k1 = k - (m - cut);
     bn__split_faces(S, faces, cut, k1);
     bn__split_faces(S, faces + cut, m - cut, k - k1);
 }

@@ -193,11 +193,12 @@ static void bn__node_point(const bn__ref *R, uint32_t v, double u1, double u2, d
     *n = p->normal;
 }
 
-/* Area-averaged F from r to s (per unit cosine when r is a cluster) by S stratified point pairs with one shadow ray each (Wallace's
- * disk regulariser keeps every term bounded); S x 4 when the first S find partial visibility. */
+/* Area-averaged F from r to s (per unit cosine when r is a cluster) by S stratified point pairs with
+ * one shadow ray each; S x 4 when the first S find partial visibility, and for nodes whose bounding
+ * spheres overlap (then Wallace's disk regulariser keeps every term bounded). */
 static double bn__F_sampled(const bn__ref *R, uint32_t r, uint32_t s, bn__worker *w, int *partial)
 {
-    int S = (R->o->samples > 0 ? R->o->samples : 8) * (bn__separated(R->t, r, s) ? 1 : 4);
+    int sep = bn__separated(R->t, r, s), S = (R->o->samples > 0 ? R->o->samples : 8) * (sep ? 1 : 4);
     for (int round = 0; round < 2; round++) {
         bn__rng g = bn__rng_make(R->o->ff.seed ^ 0x6869657261726368ull, ((uint64_t)r << 32) | s, (uint64_t)round);
         double a = R->t->area[s] / S, sum = 0, inv = 1.0 / S, cos_sum = 0;
@@ -229,7 +230,9 @@ static double bn__F_sampled(const bn__ref *R, uint32_t r, uint32_t s, bn__worker
                 blocked++;
                 continue;
             }
-            sum += cr * cs * a / (BN_PI * r2 + a);
+            /* separated nodes: the kernel itself (bounded by their distance); overlapping ones (below
+             * min_area): Wallace's disk, which bounds each term but biases F low by ~a / (pi r^2) */
+            sum += cr * cs * a / (BN_PI * r2 + (sep ? 0 : a));
         }
         *partial = blocked > 0 && blocked < seen;
         if (round == 1 || !*partial)
