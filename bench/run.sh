@@ -314,6 +314,51 @@ else
     echo "_hierarchical equal-error study failed: $(tail -1 "$work/heq.err")_" >>"$report"
 fi
 
+# ---- equal error per patch: the hierarchy, dense radiosity and the tracer on one reporting mesh ----
+if [ "$quick" = 1 ]; then
+    pref=1200; pspp="16,64,256"; hpl="1200,4800"; dpl="300,1200"; prefspp=4096; ptarget=0.05
+else
+    pref=4800; pspp="16,64,256,1024,4096"; hpl="4800,19200,76800"; dpl="1200,2400,4800"; prefspp=16384; ptarget=0.03
+fi
+note "equal error per patch on $pref patches: hierarchy, dense, tracer"
+pe_ok=1
+for kind in hier dense; do
+    if [ "$kind" = hier ]; then tr="--transport hierarchical"; pl=$hpl; else tr="--transport dense"; pl=$dpl; fi
+    # shellcheck disable=SC2086
+    timeout $((timeout_s * 4)) "$bounce" study "$scene" --unit mm --vary patches="$pl" $tr --against-spp "$pspp" \
+        --metric patch --ref-patches "$pref" --ref-spp "$prefspp" --target "$ptarget" -o "$work/pe-$kind.csv" -q \
+        >/dev/null 2>"$work/pe-$kind.err" || { pe_ok=0; echo "_per-patch study ($kind) failed: $(tail -1 "$work/pe-$kind.err")_" >>"$report"; }
+done
+if [ "$pe_ok" = 1 ]; then
+    th=$(metaget "$work/pe-hier.csv" seconds_radiosity); td=$(metaget "$work/pe-dense.csv" seconds_radiosity)
+    tt=$(metaget "$work/pe-hier.csv" seconds_trace)
+    {
+        echo "Time to equal per-patch error: RMS relative error $ptarget per patch on the Cornell box's $pref-patch mesh"
+        echo "(\`bounce study --metric patch --ref-patches $pref --ref-spp $prefspp --target $ptarget --against-spp $pspp\`;"
+        echo "hierarchy \`--vary patches=$hpl --transport hierarchical\`, dense \`--vary patches=$dpl --transport dense\`; each"
+        echo "radiosity setting read on the reference's patches as area means; the tracer runs on the reference's mesh)."
+        echo "Reference: $(metaget "$work/pe-hier.csv" reference); its error: $(metaget "$work/pe-hier.csv" reference_error_how)."
+        echo
+        echo "| method | time to $ptarget RMS per patch | ratio to the hierarchy |"
+        echo "|---|---|---|"
+        awk -v h="$th" -v d="$td" -v t="$tt" 'BEGIN {
+            printf "| hierarchy (whole pipeline) | %s s | 1 |\n", h
+            printf "| dense radiosity (whole pipeline) | %s s | %s |\n", d, (h + 0 > 0 && d == d + 0) ? sprintf("%.3g", d / h) : "n/a"
+            printf "| path tracer | %s s | %s |\n", t, (h + 0 > 0 && t == t + 0) ? sprintf("%.3g", t / h) : "n/a" }'
+        echo
+        echo "Per setting (err_rms = RMS relative error per patch on the reference's patches):"
+        echo
+        echo "| study | method | setting | patches | err_rms | t_total s |"
+        echo "|---|---|---|---|---|---|"
+        for kind in hier dense; do
+            awk -F, -v k="$kind" '/^#/ { next } !h { for (i = 1; i <= NF; i++) c[$i] = i; h = 1; next }
+                { printf "| %s | %s | %s | %s | %.4g | %.4g |\n", k, $(c["method"]), $(c["value"]), $(c["patches"]),
+                  $(c["err_rms_rel"]), $(c["t_total"]) }' "$work/pe-$kind.csv"
+        done
+        echo
+    } >>"$report"
+fi
+
 end=$(date +%s)
 echo >>"$report"
 echo "_Total: $((end - start)) s, the build excluded (bench/run.sh$( [ "$quick" = 1 ] && echo " --quick"))._" >>"$report"

@@ -97,13 +97,22 @@ int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c)
     }
     printf("# command=%s\n# bounce=%s\n# scene=%s unit=%s\n", c->cmdline, bn_version(), pos[0],
            bn_unit_name(bn_scene_unit(run.fine.scene)));
-    printf("# radiosity: %zu patches (patch size %.6g), form factors %s, %s tol %g (%s, %zu iterations), %.2f s\n",
-           run.fine.n, bn_scene_patch_size(run.fine.scene), ffdesc, bn_solve_method_name(xo.pipeline.solve.method),
-           xo.solve_tol, bn_stop_reason_name(run.fine.res.reason), run.fine.res.iterations, run.seconds_fine);
+    if (run.fine.hierarchical)
+        printf("# radiosity: %zu patches (patch size %.6g), K hierarchy eps %g (%zu links, %zu planes of %zu polygons, "
+               "min area %.3g), %s tol %g (%s, %zu iterations), %.2f s\n",
+               run.fine.n, bn_scene_patch_size(run.fine.scene), xo.pipeline.hier.eps, run.fine.hier.links,
+               run.fine.hier.planes, run.fine.hier.polygons, run.fine.hier.min_area,
+               bn_solve_method_name(run.fine.method_used), xo.solve_tol, bn_stop_reason_name(run.fine.res.reason),
+               run.fine.res.iterations, run.seconds_fine);
+    else
+        printf("# radiosity: %zu patches (patch size %.6g), form factors %s, %s tol %g (%s, %zu iterations), %.2f s\n",
+               run.fine.n, bn_scene_patch_size(run.fine.scene), ffdesc, bn_solve_method_name(run.fine.method_used),
+               xo.solve_tol, bn_stop_reason_name(run.fine.res.reason), run.fine.res.iterations, run.seconds_fine);
     if (run.other.scene)
-        printf("# discretisation: second level %zu patches (patch size %.6g, %s by r = %g), %.2f s; tolerance = "
+        printf("# discretisation: second level %zu patches (patch size %.6g, %s by r = %g%s), %.2f s; tolerance = "
                "Fs %g x %s|difference| / (r - 1) = %g x |difference| (two-level GCI, order 1)\n",
                run.other.n, bn_scene_patch_size(run.other.scene), disc == 0 ? "coarser" : "finer", ratio,
+               run.other.hierarchical ? (disc == 0 ? ", hierarchy eps x r^2" : ", hierarchy eps / r^2") : "",
                run.seconds_other, tol_scale, disc == 0 ? "" : "r ", run.in.tol_scale);
     else
         printf("# discretisation: no allowance (--disc none)\n");

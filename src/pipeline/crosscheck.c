@@ -127,6 +127,13 @@ bn_status bn_crosscheck_run_scene(const char *path, const bn_crosscheck_opts *o,
     if (st == BN_OK && o->disc != BN_DISC_NONE) {
         bn_crosscheck_opts o2 = *o;
         o2.pipeline.ff.cache_path = NULL;   /* the cache holds the mesh asked for */
+        if (run->fine.hierarchical && o->pipeline.hier.eps > 0) {
+            /* the hierarchy's other discretisation parameter, coarsened with the mesh: eps x r^2 (its
+             * error falls about as sqrt(eps) on the Cornell box, so as h, and one order fits both) */
+            o2.pipeline.hier.eps = o->pipeline.hier.eps * o->ratio * o->ratio;
+            if (o->disc == BN_DISC_FINE)
+                o2.pipeline.hier.eps = o->pipeline.hier.eps / (o->ratio * o->ratio);
+        }
         st = bn__second_mesh(o, &run->fine, &m2, err);
         if (st == BN_OK)
             st = bn__level(path, &o2, &m2, &run->other, &run->layers_other, &run->seconds_other, err);

@@ -389,6 +389,20 @@ void bn_crosscheck_print(const bn_crosscheck_input *in, const bn_crosscheck_resu
                     bn__ch[e->channel], e->radiosity, e->trace, e->se, e->tol, e->z, e->z_excess);
         }
     }
+    if (in->part && r->nworst > 0) {   /* where the regions named above are */
+        fprintf(fp, "\nregions above: %7s %-12s %12s %12s %12s %12s\n", "region", "material", "area", "cx", "cy", "cz");
+        for (int k = 0; k < r->nworst; k++) {
+            size_t g = r->worst[k].patch;
+            int seen = 0;
+            for (int q = 0; q < k; q++)
+                seen |= r->worst[q].patch == g;
+            if (seen)
+                continue;
+            fprintf(fp, "               %7zu %-12s %12.6g %12.6g %12.6g %12.6g\n", g, mats[in->part->material[g]].name,
+                    in->part->area[g], in->part->centroid[3 * g], in->part->centroid[3 * g + 1],
+                    in->part->centroid[3 * g + 2]);
+        }
+    }
     fprintf(fp, "\npower per layer, pi sum_i A_i L_i (W; R G B), radiosity | trace +- se | (rad - trace)/se | tol:\n");
     for (int l = 0; l < r->nlayers; l++) {
         const double *a = r->power_rad + 3 * l, *b = r->power_pt + 3 * l, *s = r->power_se + 3 * l,
