@@ -72,9 +72,10 @@ bn_status bn_trace_patches_write_csv(const char *path, const bn_scene *s, const 
 void bn_trace_patches_power(const bn_scene *s, const bn_trace_patches *r, int layer, double watts[3], double se[3]);
 
 /* A reporting partition: the patches grouped into regions, each a union of whole input polygons of
- * one material (so every meshing of one scene has the same regions). Made by splitting each
- * material's polygons at the area median along the longest axis of their centroids until the
- * material has its share (by area) of the regions asked; at least one region per material. */
+ * one material (so every meshing of one scene has the same regions). Each material gets its share
+ * (by area) of the regions asked, at least one: its polygons larger than an even share become
+ * regions of their own, and the rest are split at the area median along the longest axis of their
+ * centroids. */
 typedef struct bn_partition {
     size_t n;             /* regions */
     size_t npatch;

@@ -1,5 +1,6 @@
 /* A reporting partition (include/bounce/trace.h): regions of whole input polygons, one material
- * each, area-balanced by median splits, for a cross-check coarse enough for the tracer. */
+ * each, area-balanced by median splits (polygons above an even share taken first, each a region of
+ * its own), for a cross-check coarse enough for the tracer. */
 #include "bounce/trace.h"
 #include "base/internal.h"
 #include "base/vec.h"
@@ -135,7 +136,34 @@ bn_status bn_partition_regions(const bn_scene *s, size_t nregions, bn_partition 
             if (f[q].material == m)
                 faces[cnt++] = (uint32_t)q;
         k = (size_t)llround((double)nregions * marea[m] / total);
-        bn__split_faces(&S, faces, cnt, k < 1 ? 1 : k);
+        k = k < 1 ? 1 : k;
+        {   /* polygons larger than an even share are regions of their own (a wall), so that splits
+             * by area among the rest do not leave slivers beside them */
+            double left = marea[m];
+            size_t big = 0;
+            for (size_t q = 0; q < cnt; q++)
+                S.keys[q] = (bn__pkey){-fa[faces[q]], faces[q]};
+            qsort(S.keys, cnt, sizeof *S.keys, bn__pkey_cmp);
+            while (big < cnt && k > 1 && -S.keys[big].k >= left / (double)k) {
+                S.region[S.keys[big].f] = (uint32_t)S.next++;
+                left += S.keys[big].k;
+                big++;
+                k--;
+            }
+            if (big) {   /* the rest, in file order */
+                size_t w = 0;
+                for (size_t q = 0; q < cnt; q++) {
+                    int own = 0;
+                    for (size_t b = 0; b < big && !own; b++)
+                        own = S.keys[b].f == faces[q];
+                    if (!own)
+                        faces[w++] = faces[q];
+                }
+                cnt = w;
+            }
+        }
+        if (cnt)
+            bn__split_faces(&S, faces, cnt, k);
     }
     out->n = S.next;
     out->npatch = np;
