@@ -546,3 +546,85 @@ BN_TEST(cli_bake)
              bn_test_tmp("x.obj"));
     BN_ASSERT_EQ(bn_test_bounce(cmd, NULL), 2);
 }
+
+/* --mesh input (input_mesh): the faces are the scene's polygons, every corner at an input vertex, and
+ * each vertex's colour is the area-weighted mean of the patches with a corner at that point on its
+ * smooth surface (brute force here: same material as the polygon, normal within 30 degrees). */
+BN_TEST(ply_input_mesh)
+{
+    bn_load_opts lo;
+    bn_mesh_opts mo;
+    bn_error err;
+    bn_scene *s;
+    bn_bake *b;
+    bn_load_opts_default(&lo);
+    lo.log.quiet = 1;
+    bn_mesh_opts_default(&mo);
+    mo.target_patches = 250;
+    BN_ASSERT_STATUS(bn_scene_load(bn_test_path("meshes/cornell-box.obj"), &lo, &s, &err), BN_OK);
+    BN_ASSERT_STATUS(bn_scene_mesh(s, &mo, &err), BN_OK);
+    BN_ASSERT_STATUS(bn_bake_create(s, 30, &b, &err), BN_OK);
+    size_t np, npv, nf, nv, ni;
+    const bn_patch *p = bn_scene_patches(s, &np);
+    const double *pv = bn_scene_patch_vertices(s, &npv), *iv = bn_scene_vertices(s, &nv);
+    const bn_face *f = bn_scene_faces(s, &nf);
+    const size_t *idx = bn_scene_face_indices(s, &ni);
+    double *x = malloc(np * 3 * sizeof(double));
+    for (size_t i = 0; i < np; i++)
+        for (int c = 0; c < 3; c++)
+            x[3 * i + c] = 0.1 + 0.01 * (double)((i * 7 + c * 3) % 101);
+    bn_bake_layer layer = {"L", x};
+    bn_bake_write_opts wo;
+    memset(&wo, 0, sizeof wo);
+    wo.input_mesh = 1;
+    const char *path = bn_test_tmp("in.ply");
+    BN_ASSERT_STATUS(bn_bake_write(b, path, &layer, 1, &wo, &err), BN_OK);
+    ply_data d;
+    ply_parse(path, &d);
+    BN_ASSERT_EQ(d.nf, nf);
+    BN_ASSERT_LT(d.nv, bn_bake_vertex_count(b));
+    int ix = ply_prop(&d, "x"), ir = ply_prop(&d, "red");
+    double cos30 = cos(30 * 3.14159265358979 / 180);
+    for (size_t k = 0; k < nf; k++) {
+        BN_ASSERT_EQ(d.fn[k], f[k].nverts);
+        for (unsigned c = 0; c < f[k].nverts; c++) {
+            const float *row = d.v + d.fi[4 * k + c] * d.nprops;
+            const double *q = iv + 3 * idx[f[k].first + c];
+            double sum[3] = {0, 0, 0}, area = 0;
+            for (int e = 0; e < 3; e++)   /* the corner is the polygon's own vertex */
+                BN_ASSERT_LE(fabs(row[ix + e] - q[e]), 1e-3);
+            for (size_t j = 0; j < np; j++) {
+                int at = 0;
+                for (unsigned e = 0; e < p[j].ncorners; e++) {
+                    const double *a = pv + 3 * p[j].corner[e];
+                    if (fabs(a[0] - q[0]) < 1e-3 && fabs(a[1] - q[1]) < 1e-3 && fabs(a[2] - q[2]) < 1e-3)
+                        at = 1;
+                }
+                if (!at || p[j].material != f[k].material ||
+                    p[j].normal[0] * f[k].normal[0] + p[j].normal[1] * f[k].normal[1] + p[j].normal[2] * f[k].normal[2] <
+                        cos30)
+                    continue;
+                area += p[j].area;
+                for (int e = 0; e < 3; e++)
+                    sum[e] += p[j].area * x[3 * j + e];
+            }
+            BN_ASSERT_GT(area, 0);
+            for (int e = 0; e < 3; e++)
+                BN_ASSERT_REL(row[ir + e], sum[e] / area, TOL_COLOUR);
+        }
+    }
+    free(d.v);
+    free(d.fn);
+    free(d.fi);
+    /* OBJ: one f line per polygon */
+    BN_ASSERT_STATUS(bn_bake_write(b, bn_test_tmp("in.obj"), &layer, 1, &wo, &err), BN_OK);
+    char *obj = bn_test_read_file(bn_test_tmp("in.obj"), NULL);
+    size_t nfl = 0;
+    for (char *l = obj; l && *l; l = strchr(l, '\n') ? strchr(l, '\n') + 1 : l + strlen(l))
+        nfl += strncmp(l, "f ", 2) == 0;
+    BN_ASSERT_EQ(nfl, nf);
+    free(obj);
+    free(x);
+    bn_bake_destroy(b);
+    bn_scene_destroy(s);
+}

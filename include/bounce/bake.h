@@ -44,6 +44,10 @@ typedef struct bn_bake_layer {
 } bn_bake_layer;
 
 typedef struct bn_bake_write_opts {
+    int    input_mesh;   /* 1: the faces are the scene's input polygons (after triangulation of
+                            non-planar quads), each corner taking the value of the output vertex at
+                            that point (the patches around it on its smooth surface); 0: the
+                            faces are the patches (the element mesh) */
     int    ldr;          /* 1: 8-bit sRGB colours at `exposure_ev` instead of float radiance */
     double exposure_ev;  /* for ldr */
     const bn_attr *attrs;   /* provenance: PLY/OBJ comments, OM mesh property */

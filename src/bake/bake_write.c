@@ -65,13 +65,11 @@ static bn_status bn__ply_add_comments(const char *src, const char *dst, const bn
     return bn__outfile_commit(&out, err);
 }
 
-static bn_status bn__write_obj(const bn_bake *b, const char *path, const float *colour, const unsigned char *c8,
+static bn_status bn__write_obj(const char *path, size_t nv, const double *pos, size_t nf, const unsigned *face_n,
+                               const size_t *face_idx, const float *colour, const unsigned char *c8,
                                const bn_bake_write_opts *o, bn_error *err)
 {
     bn__outfile f;
-    size_t np, nv = bn_bake_vertex_count(b);
-    const bn_patch *patches = bn_scene_patches(bn_bake_scene(b), &np);
-    const double *pos = bn_bake_vertex_positions(b);
     char text[2048];
     bn_status st = bn__outfile_open(&f, path, "w", err);
     if (st != BN_OK)
@@ -91,21 +89,87 @@ static bn_status bn__write_obj(const bn_bake *b, const char *path, const float *
             fprintf(f.fp, "v %.17g %.17g %.17g %.9g %.9g %.9g\n", pos[3 * v], pos[3 * v + 1], pos[3 * v + 2],
                     (double)colour[3 * v], (double)colour[3 * v + 1], (double)colour[3 * v + 2]);
     }
-    for (size_t p = 0; p < np; p++) {
+    for (size_t p = 0; p < nf; p++) {
         fputc('f', f.fp);
-        for (unsigned c = 0; c < patches[p].ncorners; c++)
-            fprintf(f.fp, " %zu", bn_bake_corner_vertex(b, p, c) + 1);
+        for (unsigned c = 0; c < face_n[p]; c++)
+            fprintf(f.fp, " %zu", face_idx[4 * p + c] + 1);
         fputc('\n', f.fp);
     }
     return bn__outfile_commit(&f, err);
+}
+
+/* The input polygons as faces: each corner is the output vertex of a patch of that polygon with a
+ * corner at the same point. Fills face_n / face_idx (nf = the faces) with output-vertex numbers. */
+static bn_status bn__input_faces(const bn_bake *b, unsigned *face_n, size_t *face_idx, bn_error *err)
+{
+    const bn_scene *s = bn_bake_scene(b);
+    size_t np, nf, nv, ni, npv;
+    const bn_patch *pa = bn_scene_patches(s, &np);
+    const bn_face *f = bn_scene_faces(s, &nf);
+    const double *v = bn_scene_vertices(s, &nv), *pv = bn_scene_patch_vertices(s, &npv);
+    const size_t *idx = bn_scene_face_indices(s, &ni);
+    size_t *start = bn__calloc(nf + 1, sizeof(size_t)), *order = bn__malloc_array(np + 1, sizeof(size_t));
+    double lo[3], hi[3], eps;
+    bn_status st = BN_OK;
+    if (!start || !order) {
+        free(start);
+        free(order);
+        return bn_error_set(err, BN_ENOMEM, "out of memory baking %zu polygons", nf);
+    }
+    bn_scene_bounds(s, lo, hi);
+    eps = 1e-9 * sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
+                      (hi[2] - lo[2]) * (hi[2] - lo[2]));
+    for (size_t p = 0; p < np; p++)
+        start[pa[p].face + 1]++;
+    for (size_t k = 0; k < nf; k++)
+        start[k + 1] += start[k];
+    {
+        size_t *fill = bn__malloc_array(nf + 1, sizeof(size_t));
+        if (!fill) {
+            free(start);
+            free(order);
+            return bn_error_set(err, BN_ENOMEM, "out of memory baking %zu polygons", nf);
+        }
+        memcpy(fill, start, nf * sizeof(size_t));
+        for (size_t p = 0; p < np; p++)
+            order[fill[pa[p].face]++] = p;
+        free(fill);
+    }
+    for (size_t k = 0; k < nf && st == BN_OK; k++) {
+        face_n[k] = f[k].nverts;
+        for (unsigned c = 0; c < f[k].nverts && st == BN_OK; c++) {
+            const double *x = v + 3 * idx[f[k].first + c];
+            size_t found = SIZE_MAX;
+            for (size_t q = start[k]; q < start[k + 1] && found == SIZE_MAX; q++)
+                for (unsigned e = 0; e < pa[order[q]].ncorners; e++) {
+                    const double *y = pv + 3 * pa[order[q]].corner[e];
+                    if (fabs(x[0] - y[0]) <= eps && fabs(x[1] - y[1]) <= eps && fabs(x[2] - y[2]) <= eps) {
+                        found = bn_bake_corner_vertex(b, order[q], e);
+                        break;
+                    }
+                }
+            if (found == SIZE_MAX)
+                st = bn_error_set(err, BN_EINTERNAL, "%s: polygon %zu (line %u) has no patch at its corner %u",
+                                  bn_scene_path(s), f[k].source, f[k].line, c + 1);
+            face_idx[4 * k + c] = found;
+        }
+        for (unsigned c = f[k].nverts; c < 4; c++)
+            face_idx[4 * k + c] = 0;
+    }
+    free(start);
+    free(order);
+    return st;
 }
 
 bn_status bn_bake_write(const bn_bake *b, const char *path, const bn_bake_layer *layers, size_t nlayers,
                         const bn_bake_write_opts *o, bn_error *err)
 {
     const char *ext = bn__ext(path);
-    size_t nv = bn_bake_vertex_count(b), np, nbad = 0;
+    size_t nv = bn_bake_vertex_count(b), np, nf, nbad = 0, nout = nv;
     const bn_patch *patches = bn_scene_patches(bn_bake_scene(b), &np);
+    const double *opos = bn_bake_vertex_positions(b);
+    double *cpos = NULL;
+    size_t *remap = NULL;
     double *vv = NULL;
     float **vals = NULL;
     unsigned char *c8 = NULL;
@@ -126,8 +190,11 @@ bn_status bn_bake_write(const bn_bake *b, const char *path, const bn_bake_layer 
     vv = bn__malloc_array(nv, 3 * sizeof(double));
     vals = bn__calloc(nlayers, sizeof *vals);
     names = bn__calloc(3 * nlayers, sizeof *names);
-    face_n = bn__malloc_array(np, sizeof *face_n);
-    face_idx = bn__malloc_array(np, 4 * sizeof *face_idx);
+    bn_scene_faces(bn_bake_scene(b), &nf);
+    if (!o->input_mesh)
+        nf = np;
+    face_n = bn__malloc_array(nf + 1, sizeof *face_n);
+    face_idx = bn__malloc_array(nf + 1, 4 * sizeof *face_idx);
     if (!vv || !vals || !names || !face_n || !face_idx)
         goto oom;
     for (size_t l = 0; l < nlayers; l++) {
@@ -144,6 +211,46 @@ bn_status bn_bake_write(const bn_bake *b, const char *path, const bn_bake_layer 
         st = bn_error_set(err, BN_ENUMERIC, "%s: %zu baked values are not finite; nothing was written", path, nbad);
         goto done;
     }
+    if (o->input_mesh) {   /* the input polygons: keep only the vertices their corners use, renumbered */
+        st = bn__input_faces(b, face_n, face_idx, err);
+        if (st != BN_OK)
+            goto done;
+        remap = bn__malloc_array(nv + 1, sizeof *remap);
+        cpos = bn__malloc_array(nv + 1, 3 * sizeof(double));
+        if (!remap || !cpos)
+            goto oom;
+        for (size_t i = 0; i < nv; i++)
+            remap[i] = SIZE_MAX;
+        nout = 0;
+        for (size_t k = 0; k < nf; k++)
+            for (unsigned c = 0; c < face_n[k]; c++) {
+                size_t i = face_idx[4 * k + c];
+                if (remap[i] == SIZE_MAX) {
+                    remap[i] = nout;
+                    memcpy(cpos + 3 * nout, opos + 3 * i, 3 * sizeof(double));
+                    nout++;
+                }
+                face_idx[4 * k + c] = remap[i];
+            }
+        for (size_t l = 0; l < nlayers; l++) {   /* values in the new order (a copy: the orders differ) */
+            float *c = bn__malloc_array(nout + 1, 3 * sizeof(float));
+            if (!c)
+                goto oom;
+            for (size_t i = 0; i < nv; i++)
+                if (remap[i] != SIZE_MAX)
+                    memcpy(c + 3 * remap[i], vals[l] + 3 * i, 3 * sizeof(float));
+            free(vals[l]);
+            vals[l] = c;
+        }
+        opos = cpos;
+    } else {
+        for (size_t p = 0; p < np; p++) {
+            face_n[p] = patches[p].ncorners;
+            for (unsigned c = 0; c < 4; c++)
+                face_idx[4 * p + c] = c < patches[p].ncorners ? bn_bake_corner_vertex(b, p, c) : 0;
+        }
+    }
+    nv = nout;
     if (o->ldr) {
         c8 = bn__malloc_array(nv, 3);
         if (!c8)
@@ -152,13 +259,8 @@ bn_status bn_bake_write(const bn_bake *b, const char *path, const bn_bake_layer 
             c8[i] = bn_tonemap_srgb8(vals[0][i], o->exposure_ev);
     }
     if (is_obj) {
-        st = bn__write_obj(b, path, vals[0], c8, o, err);
+        st = bn__write_obj(path, nv, opos, nf, face_n, face_idx, vals[0], c8, o, err);
         goto done;
-    }
-    for (size_t p = 0; p < np; p++) {
-        face_n[p] = patches[p].ncorners;
-        for (unsigned c = 0; c < 4; c++)
-            face_idx[4 * p + c] = c < patches[p].ncorners ? bn_bake_corner_vertex(b, p, c) : 0;
     }
     {
         const char *suffix[3] = {"red", "green", "blue"};
@@ -196,8 +298,8 @@ bn_status bn_bake_write(const bn_bake *b, const char *path, const bn_bake_layer 
         }
         memset(&m, 0, sizeof m);
         m.nverts = nv;
-        m.pos = bn_bake_vertex_positions(b);
-        m.nfaces = np;
+        m.pos = opos;
+        m.nfaces = nf;
         m.face_n = face_n;
         m.face_idx = face_idx;
         m.colour = c8 ? NULL : vals[0];
@@ -256,5 +358,7 @@ done:
     free(face_n);
     free(face_idx);
     free(prov);
+    free(remap);
+    free(cpos);
     return st;
 }

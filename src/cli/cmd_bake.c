@@ -30,7 +30,7 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
     bn_cli_solution sol;
     const char *pos[1], *out = "baked.ply";
     size_t np, nl = 1;
-    int n = 3, ldr = 0, per_bounce = 0, rc = 0;
+    int n = 3, ldr = 0, per_bounce = 0, rc = 0, elements = 0;
     double ev = 0, crease = BN_BAKE_DEFAULT_CREASE;
     bn_error err;
     bn_pipeline p;
@@ -49,8 +49,8 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
     memset(&p, 0, sizeof p);
     set.usage = "bounce bake SCENE [-o baked.ply|.om|.obj] [--ldr] [--per-bounce -n K] [options]";
     set.summary =
-        "Solves L = E + K L and bakes L to vertex colours: each vertex takes the area-weighted mean of the\n"
-        "patches around it within one smooth surface (adjacent faces of one material whose normals differ by\n"
+        "Solves L = E + K L and bakes L to vertex colours on the input polygons (--mesh elements: on the\n"
+        "patches): each vertex takes the area-weighted mean of the patches around it within one smooth surface (adjacent faces of one material whose normals differ by\n"
         "less than --crease); vertices are split at creases and material seams. Colours are float radiance\n"
         "(W m^-2 sr^-1) by default, 8-bit sRGB with --ldr. .ply (binary) and .om are written through OpenMesh,\n"
         ".obj directly as `v x y z r g b`. --per-bounce adds float vertex properties E_red, E_green, E_blue,\n"
@@ -68,6 +68,9 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
                                  "also write each term E .. K^K E and rest as float vertex properties (PLY, OM)"});
     bn_optset_add(&set, (bn_opt){"bounces", 'n', BN_OPT_INT, &n, NULL, 0, 64, "K",
                                  "--per-bounce: terms E .. K^K E (default 3)"});
+    bn_optset_add(&set, (bn_opt){"mesh", 0, BN_OPT_CHOICE, &elements, "input|elements", 0, 0, "input|elements",
+                                 "faces written: the scene's input polygons, each corner the mean of the patches "
+                                 "around it (default), or every patch (the element mesh the solution lives on)"});
     bn_cli_add_solution(&set, &sol);
     bn_cli_add_ff(&set, &ff);
     bn_cli_add_scene(&set, &so);
@@ -119,7 +122,10 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
     bn_cli_ff_opts(&ff, c, &fo);
     bn_formfactor_opts_describe(&fo, ffdesc, sizeof ffdesc);
     snprintf(patches, sizeof patches, "%zu", np);
-    snprintf(verts, sizeof verts, "%zu", bn_bake_vertex_count(bake));
+    if (elements)
+        snprintf(verts, sizeof verts, "%zu", bn_bake_vertex_count(bake));
+    else
+        snprintf(verts, sizeof verts, "input polygons' corners");
     snprintf(creasebuf, sizeof creasebuf, "%g degrees", crease);
     if (ldr)
         snprintf(evbuf, sizeof evbuf, "8-bit sRGB at %+.4f EV", ev);
@@ -130,11 +136,12 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
         bn_attr attrs[] = {
             {"command line", c->cmdline}, {"scene", bn_scene_path(p.scene)}, {"solver", solver}, {"tolerance", tolbuf},
             {"form factors", ffdesc},      {"patches", patches},         {"vertices", verts}, {"crease", creasebuf},
-            {"colours", evbuf},
+            {"colours", evbuf},           {"faces", elements ? "the patches (element mesh)" : "the input polygons"},
             {"vertex colour", "L, area-weighted mean of the patches around the vertex within its smooth surface"},
         };
         snprintf(tolbuf, sizeof tolbuf, "%g", sol.tol > 0 ? sol.tol : 1e-6);
         memset(&wo, 0, sizeof wo);
+        wo.input_mesh = !elements;
         wo.ldr = ldr;
         wo.exposure_ev = ev;
         wo.attrs = attrs;
@@ -145,9 +152,16 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
             goto done;
         }
     }
-    if (!c->quiet)
-        printf("wrote %s (%zu vertices, %zu faces; %s%s)\n", out, bn_bake_vertex_count(bake), np, evbuf,
-               per_bounce ? "; per-bounce properties E .. rest" : "");
+    if (!c->quiet) {
+        size_t nf;
+        bn_scene_faces(p.scene, &nf);
+        if (elements)
+            printf("wrote %s (the element mesh: %zu vertices, %zu patches; %s%s)\n", out, bn_bake_vertex_count(bake),
+                   np, evbuf, per_bounce ? "; per-bounce properties E .. rest" : "");
+        else
+            printf("wrote %s (the input mesh: %zu polygons; %s%s)\n", out, nf, evbuf,
+                   per_bounce ? "; per-bounce properties E .. rest" : "");
+    }
 done:
     free(layers);
     free(names);
