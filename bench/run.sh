@@ -252,7 +252,7 @@ fi
 if [ "$quick" = 1 ]; then
     epsl="1e-2,1e-3"; hnp="1000 2000"; hmesh="$mesh"
 else
-    epsl="3e-2,1e-2,3e-3,1e-3,3e-4,1e-4"; hnp="1000 2000 4000 8000 16000"; hmesh="$mesh"
+    epsl="1e-1,3e-2,1e-2,3e-3,1e-3,3e-4,1e-4"; hnp="1000 2000 4000 8000 16000"; hmesh="$mesh"
 fi
 note "hierarchy: eps study, links against patches, equal error"
 {
@@ -316,44 +316,59 @@ fi
 
 # ---- equal error per patch: the hierarchy, dense radiosity and the tracer on one reporting mesh ----
 if [ "$quick" = 1 ]; then
-    pref=1200; pspp="16,64,256"; hpl="1200,4800"; dpl="300,1200"; prefspp=4096; ptarget=0.05
+    pref=1200; pspp="16,64,256"; hpl="1200,4800"; h4pl="1200"; dpl="300,1200"; prefspp=4096
 else
-    pref=4800; pspp="16,64,256,1024,4096"; hpl="4800,19200,76800"; dpl="1200,2400,4800"; prefspp=16384; ptarget=0.03
+    pref=4800; pspp="16,64,256,1024,4096"; hpl="4800,19200,76800"; h4pl="4800,19200"; dpl="1200,2400,4800"; prefspp=16384
 fi
-note "equal error per patch on $pref patches: hierarchy, dense, tracer"
+note "equal error per patch on $pref patches: hierarchy (eps 1e-3 and 1e-4), dense, tracer"
 pe_ok=1
-for kind in hier dense; do
-    if [ "$kind" = hier ]; then tr="--transport hierarchical"; pl=$hpl; else tr="--transport dense"; pl=$dpl; fi
+for kind in hier hier4 dense; do
+    case $kind in
+    hier) tr="--transport hierarchical"; pl=$hpl ;;
+    hier4) tr="--transport hierarchical --eps 1e-4"; pl=$h4pl ;;
+    dense) tr="--transport dense"; pl=$dpl ;;
+    esac
     # shellcheck disable=SC2086
     timeout $((timeout_s * 4)) "$bounce" study "$scene" --unit mm --vary patches="$pl" $tr --against-spp "$pspp" \
-        --metric patch --ref-patches "$pref" --ref-spp "$prefspp" --target "$ptarget" -o "$work/pe-$kind.csv" -q \
+        --metric patch --ref-patches "$pref" --ref-spp "$prefspp" --target 0.03 -o "$work/pe-$kind.csv" -q \
         >/dev/null 2>"$work/pe-$kind.err" || { pe_ok=0; echo "_per-patch study ($kind) failed: $(tail -1 "$work/pe-$kind.err")_" >>"$report"; }
 done
+# time to a target along one method's rows (log-log between the last row above and the first below, in
+# order of time), as the study computes it: tto FILE METHOD TARGET
+tto() {
+    awk -F, -v m="$2" -v T="$3" '/^#/ { next } !h { for (i = 1; i <= NF; i++) c[$i] = i; h = 1; next }
+        $(c["method"]) == m { n++; t[n] = $(c["t_total"]) + 0; e[n] = $(c["err_rms_rel"]) + 0 }
+        END { for (i = 2; i <= n; i++) for (j = i; j > 1 && t[j] < t[j - 1]; j--) { x = t[j]; t[j] = t[j - 1]; t[j - 1] = x; x = e[j]; e[j] = e[j - 1]; e[j - 1] = x }
+              for (i = 1; i <= n; i++) if (e[i] <= T) {
+                  if (i == 1 || !(e[i - 1] > T)) { printf "%.4g s", t[i]; exit }
+                  printf "%.4g s", exp(log(t[i - 1]) + (log(T) - log(e[i - 1])) * (log(t[i]) - log(t[i - 1])) / (log(e[i]) - log(e[i - 1]))); exit }
+              printf "not reached" }' "$1"
+}
 if [ "$pe_ok" = 1 ]; then
-    th=$(metaget "$work/pe-hier.csv" seconds_radiosity); td=$(metaget "$work/pe-dense.csv" seconds_radiosity)
-    tt=$(metaget "$work/pe-hier.csv" seconds_trace)
     {
-        echo "Time to equal per-patch error: RMS relative error $ptarget per patch on the Cornell box's $pref-patch mesh"
-        echo "(\`bounce study --metric patch --ref-patches $pref --ref-spp $prefspp --target $ptarget --against-spp $pspp\`;"
-        echo "hierarchy \`--vary patches=$hpl --transport hierarchical\`, dense \`--vary patches=$dpl --transport dense\`; each"
-        echo "radiosity setting read on the reference's patches as area means; the tracer runs on the reference's mesh)."
-        echo "Reference: $(metaget "$work/pe-hier.csv" reference); its error: $(metaget "$work/pe-hier.csv" reference_error_how)."
+        echo "Time to equal per-patch error on the Cornell box's $pref-patch mesh: RMS relative error per patch on the"
+        echo "reference's patches (\`bounce study --metric patch --ref-patches $pref --ref-spp $prefspp --against-spp $pspp\`;"
+        echo "hierarchy \`--vary patches=$hpl --transport hierarchical\` at the default eps 1e-3 and \`--vary patches=$h4pl\`"
+        echo "at \`--eps 1e-4\`, dense \`--vary patches=$dpl --transport dense\`; each radiosity setting is read on the"
+        echo "reference's patches as area means; the tracer runs on the reference's mesh). Times by log-log interpolation"
+        echo "between settings. Reference: $(metaget "$work/pe-hier.csv" reference); its error: $(metaget "$work/pe-hier.csv" reference_error_how)."
         echo
-        echo "| method | time to $ptarget RMS per patch | ratio to the hierarchy |"
-        echo "|---|---|---|"
-        awk -v h="$th" -v d="$td" -v t="$tt" 'BEGIN {
-            printf "| hierarchy (whole pipeline) | %s s | 1 |\n", h
-            printf "| dense radiosity (whole pipeline) | %s s | %s |\n", d, (h + 0 > 0 && d == d + 0) ? sprintf("%.3g", d / h) : "n/a"
-            printf "| path tracer | %s s | %s |\n", t, (h + 0 > 0 && t == t + 0) ? sprintf("%.3g", t / h) : "n/a" }'
+        echo "| target RMS per patch | hierarchy eps 1e-3 | hierarchy eps 1e-4 | dense radiosity | path tracer |"
+        echo "|---|---|---|---|---|"
+        for T in 0.03 0.02 0.01; do
+            echo "| $T | $(tto "$work/pe-hier.csv" radiosity $T) | $(tto "$work/pe-hier4.csv" radiosity $T) | $(tto "$work/pe-dense.csv" radiosity $T) | $(tto "$work/pe-hier.csv" trace $T) |"
+        done
         echo
-        echo "Per setting (err_rms = RMS relative error per patch on the reference's patches):"
+        echo "Per setting (err_rms = RMS relative error per patch on the reference's patches; ground 0: the reference's own"
+        echo "mesh, 1: a coarser one read at its centroids, 2: a finer one read as area means):"
         echo
-        echo "| study | method | setting | patches | err_rms | t_total s |"
-        echo "|---|---|---|---|---|---|"
-        for kind in hier dense; do
+        echo "| study | method | setting | patches | ground | err_rms | t_total s |"
+        echo "|---|---|---|---|---|---|---|"
+        for kind in hier hier4 dense; do
             awk -F, -v k="$kind" '/^#/ { next } !h { for (i = 1; i <= NF; i++) c[$i] = i; h = 1; next }
-                { printf "| %s | %s | %s | %s | %.4g | %.4g |\n", k, $(c["method"]), $(c["value"]), $(c["patches"]),
-                  $(c["err_rms_rel"]), $(c["t_total"]) }' "$work/pe-$kind.csv"
+                k != "hier" && $(c["method"]) == "trace" { next }
+                { printf "| %s | %s | %s | %s | %s | %.4g | %.4g |\n", k, $(c["method"]), $(c["value"]), $(c["patches"]),
+                  $(c["ground"]), $(c["err_rms_rel"]), $(c["t_total"]) }' "$work/pe-$kind.csv"
         done
         echo
     } >>"$report"
