@@ -30,7 +30,7 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
     bn_cli_solution sol;
     const char *pos[1], *out = "baked.ply";
     size_t np, nl = 1;
-    int n = 3, ldr = 0, per_bounce = 0, rc = 0, elements = 0;
+    int n = 3, ldr = 0, per_bounce = 0, rc = 0, mesh = 0, elements;
     double ev = 0, crease = BN_BAKE_DEFAULT_CREASE;
     bn_error err;
     bn_pipeline p;
@@ -49,10 +49,11 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
     memset(&p, 0, sizeof p);
     set.usage = "bounce bake SCENE [-o baked.ply|.om|.obj] [--ldr] [--per-bounce -n K] [options]";
     set.summary =
-        "Solves L = E + K L and bakes L to vertex colours on the input polygons (--mesh elements: on the\n"
-        "patches): each vertex takes the area-weighted mean of the patches around it within one smooth surface (adjacent faces of one material whose normals differ by\n"
-        "less than --crease); vertices are split at creases and material seams. Colours are float radiance\n"
-        "(W m^-2 sr^-1) by default, 8-bit sRGB with --ldr. .ply (binary) and .om are written through OpenMesh,\n"
+        "Solves L = E + K L and bakes L to vertex colours on the patches (--mesh input: on the input\n"
+        "polygons alone): each vertex takes the area-weighted mean of the patches around it within one\n"
+        "smooth surface (adjacent faces of one material whose normals differ by less than --crease);\n"
+        "vertices are split at creases and material seams. Colours are float radiance (W m^-2 sr^-1) by\n"
+        "default, 8-bit sRGB with --ldr. .ply (binary) and .om are written through OpenMesh,\n"
         ".obj directly as `v x y z r g b`. --per-bounce adds float vertex properties E_red, E_green, E_blue,\n"
         "KE_red, ..., K{K}E_*, rest_* (PLY, OM) so engines can blend bounces; their sum is L.";
     bn_optset_add(&set, (bn_opt){"output", 'o', BN_OPT_STRING, &out, NULL, 0, 0, "FILE",
@@ -68,9 +69,10 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
                                  "also write each term E .. K^K E and rest as float vertex properties (PLY, OM)"});
     bn_optset_add(&set, (bn_opt){"bounces", 'n', BN_OPT_INT, &n, NULL, 0, 64, "K",
                                  "--per-bounce: terms E .. K^K E (default 3)"});
-    bn_optset_add(&set, (bn_opt){"mesh", 0, BN_OPT_CHOICE, &elements, "input|elements", 0, 0, "input|elements",
-                                 "faces written: the scene's input polygons, each corner the mean of the patches "
-                                 "around it (default), or every patch (the element mesh the solution lives on)"});
+    bn_optset_add(&set, (bn_opt){"mesh", 0, BN_OPT_CHOICE, &mesh, "elements|input", 0, 0, "elements|input",
+                                 "faces written: every patch, the element mesh the solution lives on, whose vertices "
+                                 "include every input vertex (default); or the scene's input polygons alone, each "
+                                 "corner the mean of the patches around it"});
     bn_cli_add_solution(&set, &sol);
     bn_cli_add_ff(&set, &ff);
     bn_cli_add_scene(&set, &so);
@@ -81,6 +83,7 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
         if (!bn_cli_parse_scene_command(&set, argc, argv, pos, &prc))
             return prc;
     }
+    elements = mesh == 0;
     {
         const char *dot = strrchr(out, '.');
         if (!dot || (strcmp(dot, ".ply") && strcmp(dot, ".om") && strcmp(dot, ".obj"))) {
