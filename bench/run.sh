@@ -10,6 +10,9 @@
 #   -b DIR        build directory (default build-bench; configured Release without tests)
 #   -r N          repeats of the study figures (default 3)
 #   --quick       smaller settings everywhere (a smoke run, ~2 minutes)
+#   --big         also the large scenes: the bunny in the Cornell box (69,460 polygons) and the same
+#                 with each bunny triangle cut into 16 (1,111,225 polygons, made by
+#                 ../shared/data/scenes/make-model-box.py), whole `bounce bounces` runs (~6 minutes)
 #   --no-build    use the executables already in the build directory
 # Environment: BENCH_TIMEOUT (seconds per bench program, default 150), OMP_NUM_THREADS (default: all
 # cores). A bench that is missing, fails or times out is reported as such; the others still run.
@@ -20,6 +23,7 @@ out="$root/bench/results.md"
 build="$root/build-bench"
 reps=3
 quick=0
+big=0
 dobuild=1
 while [ $# -gt 0 ]; do
     case "$1" in
@@ -27,8 +31,9 @@ while [ $# -gt 0 ]; do
     -b) build=$2; shift 2 ;;
     -r) reps=$2; shift 2 ;;
     --quick) quick=1; shift ;;
+    --big) big=1; shift ;;
     --no-build) dobuild=0; shift ;;
-    -h|--help) sed -n '2,16p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,19p' "$0"; exit 0 ;;
     *) echo "bench/run.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
     esac
 done
@@ -372,6 +377,53 @@ if [ "$pe_ok" = 1 ]; then
         done
         echo
     } >>"$report"
+fi
+
+# ---- large scenes (--big): wall time, peak memory and image means of whole runs ----
+if [ "$big" = 1 ]; then
+    shared="$root/../shared/data"
+    if [ ! -f "$shared/scenes/bunny-box.obj" ] || [ ! -f "$shared/external/stanford-bunny/stanford-bunny.obj" ]; then
+        echo "_large scenes skipped: $shared (the bunny box, the Stanford bunny) is not beside this checkout_" >>"$report"
+    else
+        note "large scenes: the bunny box at 69k and 1.1M polygons"
+        python3 "$shared/scenes/make-model-box.py" "$root/meshes/cornell-box.obj" \
+            "$shared/external/stanford-bunny/stanford-bunny.obj" "$work/bunny-box-16x.obj" 300 white 2 >/dev/null &&
+            cp "$shared/scenes/bunny-box.camera" "$work/bunny-box-16x.camera"
+        {
+            echo "## Large scenes: whole \`bounce bounces SCENE --unit mm\` runs"
+            echo
+            echo "| scene | polygons | wall s | peak MiB | links | mean per layer (R G B, oiiotool --stats) |"
+            echo "|---|---|---|---|---|---|"
+        } >>"$report"
+        for sc in "$shared/scenes/bunny-box.obj" "$work/bunny-box-16x.obj"; do
+            name=$(basename "$sc" .obj)
+            t0=$(date +%s.%N)
+            if command -v /usr/bin/time >/dev/null 2>&1; then
+                timeout 1800 /usr/bin/time -v "$bounce" bounces "$sc" --unit mm -o "$work/$name.exr" --no-previews \
+                    >"$work/$name.out" 2>"$work/$name.err"
+            else
+                timeout 1800 "$bounce" bounces "$sc" --unit mm -o "$work/$name.exr" --no-previews >"$work/$name.out" 2>"$work/$name.err"
+            fi
+            rc=$?
+            t1=$(date +%s.%N)
+            peak=$(sed -n 's/.*Maximum resident set size (kbytes): //p' "$work/$name.err" | awk '{ printf "%.0f", $1 / 1024 }')
+            links=$(sed -n 's/.*hierarchy pass [0-9]*: \([0-9]*\) links.*/\1/p' "$work/$name.err" | tail -1)
+            polys=$(grep -c '^f ' "$sc")
+            means="n/a"
+            if [ "$rc" = 0 ] && command -v oiiotool >/dev/null 2>&1; then
+                means=$(oiiotool --info -v "$work/$name.exr" 2>/dev/null | sed -n 's/.*channel list: //p' | tr -d ' ' | tr ',' '\n' >"$work/$name.ch";
+                        oiiotool --stats "$work/$name.exr" 2>/dev/null | sed -n 's/.*Stats Avg: //p' | tr ' ' '\n' | head -n "$(wc -l <"$work/$name.ch")" |
+                        paste -d' ' "$work/$name.ch" - | awk '{ split($1, a, "."); v[a[1]] = v[a[1]] sprintf(" %.6g", $2) }
+                            END { n = split("E KE K2E K3E rest L", o, " "); for (i = 1; i <= n; i++) printf "%s%s:%s", (i > 1 ? "; " : ""), o[i], v[o[i]] }')
+            fi
+            if [ "$rc" = 0 ]; then
+                echo "| $name | $polys | $(awk -v a="$t0" -v b="$t1" 'BEGIN { printf "%.1f", b - a }') | ${peak:-n/a} | ${links:-n/a} | $means |" >>"$report"
+            else
+                echo "| $name | $polys | failed (exit $rc: $(tail -1 "$work/$name.err")) | | | |" >>"$report"
+            fi
+        done
+        echo >>"$report"
+    fi
 fi
 
 end=$(date +%s)
