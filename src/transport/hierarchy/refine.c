@@ -76,7 +76,7 @@ static void bn__vec_push(bn__vec *v, uint32_t r, uint32_t s, float F, int partia
 typedef struct bn__worker {
     bn__vec links, pending;
     bn__ff_worker *ff;
-    size_t rays, splits, mc_links;
+    size_t rays, splits;
 } bn__worker;
 
 /* ---- geometry of nodes ---- */
@@ -259,7 +259,6 @@ static float bn__link_F(const bn__ref *R, uint32_t r, uint32_t s, bn__worker *w,
         }
     } else {
         F = bn__F_sampled(R, r, s, w, partial);
-        w->mc_links++;
     }
     return (float)fmin(fmax(F, 0.0), 1.0);
 }
