@@ -130,9 +130,8 @@ bn_status bn_crosscheck_run_scene(const char *path, const bn_crosscheck_opts *o,
         if (run->fine.hierarchical && o->pipeline.hier.eps > 0) {
             /* the hierarchy's other discretisation parameter, coarsened with the mesh: eps x r^2 (its
              * error falls about as sqrt(eps) on the Cornell box, so as h, and one order fits both) */
-            o2.pipeline.hier.eps = o->pipeline.hier.eps * o->ratio * o->ratio;
-            if (o->disc == BN_DISC_FINE)
-                o2.pipeline.hier.eps = o->pipeline.hier.eps / (o->ratio * o->ratio);
+            double r2 = o->ratio * o->ratio;
+            o2.pipeline.hier.eps = o->disc == BN_DISC_FINE ? o->pipeline.hier.eps / r2 : o->pipeline.hier.eps * r2;
         }
         st = bn__second_mesh(o, &run->fine, &m2, err);
         if (st == BN_OK)

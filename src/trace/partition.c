@@ -126,6 +126,8 @@ bn_status bn_partition_regions(const bn_scene *s, size_t nregions, bn_partition 
         marea[f[k].material] += f[k].area;
         total += f[k].area;
     }
+    for (size_t q = 0; q < nf; q++)
+        S.region[q] = UINT32_MAX;   /* faces of a material without area stay in no region */
     S.fc = fc;
     S.fa = fa;
     for (size_t m = 0; m < nm; m++) {   /* each material's faces, in file order, then split */
@@ -164,6 +166,33 @@ bn_status bn_partition_regions(const bn_scene *s, size_t nregions, bn_partition 
         }
         if (cnt)
             bn__split_faces(&S, faces, cnt, k);
+    }
+    {   /* regions whose polygons hold no patch are dropped (the tracer needs a patch to sample) */
+        uint32_t *id = bn__malloc_array(S.next + 1, sizeof(uint32_t));
+        unsigned char *used = bn__calloc(S.next + 1, 1);
+        size_t kept = 0;
+        if (!id || !used) {
+            free(id);
+            free(used);
+            goto oom;
+        }
+        for (size_t i = 0; i < np; i++) {
+            if (S.region[pa[i].face] == UINT32_MAX) {   /* a patch on a face of no area: cannot happen */
+                free(id);
+                free(used);
+                st = bn_error_set(err, BN_EINTERNAL, "partition: patch %zu lies in no region", i);
+                goto fail;
+            }
+            used[S.region[pa[i].face]] = 1;
+        }
+        for (size_t g = 0; g < S.next; g++)
+            id[g] = used[g] ? (uint32_t)kept++ : UINT32_MAX;
+        for (size_t q = 0; q < nf; q++)
+            if (S.region[q] != UINT32_MAX)
+                S.region[q] = id[S.region[q]];
+        S.next = kept;
+        free(id);
+        free(used);
     }
     out->n = S.next;
     out->npatch = np;
@@ -213,6 +242,7 @@ bn_status bn_partition_regions(const bn_scene *s, size_t nregions, bn_partition 
     goto done;
 oom:
     st = bn_error_set(err, BN_ENOMEM, "out of memory for a partition of %zu polygons", nf);
+fail:
     bn_partition_free(out);
 done:
     free(fc);

@@ -470,6 +470,8 @@ static bn_status bn__check_opts(const bn_hierarchy_opts *o, bn_error *err)
         return bn_error_set(err, BN_EINPUT, "hierarchy: eps %g is not a finite number >= 0", o->eps);
     if (o->samples < 0 || o->samples > (1 << 20))
         return bn_error_set(err, BN_EINPUT, "hierarchy: %d samples per link is outside [1, 2^20]", o->samples);
+    if (isnan(o->min_area) || isinf(o->min_area))
+        return bn_error_set(err, BN_EINPUT, "hierarchy: min area %g is not a finite number", o->min_area);
     if (o->max_passes < 1)
         return bn_error_set(err, BN_EINPUT, "hierarchy: %d passes (at least 1)", o->max_passes);
     return BN_OK;
