@@ -198,6 +198,7 @@ static double dist_point_segment(const double *p, const double *a, const double 
     return sqrt(d);
 }
 
+/* size: the longest patch edge allowed (0: no bound) */
 static void check_mesh(bn_scene *s, double size)
 {
     size_t nf, np, npv;
@@ -268,18 +269,23 @@ static void check_mesh(bn_scene *s, double size)
     free(edges);
 }
 
+/* The Cornell box has contacts (the blocks on the floor): with them cut, edges near the contact
+ * may stretch by BN_CONTACT_STRETCH; without, the grid's edges are at most the size. */
 BN_TEST(mesh_invariants_cornell)
 {
     bn_scene *s = load("meshes/cornell-box.obj", BN_UNIT_MM);
     bn_mesh_opts mo;
     bn_error err;
     double sizes[] = {1000.0, 100.0, 37.0, 12.5};
-    for (size_t k = 0; k < sizeof sizes / sizeof sizes[0]; k++) {
-        bn_mesh_opts_default(&mo);
-        mo.patch_size = sizes[k];
-        BN_ASSERT_STATUS(bn_scene_mesh(s, &mo, &err), BN_OK);
-        check_mesh(s, sizes[k]);
-    }
+    for (int nc = 0; nc < 2; nc++)
+        for (size_t k = 0; k < sizeof sizes / sizeof sizes[0]; k++) {
+            bn_mesh_opts_default(&mo);
+            mo.patch_size = sizes[k];
+            mo.no_contacts = nc;
+            BN_ASSERT_STATUS(bn_scene_mesh(s, &mo, &err), BN_OK);
+            BN_ASSERT_EQ(bn_scene_stats_get(s).contact_faces, nc ? 0 : 1);
+            check_mesh(s, sizes[k] * (nc ? 1 : BN_CONTACT_STRETCH));
+        }
     bn_mesh_opts_default(&mo);
     mo.no_subdivide = 1;
     BN_ASSERT_STATUS(bn_scene_mesh(s, &mo, &err), BN_OK);
@@ -307,7 +313,7 @@ BN_TEST(mesh_target_count)
         bn_scene_patches(s, &np);
         BN_ASSERT_LE(np, targets[k]);
         BN_ASSERT_GE(np, targets[k] * 0.6);
-        check_mesh(s, bn_scene_patch_size(s));
+        check_mesh(s, bn_scene_patch_size(s) * BN_CONTACT_STRETCH);
     }
     bn_scene_destroy(s);
 }
@@ -344,8 +350,11 @@ BN_TEST(largest_patch_edge_is_measured)
     bn_mesh_opts_default(&mo);
     mo.patch_size = 50;
     BN_ASSERT_STATUS(bn_scene_mesh(s, &mo, &err), BN_OK);
-    BN_ASSERT_LE(bn_scene_largest_patch_edge(s), 50 + 1e-9);
+    BN_ASSERT_LE(bn_scene_largest_patch_edge(s), 50 * BN_CONTACT_STRETCH + 1e-9);
     BN_ASSERT_GE(bn_scene_largest_patch_edge(s), 25);
+    mo.no_contacts = 1;
+    BN_ASSERT_STATUS(bn_scene_mesh(s, &mo, &err), BN_OK);
+    BN_ASSERT_LE(bn_scene_largest_patch_edge(s), 50 + 1e-9);
     bn_scene_destroy(s);
 }
 

@@ -80,9 +80,16 @@ typedef struct bn_mesh_opts {
     double patch_size;
     size_t target_patches;
     int    no_subdivide;
+    /* Patches are split along contact lines (where another face touches or pierces a face's
+     * front: a block standing on the floor), so no patch straddles lit and hidden parts. 1 turns
+     * that off; no_subdivide implies it. A cut piece's edge can be its grid patch's diagonal, and
+     * corners near a contact move onto it (no thin strips; a patch grows by at most a third), so
+     * patch edges there may reach BN_CONTACT_STRETCH times the grid's longest edge. */
+    int    no_contacts;
 } bn_mesh_opts;
 void bn_mesh_opts_default(bn_mesh_opts *o);   /* target_patches = BN_DEFAULT_PATCHES */
 #define BN_DEFAULT_PATCHES 1200
+#define BN_CONTACT_STRETCH 2.0
 bn_status bn_scene_mesh(bn_scene *s, const bn_mesh_opts *o, bn_error *err);
 
 /* Accessors. Returned arrays are borrowed: valid while the scene lives and is not re-meshed. */
@@ -102,6 +109,9 @@ double             bn_scene_largest_patch_edge(const bn_scene *s);   /* longest 
 typedef struct bn_scene_stats {
     size_t input_polygons, degenerate_dropped, duplicates_dropped, nonplanar_split,
            polygons_triangulated, back_to_back;
+    /* from the last bn_scene_mesh: contact segments found, faces they cut, patches split and the
+     * patches those became */
+    size_t contact_segments, contact_faces, contact_patches_split, contact_patches_made;
 } bn_scene_stats;
 bn_scene_stats     bn_scene_stats_get(const bn_scene *s);
 /* Axis-aligned bounding box of the faces, scene units. */

@@ -271,7 +271,9 @@ void bn_cli_add_scene(bn_optset *s, bn_cli_scene *o)
     bn_optset_add(s, (bn_opt){"patches", 0, BN_OPT_SIZE, &o->patches, NULL, 1, 1e9, "N",
                               "target total patch count (default 1200)"});
     bn_optset_add(s, (bn_opt){"no-subdivide", 0, BN_OPT_FLAG, &o->no_subdivide, NULL, 0, 0, NULL,
-                              "one patch per input polygon (after triangulation)"});
+                              "one patch per input polygon (after triangulation; no contact cuts)"});
+    bn_optset_add(s, (bn_opt){"no-contacts", 0, BN_OPT_FLAG, &o->no_contacts, NULL, 0, 0, NULL,
+                              "do not split patches along contact lines (where a face touches or pierces another's front, as a block on the floor)"});
     bn_optset_add(s, (bn_opt){"planar-tol", 0, BN_OPT_DOUBLE, &o->planar_tol, NULL, 0, 1, "T",
                               "non-planarity allowed before a polygon is split, relative to its size (default 1e-6)"});
 }

@@ -57,7 +57,7 @@ static double bn__count(const bn_scene *s, double size)
     return total;
 }
 
-static void bn__patch_finish(bn_patch *p, const double *pv, const double normal[3])
+void bn__scene_patch_finish(bn_patch *p, const double *pv, const double normal[3])
 {
     const double *a = pv + 3 * p->corner[0], *b = pv + 3 * p->corner[1], *c = pv + 3 * p->corner[2];
     double e1[3], e2[3], cr[3];
@@ -83,49 +83,13 @@ static void bn__patch_finish(bn_patch *p, const double *pv, const double normal[
     }
 }
 
-bn_status bn_scene_mesh(bn_scene *s, const bn_mesh_opts *o, bn_error *err)
+/* The regular grid of every face at patch edge `size`, then the contact cuts (unless off). */
+static bn_status bn__grid(bn_scene *s, double size, int contacts, bn_patch **out_p, size_t *out_np, double **out_v,
+                          size_t *out_nv, bn_error *err)
 {
-    bn_mesh_opts defo;
-    double size;
-    double count_d;
     size_t np = 0, nv = 0, ip = 0, iv = 0;
     bn_patch *patches;
     double *pv;
-
-    if (!o) {
-        bn_mesh_opts_default(&defo);
-        o = &defo;
-    }
-    if (o->no_subdivide) {
-        size = 0;
-    } else if (o->patch_size > 0) {
-        if (!isfinite(o->patch_size))
-            return bn_error_set(err, BN_EINPUT, "--patch-size %g is not a finite positive length", o->patch_size);
-        size = o->patch_size;
-    } else if (o->target_patches > 0) {
-        /* Bisection on log(size): the count falls as the size grows. */
-        double d[3], hi_s, lo_s;
-        bn_v3_sub(s->hi, s->lo, d);
-        hi_s = 2 * bn_v3_len(d) + 1e-300;
-        lo_s = hi_s * 1e-7;
-        if (bn__count(s, hi_s) >= (double)o->target_patches) {
-            size = hi_s;
-        } else {
-            for (int it = 0; it < 60; it++) {
-                double mid = sqrt(lo_s * hi_s);
-                if (bn__count(s, mid) > (double)o->target_patches)
-                    lo_s = mid;
-                else
-                    hi_s = mid;
-            }
-            size = hi_s;   /* the finest size whose count does not exceed the target */
-        }
-    } else {
-        return bn_error_set(err, BN_EUSAGE, "meshing needs a patch size, a target patch count or no-subdivide");
-    }
-    count_d = bn__count(s, size);
-    if (count_d > 1e9)
-        return bn_error_set(err, BN_ENOMEM, "patch size %g would make %.3g patches (more than 1e9)", size, count_d);
     for (size_t f = 0; f < s->nfaces; f++) {
         unsigned nu, nvv;
         bn__face_grid(s, &s->faces[f], size, &nu, &nvv);
@@ -170,7 +134,7 @@ bn_status bn_scene_mesh(bn_scene *s, const bn_mesh_opts *o, bn_error *err)
                     p->corner[1] = p->corner[0] + 1;
                     p->corner[2] = p->corner[1] + (nu + 1);
                     p->corner[3] = p->corner[0] + (nu + 1);
-                    bn__patch_finish(p, pv, f->normal);
+                    bn__scene_patch_finish(p, pv, f->normal);
                 }
         } else {
             const double *a = bn__fv(s, f, 0), *b = bn__fv(s, f, 1), *c = bn__fv(s, f, 2);
@@ -194,7 +158,7 @@ bn_status bn_scene_mesh(bn_scene *s, const bn_mesh_opts *o, bn_error *err)
                     p->corner[0] = BN__TRI_ID(i, j);
                     p->corner[1] = BN__TRI_ID(i + 1, j);
                     p->corner[2] = BN__TRI_ID(i, j + 1);
-                    bn__patch_finish(p, pv, f->normal);
+                    bn__scene_patch_finish(p, pv, f->normal);
                     if (i + j + 1 < n) {
                         p = &patches[ip++];
                         memset(p, 0, sizeof *p);
@@ -204,13 +168,88 @@ bn_status bn_scene_mesh(bn_scene *s, const bn_mesh_opts *o, bn_error *err)
                         p->corner[0] = BN__TRI_ID(i + 1, j);
                         p->corner[1] = BN__TRI_ID(i + 1, j + 1);
                         p->corner[2] = BN__TRI_ID(i, j + 1);
-                        bn__patch_finish(p, pv, f->normal);
+                        bn__scene_patch_finish(p, pv, f->normal);
                     }
                 }
 #undef BN__TRI_ID
         }
     }
     BN_CHECK(ip == np && iv == nv);
+    s->stats.contact_segments = s->stats.contact_faces = 0;
+    s->stats.contact_patches_split = s->stats.contact_patches_made = 0;
+    if (contacts) {
+        bn_status st = bn__mesh_contacts(s, &patches, &np, &pv, &nv, err);
+        if (st != BN_OK) {
+            free(patches);
+            free(pv);
+            return st;
+        }
+    }
+    *out_p = patches;
+    *out_np = np;
+    *out_v = pv;
+    *out_nv = nv;
+    return BN_OK;
+}
+
+bn_status bn_scene_mesh(bn_scene *s, const bn_mesh_opts *o, bn_error *err)
+{
+    bn_mesh_opts defo;
+    double size;
+    double count_d;
+    size_t np = 0, nv = 0;
+    bn_patch *patches = NULL;
+    double *pv = NULL;
+
+    if (!o) {
+        bn_mesh_opts_default(&defo);
+        o = &defo;
+    }
+    if (o->no_subdivide) {
+        size = 0;
+    } else if (o->patch_size > 0) {
+        if (!isfinite(o->patch_size))
+            return bn_error_set(err, BN_EINPUT, "--patch-size %g is not a finite positive length", o->patch_size);
+        size = o->patch_size;
+    } else if (o->target_patches > 0) {
+        /* Bisection on log(size): the count falls as the size grows. */
+        double d[3], hi_s, lo_s;
+        bn_v3_sub(s->hi, s->lo, d);
+        hi_s = 2 * bn_v3_len(d) + 1e-300;
+        lo_s = hi_s * 1e-7;
+        if (bn__count(s, hi_s) >= (double)o->target_patches) {
+            size = hi_s;
+        } else {
+            for (int it = 0; it < 60; it++) {
+                double mid = sqrt(lo_s * hi_s);
+                if (bn__count(s, mid) > (double)o->target_patches)
+                    lo_s = mid;
+                else
+                    hi_s = mid;
+            }
+            size = hi_s;   /* the finest size whose count does not exceed the target */
+        }
+    } else {
+        return bn_error_set(err, BN_EUSAGE, "meshing needs a patch size, a target patch count or no-subdivide");
+    }
+    count_d = bn__count(s, size);
+    if (count_d > 1e9)
+        return bn_error_set(err, BN_ENOMEM, "patch size %g would make %.3g patches (more than 1e9)", size, count_d);
+    {
+        int contacts = !o->no_subdivide && !o->no_contacts,
+            by_target = !o->no_subdivide && !(o->patch_size > 0) && o->target_patches > 0;
+        for (int attempt = 0;; attempt++) {
+            bn_status st = bn__grid(s, size, contacts, &patches, &np, &pv, &nv, err);
+            if (st != BN_OK)
+                return st;
+            /* contact cuts add patches: a target count holds for the mesh with its cuts */
+            if (!by_target || np <= o->target_patches || attempt == 8)
+                break;
+            free(patches);
+            free(pv);
+            size *= 1.02 * sqrt((double)np / (double)o->target_patches);
+        }
+    }
     s->largest_edge = 0;
     for (size_t q = 0; q < np; q++)
         for (unsigned k = 0; k < patches[q].ncorners; k++)

@@ -47,6 +47,13 @@ bn_status bn__read_off_binary(const char *path, bn__soup *out, const bn_log *log
 bn_status bn__scene_build(const char *path, const bn__soup *soup, const bn_load_opts *o,
                           bn_scene **out, bn_error *err);
 
+/* The mesher's patch geometry (area, centroid, normal) from its corners. */
+void bn__scene_patch_finish(bn_patch *p, const double *pv, const double normal[3]);
+/* Splits the patches of faces that other faces touch or pierce along the contact lines
+ * (src/scene/contact.c). Patches must be in face order; *patches and *pv are replaced (grown) and
+ * stay the caller's on failure. Counts go to s->stats. */
+bn_status bn__mesh_contacts(bn_scene *s, bn_patch **patches, size_t *np, double **pv, size_t *nv, bn_error *err);
+
 struct bn_scene {
     char        *path;
     bn_unit      unit;

@@ -1,0 +1,864 @@
+/* Contact lines. Where one face touches or pierces another face's front (a block standing on the
+ * floor, a model resting on a table or sunk into it), the receiving face's patches are split along
+ * the contact, so no patch straddles the lit floor and the hidden floor underneath.
+ *
+ * A contact on face P is the zero set of another face Q on P's plane, clipped to P's interior:
+ * Q's edge when Q touches P's plane along it, the line where Q crosses the plane, or every edge of
+ * Q when Q lies on P facing it (a block's bottom). Lines on P's boundary (walls meeting the floor
+ * at its edge) and faces coplanar with P facing the same way cut nothing. Each patch of P that a
+ * contact segment passes through is split along the segment's line into convex pieces; points the
+ * cuts create on an edge shared with a neighbouring patch are inserted into the neighbour too, so
+ * the patch mesh of a face stays free of T-junctions. Pieces become triangles or quads (the
+ * patch's corners must stay 3 or 4): a fan from a corner whose neighbours are corners, or from
+ * the piece's centroid. Areas sum to the face's as before. */
+#include "scene/scene_internal.h"
+#include "base/vec.h"
+
+#include <math.h>
+#include <string.h>
+
+#ifndef BN__SLIVER
+#define BN__SLIVER 1e-2
+#endif
+
+typedef struct {
+    double o[3], e1[3], e2[3], n[3];
+} bn__frame;
+
+typedef struct {
+    double a[2], b[2];
+} bn__seg;
+
+typedef struct {
+    size_t off, n;     /* ring in the id pool */
+    size_t orig;       /* the patch it came from */
+    int    changed;
+} bn__piece;
+
+typedef struct {
+    bn_scene *s;
+    /* growable outputs */
+    bn_patch *patches;
+    size_t    np, np_cap;
+    double   *pv;
+    size_t    nv, nv_cap;
+    /* per face scratch */
+    size_t   *pool;
+    size_t    npool, pool_cap;
+    bn__piece *pieces;
+    size_t    npieces, pieces_cap;
+    size_t   *fresh;    /* vertices the cuts made on the current face */
+    size_t    nfresh, fresh_cap;
+    bn__seg  *segs;
+    size_t    nsegs, segs_cap;
+    bn__frame fr;
+    double    tol;      /* plane distance that counts as touching */
+    double    snap;     /* points closer than this are one point */
+    double    keep;     /* on the current face: a patch corner this close to a contact line is
+                           taken as on it, so cuts never leave slivers thinner than this */
+} bn__cx;
+
+static int bn__grow(void **p, size_t *cap, size_t need, size_t size)
+{
+    size_t c = *cap ? *cap : 16;
+    void *q;
+    if (need <= *cap)
+        return 1;
+    while (c < need)
+        c *= 2;
+    q = bn__realloc_array(*p, c, size);
+    if (!q)
+        return 0;
+    *p = q;
+    *cap = c;
+    return 1;
+}
+
+static const double *bn__fvert(const bn_scene *s, const bn_face *f, unsigned i)
+{
+    return s->verts + 3 * s->fidx[f->first + i];
+}
+
+static void bn__frame_of(const bn_scene *s, const bn_face *f, bn__frame *fr)
+{
+    memcpy(fr->o, bn__fvert(s, f, 0), sizeof fr->o);
+    memcpy(fr->n, f->normal, sizeof fr->n);
+    bn_v3_sub(bn__fvert(s, f, 1), fr->o, fr->e1);
+    /* remove any normal component so the frame is exactly orthonormal */
+    bn_v3_madd(fr->e1, -bn_v3_dot(fr->e1, fr->n), fr->n, fr->e1);
+    bn_v3_normalize(fr->e1);
+    bn_v3_cross(fr->n, fr->e1, fr->e2);
+}
+
+static void bn__to2(const bn__frame *fr, const double p[3], double q[2])
+{
+    double d[3];
+    bn_v3_sub(p, fr->o, d);
+    q[0] = bn_v3_dot(d, fr->e1);
+    q[1] = bn_v3_dot(d, fr->e2);
+}
+
+static double bn__cross2(const double a[2], const double b[2], const double c[2])
+{
+    return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+}
+
+/* Clips segment [a, b] to the convex CCW polygon poly[0..n) shrunk by `inset`: the parameters
+ * [*t0, *t1] of the part inside. 0 when nothing is left. */
+static int bn__clip(const double (*poly)[2], unsigned n, const double a[2], const double b[2], double inset,
+                    double *t0, double *t1)
+{
+    double lo = 0, hi = 1, d[2] = {b[0] - a[0], b[1] - a[1]};
+    for (unsigned i = 0; i < n; i++) {
+        const double *p = poly[i], *q = poly[(i + 1) % n];
+        double m[2] = {-(q[1] - p[1]), q[0] - p[0]}, len = hypot(m[0], m[1]), sa, sd;
+        if (!(len > 0))
+            continue;
+        m[0] /= len;
+        m[1] /= len;
+        sa = m[0] * (a[0] - p[0]) + m[1] * (a[1] - p[1]) - inset;   /* >= 0 inside */
+        sd = m[0] * d[0] + m[1] * d[1];
+        if (sd == 0) {
+            if (sa < 0)
+                return 0;
+        } else {
+            double t = -sa / sd;
+            if (sd > 0)
+                lo = fmax(lo, t);
+            else
+                hi = fmin(hi, t);
+        }
+        if (lo >= hi)
+            return 0;
+    }
+    *t0 = lo;
+    *t1 = hi;
+    return 1;
+}
+
+static int bn__add_seg(bn__cx *c, const double a3[3], const double b3[3], const double (*poly)[2], unsigned n)
+{
+    double a[2], b[2], t0, t1;
+    bn__to2(&c->fr, a3, a);
+    bn__to2(&c->fr, b3, b);
+    if (hypot(b[0] - a[0], b[1] - a[1]) <= 2 * c->tol)
+        return 1;
+    /* inset by tol: contacts on P's boundary (or within tol of it) cut nothing */
+    if (!bn__clip(poly, n, a, b, c->tol, &t0, &t1))
+        return 1;
+    {
+        bn__seg sg;
+        for (int k = 0; k < 2; k++) {
+            sg.a[k] = a[k] + t0 * (b[k] - a[k]);
+            sg.b[k] = a[k] + t1 * (b[k] - a[k]);
+        }
+        if (hypot(sg.b[0] - sg.a[0], sg.b[1] - sg.a[1]) <= 2 * c->tol)
+            return 1;
+        if (!bn__grow((void **)&c->segs, &c->segs_cap, c->nsegs + 1, sizeof *c->segs))
+            return 0;
+        c->segs[c->nsegs++] = sg;
+    }
+    return 1;
+}
+
+/* The zero set of face q on face p's plane, as segments in p's frame. 0 on OOM. */
+static int bn__contacts_of(bn__cx *c, const bn_face *p, const double (*poly)[2], unsigned np, const bn_face *q)
+{
+    const bn_scene *s = c->s;
+    double d[4], pts[8][3], dmax = -INFINITY;
+    unsigned n = q->nverts, npts = 0, zero = 0;
+    for (unsigned k = 0; k < n; k++) {
+        double r[3];
+        bn_v3_sub(bn__fvert(s, q, k), c->fr.o, r);
+        d[k] = bn_v3_dot(r, c->fr.n);
+        if (fabs(d[k]) <= c->tol) {
+            d[k] = 0;
+            zero++;
+        }
+        dmax = fmax(dmax, d[k]);
+    }
+    if (zero == n) {
+        /* coplanar: a face lying on p and facing it touches p along its whole outline */
+        if (bn_v3_dot(q->normal, p->normal) >= 0)
+            return 1;
+        for (unsigned k = 0; k < n; k++)
+            if (!bn__add_seg(c, bn__fvert(s, q, k), bn__fvert(s, q, (k + 1) % n), poly, np))
+                return 0;
+        return 1;
+    }
+    if (!(dmax > 0))
+        return 1;   /* q lies behind p's plane: p's back neither emits nor reflects */
+    for (unsigned k = 0; k < n; k++) {
+        unsigned k1 = (k + 1) % n;
+        if (d[k] == 0)
+            memcpy(pts[npts++], bn__fvert(s, q, k), sizeof pts[0]);
+        if ((d[k] > 0 && d[k1] < 0) || (d[k] < 0 && d[k1] > 0)) {
+            double t = d[k] / (d[k] - d[k1]), e[3];
+            bn_v3_sub(bn__fvert(s, q, k1), bn__fvert(s, q, k), e);
+            bn_v3_madd(bn__fvert(s, q, k), t, e, pts[npts++]);
+        }
+    }
+    if (npts < 2)
+        return 1;
+    {
+        unsigned ba = 0, bb = 1;
+        double best = -1;
+        for (unsigned i = 0; i < npts; i++)
+            for (unsigned j = i + 1; j < npts; j++) {
+                double dd = bn_v3_dist(pts[i], pts[j]);
+                if (dd > best) {
+                    best = dd;
+                    ba = i;
+                    bb = j;
+                }
+            }
+        return bn__add_seg(c, pts[ba], pts[bb], poly, np);
+    }
+}
+
+static void bn__xy(const bn__cx *c, size_t id, double q[2])
+{
+    bn__to2(&c->fr, c->pv + 3 * id, q);
+}
+
+/* The vertex at parameter t along a -> b (computed from the lower id, so two pieces sharing the
+ * edge make the same point), reused when the face already has a fresh one there. */
+static int bn__cut_vertex(bn__cx *c, size_t a, size_t b, double da, double db, size_t *out)
+{
+    double t, p[3], e[3];
+    if (a > b) {
+        size_t tmp = a;
+        double td = da;
+        a = b;
+        b = tmp;
+        da = db;
+        db = td;
+    }
+    t = da / (da - db);
+    bn_v3_sub(c->pv + 3 * b, c->pv + 3 * a, e);
+    bn_v3_madd(c->pv + 3 * a, t, e, p);
+    for (size_t i = 0; i < c->nfresh; i++)
+        if (bn_v3_dist(c->pv + 3 * c->fresh[i], p) <= c->snap) {
+            *out = c->fresh[i];
+            return 1;
+        }
+    if (!bn__grow((void **)&c->pv, &c->nv_cap, c->nv + 1, 3 * sizeof(double)) ||
+        !bn__grow((void **)&c->fresh, &c->fresh_cap, c->nfresh + 1, sizeof(size_t)))
+        return 0;
+    memcpy(c->pv + 3 * c->nv, p, sizeof p);
+    c->fresh[c->nfresh++] = c->nv;
+    *out = c->nv++;
+    return 1;
+}
+
+static int bn__new_piece(bn__cx *c, const size_t *ids, size_t n, size_t orig, int changed)
+{
+    if (!bn__grow((void **)&c->pool, &c->pool_cap, c->npool + n, sizeof(size_t)) ||
+        !bn__grow((void **)&c->pieces, &c->pieces_cap, c->npieces + 1, sizeof *c->pieces))
+        return 0;
+    memcpy(c->pool + c->npool, ids, n * sizeof(size_t));
+    c->pieces[c->npieces].off = c->npool;
+    c->pieces[c->npieces].n = n;
+    c->pieces[c->npieces].orig = orig;
+    c->pieces[c->npieces].changed = changed;
+    c->npool += n;
+    c->npieces++;
+    return 1;
+}
+
+/* Splits piece k along segment g where g passes through it. 0 on OOM. */
+static int bn__cut(bn__cx *c, size_t k, const bn__seg *g, size_t *tmp_l, size_t *tmp_r)
+{
+    bn__piece pc = c->pieces[k];
+    double u[2] = {g->b[0] - g->a[0], g->b[1] - g->a[1]}, len = hypot(u[0], u[1]), nrm[2];
+    double dmin = INFINITY, dmax = -INFINITY;
+    double xy[64][2], dist[64], t0, t1;
+    size_t nl = 0, nr = 0;
+    if (pc.n > 64)
+        return 1;   /* a piece this complex is left as it is */
+    nrm[0] = -u[1] / len;
+    nrm[1] = u[0] / len;
+    for (size_t i = 0; i < pc.n; i++) {
+        bn__xy(c, c->pool[pc.off + i], xy[i]);
+        dist[i] = nrm[0] * (xy[i][0] - g->a[0]) + nrm[1] * (xy[i][1] - g->a[1]);
+        dmin = fmin(dmin, dist[i]);
+        dmax = fmax(dmax, dist[i]);
+    }
+    /* corners within keep of the line count as on it (the cut bends through them): no slivers */
+    for (size_t i = 0; i < pc.n; i++)
+        if (fabs(dist[i]) <= c->keep)
+            dist[i] = 0;
+    if (!(dmax > c->keep && -dmin > c->keep))
+        return 1;
+    /* the segment itself must pass through the piece, not only its line */
+    if (!bn__clip((const double(*)[2])xy, (unsigned)pc.n, g->a, g->b, 0, &t0, &t1) || (t1 - t0) * len <= c->keep)
+        return 1;
+    for (size_t i = 0; i < pc.n; i++) {
+        size_t i1 = (i + 1) % pc.n, a = c->pool[pc.off + i], b = c->pool[pc.off + i1];
+        double da = dist[i], db = dist[i1];
+        if (da >= 0)
+            tmp_l[nl++] = a;
+        if (da <= 0)
+            tmp_r[nr++] = a;
+        if ((da > 0 && db < 0) || (da < 0 && db > 0)) {
+            size_t v;
+            if (!bn__cut_vertex(c, a, b, da, db, &v))
+                return 0;
+            tmp_l[nl++] = v;
+            tmp_r[nr++] = v;
+        }
+    }
+    if (nl < 3 || nr < 3)
+        return 1;
+    /* piece k becomes the left part (its ring rewritten at the pool's end), the right is new */
+    {
+        size_t orig = pc.orig;
+        if (!bn__new_piece(c, tmp_r, nr, orig, 1) || !bn__new_piece(c, tmp_l, nl, orig, 1))
+            return 0;
+        c->pieces[k] = c->pieces[c->npieces - 1];
+        c->npieces--;
+    }
+    return 1;
+}
+
+/* Inserts the fresh vertices that lie inside an edge of piece k (a neighbour's cut). */
+static int bn__mend(bn__cx *c, size_t k, size_t *tmp, size_t tmp_cap)
+{
+    bn__piece pc = c->pieces[k];
+    size_t n = 0;
+    int any = 0;
+    for (size_t i = 0; i < pc.n; i++) {
+        size_t a = c->pool[pc.off + i], b = c->pool[pc.off + (i + 1) % pc.n], m = 0;
+        double pa[2], pb[2], e[2], l2, ts[64];
+        size_t ids[64];
+        bn__xy(c, a, pa);
+        bn__xy(c, b, pb);
+        e[0] = pb[0] - pa[0];
+        e[1] = pb[1] - pa[1];
+        l2 = e[0] * e[0] + e[1] * e[1];
+        if (n + 1 > tmp_cap)
+            return 1;
+        tmp[n++] = a;
+        if (!(l2 > 0))
+            continue;
+        for (size_t j = 0; j < c->nfresh && m < 64; j++) {
+            size_t w = c->fresh[j];
+            double pw[2], t, perp;
+            if (w == a || w == b)
+                continue;
+            bn__xy(c, w, pw);
+            t = ((pw[0] - pa[0]) * e[0] + (pw[1] - pa[1]) * e[1]) / l2;
+            perp = fabs((pw[0] - pa[0]) * e[1] - (pw[1] - pa[1]) * e[0]) / sqrt(l2);
+            if (t > 0 && t < 1 && perp <= 16 * c->snap) {
+                size_t q = m++;
+                while (q > 0 && ts[q - 1] > t) {   /* insertion sort along the edge */
+                    ts[q] = ts[q - 1];
+                    ids[q] = ids[q - 1];
+                    q--;
+                }
+                ts[q] = t;
+                ids[q] = w;
+            }
+        }
+        for (size_t q = 0; q < m && n < tmp_cap; q++)
+            tmp[n++] = ids[q];
+        any |= m > 0;
+    }
+    if (!any)
+        return 1;
+    if (!bn__new_piece(c, tmp, n, pc.orig, 1))
+        return 0;
+    c->pieces[k] = c->pieces[c->npieces - 1];
+    c->npieces--;
+    return 1;
+}
+
+static int bn__emit(bn__cx *c, size_t face, const bn_patch *orig, const size_t *ring, size_t n)
+{
+    bn_patch p;
+    if (!bn__grow((void **)&c->patches, &c->np_cap, c->np + n, sizeof *c->patches))
+        return 0;
+    memset(&p, 0, sizeof p);
+    p.face = face;
+    p.material = orig->material;
+    if (n == 3 || n == 4) {
+        p.ncorners = (unsigned)n;
+        memcpy(p.corner, ring, n * sizeof(size_t));
+        bn__scene_patch_finish(&p, c->pv, c->fr.n);
+        c->patches[c->np++] = p;
+        return 1;
+    }
+    return 0;
+}
+
+/* A convex ring of n >= 3 points (some possibly on the straight line between their neighbours)
+ * as triangles and quads that keep every point as a corner. */
+static int bn__emit_piece(bn__cx *c, size_t face, const bn_patch *orig, const size_t *ring, size_t n)
+{
+    double (*xy)[2] = bn__malloc_array(n, sizeof *xy);
+    int *corner = bn__malloc_array(n, sizeof *corner), ok = 0;
+    size_t ncorner = 0, apex = SIZE_MAX;
+    if (!xy || !corner)
+        goto done;
+    for (size_t i = 0; i < n; i++)
+        bn__xy(c, ring[i], xy[i]);
+    for (size_t i = 0; i < n; i++) {
+        const double *a = xy[(i + n - 1) % n], *b = xy[i], *d = xy[(i + 1) % n];
+        double la = hypot(b[0] - a[0], b[1] - a[1]), lb = hypot(d[0] - b[0], d[1] - b[1]);
+        corner[i] = bn__cross2(a, b, d) > 1e-9 * la * lb;
+        ncorner += (size_t)corner[i];
+    }
+    if (n == 3 || (n == 4 && ncorner == 4)) {
+        ok = bn__emit(c, face, orig, ring, n);
+        goto done;
+    }
+    for (size_t i = 0; i < n && apex == SIZE_MAX; i++)
+        if (corner[(i + 1) % n] && corner[(i + n - 1) % n])
+            apex = i;
+    if (apex != SIZE_MAX) {
+        for (size_t j = 1; j + 1 < n; j++) {
+            size_t tri[3] = {ring[apex], ring[(apex + j) % n], ring[(apex + j + 1) % n]};
+            if (!bn__emit(c, face, orig, tri, 3))
+                goto done;
+        }
+        ok = 1;
+    } else {
+        /* no such corner: a fan from the area centroid, a new vertex inside */
+        double cen[3] = {0, 0, 0}, w = 0;
+        size_t cv;
+        for (size_t j = 1; j + 1 < n; j++) {
+            const double *a = c->pv + 3 * ring[0], *b = c->pv + 3 * ring[j], *d = c->pv + 3 * ring[j + 1];
+            double ar = fabs(bn__cross2(xy[0], xy[j], xy[j + 1]));
+            for (int k = 0; k < 3; k++)
+                cen[k] += ar * (a[k] + b[k] + d[k]) / 3.0;
+            w += ar;
+        }
+        if (!(w > 0) || !bn__grow((void **)&c->pv, &c->nv_cap, c->nv + 1, 3 * sizeof(double)))
+            goto done;
+        bn_v3_scale(cen, 1.0 / w, cen);
+        memcpy(c->pv + 3 * c->nv, cen, sizeof cen);
+        cv = c->nv++;
+        for (size_t j = 0; j < n; j++) {
+            size_t tri[3] = {cv, ring[j], ring[(j + 1) % n]};
+            if (!bn__emit(c, face, orig, tri, 3))
+                goto done;
+        }
+        ok = 1;
+    }
+done:
+    free(xy);
+    free(corner);
+    return ok;
+}
+
+/* Candidate faces near each face: a uniform grid over the faces' boxes. */
+typedef struct {
+    double lo[3], cell[3];
+    int    res[3];
+    size_t *start, *items;
+    size_t *big;      /* faces covering too many cells: tested against everything */
+    size_t  nbig;
+} bn__fgrid;
+
+#define BN__BIG_CELLS 4096
+
+static void bn__face_box(const bn_scene *s, const bn_face *f, double tol, double lo[3], double hi[3])
+{
+    for (int k = 0; k < 3; k++) {
+        lo[k] = INFINITY;
+        hi[k] = -INFINITY;
+    }
+    for (unsigned i = 0; i < f->nverts; i++)
+        for (int k = 0; k < 3; k++) {
+            lo[k] = fmin(lo[k], bn__fvert(s, f, i)[k] - tol);
+            hi[k] = fmax(hi[k], bn__fvert(s, f, i)[k] + tol);
+        }
+}
+
+static void bn__cell_range(const bn__fgrid *g, const double lo[3], const double hi[3], int a[3], int b[3])
+{
+    for (int k = 0; k < 3; k++) {
+        double x0 = (lo[k] - g->lo[k]) / g->cell[k], x1 = (hi[k] - g->lo[k]) / g->cell[k];
+        a[k] = (int)bn_clamp(floor(x0), 0, g->res[k] - 1);
+        b[k] = (int)bn_clamp(floor(x1), 0, g->res[k] - 1);
+    }
+}
+
+static size_t bn__cells(const int a[3], const int b[3])
+{
+    return (size_t)(b[0] - a[0] + 1) * (size_t)(b[1] - a[1] + 1) * (size_t)(b[2] - a[2] + 1);
+}
+
+static void bn__fgrid_free(bn__fgrid *g)
+{
+    free(g->start);
+    free(g->items);
+    free(g->big);
+}
+
+static int bn__fgrid_build(const bn_scene *s, double tol, bn__fgrid *g)
+{
+    size_t nf = s->nfaces, ncell, total = 0;
+    int r = (int)bn_clamp(ceil(cbrt((double)nf)), 1, 128);
+    memset(g, 0, sizeof *g);
+    for (int k = 0; k < 3; k++) {
+        double ext = s->hi[k] - s->lo[k] + 2 * tol;
+        g->lo[k] = s->lo[k] - tol;
+        g->res[k] = r;
+        g->cell[k] = ext > 0 ? ext / r : 1;
+    }
+    ncell = (size_t)r * r * r;
+    g->start = bn__calloc(ncell + 1, sizeof(size_t));
+    g->big = bn__malloc_array(nf + 1, sizeof(size_t));
+    if (!g->start || !g->big)
+        return 0;
+    for (int pass = 0; pass < 2; pass++) {
+        for (size_t f = 0; f < nf; f++) {
+            double lo[3], hi[3];
+            int a[3], b[3];
+            bn__face_box(s, &s->faces[f], tol, lo, hi);
+            bn__cell_range(g, lo, hi, a, b);
+            if (bn__cells(a, b) > BN__BIG_CELLS) {
+                if (pass == 0)
+                    g->big[g->nbig++] = f;
+                continue;
+            }
+            for (int z = a[2]; z <= b[2]; z++)
+                for (int y = a[1]; y <= b[1]; y++)
+                    for (int x = a[0]; x <= b[0]; x++) {
+                        size_t cell = ((size_t)z * r + y) * r + x;
+                        if (pass == 0)
+                            g->start[cell + 1]++;
+                        else
+                            g->items[g->start[cell]++] = f;
+                    }
+        }
+        if (pass == 0) {
+            for (size_t i = 0; i < ncell; i++)
+                g->start[i + 1] += g->start[i];
+            total = g->start[ncell];
+            g->items = bn__malloc_array(total + 1, sizeof(size_t));
+            if (!g->items)
+                return 0;
+        } else {
+            /* the fill advanced each start to the next cell's: shift back */
+            memmove(g->start + 1, g->start, ncell * sizeof(size_t));
+            g->start[0] = 0;
+        }
+    }
+    return 1;
+}
+
+static double bn__diameter(const bn__cx *c, const bn_patch *p)
+{
+    double d = 0;
+    for (unsigned i = 0; i < p->ncorners; i++)
+        for (unsigned j = i + 1; j < p->ncorners; j++)
+            d = fmax(d, bn_v3_dist(c->pv + 3 * p->corner[i], c->pv + 3 * p->corner[j]));
+    return d;
+}
+
+/* Corner sines of a patch in the face's frame (ring order), 0 if any is not positive. */
+static int bn__sines(const bn__cx *c, const bn_patch *p, double *sn)
+{
+    double xy[4][2];
+    unsigned n = p->ncorners;
+    for (unsigned k = 0; k < n; k++)
+        bn__xy(c, p->corner[k], xy[k]);
+    for (unsigned k = 0; k < n; k++) {
+        const double *a = xy[(k + n - 1) % n], *b = xy[k], *d = xy[(k + 1) % n];
+        double la = hypot(b[0] - a[0], b[1] - a[1]), lb = hypot(d[0] - b[0], d[1] - b[1]);
+        if (!(la > 0 && lb > 0))
+            return 0;
+        sn[k] = bn__cross2(a, b, d) / (la * lb);
+        if (!(sn[k] > 0))
+            return 0;
+    }
+    return 1;
+}
+
+/* Moves interior patch corners that lie within a third of a patch's width of a contact segment
+ * onto it (its nearest point), where the patches around them stay convex with every corner's sine
+ * at least half what it was and none grows wider than 4/3 of the face's widest patch (diameter).
+ * Cuts then run along patch edges there instead of leaving thin strips beside the contact: a strip a millimetre wide against a wall is where the patch-constant
+ * solution is least right (the corner's light changes fastest). Returns 0 on OOM. */
+static int bn__snap_corners(bn__cx *c, const bn_face *f, bn_patch *pt, size_t n, const double (*poly)[2])
+{
+    size_t vmin = SIZE_MAX, vmax = 0, nloc, *start = NULL, *inc = NULL, *fill = NULL;
+    double width = INFINITY, longest = 0;
+    int ok = 0;
+    for (size_t p = 0; p < n; p++) {
+        double lp = 0;
+        for (unsigned k = 0; k < pt[p].ncorners; k++) {
+            size_t v = pt[p].corner[k];
+            vmin = v < vmin ? v : vmin;
+            vmax = v > vmax ? v : vmax;
+            lp = fmax(lp, bn_v3_dist(c->pv + 3 * v, c->pv + 3 * pt[p].corner[(k + 1) % pt[p].ncorners]));
+        }
+        if (lp > 0)
+            width = fmin(width, (pt[p].ncorners == 3 ? 2 : 1) * pt[p].area / lp);
+        longest = fmax(longest, bn__diameter(c, &pt[p]));
+    }
+    if (n == 0 || !(width < INFINITY))
+        return 1;
+    nloc = vmax - vmin + 1;
+    start = bn__calloc(nloc + 1, sizeof(size_t));
+    fill = bn__calloc(nloc + 1, sizeof(size_t));
+    inc = bn__malloc_array(4 * n + 1, sizeof(size_t));
+    if (!start || !fill || !inc)
+        goto done;
+    for (size_t p = 0; p < n; p++)
+        for (unsigned k = 0; k < pt[p].ncorners; k++)
+            start[pt[p].corner[k] - vmin + 1]++;
+    for (size_t v = 0; v < nloc; v++)
+        start[v + 1] += start[v];
+    for (size_t p = 0; p < n; p++)
+        for (unsigned k = 0; k < pt[p].ncorners; k++) {
+            size_t v = pt[p].corner[k] - vmin;
+            inc[start[v] + fill[v]++] = p;
+        }
+    for (size_t v = 0; v < nloc; v++) {
+        size_t id = v + vmin;
+        double q[2], best = INFINITY, to[2] = {0, 0}, old[3], sn0[16][4];
+        int boundary = 0, good = 1;
+        if (start[v] == start[v + 1] || start[v + 1] - start[v] > 16)
+            continue;
+        bn__xy(c, id, q);
+        for (unsigned k = 0; k < f->nverts && !boundary; k++) {
+            const double *a = poly[k], *b = poly[(k + 1) % f->nverts];
+            double len = hypot(b[0] - a[0], b[1] - a[1]);
+            boundary = len > 0 && fabs(bn__cross2(a, b, q)) / len <= c->tol;
+        }
+        if (boundary)
+            continue;
+        for (size_t g = 0; g < c->nsegs; g++) {
+            const bn__seg *sg = &c->segs[g];
+            double e[2] = {sg->b[0] - sg->a[0], sg->b[1] - sg->a[1]}, l2 = e[0] * e[0] + e[1] * e[1], t, p2[2], d;
+            t = l2 > 0 ? bn_clamp(((q[0] - sg->a[0]) * e[0] + (q[1] - sg->a[1]) * e[1]) / l2, 0, 1) : 0;
+            p2[0] = sg->a[0] + t * e[0];
+            p2[1] = sg->a[1] + t * e[1];
+            d = hypot(q[0] - p2[0], q[1] - p2[1]);
+            if (d < best) {
+                best = d;
+                to[0] = p2[0];
+                to[1] = p2[1];
+            }
+        }
+        if (!(best <= width / 3) || best <= c->snap)
+            continue;
+        for (size_t i = start[v]; i < start[v + 1] && good; i++)
+            good = bn__sines(c, &pt[inc[i]], sn0[i - start[v]]);
+        if (!good)
+            continue;
+        memcpy(old, c->pv + 3 * id, sizeof old);
+        for (int k = 0; k < 3; k++)
+            c->pv[3 * id + k] = c->fr.o[k] + to[0] * c->fr.e1[k] + to[1] * c->fr.e2[k];
+        for (size_t i = start[v]; i < start[v + 1] && good; i++) {
+            const bn_patch *p = &pt[inc[i]];
+            double sn[4];
+            good = bn__sines(c, p, sn);
+            for (unsigned k = 0; k < p->ncorners && good; k++)
+                good = sn[k] >= 0.5 * sn0[i - start[v]][k];
+            good = good && bn__diameter(c, p) <= 4.0 / 3.0 * longest;
+        }
+        if (!good) {
+            memcpy(c->pv + 3 * id, old, sizeof old);
+            continue;
+        }
+        for (size_t i = start[v]; i < start[v + 1]; i++)
+            bn__scene_patch_finish(&pt[inc[i]], c->pv, f->normal);
+    }
+    ok = 1;
+done:
+    free(start);
+    free(fill);
+    free(inc);
+    return ok;
+}
+
+/* Cuts face f's patches along its contact segments (c->segs); appends the result. */
+static int bn__cut_face(bn__cx *c, size_t f, bn_patch *src, size_t p0, size_t p1, const double (*poly)[2],
+                        bn_scene_stats *st)
+{
+    size_t *tl = NULL, *tr = NULL, cap = 0, changed = 0, before;
+    int ok = 0;
+    c->npool = c->npieces = c->nfresh = 0;
+    c->keep = 0;
+    for (size_t p = p0; p < p1; p++)
+        for (unsigned k = 0; k < src[p].ncorners; k++)
+            c->keep = fmax(c->keep, bn_v3_dist(c->pv + 3 * src[p].corner[k], c->pv + 3 * src[p].corner[(k + 1) % src[p].ncorners]));
+    c->keep *= BN__SLIVER;
+    if (!bn__snap_corners(c, &c->s->faces[f], src + p0, p1 - p0, poly))
+        return 0;
+    for (size_t p = p0; p < p1; p++)
+        if (!bn__new_piece(c, src[p].corner, src[p].ncorners, p, 0))
+            return 0;
+    for (size_t g = 0; g < c->nsegs; g++) {
+        size_t count = c->npieces;
+        for (size_t k = 0; k < count; k++) {
+            size_t n = c->pieces[k].n + 2;
+            if (n > cap) {
+                size_t *a = bn__realloc_array(tl, n, sizeof *tl), *b;
+                if (!a)
+                    goto done;
+                tl = a;
+                b = bn__realloc_array(tr, n, sizeof *tr);
+                if (!b)
+                    goto done;
+                tr = b;
+                cap = n;
+            }
+            if (!bn__cut(c, k, &c->segs[g], tl, tr))
+                goto done;
+        }
+    }
+    if (c->nfresh > 0) {
+        size_t count = c->npieces, mcap = 0;
+        for (size_t k = 0; k < count; k++)
+            mcap = mcap > c->pieces[k].n ? mcap : c->pieces[k].n;
+        mcap = mcap * 65;
+        if (mcap > cap) {
+            size_t *a = bn__realloc_array(tl, mcap, sizeof *tl);
+            if (!a)
+                goto done;
+            tl = a;
+            cap = mcap;
+        }
+        for (size_t k = 0; k < count; k++)
+            if (!bn__mend(c, k, tl, cap))
+                goto done;
+    }
+    before = c->np;
+    for (size_t k = 0; k < c->npieces; k++) {
+        const bn__piece *pc = &c->pieces[k];
+        const bn_patch *o = &src[pc->orig];
+        if (!pc->changed) {
+            if (!bn__grow((void **)&c->patches, &c->np_cap, c->np + 1, sizeof *c->patches))
+                goto done;
+            c->patches[c->np++] = *o;
+            continue;
+        }
+        if (!bn__emit_piece(c, f, o, c->pool + pc->off, pc->n))
+            goto done;
+    }
+    for (size_t p = p0; p < p1; p++) {
+        int hit = 0;
+        for (size_t k = 0; k < c->npieces && !hit; k++)
+            hit = c->pieces[k].orig == p && c->pieces[k].changed;
+        changed += (size_t)hit;
+    }
+    st->contact_patches_split += changed;
+    st->contact_patches_made += (c->np - before) - ((p1 - p0) - changed);
+    ok = 1;
+done:
+    free(tl);
+    free(tr);
+    return ok;
+}
+
+bn_status bn__mesh_contacts(bn_scene *s, bn_patch **patches, size_t *np, double **pv, size_t *nv, bn_error *err)
+{
+    bn__cx c;
+    bn__fgrid g;
+    size_t nf = s->nfaces, *first = NULL, *stamp = NULL;
+    double d[3];
+    bn_scene_stats *st = &s->stats;
+    bn_status rc = BN_ENOMEM;
+
+    st->contact_segments = st->contact_faces = st->contact_patches_split = st->contact_patches_made = 0;
+    memset(&c, 0, sizeof c);
+    c.s = s;
+    c.patches = NULL;
+    c.pv = *pv;
+    c.nv = c.nv_cap = *nv;
+    bn_v3_sub(s->hi, s->lo, d);
+    c.tol = 1e-6 * bn_v3_len(d);
+    c.snap = 1e-9 * bn_v3_len(d);
+    if (!(c.tol > 0))
+        return BN_OK;
+    if (!bn__fgrid_build(s, c.tol, &g))
+        goto fail;
+    first = bn__calloc(nf + 1, sizeof(size_t));
+    stamp = bn__calloc(nf, sizeof(size_t));
+    if (!first || !stamp)
+        goto fail;
+    for (size_t p = 0; p < *np; p++)
+        first[(*patches)[p].face + 1]++;
+    for (size_t f = 0; f < nf; f++)
+        first[f + 1] += first[f];
+    for (size_t p = 0; p + 1 < *np; p++)
+        if ((*patches)[p].face > (*patches)[p + 1].face) {
+            rc = bn_error_set(err, BN_EINTERNAL, "contact cuts: patches are not in face order");
+            goto fail;
+        }
+    for (size_t fi = 0; fi < nf; fi++) {
+        const bn_face *f = &s->faces[fi];
+        double poly[4][2], lo[3], hi[3];
+        int a[3], b[3];
+        c.nsegs = 0;
+        bn__frame_of(s, f, &c.fr);
+        for (unsigned k = 0; k < f->nverts; k++)
+            bn__to2(&c.fr, bn__fvert(s, f, k), poly[k]);
+        bn__face_box(s, f, c.tol, lo, hi);
+        bn__cell_range(&g, lo, hi, a, b);
+#define BN__VISIT(q)                                                                                  \
+    do {                                                                                              \
+        size_t q_ = (q);                                                                              \
+        if (q_ != fi && stamp[q_] != fi + 1) {                                                        \
+            stamp[q_] = fi + 1;                                                                       \
+            if (!bn__contacts_of(&c, f, (const double(*)[2])poly, f->nverts, &s->faces[q_]))          \
+                goto fail;                                                                            \
+        }                                                                                             \
+    } while (0)
+        if (bn__cells(a, b) > BN__BIG_CELLS) {
+            for (size_t q = 0; q < nf; q++)
+                BN__VISIT(q);
+        } else {
+            for (int z = a[2]; z <= b[2]; z++)
+                for (int y = a[1]; y <= b[1]; y++)
+                    for (int x = a[0]; x <= b[0]; x++) {
+                        size_t cell = ((size_t)z * g.res[1] + y) * g.res[0] + x;
+                        for (size_t i = g.start[cell]; i < g.start[cell + 1]; i++)
+                            BN__VISIT(g.items[i]);
+                    }
+            for (size_t i = 0; i < g.nbig; i++)
+                BN__VISIT(g.big[i]);
+        }
+#undef BN__VISIT
+        if (c.nsegs == 0) {
+            size_t n = first[fi + 1] - first[fi];
+            if (!bn__grow((void **)&c.patches, &c.np_cap, c.np + n, sizeof *c.patches))
+                goto fail;
+            memcpy(c.patches + c.np, *patches + first[fi], n * sizeof *c.patches);
+            c.np += n;
+            continue;
+        }
+        st->contact_segments += c.nsegs;
+        st->contact_faces++;
+        if (!bn__cut_face(&c, fi, *patches, first[fi], first[fi + 1], (const double(*)[2])poly, st))
+            goto fail;
+    }
+    free(*patches);
+    *patches = c.patches;
+    *np = c.np;
+    *pv = c.pv;
+    *nv = c.nv;
+    c.patches = NULL;
+    rc = BN_OK;
+fail:
+    if (rc != BN_OK) {
+        *pv = c.pv;   /* grown or not, the caller owns it */
+        *nv = c.nv;
+        if (rc == BN_ENOMEM)
+            bn_error_set(err, BN_ENOMEM, "out of memory while cutting patches along contact lines");
+    }
+    free(c.patches);
+    free(c.pool);
+    free(c.pieces);
+    free(c.fresh);
+    free(c.segs);
+    free(first);
+    free(stamp);
+    bn__fgrid_free(&g);
+    return rc;
+}
