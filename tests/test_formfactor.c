@@ -115,6 +115,7 @@ static bn_scene *sb_scene(sb *s, double patch_size)
     bn_mesh_opts_default(&mo);
     mo.patch_size = patch_size;
     mo.no_subdivide = patch_size <= 0;
+    mo.no_contacts = 1;   /* walls and floor mesh the same with and without blocks standing on them */
     if (bn_scene_mesh(scene, &mo, &err) != BN_OK)
         BN_FAIL("mesh: %s", err.msg);
     return scene;

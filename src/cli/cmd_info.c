@@ -79,6 +79,9 @@ int bn_cmd_info(int argc, char **argv, bn_cli_common *c)
            bn_scene_emitter_count(s), bn_scene_emitter_count(s) == 1 ? "" : "s", watts[0], watts[1], watts[2]);
     printf("patches     %zu (largest patch edge %.6g %s)\n", np, bn_scene_largest_patch_edge(s),
            bn_unit_name(bn_scene_unit(s)));
+    printf("contacts    %zu segments on %zu faces split %zu patches into %zu%s\n", st.contact_segments,
+           st.contact_faces, st.contact_patches_split, st.contact_patches_made,
+           so.no_contacts ? " (--no-contacts)" : "");
     bn__bytes((double)np * (double)np * 4.0, buf, sizeof buf);
     printf("dense K     %s as float (N^2 x 4 bytes; F is stored once for all channels)\n", buf);
     {

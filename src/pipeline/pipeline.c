@@ -56,6 +56,14 @@ bn_status bn_pipeline_scene(const char *path, const bn_pipeline_opts *o, bn_pipe
         }
     }
     p->seconds_mesh = bn__now() - t0;
+    if (st == BN_OK) {
+        bn_scene_stats ss = bn_scene_stats_get(p->scene);
+        if (ss.contact_faces > 0)
+            bn_logf(&o->load.log, BN_LOG_INFO,
+                    "contact lines: %zu segments on %zu face%s split %zu patches into %zu (--no-contacts: off)",
+                    ss.contact_segments, ss.contact_faces, ss.contact_faces == 1 ? "" : "s", ss.contact_patches_split,
+                    ss.contact_patches_made);
+    }
     if (st != BN_OK) {
         bn_scene_destroy(p->scene);
         p->scene = NULL;
