@@ -28,7 +28,7 @@ static void footprint(double fp[4][2])
     }
 }
 
-static void write_scene(void)
+static void write_scene_lifted(double lift)
 {
     double fp[4][2];
     FILE *fp_mtl = fopen(bn_test_tmp("block.mtl"), "w"), *f = fopen(bn_test_tmp("block.obj"), "w");
@@ -41,9 +41,9 @@ static void write_scene(void)
     fprintf(f, "v -1 0 -1\nv -1 0 1\nv 1 0 1\nv 1 0 -1\nf 1 2 3 4\n");
     /* the block: bottom (facing down, lying on the floor), top, four sides */
     for (int k = 0; k < 4; k++)
-        fprintf(f, "v %.17g 0 %.17g\n", fp[k][0], fp[k][1]);            /* 5..8 */
+        fprintf(f, "v %.17g %.17g %.17g\n", fp[k][0], lift, fp[k][1]);            /* 5..8 */
     for (int k = 0; k < 4; k++)
-        fprintf(f, "v %.17g %.17g %.17g\n", fp[k][0], H_BLOCK, fp[k][1]); /* 9..12 */
+        fprintf(f, "v %.17g %.17g %.17g\n", fp[k][0], lift + H_BLOCK, fp[k][1]); /* 9..12 */
     /* footprint order in (x, z) is counter-clockwise seen from -y, so as written it faces -y */
     fprintf(f, "f 5 6 7 8\nf 12 11 10 9\n");
     for (int k = 0; k < 4; k++) {
@@ -55,6 +55,8 @@ static void write_scene(void)
             HALF_LIGHT);
     fclose(f);
 }
+
+static void write_scene(void) { write_scene_lifted(0); }
 
 /* Signed side of (x, z) against the footprint: > 0 inside by that distance, < 0 outside. */
 static double inside(const double fp[4][2], double x, double z)
@@ -194,6 +196,26 @@ static double patch_ff(const double fp[4][2], const double *pv, const bn_patch *
     return sum / area;
 }
 
+/* Floor patches whose corners lie on both sides of the footprint's outline. */
+static size_t straddling(const double fp[4][2], const bn_scene *s)
+{
+    size_t np, npv, n = 0;
+    const bn_patch *pt = bn_scene_patches(s, &np);
+    const double *pv = bn_scene_patch_vertices(s, &npv);
+    for (size_t i = 0; i < np; i++) {
+        double lo = INFINITY, hi = -INFINITY;
+        if (pt[i].face != 0)
+            continue;
+        for (unsigned k = 0; k < pt[i].ncorners; k++) {
+            double d = inside(fp, pv[3 * pt[i].corner[k]], pv[3 * pt[i].corner[k] + 2]);
+            lo = fmin(lo, d);
+            hi = fmax(hi, d);
+        }
+        n += lo < -1e-9 && hi > 1e-9;
+    }
+    return n;
+}
+
 static void solve(int no_contacts, bn_pipeline *p)
 {
     bn_pipeline_opts o;
@@ -216,7 +238,7 @@ BN_TEST(block_on_plane)
 {
     double fp[4][2];
     bn_pipeline p;
-    size_t np, npv, hidden = 0, beside = 0, straddle = 0;
+    size_t np, npv, hidden = 0, beside = 0;
     const bn_patch *pt;
     const double *pv;
     double worst = 0;
@@ -225,20 +247,7 @@ BN_TEST(block_on_plane)
 
     /* without the cuts, floor patches straddle the footprint (the test's premise) */
     solve(1, &p);
-    pt = bn_scene_patches(p.scene, &np);
-    pv = bn_scene_patch_vertices(p.scene, &npv);
-    for (size_t i = 0; i < np; i++) {
-        double lo = INFINITY, hi = -INFINITY;
-        if (pt[i].face != 0)
-            continue;
-        for (unsigned k = 0; k < pt[i].ncorners; k++) {
-            double s = inside(fp, pv[3 * pt[i].corner[k]], pv[3 * pt[i].corner[k] + 2]);
-            lo = fmin(lo, s);
-            hi = fmax(hi, s);
-        }
-        straddle += lo < -1e-9 && hi > 1e-9;
-    }
-    BN_ASSERT_GT(straddle, 10);
+    BN_ASSERT_GT(straddling(fp, p.scene), 10);
     bn_pipeline_free(&p);
 
     solve(0, &p);
@@ -281,4 +290,32 @@ BN_TEST(block_on_plane)
     BN_ASSERT_GT(hidden, 10);
     BN_ASSERT_GT(beside, 20);
     bn_pipeline_free(&p);
+}
+
+/* A block 2 mm above the floor does not touch it; --contact-gap 5 mm says it does, and then no floor
+ * patch straddles its footprint (projected onto the floor). */
+BN_TEST(block_lifted_needs_gap)
+{
+    double fp[4][2];
+    bn_load_opts lo;
+    bn_mesh_opts mo;
+    bn_scene *s;
+    bn_error err;
+    write_scene_lifted(0.002);
+    footprint(fp);
+    bn_load_opts_default(&lo);
+    lo.log.quiet = 1;
+    BN_ASSERT_STATUS(bn_scene_load(bn_test_tmp("block.obj"), &lo, &s, &err), BN_OK);
+    bn_mesh_opts_default(&mo);
+    mo.patch_size = 0.1;
+    BN_ASSERT_STATUS(bn_scene_mesh(s, &mo, &err), BN_OK);
+    BN_ASSERT_EQ(bn_scene_stats_get(s).contact_faces, 0);
+    BN_ASSERT_GT(straddling(fp, s), 10);
+    mo.contact_gap = 0.005;
+    BN_ASSERT_STATUS(bn_scene_mesh(s, &mo, &err), BN_OK);
+    BN_ASSERT_EQ(bn_scene_stats_get(s).contact_faces, 1);
+    BN_ASSERT_EQ(straddling(fp, s), 0);
+    mo.contact_gap = -1;
+    BN_ASSERT_STATUS(bn_scene_mesh(s, &mo, &err), BN_EINPUT);
+    bn_scene_destroy(s);
 }

@@ -86,6 +86,10 @@ typedef struct bn_mesh_opts {
      * corners near a contact move onto it (no thin strips; a patch grows by at most a third), so
      * patch edges there may reach BN_CONTACT_STRETCH times the grid's longest edge. */
     int    no_contacts;
+    /* Distance from a face's plane that still counts as touching it, scene units (0: 1e-6 of the
+     * scene's diameter). A scanned model that rests on a floor with its base a millimetre above
+     * it (the bunny box) needs about that much. */
+    double contact_gap;
 } bn_mesh_opts;
 void bn_mesh_opts_default(bn_mesh_opts *o);   /* target_patches = BN_DEFAULT_PATCHES */
 #define BN_DEFAULT_PATCHES 1200

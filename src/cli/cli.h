@@ -67,6 +67,7 @@ typedef struct bn_cli_scene {
     size_t patches;
     int    no_subdivide;
     int    no_contacts;
+    double contact_gap;
     double planar_tol;
 } bn_cli_scene;
 void bn_cli_add_scene(bn_optset *s, bn_cli_scene *o);

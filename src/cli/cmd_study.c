@@ -228,6 +228,7 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
         o.mesh.target_patches = so.patches;
     o.mesh.no_subdivide = so.no_subdivide;
     o.mesh.no_contacts = so.no_contacts;
+    o.mesh.contact_gap = so.contact_gap;
     bn_cli_ff_opts(&ffo, c, &o.ff);
     o.ff.quiet = 1;
     o.ff.cache_path = NULL;   /* every setting is built and timed */

@@ -274,6 +274,8 @@ void bn_cli_add_scene(bn_optset *s, bn_cli_scene *o)
                               "one patch per input polygon (after triangulation; no contact cuts)"});
     bn_optset_add(s, (bn_opt){"no-contacts", 0, BN_OPT_FLAG, &o->no_contacts, NULL, 0, 0, NULL,
                               "do not split patches along contact lines (where a face touches or pierces another's front, as a block on the floor)"});
+    bn_optset_add(s, (bn_opt){"contact-gap", 0, BN_OPT_DOUBLE, &o->contact_gap, NULL, 0, 1e300, "G",
+                              "distance from a face's plane that still counts as touching it, scene units (default 1e-6 of the scene's diameter)"});
     bn_optset_add(s, (bn_opt){"planar-tol", 0, BN_OPT_DOUBLE, &o->planar_tol, NULL, 0, 1, "T",
                               "non-planarity allowed before a polygon is split, relative to its size (default 1e-6)"});
 }

@@ -53,6 +53,8 @@ typedef struct {
     size_t    nsegs, segs_cap;
     bn__frame fr;
     double    tol;      /* plane distance that counts as touching */
+    double    edge;     /* 1e-6 of the scene's diameter: contacts this near a face's boundary, or
+                           this short, cut nothing */
     double    snap;     /* points closer than this are one point */
     double    keep;     /* on the current face: a patch corner this close to a contact line is
                            taken as on it, so cuts never leave slivers thinner than this */
@@ -141,10 +143,10 @@ static int bn__add_seg(bn__cx *c, const double a3[3], const double b3[3], const 
     double a[2], b[2], t0, t1;
     bn__to2(&c->fr, a3, a);
     bn__to2(&c->fr, b3, b);
-    if (hypot(b[0] - a[0], b[1] - a[1]) <= 2 * c->tol)
+    if (hypot(b[0] - a[0], b[1] - a[1]) <= 2 * c->edge)
         return 1;
-    /* inset by tol: contacts on P's boundary (or within tol of it) cut nothing */
-    if (!bn__clip(poly, n, a, b, c->tol, &t0, &t1))
+    /* inset: contacts on P's boundary (or within `edge` of it) cut nothing */
+    if (!bn__clip(poly, n, a, b, c->edge, &t0, &t1))
         return 1;
     {
         bn__seg sg;
@@ -152,7 +154,7 @@ static int bn__add_seg(bn__cx *c, const double a3[3], const double b3[3], const 
             sg.a[k] = a[k] + t0 * (b[k] - a[k]);
             sg.b[k] = a[k] + t1 * (b[k] - a[k]);
         }
-        if (hypot(sg.b[0] - sg.a[0], sg.b[1] - sg.a[1]) <= 2 * c->tol)
+        if (hypot(sg.b[0] - sg.a[0], sg.b[1] - sg.a[1]) <= 2 * c->edge)
             return 1;
         if (!bn__grow((void **)&c->segs, &c->segs_cap, c->nsegs + 1, sizeof *c->segs))
             return 0;
@@ -627,7 +629,7 @@ static int bn__snap_corners(bn__cx *c, const bn_face *f, bn_patch *pt, size_t n,
         for (unsigned k = 0; k < f->nverts && !boundary; k++) {
             const double *a = poly[k], *b = poly[(k + 1) % f->nverts];
             double len = hypot(b[0] - a[0], b[1] - a[1]);
-            boundary = len > 0 && fabs(bn__cross2(a, b, q)) / len <= c->tol;
+            boundary = len > 0 && fabs(bn__cross2(a, b, q)) / len <= c->edge;
         }
         if (boundary)
             continue;
@@ -756,7 +758,8 @@ done:
     return ok;
 }
 
-bn_status bn__mesh_contacts(bn_scene *s, bn_patch **patches, size_t *np, double **pv, size_t *nv, bn_error *err)
+bn_status bn__mesh_contacts(bn_scene *s, double gap, bn_patch **patches, size_t *np, double **pv, size_t *nv,
+                           bn_error *err)
 {
     bn__cx c;
     bn__fgrid g;
@@ -772,7 +775,8 @@ bn_status bn__mesh_contacts(bn_scene *s, bn_patch **patches, size_t *np, double 
     c.pv = *pv;
     c.nv = c.nv_cap = *nv;
     bn_v3_sub(s->hi, s->lo, d);
-    c.tol = 1e-6 * bn_v3_len(d);
+    c.edge = 1e-6 * bn_v3_len(d);
+    c.tol = gap > 0 ? gap : c.edge;
     c.snap = 1e-9 * bn_v3_len(d);
     if (!(c.tol > 0))
         return BN_OK;

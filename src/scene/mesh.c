@@ -84,7 +84,7 @@ void bn__scene_patch_finish(bn_patch *p, const double *pv, const double normal[3
 }
 
 /* The regular grid of every face at patch edge `size`, then the contact cuts (unless off). */
-static bn_status bn__grid(bn_scene *s, double size, int contacts, bn_patch **out_p, size_t *out_np, double **out_v,
+static bn_status bn__grid(bn_scene *s, double size, int contacts, double gap, bn_patch **out_p, size_t *out_np, double **out_v,
                           size_t *out_nv, bn_error *err)
 {
     size_t np = 0, nv = 0, ip = 0, iv = 0;
@@ -178,7 +178,7 @@ static bn_status bn__grid(bn_scene *s, double size, int contacts, bn_patch **out
     s->stats.contact_segments = s->stats.contact_faces = 0;
     s->stats.contact_patches_split = s->stats.contact_patches_made = 0;
     if (contacts) {
-        bn_status st = bn__mesh_contacts(s, &patches, &np, &pv, &nv, err);
+        bn_status st = bn__mesh_contacts(s, gap, &patches, &np, &pv, &nv, err);
         if (st != BN_OK) {
             free(patches);
             free(pv);
@@ -232,6 +232,8 @@ bn_status bn_scene_mesh(bn_scene *s, const bn_mesh_opts *o, bn_error *err)
     } else {
         return bn_error_set(err, BN_EUSAGE, "meshing needs a patch size, a target patch count or no-subdivide");
     }
+    if (!(o->contact_gap >= 0 && isfinite(o->contact_gap)))
+        return bn_error_set(err, BN_EINPUT, "--contact-gap %g is not a finite length >= 0", o->contact_gap);
     count_d = bn__count(s, size);
     if (count_d > 1e9)
         return bn_error_set(err, BN_ENOMEM, "patch size %g would make %.3g patches (more than 1e9)", size, count_d);
@@ -239,7 +241,7 @@ bn_status bn_scene_mesh(bn_scene *s, const bn_mesh_opts *o, bn_error *err)
         int contacts = !o->no_subdivide && !o->no_contacts,
             by_target = !o->no_subdivide && !(o->patch_size > 0) && o->target_patches > 0;
         for (int attempt = 0;; attempt++) {
-            bn_status st = bn__grid(s, size, contacts, &patches, &np, &pv, &nv, err);
+            bn_status st = bn__grid(s, size, contacts, o->contact_gap, &patches, &np, &pv, &nv, err);
             if (st != BN_OK)
                 return st;
             /* contact cuts add patches: a target count holds for the mesh with its cuts */

@@ -50,9 +50,11 @@ bn_status bn__scene_build(const char *path, const bn__soup *soup, const bn_load_
 /* The mesher's patch geometry (area, centroid, normal) from its corners. */
 void bn__scene_patch_finish(bn_patch *p, const double *pv, const double normal[3]);
 /* Splits the patches of faces that other faces touch or pierce along the contact lines
- * (src/scene/contact.c). Patches must be in face order; *patches and *pv are replaced (grown) and
+ * (src/scene/contact.c); gap: the distance that counts as touching (0: 1e-6 of the scene's
+ * diameter). Patches must be in face order; *patches and *pv are replaced (grown) and
  * stay the caller's on failure. Counts go to s->stats. */
-bn_status bn__mesh_contacts(bn_scene *s, bn_patch **patches, size_t *np, double **pv, size_t *nv, bn_error *err);
+bn_status bn__mesh_contacts(bn_scene *s, double gap, bn_patch **patches, size_t *np, double **pv, size_t *nv,
+                           bn_error *err);
 
 struct bn_scene {
     char        *path;
