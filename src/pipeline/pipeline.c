@@ -41,8 +41,13 @@ bn_status bn_pipeline_scene(const char *path, const bn_pipeline_opts *o, bn_pipe
     st = bn_scene_load(path, &o->load, &p->scene, err);
     p->seconds_load = bn__now() - t0;
     t0 = bn__now();
-    if (st == BN_OK)
-        st = bn_scene_mesh(p->scene, &o->mesh, err);
+    if (st == BN_OK) {
+        /* a default mesh may be redone for the hierarchy: the first one then only counts, without
+         * the contact cuts (seconds on a million polygons) */
+        bn_mesh_opts m0 = o->mesh;
+        m0.no_contacts |= o->mesh_auto;
+        st = bn_scene_mesh(p->scene, &m0, err);
+    }
     if (st == BN_OK && o->mesh_auto) {
         size_t n, nf;
         bn_scene_patches(p->scene, &n);
@@ -53,6 +58,8 @@ bn_status bn_pipeline_scene(const char *path, const bn_pipeline_opts *o, bn_pipe
             m.no_subdivide = 0;
             m.target_patches = nf + BN_HIERARCHY_EXTRA_PATCHES;
             st = bn_scene_mesh(p->scene, &m, err);
+        } else if (!o->mesh.no_contacts) {
+            st = bn_scene_mesh(p->scene, &o->mesh, err);
         }
     }
     p->seconds_mesh = bn__now() - t0;

@@ -15,6 +15,7 @@
 #include "base/vec.h"
 
 #include <math.h>
+#include <stdint.h>
 #include <string.h>
 
 #ifndef BN__SLIVER
@@ -168,7 +169,14 @@ static int bn__contacts_of(bn__cx *c, const bn_face *p, const double (*poly)[2],
 {
     const bn_scene *s = c->s;
     double d[4], pts[8][3], dmax = -INFINITY;
-    unsigned n = q->nverts, npts = 0, zero = 0;
+    unsigned n = q->nverts, npts = 0, zero = 0, shared = 0;
+    /* a neighbour sharing an edge (two vertices) meets p's plane on that edge, p's boundary: cuts
+     * nothing (most candidate pairs in a fine scanned mesh) */
+    for (unsigned k = 0; k < n; k++)
+        for (unsigned j = 0; j < np; j++)
+            shared += s->fidx[q->first + k] == s->fidx[p->first + j];
+    if (shared >= 2)
+        return 1;
     for (unsigned k = 0; k < n; k++) {
         double r[3];
         bn_v3_sub(bn__fvert(s, q, k), c->fr.o, r);
@@ -453,12 +461,15 @@ done:
     return ok;
 }
 
-/* Candidate faces near each face: a uniform grid over the faces' boxes. */
+/* Candidate faces near each face: a hashed uniform grid over the faces' boxes, cells twice the
+ * median face's size (a scanned model's small triangles then share a cell with a few neighbours,
+ * not hundreds); faces covering more than BN__BIG_CELLS cells (walls, floors) are kept apart and
+ * tested against every face. */
 typedef struct {
-    double lo[3], cell[3];
-    int    res[3];
+    double lo[3], cell;
+    size_t nbucket;   /* a power of two */
     size_t *start, *items;
-    size_t *big;      /* faces covering too many cells: tested against everything */
+    size_t *big;
     size_t  nbig;
 } bn__fgrid;
 
@@ -477,18 +488,25 @@ static void bn__face_box(const bn_scene *s, const bn_face *f, double tol, double
         }
 }
 
-static void bn__cell_range(const bn__fgrid *g, const double lo[3], const double hi[3], int a[3], int b[3])
+static void bn__cell_range(const bn__fgrid *g, const double lo[3], const double hi[3], int64_t a[3], int64_t b[3])
 {
     for (int k = 0; k < 3; k++) {
-        double x0 = (lo[k] - g->lo[k]) / g->cell[k], x1 = (hi[k] - g->lo[k]) / g->cell[k];
-        a[k] = (int)bn_clamp(floor(x0), 0, g->res[k] - 1);
-        b[k] = (int)bn_clamp(floor(x1), 0, g->res[k] - 1);
+        a[k] = (int64_t)bn_clamp(floor((lo[k] - g->lo[k]) / g->cell), -1e15, 1e15);
+        b[k] = (int64_t)bn_clamp(floor((hi[k] - g->lo[k]) / g->cell), -1e15, 1e15);
     }
 }
 
-static size_t bn__cells(const int a[3], const int b[3])
+static double bn__cells(const int64_t a[3], const int64_t b[3])
 {
-    return (size_t)(b[0] - a[0] + 1) * (size_t)(b[1] - a[1] + 1) * (size_t)(b[2] - a[2] + 1);
+    return (double)(b[0] - a[0] + 1) * (double)(b[1] - a[1] + 1) * (double)(b[2] - a[2] + 1);
+}
+
+static size_t bn__bucket(const bn__fgrid *g, int64_t x, int64_t y, int64_t z)
+{
+    uint64_t h = (uint64_t)x * 0x9E3779B97F4A7C15ull ^ (uint64_t)y * 0xC2B2AE3D27D4EB4Full ^
+                 (uint64_t)z * 0x165667B19E3779F9ull;
+    h ^= h >> 29;
+    return (size_t)(h & (g->nbucket - 1));
 }
 
 static void bn__fgrid_free(bn__fgrid *g)
@@ -500,51 +518,76 @@ static void bn__fgrid_free(bn__fgrid *g)
 
 static int bn__fgrid_build(const bn_scene *s, double tol, bn__fgrid *g)
 {
-    size_t nf = s->nfaces, ncell, total = 0;
-    int r = (int)bn_clamp(ceil(cbrt((double)nf)), 1, 128);
+    size_t nf = s->nfaces, total = 0, nsample = nf < 4096 ? nf : 4096;
+    double *sz = bn__malloc_array(nsample + 1, sizeof(double)), ext = 0;
     memset(g, 0, sizeof *g);
-    for (int k = 0; k < 3; k++) {
-        double ext = s->hi[k] - s->lo[k] + 2 * tol;
-        g->lo[k] = s->lo[k] - tol;
-        g->res[k] = r;
-        g->cell[k] = ext > 0 ? ext / r : 1;
+    if (!sz)
+        return 0;
+    for (size_t i = 0; i < nsample; i++) {
+        double lo[3], hi[3], d[3];
+        bn__face_box(s, &s->faces[i * (nf / nsample)], 0, lo, hi);
+        bn_v3_sub(hi, lo, d);
+        sz[i] = bn_v3_len(d);
     }
-    ncell = (size_t)r * r * r;
-    g->start = bn__calloc(ncell + 1, sizeof(size_t));
+    /* the median by a partial selection would do; a sort of 4096 doubles is as cheap */
+    for (size_t i = 1; i < nsample; i++)
+        for (size_t j = i; j > 0 && sz[j - 1] > sz[j]; j--) {
+            double t = sz[j];
+            sz[j] = sz[j - 1];
+            sz[j - 1] = t;
+        }
+    for (int k = 0; k < 3; k++) {
+        g->lo[k] = s->lo[k] - tol;
+        ext = fmax(ext, s->hi[k] - s->lo[k] + 2 * tol);
+    }
+    g->cell = fmax(2 * (nsample ? sz[nsample / 2] : 0) + 2 * tol, ext / 1024);
+    free(sz);
+    if (!(g->cell > 0))
+        g->cell = 1;
     g->big = bn__malloc_array(nf + 1, sizeof(size_t));
-    if (!g->start || !g->big)
+    if (!g->big)
+        return 0;
+    for (size_t f = 0; f < nf; f++) {
+        double lo[3], hi[3];
+        int64_t a[3], b[3];
+        bn__face_box(s, &s->faces[f], tol, lo, hi);
+        bn__cell_range(g, lo, hi, a, b);
+        if (bn__cells(a, b) > BN__BIG_CELLS)
+            g->big[g->nbig++] = f;
+        else
+            total += (size_t)bn__cells(a, b);
+    }
+    g->nbucket = 1;
+    while (g->nbucket < 2 * total + 1)
+        g->nbucket *= 2;
+    g->start = bn__calloc(g->nbucket + 1, sizeof(size_t));
+    g->items = bn__malloc_array(total + 1, sizeof(size_t));
+    if (!g->start || !g->items)
         return 0;
     for (int pass = 0; pass < 2; pass++) {
         for (size_t f = 0; f < nf; f++) {
             double lo[3], hi[3];
-            int a[3], b[3];
+            int64_t a[3], b[3];
             bn__face_box(s, &s->faces[f], tol, lo, hi);
             bn__cell_range(g, lo, hi, a, b);
-            if (bn__cells(a, b) > BN__BIG_CELLS) {
-                if (pass == 0)
-                    g->big[g->nbig++] = f;
+            if (bn__cells(a, b) > BN__BIG_CELLS)
                 continue;
-            }
-            for (int z = a[2]; z <= b[2]; z++)
-                for (int y = a[1]; y <= b[1]; y++)
-                    for (int x = a[0]; x <= b[0]; x++) {
-                        size_t cell = ((size_t)z * r + y) * r + x;
+            for (int64_t z = a[2]; z <= b[2]; z++)
+                for (int64_t y = a[1]; y <= b[1]; y++)
+                    for (int64_t x = a[0]; x <= b[0]; x++) {
+                        size_t h = bn__bucket(g, x, y, z);
                         if (pass == 0)
-                            g->start[cell + 1]++;
+                            g->start[h + 1]++;
                         else
-                            g->items[g->start[cell]++] = f;
+                            g->items[g->start[h]++] = f;
                     }
         }
         if (pass == 0) {
-            for (size_t i = 0; i < ncell; i++)
+            for (size_t i = 0; i < g->nbucket; i++)
                 g->start[i + 1] += g->start[i];
-            total = g->start[ncell];
-            g->items = bn__malloc_array(total + 1, sizeof(size_t));
-            if (!g->items)
-                return 0;
         } else {
-            /* the fill advanced each start to the next cell's: shift back */
-            memmove(g->start + 1, g->start, ncell * sizeof(size_t));
+            /* the fill advanced each start to the next bucket's: shift back */
+            memmove(g->start + 1, g->start, g->nbucket * sizeof(size_t));
             g->start[0] = 0;
         }
     }
@@ -798,7 +841,7 @@ bn_status bn__mesh_contacts(bn_scene *s, double gap, bn_patch **patches, size_t 
     for (size_t fi = 0; fi < nf; fi++) {
         const bn_face *f = &s->faces[fi];
         double poly[4][2], lo[3], hi[3];
-        int a[3], b[3];
+        int64_t a[3], b[3];
         c.nsegs = 0;
         bn__frame_of(s, f, &c.fr);
         for (unsigned k = 0; k < f->nverts; k++)
@@ -818,11 +861,11 @@ bn_status bn__mesh_contacts(bn_scene *s, double gap, bn_patch **patches, size_t 
             for (size_t q = 0; q < nf; q++)
                 BN__VISIT(q);
         } else {
-            for (int z = a[2]; z <= b[2]; z++)
-                for (int y = a[1]; y <= b[1]; y++)
-                    for (int x = a[0]; x <= b[0]; x++) {
-                        size_t cell = ((size_t)z * g.res[1] + y) * g.res[0] + x;
-                        for (size_t i = g.start[cell]; i < g.start[cell + 1]; i++)
+            for (int64_t z = a[2]; z <= b[2]; z++)
+                for (int64_t y = a[1]; y <= b[1]; y++)
+                    for (int64_t x = a[0]; x <= b[0]; x++) {
+                        size_t h = bn__bucket(&g, x, y, z);
+                        for (size_t i = g.start[h]; i < g.start[h + 1]; i++)
                             BN__VISIT(g.items[i]);
                     }
             for (size_t i = 0; i < g.nbig; i++)

@@ -244,8 +244,9 @@ bn_status bn_scene_mesh(bn_scene *s, const bn_mesh_opts *o, bn_error *err)
             bn_status st = bn__grid(s, size, contacts, o->contact_gap, &patches, &np, &pv, &nv, err);
             if (st != BN_OK)
                 return st;
-            /* contact cuts add patches: a target count holds for the mesh with its cuts */
-            if (!by_target || np <= o->target_patches || attempt == 8)
+            /* contact cuts add patches: a target count holds for the mesh with its cuts (where the
+             * grid alone can meet it: one patch a face may already be more) */
+            if (!by_target || np <= o->target_patches || (double)np <= bn__count(s, size) || attempt == 8)
                 break;
             free(patches);
             free(pv);
