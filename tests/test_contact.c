@@ -196,21 +196,30 @@ static double patch_ff(const double fp[4][2], const double *pv, const bn_patch *
     return sum / area;
 }
 
+/* How far inside the footprint patch i's corners reach: the least and the most. */
+static void corner_sides(const double fp[4][2], const bn_scene *s, size_t i, double *lo, double *hi)
+{
+    const bn_patch *pt = bn_scene_patches(s, NULL) + i;
+    const double *pv = bn_scene_patch_vertices(s, NULL);
+    *lo = INFINITY;
+    *hi = -INFINITY;
+    for (unsigned k = 0; k < pt->ncorners; k++) {
+        double d = inside(fp, pv[3 * pt->corner[k]], pv[3 * pt->corner[k] + 2]);
+        *lo = fmin(*lo, d);
+        *hi = fmax(*hi, d);
+    }
+}
+
 /* Floor patches whose corners lie on both sides of the footprint's outline. */
 static size_t straddling(const double fp[4][2], const bn_scene *s)
 {
-    size_t np, npv, n = 0;
+    size_t np, n = 0;
     const bn_patch *pt = bn_scene_patches(s, &np);
-    const double *pv = bn_scene_patch_vertices(s, &npv);
     for (size_t i = 0; i < np; i++) {
-        double lo = INFINITY, hi = -INFINITY;
+        double lo, hi;
         if (pt[i].face != 0)
             continue;
-        for (unsigned k = 0; k < pt[i].ncorners; k++) {
-            double d = inside(fp, pv[3 * pt[i].corner[k]], pv[3 * pt[i].corner[k] + 2]);
-            lo = fmin(lo, d);
-            hi = fmax(hi, d);
-        }
+        corner_sides(fp, s, i, &lo, &hi);
         n += lo < -1e-9 && hi > 1e-9;
     }
     return n;
@@ -255,15 +264,11 @@ BN_TEST(block_on_plane)
     pt = bn_scene_patches(p.scene, &np);
     pv = bn_scene_patch_vertices(p.scene, &npv);
     for (size_t i = 0; i < np; i++) {
-        double lo = INFINITY, hi = -INFINITY;
+        double lo, hi;
         const double *ke = p.res.terms[1] + 3 * i, *L = p.res.L + 3 * i;
         if (pt[i].face != 0)
             continue;
-        for (unsigned k = 0; k < pt[i].ncorners; k++) {
-            double s = inside(fp, pv[3 * pt[i].corner[k]], pv[3 * pt[i].corner[k] + 2]);
-            lo = fmin(lo, s);
-            hi = fmax(hi, s);
-        }
+        corner_sides(fp, p.scene, i, &lo, &hi);
         /* no patch straddles the contact outline */
         if (lo < -1e-9 && hi > 1e-9)
             BN_FAIL("floor patch %zu straddles the footprint (corners %.3g .. %.3g inside)", i, lo, hi);

@@ -516,6 +516,37 @@ static void bn__fgrid_free(bn__fgrid *g)
     free(g->big);
 }
 
+/* Every face's cells: pass 0 sets the big faces aside and returns the others' cell count, pass 1
+ * counts per bucket, pass 2 fills. */
+static size_t bn__fgrid_walk(const bn_scene *s, double tol, bn__fgrid *g, int pass)
+{
+    size_t total = 0;
+    for (size_t f = 0; f < s->nfaces; f++) {
+        double lo[3], hi[3];
+        int64_t a[3], b[3];
+        bn__face_box(s, &s->faces[f], tol, lo, hi);
+        bn__cell_range(g, lo, hi, a, b);
+        if (bn__cells(a, b) > BN__BIG_CELLS) {
+            if (pass == 0)
+                g->big[g->nbig++] = f;
+            continue;
+        }
+        total += (size_t)bn__cells(a, b);
+        if (pass == 0)
+            continue;
+        for (int64_t z = a[2]; z <= b[2]; z++)
+            for (int64_t y = a[1]; y <= b[1]; y++)
+                for (int64_t x = a[0]; x <= b[0]; x++) {
+                    size_t h = bn__bucket(g, x, y, z);
+                    if (pass == 1)
+                        g->start[h + 1]++;
+                    else
+                        g->items[g->start[h]++] = f;
+                }
+    }
+    return total;
+}
+
 static int bn__fgrid_build(const bn_scene *s, double tol, bn__fgrid *g)
 {
     size_t nf = s->nfaces, total = 0, nsample = nf < 4096 ? nf : 4096;
@@ -547,16 +578,7 @@ static int bn__fgrid_build(const bn_scene *s, double tol, bn__fgrid *g)
     g->big = bn__malloc_array(nf + 1, sizeof(size_t));
     if (!g->big)
         return 0;
-    for (size_t f = 0; f < nf; f++) {
-        double lo[3], hi[3];
-        int64_t a[3], b[3];
-        bn__face_box(s, &s->faces[f], tol, lo, hi);
-        bn__cell_range(g, lo, hi, a, b);
-        if (bn__cells(a, b) > BN__BIG_CELLS)
-            g->big[g->nbig++] = f;
-        else
-            total += (size_t)bn__cells(a, b);
-    }
+    total = bn__fgrid_walk(s, tol, g, 0);
     g->nbucket = 1;
     while (g->nbucket < 2 * total + 1)
         g->nbucket *= 2;
@@ -564,33 +586,13 @@ static int bn__fgrid_build(const bn_scene *s, double tol, bn__fgrid *g)
     g->items = bn__malloc_array(total + 1, sizeof(size_t));
     if (!g->start || !g->items)
         return 0;
-    for (int pass = 0; pass < 2; pass++) {
-        for (size_t f = 0; f < nf; f++) {
-            double lo[3], hi[3];
-            int64_t a[3], b[3];
-            bn__face_box(s, &s->faces[f], tol, lo, hi);
-            bn__cell_range(g, lo, hi, a, b);
-            if (bn__cells(a, b) > BN__BIG_CELLS)
-                continue;
-            for (int64_t z = a[2]; z <= b[2]; z++)
-                for (int64_t y = a[1]; y <= b[1]; y++)
-                    for (int64_t x = a[0]; x <= b[0]; x++) {
-                        size_t h = bn__bucket(g, x, y, z);
-                        if (pass == 0)
-                            g->start[h + 1]++;
-                        else
-                            g->items[g->start[h]++] = f;
-                    }
-        }
-        if (pass == 0) {
-            for (size_t i = 0; i < g->nbucket; i++)
-                g->start[i + 1] += g->start[i];
-        } else {
-            /* the fill advanced each start to the next bucket's: shift back */
-            memmove(g->start + 1, g->start, g->nbucket * sizeof(size_t));
-            g->start[0] = 0;
-        }
-    }
+    bn__fgrid_walk(s, tol, g, 1);
+    for (size_t i = 0; i < g->nbucket; i++)
+        g->start[i + 1] += g->start[i];
+    bn__fgrid_walk(s, tol, g, 2);
+    /* the fill advanced each start to the next bucket's: shift back */
+    memmove(g->start + 1, g->start, g->nbucket * sizeof(size_t));
+    g->start[0] = 0;
     return 1;
 }
 
