@@ -324,3 +324,166 @@ BN_TEST(block_lifted_needs_gap)
     BN_ASSERT_STATUS(bn_scene_mesh(s, &mo, &err), BN_EINPUT);
     bn_scene_destroy(s);
 }
+
+/* Random blocks (turned, overlapping each other, some running off the floor's edge, some sunk into
+ * it so their sides pierce it) on a floor at
+ * random patch sizes: the mesher must keep its invariants with every cut: patch areas sum to the
+ * floor's, every patch is counter-clockwise with positive area, no patch straddles any footprint
+ * edge inside the floor, and no T-junction (every patch edge inside the floor is shared by two
+ * patches with the same two corners). */
+static double urand(unsigned *st)
+{
+    *st = *st * 1103515245u + 12345u;
+    return ((*st >> 8) & 0xffffff) / 16777216.0;
+}
+
+typedef struct { size_t a, b; } pedge;
+
+static int cmp_pedge(const void *x, const void *y)
+{
+    const pedge *e = x, *f = y;
+    if (e->a != f->a)
+        return e->a < f->a ? -1 : 1;
+    return e->b < f->b ? -1 : (e->b > f->b);
+}
+
+/* The length of segment p0-p1 (in (x, z)) inside floor patch p. */
+static double inside_length(const double p0[2], const double p1[2], const double *pv, const bn_patch *p)
+{
+    double lo = 0, hi = 1, d[2] = {p1[0] - p0[0], p1[1] - p0[1]}, orient = 0;
+    unsigned n = p->ncorners;
+    for (unsigned k = 0; k < n; k++) {
+        const double *a = pv + 3 * p->corner[k], *b = pv + 3 * p->corner[(k + 1) % n];
+        orient += a[0] * b[2] - b[0] * a[2];
+    }
+    for (unsigned k = 0; k < n; k++) {
+        const double *a = pv + 3 * p->corner[k], *b = pv + 3 * p->corner[(k + 1) % n];
+        /* inside: the side of edge a-b the polygon turns to */
+        double m[2] = {-(b[2] - a[2]), b[0] - a[0]};
+        double sa = (m[0] * (p0[0] - a[0]) + m[1] * (p0[1] - a[2])) * orient;
+        double sd = (m[0] * d[0] + m[1] * d[1]) * orient;
+        if (sd == 0) {
+            if (sa < 0)
+                return 0;
+        } else if (sd > 0) {
+            lo = fmax(lo, -sa / sd);
+        } else {
+            hi = fmin(hi, -sa / sd);
+        }
+    }
+    return hi > lo ? (hi - lo) * hypot(d[0], d[1]) : 0;
+}
+
+/* How far patch p reaches to the lesser side of the line through p0-p1. */
+static double side_extent(const double p0[2], const double p1[2], const double *pv, const bn_patch *p)
+{
+    double ex = p1[0] - p0[0], ez = p1[1] - p0[1], len = hypot(ex, ez), dmin = INFINITY, dmax = -INFINITY;
+    for (unsigned q = 0; q < p->ncorners; q++) {
+        const double *v = pv + 3 * p->corner[q];
+        double dd = (ex * (v[2] - p0[1]) - ez * (v[0] - p0[0])) / len;
+        dmin = fmin(dmin, dd);
+        dmax = fmax(dmax, dd);
+    }
+    return fmin(-dmin, dmax);
+}
+
+BN_TEST(random_blocks_keep_mesh_invariants)
+{
+    unsigned st = 12345;
+    for (int trial = 0; trial < 40; trial++) {
+        int nb = 1 + (int)(urand(&st) * 3);
+        double fps[3][4][2];
+        FILE *f = fopen(bn_test_tmp("rand.obj"), "w");
+        bn_load_opts lo;
+        bn_mesh_opts mo;
+        bn_scene *s;
+        bn_error err;
+        size_t np, nv, nfloor = 0, ne = 0;
+        const bn_patch *pt;
+        const double *pv;
+        double area = 0;
+        pedge *edges;
+        FILE *m = fopen(bn_test_tmp("rand.mtl"), "w");
+        fprintf(m, "newmtl white\nKd 0.5 0.5 0.5\nKe 1 1 1\n");
+        fclose(m);
+        fprintf(f, "mtllib rand.mtl\nusemtl white\nv -1 0 -1\nv -1 0 1\nv 1 0 1\nv 1 0 -1\nf 1 2 3 4\n");
+        for (int b = 0; b < nb; b++) {
+            double ang = urand(&st) * M_PI, c = cos(ang), sn = sin(ang), cx = urand(&st) * 2.4 - 1.2,
+                   cz = urand(&st) * 2.4 - 1.2, hx = 0.05 + urand(&st) * 0.5, hz = 0.05 + urand(&st) * 0.5,
+                   h = 0.02 + urand(&st) * 0.3, y0 = urand(&st) < 0.3 ? -0.9 * h * urand(&st) : 0;   /* some sunk in, not under */
+            double loc[4][2] = {{-hx, -hz}, {hx, -hz}, {hx, hz}, {-hx, hz}};
+            int base = 5 + 8 * b;
+            for (int k = 0; k < 4; k++) {
+                fps[b][k][0] = cx + c * loc[k][0] - sn * loc[k][1];
+                fps[b][k][1] = cz + sn * loc[k][0] + c * loc[k][1];
+                fprintf(f, "v %.17g %.17g %.17g\n", fps[b][k][0], y0, fps[b][k][1]);
+            }
+            for (int k = 0; k < 4; k++)
+                fprintf(f, "v %.17g %.17g %.17g\n", fps[b][k][0], y0 + h, fps[b][k][1]);
+            fprintf(f, "f %d %d %d %d\nf %d %d %d %d\n", base, base + 1, base + 2, base + 3, base + 7, base + 6,
+                    base + 5, base + 4);
+            for (int k = 0; k < 4; k++) {
+                int a = base + k, bb = base + (k + 1) % 4;
+                fprintf(f, "f %d %d %d %d\n", a, a + 4, bb + 4, bb);
+            }
+        }
+        fclose(f);
+        bn_load_opts_default(&lo);
+        lo.log.quiet = 1;
+        BN_ASSERT_STATUS(bn_scene_load(bn_test_tmp("rand.obj"), &lo, &s, &err), BN_OK);
+        bn_mesh_opts_default(&mo);
+        mo.patch_size = 0.03 + urand(&st) * 0.4;
+        BN_ASSERT_STATUS(bn_scene_mesh(s, &mo, &err), BN_OK);
+        pt = bn_scene_patches(s, &np);
+        pv = bn_scene_patch_vertices(s, &nv);
+        edges = malloc(4 * np * sizeof *edges);
+        for (size_t i = 0; i < np; i++) {
+            if (pt[i].face != 0)
+                continue;
+            nfloor++;
+            area += pt[i].area;
+            for (unsigned k = 0; k < pt[i].ncorners; k++) {
+                const double *a = pv + 3 * pt[i].corner[k], *b = pv + 3 * pt[i].corner[(k + 1) % pt[i].ncorners],
+                             *d = pv + 3 * pt[i].corner[(k + 2) % pt[i].ncorners];
+                /* counter-clockwise seen from +y: (b - a) x (d - b) has a positive y */
+                double cr = (b[2] - a[2]) * (d[0] - b[0]) - (b[0] - a[0]) * (d[2] - b[2]);
+                if (!(cr > 0))
+                    BN_FAIL("trial %d: floor patch %zu turns the wrong way at corner %u (%g)", trial, i, k, cr);
+                edges[ne].a = pt[i].corner[k];
+                edges[ne].b = pt[i].corner[(k + 1) % pt[i].ncorners];
+                ne++;
+            }
+            for (int b = 0; b < nb; b++) {
+                double lo_s, hi_s;
+                corner_sides(fps[b], s, i, &lo_s, &hi_s);
+                if (lo_s < -1e-9 && hi_s > 1e-9) {
+                    /* a footprint edge may leave the floor: only its part inside the floor cuts,
+                     * so test the patch against each edge's line where the edge passes through it */
+                    for (int k = 0; k < 4; k++) {
+                        double len = inside_length(fps[b][k], fps[b][(k + 1) % 4], pv, &pt[i]);
+                        /* the mesher leaves a piece whole when an edge crosses it for less than
+                         * 1% of a patch edge, or passes within that of a corner */
+                        if (len > 0.011 * mo.patch_size && side_extent(fps[b][k], fps[b][(k + 1) % 4], pv, &pt[i]) >
+                                                               0.011 * mo.patch_size)
+                            BN_FAIL("trial %d: floor patch %zu straddles block %d's edge %d (inside it for %g)",
+                                    trial, i, b, k, len);
+                    }
+                }
+            }
+        }
+        BN_ASSERT_REL(area, 4.0, 1e-12);
+        qsort(edges, ne, sizeof *edges, cmp_pedge);
+        for (size_t e = 0; e < ne; e++) {
+            pedge twin = {edges[e].b, edges[e].a};
+            const double *a = pv + 3 * edges[e].a, *b = pv + 3 * edges[e].b;
+            int on_boundary = (fabs(fabs(a[0]) - 1) < 1e-12 && fabs(a[0] - b[0]) < 1e-12) ||
+                              (fabs(fabs(a[2]) - 1) < 1e-12 && fabs(a[2] - b[2]) < 1e-12);
+            if (!on_boundary && !bsearch(&twin, edges, ne, sizeof *edges, cmp_pedge))
+                BN_FAIL("trial %d: floor edge %zu-%zu has no twin (a T-junction or a crack)", trial, edges[e].a,
+                        edges[e].b);
+        }
+        BN_ASSERT_GT(nfloor, 0);
+        free(edges);
+        bn_scene_destroy(s);
+    }
+}

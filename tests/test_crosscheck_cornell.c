@@ -212,16 +212,22 @@ BN_TEST(cornell_regions)
         for (int ch = 0; ch < 3; ch++)
             BN_ASSERT_REL(tr.mean[3 * g + ch], rr[3 * g + ch], 1e-12);
     bn_crosscheck_result_free(&cr);
-    {   /* a 10% error in one region's KE (the largest white region) is caught */
-        size_t worst = 0;
-        for (size_t g = 0; g < part.n; g++)
-            if (part.area[g] > part.area[worst] && rr[(part.n + g) * 3] > 0)
-                worst = g;
+    {   /* a 10% error in one region's KE is caught: the region the tracer knows best (smallest
+         * relative standard error of KE; a region the blocks shade is known to only 2-3%) */
+        size_t target = 0;
+        double best = INFINITY;
+        for (size_t g = 0; g < part.n; g++) {
+            double m = tr.mean[(part.n + g) * 3], se = tr.se[(part.n + g) * 3];
+            if (m > 0 && se / m < best) {
+                best = se / m;
+                target = g;
+            }
+        }
         for (int ch = 0; ch < 3; ch++)
-            rr[(part.n + worst) * 3 + ch] *= 1.1;
+            rr[(part.n + target) * 3 + ch] *= 1.1;
         if (bn_crosscheck_compare(&in, &cr, &err) != BN_OK)
             BN_FAIL("%s", err.msg);
-        fprintf(stderr, "with region %zu's KE +10%%: worst z_excess %.3f\n", worst, cr.worst_z);
+        fprintf(stderr, "with region %zu's KE +10%%: worst z_excess %.3f\n", target, cr.worst_z);
         BN_ASSERT_EQ(cr.pass, 0);
         bn_crosscheck_result_free(&cr);
     }
