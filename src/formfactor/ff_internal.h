@@ -40,6 +40,21 @@ typedef struct bn__quad_stats {
 double bn__ff_polygon_integral(const double *pi, size_t ni, const double ni_n[3], const double *pj, size_t nj,
                                double rtol, double atol, bn__quad_stats *st);
 
+/* The same integral, A_i F_ij, as a double contour integral whose inner integral is closed-form and
+ * whose outer one is adaptive Gauss-Kronrod to rtol (see kernel.c): exact to that at every
+ * separation, for polygons wholly in front of each other (clip them first). */
+double bn__ff_contour(const double *pi, size_t ni, const double *pj, size_t nj, double rtol, bn__quad_stats *st);
+/* The tolerance the tests run the contour at. */
+#define BN_FF_EXACT_RTOL 1e-12
+
+/* A_i F_ij unoccluded, the way every caller gets it: near pairs (centroids closer than the larger
+ * diameter), where the point kernel's quadrature needs thousands of points and still misses by
+ * 1e-3 at a gap of 1e-3, by the contour to min(rtol, BN_FF_CONTOUR_RTOL); the others, whose
+ * integrand is smooth, by the adaptive quadrature to rtol (it meets 2e-7 or better there). */
+#define BN_FF_CONTOUR_RTOL 1e-9
+double bn__ff_unoccluded(const double *pi, size_t ni, const double ni_n[3], const double *pj, size_t nj, double rtol,
+                         double atol, bn__quad_stats *st);
+
 /* Uniform point in a convex polygon from (u, v) in [0,1)^2 (fan triangles chosen by area). */
 void bn__poly_sample(const double *v, size_t nv, double u, double w, double out[3]);
 

@@ -493,7 +493,7 @@ static double bn__pair_value(const bn_rt *rt, const bn__ffg *g, const bn_formfac
     if (o->method == BN_FF_ANALYTIC) {
         bn__quad_stats qs;
         /* A_i F_ij to relative rtol; the absolute floor keeps F errors below 1e-6 rtol. */
-        I = bn__ff_polygon_integral(p.a, p.na, ni, p.b, p.nb, rtol, 1e-6 * rtol * fmin(p.Aa, p.Ab), &qs);
+        I = bn__ff_unoccluded(p.a, p.na, ni, p.b, p.nb, rtol, 1e-6 * rtol * fmin(p.Aa, p.Ab), &qs);
         cnt->evals += qs.evals;
         if (maybe) {
             bn__rng r = bn__rng_make(o->seed, i, j);
@@ -1084,7 +1084,7 @@ double bn_ff_polygon_pair(const double *vi, size_t ni, const double *vj, size_t 
     na = bn__max_height(vj, nj, nni, vi) > 1e-12 * diam ? bn__poly_clip(vi, ni, nnj, vj, 1e-12 * diam, a) : 0;
     nb = na && bn__max_height(vi, ni, nnj, vj) > 1e-12 * diam ? bn__poly_clip(vj, nj, nni, vi, 1e-12 * diam, b) : 0;
     if (na && nb && na <= 4) {
-        f = bn__ff_polygon_integral(a, na, nni, b, nb, rtol > 0 ? rtol : 1e-6, 0, NULL) / Ai;
+        f = bn__ff_unoccluded(a, na, nni, b, nb, rtol > 0 ? rtol : 1e-6, 0, NULL) / Ai;
     } else if (na && nb) {
         /* Many corners (a disk as a polygon): a fan from the centroid instead of the fan from the
          * first corner, whose slivers span the polygon. The integrand is positive, so a relative
@@ -1232,7 +1232,7 @@ double bn__ff_pair_quick(const bn__ff_pairs *p, bn__ff_worker *w, size_t i, size
         return 0;
     if (S < 1)
         S = 1;
-    I = bn__ff_polygon_integral(pp.a, pp.na, ni, pp.b, pp.nb, rtol, 1e-6 * rtol * fmin(pp.Aa, pp.Ab), &qs) /
+    I = bn__ff_unoccluded(pp.a, pp.na, ni, pp.b, pp.nb, rtol, 1e-6 * rtol * fmin(pp.Aa, pp.Ab), &qs) /
         g->patch[i].area;
     w->c.evals += qs.evals;
     for (int round = 0; round < 2; round++) {
