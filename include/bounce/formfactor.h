@@ -35,6 +35,8 @@ typedef struct bn_formfactor_opts {
     const char  *cache_path;  /* NULL: no cache */
     bn_log       log;
     double       tolerance;   /* analytic: relative quadrature tolerance per pair (default 1e-5) */
+    int          quadrature_only;  /* analytic: near pairs too by the point kernel's quadrature (the
+                                      path before the closed form; for comparisons and bench/) */
     int          threads;     /* 0 = the caller's (all cores by default); results do not depend on it */
 } bn_formfactor_opts;
 void bn_formfactor_opts_default(bn_formfactor_opts *o);

@@ -97,6 +97,7 @@ typedef struct bn_cli_ff {
     double sparse_threshold;
     size_t max_memory;        /* bytes, 0 = 80% of physical memory */
     double tolerance;         /* 0 = default */
+    int    quadrature_only;
     const char *cache;        /* NULL: no cache */
     int    transport;         /* index into "auto|dense|sparse|hierarchical" (default auto) */
     double eps;               /* hierarchy: link tolerance (< 0: the default) */

@@ -50,6 +50,8 @@ void bn_cli_add_ff(bn_optset *s, bn_cli_ff *o)
                               "limit for F's storage (default 80% of physical memory)"});
     bn_optset_add(s, (bn_opt){"ff-tolerance", 0, BN_OPT_DOUBLE, &o->tolerance, NULL, 1e-12, 0.1, "T",
                               "analytic: relative quadrature tolerance per pair (default 1e-5)"});
+    bn_optset_add(s, (bn_opt){"ff-quadrature-only", 0, BN_OPT_FLAG, &o->quadrature_only, NULL, 0, 0, NULL,
+                              "analytic: near pairs too by the point kernel's quadrature instead of the closed form (for comparisons)"});
     bn_optset_add(s, (bn_opt){"cache", 0, BN_OPT_STRING, &o->cache, NULL, 0, 0, "FILE",
                               "reuse F from FILE when its key (scene, meshing, options) matches; else write it"});
 }
@@ -66,6 +68,7 @@ void bn_cli_ff_opts(const bn_cli_ff *o, const bn_cli_common *c, bn_formfactor_op
     out->max_memory = o->max_memory;
     if (o->tolerance > 0)
         out->tolerance = o->tolerance;
+    out->quadrature_only = o->quadrature_only;
     out->seed = c->seed;
     out->quiet = c->quiet;
     out->cache_path = o->cache;

@@ -67,10 +67,11 @@ static int bn__samples(const bn_formfactor_opts *o)
 
 void bn_formfactor_opts_describe(const bn_formfactor_opts *o, char *buf, size_t size)
 {
-    snprintf(buf, size, "method=%s samples=%d seed=%llu precision=%s storage=%s sparse_threshold=%.17g tolerance=%.17g",
+    snprintf(buf, size, "method=%s samples=%d seed=%llu precision=%s storage=%s sparse_threshold=%.17g tolerance=%.17g%s",
              bn_ff_method_name(o->method), bn__samples(o), (unsigned long long)o->seed,
              bn_precision_name(o->precision), o->storage ? o->storage : BN_STORAGE_DEFAULT, o->sparse_threshold,
-             o->method == BN_FF_ANALYTIC ? (o->tolerance > 0 ? o->tolerance : 1e-5) : 0.0);
+             o->method == BN_FF_ANALYTIC ? (o->tolerance > 0 ? o->tolerance : 1e-5) : 0.0,
+             o->method == BN_FF_ANALYTIC && o->quadrature_only ? " quadrature_only=1" : "");
 }
 
 /* ---- geometry shared by every pair ---- */
@@ -493,7 +494,9 @@ static double bn__pair_value(const bn_rt *rt, const bn__ffg *g, const bn_formfac
     if (o->method == BN_FF_ANALYTIC) {
         bn__quad_stats qs;
         /* A_i F_ij to relative rtol; the absolute floor keeps F errors below 1e-6 rtol. */
-        I = bn__ff_unoccluded(p.a, p.na, ni, p.b, p.nb, rtol, 1e-6 * rtol * fmin(p.Aa, p.Ab), &qs);
+        I = o->quadrature_only
+                ? bn__ff_polygon_integral(p.a, p.na, ni, p.b, p.nb, rtol, 1e-6 * rtol * fmin(p.Aa, p.Ab), &qs)
+                : bn__ff_unoccluded(p.a, p.na, ni, p.b, p.nb, rtol, 1e-6 * rtol * fmin(p.Aa, p.Ab), &qs);
         cnt->evals += qs.evals;
         if (maybe) {
             bn__rng r = bn__rng_make(o->seed, i, j);
