@@ -155,7 +155,7 @@ BN_TEST(perpendicular_common_edge_every_aspect)
 }
 
 /* A closed 2 x 3 x 5 box, one polygon a face: every row of F sums to 1, on the closed-form path to
- * 1e-12 and at the default settings (far pairs by quadrature to 1e-6) to 1e-9. */
+ * 1e-12 and at the default settings (the pair routine's tolerance, 1e-6) to 1e-7. */
 BN_TEST(closed_box_rows_sum_to_one)
 {
     double L[3] = {2, 3, 5}, faces[6][12], area[6], worst = 0, worst_default = 0;
@@ -186,5 +186,5 @@ BN_TEST(closed_box_rows_sum_to_one)
     fprintf(stderr, "closed box: worst |row sum - 1| %.2e (closed form), %.2e (default settings)\n", worst,
             worst_default);
     BN_ASSERT_LE(worst, 1e-12);
-    BN_ASSERT_LE(worst_default, 1e-9);
+    BN_ASSERT_LE(worst_default, 1e-7);
 }

@@ -709,6 +709,6 @@ double bn__ff_unoccluded(const double *pi, size_t ni, const double ni_n[3], cons
                          double atol, bn__quad_stats *st)
 {
     if (ni >= 3 && nj >= 3 && ni <= BN__FF_POLY_MAX && nj <= BN__FF_POLY_MAX && bn__ff_near(pi, ni, pj, nj))
-        return bn__ff_contour(pi, ni, pj, nj, fmin(rtol, BN_FF_CONTOUR_RTOL), st);
+        return bn__ff_contour(pi, ni, pj, nj, rtol, st);
     return bn__ff_polygon_integral(pi, ni, ni_n, pj, nj, rtol, atol, st);
 }
