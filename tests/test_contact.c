@@ -322,6 +322,8 @@ BN_TEST(block_lifted_needs_gap)
     BN_ASSERT_EQ(straddling(fp, s), 0);
     mo.contact_gap = -1;
     BN_ASSERT_STATUS(bn_scene_mesh(s, &mo, &err), BN_EINPUT);
+    mo.contact_gap = 1e300;   /* every face would touch every other */
+    BN_ASSERT_STATUS(bn_scene_mesh(s, &mo, &err), BN_EINPUT);
     bn_scene_destroy(s);
 }
 

@@ -585,10 +585,9 @@ static const double bn__gk_wg[4] = {0.129484966168869693270611432679082, 0.27970
 static void bn__panel_eval(const bn__cctx *cc, const double *pi, size_t ni, bn__panel *pn, size_t *evals)
 {
     const double *a = pi + 3 * pn->p, *b = pi + 3 * ((pn->p + 1) % ni);
-    double u[3], len, half = 0.5 * (pn->s1 - pn->s0), mid = 0.5 * (pn->s0 + pn->s1), k = 0, g = 0, m = 0;
+    double u[3], half = 0.5 * (pn->s1 - pn->s0), mid = 0.5 * (pn->s0 + pn->s1), k = 0, g = 0, m = 0;
     bn_v3_sub(b, a, u);
-    len = bn_v3_normalize(u);
-    (void)len;
+    bn_v3_normalize(u);
     for (int i = 0; i < 15; i++) {
         int j = i < 8 ? i : 14 - i;
         double t = i < 8 ? -bn__gk_x[i] : bn__gk_x[14 - i], x[3], f;

@@ -234,6 +234,14 @@ bn_status bn_scene_mesh(bn_scene *s, const bn_mesh_opts *o, bn_error *err)
     }
     if (!(o->contact_gap >= 0 && isfinite(o->contact_gap)))
         return bn_error_set(err, BN_EINPUT, "--contact-gap %g is not a finite length >= 0", o->contact_gap);
+    {
+        /* a gap near the scene's size would make every face touch every other (and cost N^2) */
+        double d[3];
+        bn_v3_sub(s->hi, s->lo, d);
+        if (o->contact_gap > 0.01 * bn_v3_len(d))
+            return bn_error_set(err, BN_EINPUT, "--contact-gap %g is more than 1%% of the scene's diameter %g",
+                                o->contact_gap, bn_v3_len(d));
+    }
     count_d = bn__count(s, size);
     if (count_d > 1e9)
         return bn_error_set(err, BN_ENOMEM, "patch size %g would make %.3g patches (more than 1e9)", size, count_d);
