@@ -1,6 +1,6 @@
 /* The form factors at bounce's default settings (bn_ff_polygon_pair, the routine the assembly
- * uses: near pairs by the double contour integral with its inner integral in closed form, the
- * others by adaptive quadrature of the point kernel) against the view-factor catalogue at every
+ * uses: every pair by the double contour integral with its inner integral in closed form, polygons
+ * of more than BN__FF_POLY_MAX corners as fan pieces) against the view-factor catalogue at every
  * separation and aspect ratio. References are evaluated here in quadruple precision (__float128), where the catalogue's
  * formulas lose digits in double (their terms cancel to the result's size at gap/side 1e3):
  * - parallel rectangles in any position: Ehlert and Smith's sum over corner differences (J.
@@ -65,7 +65,7 @@ static void rect_z(double *v, double x1, double x2, double y1, double y2, double
 static double ff(const double *a, const double *b, double *recip_rel)
 {
     if (recip_rel) {
-        double ab = bn__ff_contour(a, 4, b, 4, BN_FF_EXACT_RTOL, NULL), ba = bn__ff_contour(b, 4, a, 4, BN_FF_EXACT_RTOL, NULL);
+        double ab = bn__ff_contour(a, 4, b, 4, BN_FF_EXACT_RTOL, 0, NULL), ba = bn__ff_contour(b, 4, a, 4, BN_FF_EXACT_RTOL, 0, NULL);
         *recip_rel = fabs(ab - ba) / fmax(fabs(ab), 1e-300);
     }
     return bn_ff_polygon_pair(a, 4, b, 4, 0);
@@ -160,6 +160,40 @@ BN_TEST(perpendicular_common_edge_every_aspect)
     BN_ASSERT_LE(recip_moderate, 1e-12);
 }
 
+/* Polygons of more corners than the contour takes at once (BN__FF_POLY_MAX) go as fan pieces: a
+ * 1 x 2 rectangle and a 1.5 x 1 one written with extra corners along every edge (m per edge, so
+ * 4 (m + 1) corners, up to 36) are still the rectangles of the catalogue, at every gap. */
+static void rect_many(double *v, double x1, double x2, double y1, double y2, double z, int up, int m)
+{
+    double r[12];
+    size_t n = 0;
+    rect_z(r, x1, x2, y1, y2, z, up);
+    for (int k = 0; k < 4; k++)
+        for (int t = 0; t <= m; t++, n++)
+            for (int c = 0; c < 3; c++)
+                v[3 * n + c] = r[3 * k + c] + (double)t / (m + 1) * (r[3 * ((k + 1) % 4) + c] - r[3 * k + c]);
+}
+
+BN_TEST(many_corners_as_fan_pieces)
+{
+    double gaps[] = {1e-6, 1e-3, 1, 1000}, worst = 0;
+    int ms[] = {1, 2, 5, 8};
+    for (size_t g = 0; g < 4; g++)
+        for (size_t k = 0; k < 4; k++) {
+            double a[3 * 36], b[3 * 36], c = gaps[g], want = es(0, 1, 0, 2, 0.5, 2, 0.25, 1.25, c);
+            size_t n = 4 * (size_t)(ms[k] + 1);
+            char what[64];
+            rect_many(a, 0, 1, 0, 2, 0, 1, ms[k]);
+            rect_many(b, 0.5, 2, 0.25, 1.25, c, 0, ms[k]);
+            snprintf(what, sizeof what, "gap %g, %zu corners", c, n);
+            check(bn_ff_polygon_pair(a, n, b, n, 0), want, &worst, what);
+            /* and against a 4-corner partner */
+            rect_z(b, 0.5, 2, 0.25, 1.25, c, 0);
+            check(bn_ff_polygon_pair(a, n, b, 4, 0), want, &worst, what);
+        }
+    fprintf(stderr, "rectangles of 8 to 36 corners, gap 1e-6 .. 1e3: worst %.2e\n", worst);
+}
+
 /* A closed 2 x 3 x 5 box, one polygon a face: every row of F sums to 1, on the closed-form path to
  * 1e-12 and at the default settings (the pair routine's tolerance, 1e-6) to 1e-7. */
 BN_TEST(closed_box_rows_sum_to_one)
@@ -183,7 +217,7 @@ BN_TEST(closed_box_rows_sum_to_one)
         double row = 0, row_default = 0;
         for (int j = 0; j < 6; j++)
             if (j != i) {
-                row += bn__ff_contour(faces[i], 4, faces[j], 4, BN_FF_EXACT_RTOL, NULL) / area[i];
+                row += bn__ff_contour(faces[i], 4, faces[j], 4, BN_FF_EXACT_RTOL, 0, NULL) / area[i];
                 row_default += bn_ff_polygon_pair(faces[i], 4, faces[j], 4, 0);
             }
         worst = fmax(worst, fabs(row - 1));

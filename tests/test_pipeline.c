@@ -109,6 +109,61 @@ BN_TEST(precision_by_need)
     BN_ASSERT_GT(fabs(L - 1000) / 1000, 2e-6);   /* ... and then it misses the tolerance: the need was real */
 }
 
+/* The white furnace at bounce's defaults (form-factor tolerance, storage precision by need, solver
+ * tolerance 1e-6; only the mesh is coarser, which the furnace's answer does not depend on): for
+ * rho 0.5, 0.9, 0.99 and 0.999, every method gives L = Le / (1 - rho) within 1e-6 relative, and
+ * each term K^k E = rho^k Le. The form factors' row sums enter amplified by 1 / (1 - rho) = 1000
+ * at 0.999: at the quadrature's 1e-5 they cost 4.6e-6 there. */
+static void furnace_defaults(double rho, bn_solve_method method)
+{
+    bn_pipeline_opts o;
+    bn_pipeline p;
+    bn_error err;
+    char mtl[64], obj[64];
+    double worst = 0, worst_term = 0, Lx = 1 / (1 - rho);
+    FILE *fp;
+    snprintf(mtl, sizeof mtl, "fd%g.mtl", rho);
+    snprintf(obj, sizeof obj, "fd%g.obj", rho);
+    fp = fopen(bn_test_tmp(mtl), "w");
+    fprintf(fp, "newmtl furnace\nKd %.17g %.17g %.17g\nKe 1 1 1\n", rho, rho, rho);
+    fclose(fp);
+    fp = fopen(bn_test_tmp(obj), "w");
+    fprintf(fp, "mtllib %s\nusemtl furnace\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
+                "f 1 2 3 4\nf 5 8 7 6\nf 1 5 6 2\nf 2 6 7 3\nf 3 7 8 4\nf 4 8 5 1\n", mtl);
+    fclose(fp);
+    bn_pipeline_opts_default(&o);
+    o.load.log.quiet = 1;
+    o.mesh.target_patches = 150;
+    o.ff.quiet = 1;
+    o.solve.quiet = 1;
+    o.solve.log_sink.quiet = 1;
+    o.solve.method = method;
+    if (bn_pipeline_run(bn_test_tmp(obj), &o, &p, &err) != BN_OK)
+        BN_FAIL("rho %g, %s: %s", rho, bn_solve_method_name(method), err.msg);
+    BN_ASSERT_GT(p.n, 100);
+    for (size_t i = 0; i < 3 * p.n; i++) {
+        worst = fmax(worst, fabs(p.res.L[i] - Lx) / Lx);
+        for (int t = 0; t < p.res.nterms; t++)
+            worst_term = fmax(worst_term, fabs(p.res.terms[t][i] - pow(rho, t)) / pow(rho, t));
+    }
+    fprintf(stderr, "furnace rho %g, %-12s (%zu patches, %s): max |L - Le/(1-rho)| / L = %.3g, terms rho^k Le %.3g\n",
+            rho, bn_solve_method_name(method), p.n, bn_transport_name(p.k), worst, worst_term);
+    BN_ASSERT_LE(worst, 1e-6);
+    BN_ASSERT_LE(worst_term, 1e-6);
+    bn_pipeline_free(&p);
+}
+
+static void furnace_defaults_all(double rho)
+{
+    for (int m = BN_SOLVE_JACOBI; m <= BN_SOLVE_DIRECT; m++)
+        furnace_defaults(rho, (bn_solve_method)m);
+}
+
+BN_TEST(furnace_defaults_rho_0_5) { furnace_defaults_all(0.5); }
+BN_TEST(furnace_defaults_rho_0_9) { furnace_defaults_all(0.9); }
+BN_TEST(furnace_defaults_rho_0_99) { furnace_defaults_all(0.99); }
+BN_TEST(furnace_defaults_rho_0_999) { furnace_defaults_all(0.999); }
+
 /* The same scene at 1e-6 and 1e6 times its size gives the same radiance: every tolerance and ray
  * offset is relative to the scene. Without occluders (the furnace) to 1e-9; with them (the Cornell
  * box's blocks) the visibility samples are the same points scaled, so to float rounding of the rays. */

@@ -49,9 +49,9 @@ void bn_cli_add_ff(bn_optset *s, bn_cli_ff *o)
     bn_optset_add(s, (bn_opt){"max-memory", 0, BN_OPT_SIZE, &o->max_memory, NULL, 1, 1e18, "BYTES",
                               "limit for F's storage (default 80% of physical memory)"});
     bn_optset_add(s, (bn_opt){"ff-tolerance", 0, BN_OPT_DOUBLE, &o->tolerance, NULL, 1e-12, 0.1, "T",
-                              "analytic: relative quadrature tolerance per pair (default 1e-5)"});
+                              "analytic: relative tolerance per pair (default 1e-9; every pair by the closed form, whose cost hardly depends on it)"});
     bn_optset_add(s, (bn_opt){"ff-quadrature-only", 0, BN_OPT_FLAG, &o->quadrature_only, NULL, 0, 0, NULL,
-                              "analytic: near pairs too by the point kernel's quadrature instead of the closed form (for comparisons)"});
+                              "analytic: every pair by the point kernel's quadrature instead of the closed form (the path before it; for comparisons)"});
     bn_optset_add(s, (bn_opt){"cache", 0, BN_OPT_STRING, &o->cache, NULL, 0, 0, "FILE",
                               "reuse F from FILE when its key (scene, meshing, options) matches; else write it"});
 }

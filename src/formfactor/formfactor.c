@@ -57,7 +57,7 @@ void bn_formfactor_opts_default(bn_formfactor_opts *o)
     o->sparse_threshold = 0;
     o->max_memory = 0;
     o->seed = 1;
-    o->tolerance = 1e-5;
+    o->tolerance = BN_FF_TOLERANCE_DEFAULT;
 }
 
 static int bn__samples(const bn_formfactor_opts *o)
@@ -70,7 +70,7 @@ void bn_formfactor_opts_describe(const bn_formfactor_opts *o, char *buf, size_t 
     snprintf(buf, size, "method=%s samples=%d seed=%llu precision=%s storage=%s sparse_threshold=%.17g tolerance=%.17g%s",
              bn_ff_method_name(o->method), bn__samples(o), (unsigned long long)o->seed,
              bn_precision_name(o->precision), o->storage ? o->storage : BN_STORAGE_DEFAULT, o->sparse_threshold,
-             o->method == BN_FF_ANALYTIC ? (o->tolerance > 0 ? o->tolerance : 1e-5) : 0.0,
+             o->method == BN_FF_ANALYTIC ? (o->tolerance > 0 ? o->tolerance : BN_FF_TOLERANCE_DEFAULT) : 0.0,
              o->method == BN_FF_ANALYTIC && o->quadrature_only ? " quadrature_only=1" : "");
 }
 
@@ -784,7 +784,7 @@ static double bn__rowsum_tol(const bn_formfactor_opts *o)
      * 1e-12: double sums of many hemisphere fractions k/S carry that much */
     double round = fmax(16 * bn_precision_epsilon(o->precision), 1e-12);
     if (o->method == BN_FF_ANALYTIC)   /* quadrature; sampled visibility may add noise */
-        return 10 * (o->tolerance > 0 ? o->tolerance : 1e-5) + round;
+        return 10 * (o->tolerance > 0 ? o->tolerance : BN_FF_TOLERANCE_DEFAULT) + round;
     if (o->method == BN_FF_HEMISPHERE)
         return round;
     return 3.0 / sqrt((double)bn__samples(o));   /* montecarlo: statistical */
@@ -962,7 +962,7 @@ static bn_status bn__ff_opts(const bn_scene *scene, const bn_rt *rt, const bn_fo
     size_t n;
     *o = *in;
     if (o->tolerance <= 0)
-        o->tolerance = 1e-5;
+        o->tolerance = BN_FF_TOLERANCE_DEFAULT;
     if (!o->storage)
         o->storage = BN_STORAGE_DEFAULT;
     bn_scene_patches(scene, &n);
@@ -1086,24 +1086,8 @@ double bn_ff_polygon_pair(const double *vi, size_t ni, const double *vj, size_t 
     /* the part of i in front of j and of j in front of i */
     na = bn__max_height(vj, nj, nni, vi) > 1e-12 * diam ? bn__poly_clip(vi, ni, nnj, vj, 1e-12 * diam, a) : 0;
     nb = na && bn__max_height(vi, ni, nnj, vj) > 1e-12 * diam ? bn__poly_clip(vj, nj, nni, vi, 1e-12 * diam, b) : 0;
-    if (na && nb && na <= 4) {
-        f = bn__ff_unoccluded(a, na, nni, b, nb, rtol > 0 ? rtol : 1e-6, 0, NULL) / Ai;
-    } else if (na && nb) {
-        /* Many corners (a disk as a polygon): a fan from the centroid instead of the fan from the
-         * first corner, whose slivers span the polygon. The integrand is positive, so a relative
-         * tolerance per triangle bounds the sum's relative error. */
-        double c[3] = {0, 0, 0}, t[9];
-        for (size_t k = 0; k < na; k++)
-            for (int d = 0; d < 3; d++)
-                c[d] += a[3 * k + d] / (double)na;
-        for (size_t k = 0; k < na; k++) {
-            memcpy(t, c, sizeof c);
-            memcpy(t + 3, a + 3 * k, 3 * sizeof(double));
-            memcpy(t + 6, a + 3 * (k + 1 < na ? k + 1 : 0), 3 * sizeof(double));
-            f += bn__ff_polygon_integral(t, 3, nni, b, nb, rtol > 0 ? rtol : 1e-6, 0, NULL);
-        }
-        f /= Ai;
-    }
+    if (na && nb)
+        f = bn__ff_unoccluded(a, na, nni, b, nb, rtol > 0 ? rtol : BN_FF_TOLERANCE_DEFAULT, 0, NULL) / Ai;
     free(a);
     free(b);
     return f;

@@ -534,14 +534,6 @@ void bn__sph_poly_sample(const bn__sph_poly *sp, double u, double w, double dir[
 
 
 
-static double bn__G(double z, double h)
-{
-    double r2 = z * z + h * h;
-    if (r2 <= 0)
-        return 0;
-    return z * 0.5 * log(r2) - z + (h > 0 ? h * atan(z / h) : 0);
-}
-
 typedef struct {
     const double *pj;
     size_t nj;
@@ -549,26 +541,37 @@ typedef struct {
     double v[BN__FF_POLY_MAX][3], L[BN__FF_POLY_MAX];
 } bn__cctx;
 
-/* sum_q (u . v_q) int_q ln(r / c) dt at the point x */
-static double bn__contour_inner(const bn__cctx *cc, const double x[3], const double u[3])
+/* sum_q (u . v_q) int_q ln(r / c) dt at the point x; *mag: the sum of the terms' sizes, which
+ * bounds the rounding of f (the terms cancel: for nearly coplanar pairs f is 1e-9 of them) */
+static double bn__contour_inner(const bn__cctx *cc, const double x[3], const double u[3], double *mag)
 {
-    double f = 0;
+    double f = 0, m = 0;
     for (size_t q = 0; q < cc->nj; q++) {
-        double dot = bn_v3_dot(u, cc->v[q]), w[3], cr[3], tau, h;
+        double dot = bn_v3_dot(u, cc->v[q]), w[3], cr[3], tau, h, g1, g0, gc;
         if (dot == 0 || !(cc->L[q] > 0))
             continue;
         bn_v3_sub(x, cc->pj + 3 * q, w);
         tau = bn_v3_dot(w, cc->v[q]);
         bn_v3_cross(w, cc->v[q], cr);
         h = bn_v3_len(cr);
-        f += dot * (bn__G(cc->L[q] - tau, h) - bn__G(-tau, h) - cc->L[q] * cc->lnc);
+        /* G(L - tau) - G(-tau), the two atan(z / h) as one angle: atan(a) + atan(b) =
+         * atan2(a + b, 1 - ab) for a, b of either sign (the sum stays inside (-pi, pi)) */
+        {
+            double z1 = cc->L[q] - tau, z0 = -tau, r1 = z1 * z1 + h * h, r0 = z0 * z0 + h * h;
+            g1 = r1 > 0 ? z1 * 0.5 * log(r1) : 0;
+            g0 = r0 > 0 ? z0 * 0.5 * log(r0) : 0;
+            gc = cc->L[q] * (1 + cc->lnc) - (h > 0 ? h * atan2(h * cc->L[q], h * h - z1 * tau) : 0);
+        }
+        f += dot * (g1 - g0 - gc);
+        m += fabs(dot) * (fabs(g1) + fabs(g0) + fabs(gc));
     }
+    *mag = m;
     return f;
 }
 
 typedef struct {
     size_t p;
-    double s0, s1, val, err, mag;   /* mag: the integral of |f|, for the rounding floor */
+    double s0, s1, val, err, mag;   /* mag: the integral of f's term sizes, for the rounding floor */
 } bn__panel;
 
 static const double bn__gk_x[8] = {0.991455371120812639206854697526329, 0.949107912342758524526189684047851,
@@ -590,11 +593,11 @@ static void bn__panel_eval(const bn__cctx *cc, const double *pi, size_t ni, bn__
     bn_v3_normalize(u);
     for (int i = 0; i < 15; i++) {
         int j = i < 8 ? i : 14 - i;
-        double t = i < 8 ? -bn__gk_x[i] : bn__gk_x[14 - i], x[3], f;
+        double t = i < 8 ? -bn__gk_x[i] : bn__gk_x[14 - i], x[3], f, fm;
         bn_v3_madd(a, mid + half * t, u, x);
-        f = bn__contour_inner(cc, x, u);
+        f = bn__contour_inner(cc, x, u, &fm);
         k += bn__gk_wk[j] * f;
-        m += bn__gk_wk[j] * fabs(f);
+        m += bn__gk_wk[j] * fm;
         if (j % 2 == 1)
             g += bn__gk_wg[j / 2] * f;
     }
@@ -604,7 +607,8 @@ static void bn__panel_eval(const bn__cctx *cc, const double *pi, size_t ni, bn__
     pn->mag = half * m;
 }
 
-double bn__ff_contour(const double *pi, size_t ni, const double *pj, size_t nj, double rtol, bn__quad_stats *st)
+double bn__ff_contour(const double *pi, size_t ni, const double *pj, size_t nj, double rtol, double atol,
+                      bn__quad_stats *st)
 {
     bn__cctx cc;
     bn__panel inl[64], *pan = inl;
@@ -645,8 +649,9 @@ double bn__ff_contour(const double *pi, size_t ni, const double *pj, size_t nj, 
     for (int it = 0; it < 4000; it++) {
         size_t w = 0;
         bn__panel a, b;
-        /* or the rounding floor: terms of total size mag cancel to the result */
-        if (err <= fmax(rtol * fabs(sum), 8 * DBL_EPSILON * mag))
+        /* or the absolute floor (atol, on A_i F_ij), or the rounding floor: terms of total size
+         * mag cancel to the result */
+        if (err <= fmax(fmax(rtol * fabs(sum), 2 * BN_PI * atol), 1 * DBL_EPSILON * mag))
             break;
         for (size_t k = 1; k < np; k++)
             if (pan[k].err > pan[w].err)
@@ -682,32 +687,52 @@ double bn__ff_contour(const double *pi, size_t ni, const double *pj, size_t nj, 
         memset(st, 0, sizeof *st);
         st->evals = evals;
         st->triangles = np;
-        st->capped = err > rtol * fabs(sum);   /* stopped by the rounding floor or the panel limit */
+        st->capped = err > fmax(rtol * fabs(sum), 2 * BN_PI * atol);   /* the rounding floor or the panel limit */
     }
     if (pan != inl)
         free(pan);
     return sum / (2 * BN_PI);
 }
 
-/* The pair is near: its centroids closer than its larger diameter. */
-static int bn__ff_near(const double *pi, size_t ni, const double *pj, size_t nj)
+/* Corners of the k-th fan piece of a convex polygon of nv corners: v0 and up to
+ * BN__FF_POLY_MAX - 1 consecutive corners after it, each piece sharing an edge with the next. */
+static size_t bn__fan_piece(const double *v, size_t nv, size_t k, double *out)
 {
-    double ca[3] = {0, 0, 0}, cb[3] = {0, 0, 0}, da = 0, db = 0;
-    for (size_t m = 0; m < ni; m++)
-        bn_v3_madd(ca, 1.0 / ni, pi + 3 * m, ca);
-    for (size_t m = 0; m < nj; m++)
-        bn_v3_madd(cb, 1.0 / nj, pj + 3 * m, cb);
-    for (size_t m = 0; m < ni; m++)
-        da = fmax(da, 2 * bn_v3_dist(ca, pi + 3 * m));
-    for (size_t m = 0; m < nj; m++)
-        db = fmax(db, 2 * bn_v3_dist(cb, pj + 3 * m));
-    return bn_v3_dist(ca, cb) < fmax(da, db);
+    size_t step = BN__FF_POLY_MAX - 2, s = 1 + k * step, m = 1;
+    memcpy(out, v, 3 * sizeof(double));
+    for (size_t c = s; c < nv && m < BN__FF_POLY_MAX; c++, m++)
+        memcpy(out + 3 * m, v + 3 * c, 3 * sizeof(double));
+    return m;
 }
 
 double bn__ff_unoccluded(const double *pi, size_t ni, const double ni_n[3], const double *pj, size_t nj, double rtol,
                          double atol, bn__quad_stats *st)
 {
-    if (ni >= 3 && nj >= 3 && ni <= BN__FF_POLY_MAX && nj <= BN__FF_POLY_MAX && bn__ff_near(pi, ni, pj, nj))
-        return bn__ff_contour(pi, ni, pj, nj, rtol, st);
-    return bn__ff_polygon_integral(pi, ni, ni_n, pj, nj, rtol, atol, st);
+    double a[3 * BN__FF_POLY_MAX], b[3 * BN__FF_POLY_MAX], sum = 0;
+    size_t pa, pb;
+    (void)ni_n;
+    if (ni < 3 || nj < 3)
+        return 0;
+    if (ni <= BN__FF_POLY_MAX && nj <= BN__FF_POLY_MAX)
+        return bn__ff_contour(pi, ni, pj, nj, rtol, atol, st);
+    /* larger convex polygons: the sum over fan pieces of both (the integral is additive; every
+     * piece's value is >= 0, so each piece to rtol keeps the sum to rtol) */
+    pa = (ni - 2 + BN__FF_POLY_MAX - 3) / (BN__FF_POLY_MAX - 2);
+    pb = (nj - 2 + BN__FF_POLY_MAX - 3) / (BN__FF_POLY_MAX - 2);
+    if (st)
+        memset(st, 0, sizeof *st);
+    for (size_t x = 0; x < pa; x++) {
+        size_t na = bn__fan_piece(pi, ni, x, a);
+        for (size_t y = 0; y < pb; y++) {
+            size_t nb = bn__fan_piece(pj, nj, y, b);
+            bn__quad_stats q;
+            sum += bn__ff_contour(a, na, b, nb, rtol, atol / (double)(pa * pb), &q);
+            if (st) {
+                st->evals += q.evals;
+                st->triangles += q.triangles;
+                st->capped |= q.capped;
+            }
+        }
+    }
+    return sum;
 }
