@@ -694,6 +694,20 @@ double bn__ff_contour(const double *pi, size_t ni, const double *pj, size_t nj, 
     return sum / (2 * BN_PI);
 }
 
+int bn__ff_near(const double *pi, size_t ni, const double *pj, size_t nj)
+{
+    double ca[3] = {0, 0, 0}, cb[3] = {0, 0, 0}, da = 0, db = 0;
+    for (size_t m = 0; m < ni; m++)
+        bn_v3_madd(ca, 1.0 / ni, pi + 3 * m, ca);
+    for (size_t m = 0; m < nj; m++)
+        bn_v3_madd(cb, 1.0 / nj, pj + 3 * m, cb);
+    for (size_t m = 0; m < ni; m++)
+        da = fmax(da, 2 * bn_v3_dist(ca, pi + 3 * m));
+    for (size_t m = 0; m < nj; m++)
+        db = fmax(db, 2 * bn_v3_dist(cb, pj + 3 * m));
+    return bn_v3_dist(ca, cb) < fmax(da, db);
+}
+
 /* Corners of the k-th fan piece of a convex polygon of nv corners: v0 and up to
  * BN__FF_POLY_MAX - 1 consecutive corners after it, each piece sharing an edge with the next. */
 static size_t bn__fan_piece(const double *v, size_t nv, size_t k, double *out)
