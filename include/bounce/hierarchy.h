@@ -75,7 +75,7 @@ typedef struct bn_hierarchy_report {
     double min_area;                                /* the smallest element split (scene units^2) */
     size_t links, leaf_links, cluster_links;        /* leaf: patch to patch; cluster: a cluster at either end */
     size_t passes;                                  /* refine-gather passes */
-    int    settled;                                 /* 1 if the last pass split no link */
+    int    settled;                                 /* 1 if the last pass split fewer than 1e-3 of the links */
     size_t rays;
     size_t bytes;                                   /* the frozen operator: nodes and links */
     double bytes_per_link;                          /* link storage alone / links */

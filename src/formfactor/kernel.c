@@ -369,20 +369,22 @@ done:
 void bn__poly_sample(const double *v, size_t nv, double u, double w, double out[3])
 {
     double areas[BN__FF_POLY_MAX], total = 0, acc = 0, s, b0, b1, b2;
-    size_t ntri = nv - 2, t;
+    size_t ntri = nv - 2, t = 0;
     if (ntri > BN__FF_POLY_MAX)
         ntri = BN__FF_POLY_MAX;
-    for (t = 0; t < ntri; t++) {
-        areas[t] = bn__tri_area(v, v + 3 * (t + 1), v + 3 * (t + 2));
-        total += areas[t];
+    if (ntri > 1) {   /* a fan triangle chosen by area (a triangle has nothing to choose) */
+        for (t = 0; t < ntri; t++) {
+            areas[t] = bn__tri_area(v, v + 3 * (t + 1), v + 3 * (t + 2));
+            total += areas[t];
+        }
+        u *= total;
+        for (t = 0; t + 1 < ntri; t++) {
+            if (u < acc + areas[t])
+                break;
+            acc += areas[t];
+        }
+        u = areas[t] > 0 ? bn_clamp((u - acc) / areas[t], 0, 1) : 0.5;
     }
-    u *= total;
-    for (t = 0; t + 1 < ntri; t++) {
-        if (u < acc + areas[t])
-            break;
-        acc += areas[t];
-    }
-    u = areas[t] > 0 ? bn_clamp((u - acc) / areas[t], 0, 1) : 0.5;
     /* Square to triangle (Shirley): b0 = 1 - sqrt(u), b1 = sqrt(u)(1 - w), b2 = sqrt(u) w. */
     s = sqrt(u);
     b0 = 1 - s;

@@ -18,6 +18,10 @@
 #define BN__LEAF_RTOL 1e-3
 /* Shadow rays of a leaf link (x4 when partly visible). */
 #define BN__LEAF_RAYS 16
+/* The link set has settled when a pass splits fewer than this fraction of its links: the next
+ * pass would weigh them by a brightness that the few new links hardly change (on the bunny box,
+ * pass 4 splits 2,557 of 18.9 M, pass 5 17, pass 6 none, at 6 s a pass). */
+#define BN__SETTLED 1e-3
 /* Partly visible links are split down to this fraction of eps. */
 #define BN__PARTIAL 0.125
 
@@ -346,6 +350,7 @@ static bn_status bn__pass(const bn__ref *R, bn__worker *W, int nt, bn__vec *work
 #pragma omp parallel num_threads(nt)
         {
             bn__worker *w = &W[omp_get_thread_num()];
+            size_t mine = 0;   /* items since this thread's last progress step (one atomic per 4096) */
 #pragma omp for schedule(dynamic, 64)
             for (long l = 0; l < ln; l++) {
                 if (oom || bn_interrupted() != BN_OK)
@@ -354,8 +359,12 @@ static bn_status bn__pass(const bn__ref *R, bn__worker *W, int nt, bn__vec *work
                 bn__visit(R, it.r, it.s, it.F, it.partial, BN__DEPTH_PER_ROUND, w);
                 if (w->links.oom || w->pending.oom)
                     oom = 1;
-                bn__progress_step(&prog, &done, 1);
+                if (++mine == 4096) {
+                    bn__progress_step(&prog, &done, mine);
+                    mine = 0;
+                }
             }
+            bn__progress_step(&prog, &done, mine);
         }
         bn__progress_end(&prog);
         if (bn_interrupted() != BN_OK) {
@@ -426,7 +435,8 @@ static size_t bn__compact(bn__vec *v)
 }
 
 /* L ~ E + K_H L by a few Jacobi sweeps over the current links: the brightness the next pass's
- * oracle weighs links by. */
+ * oracle weighs links by. L comes in as the previous pass's estimate (E before the first): the links
+ * change little after the second pass, so a few sweeps settle it again. */
 static bn_status bn__estimate(const bn__tree *t, bn__vec *links, const double *E, const double *rho, double eps_abs,
                               double *L, bn_error *err)
 {
@@ -446,7 +456,6 @@ static bn_status bn__estimate(const bn__tree *t, bn__vec *links, const double *E
     live.a = copy;
     live.n = bn__compact(&live);
     st = bn__hop_make(t, live.a, live.n, &h, err);
-    memcpy(L, E, n3 * sizeof(double));
     for (int it = 0; st == BN_OK && it < 200; it++) {
         double change = 0;
         st = bn__hop_apply(h, L, y, err);
@@ -535,6 +544,7 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
         }
     bn_scene_patch_emission(scene, E);
     bn_scene_patch_reflectance(scene, rho);
+    memcpy(L, E, 3 * np * sizeof(double));
     for (size_t k = 0; k < 3 * np; k++)
         emax = fmax(emax, E[k]);
     R.eps_abs = o->eps * emax;
@@ -584,7 +594,7 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
             bn_logf(&o->log, BN_LOG_INFO, "hierarchy pass %d: %zu links (%zu between patches), %zu split, %.1f s",
                     pass + 1, work.n, leaf, splits, bn__now() - t0);
         }
-        if (pass > 0 && splits == 0) {
+        if (pass > 0 && (double)splits < BN__SETTLED * (double)work.n) {
             rep->settled = 1;
             break;
         }
