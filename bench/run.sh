@@ -157,7 +157,7 @@ done
 if [ "$quick" = 1 ]; then
     np_ops=300; mesh="30,60,120"; spp="4,16,64"; ref_spp=4096
 else
-    np_ops=1200; mesh="50,100,200,400,800,1600"; spp="16,64,256,1024,4096"; ref_spp=0
+    np_ops=1200; mesh="50,100,200,400,800,1600"; spp="16,64,256,1024,4096,16384"; ref_spp=0
 fi
 note "study: methods on one K ($np_ops patches) and the equal-error comparison, $reps repeats"
 : >"$work/fail"
