@@ -61,6 +61,38 @@ BN_TEST(stages_fail_cleanly)
     bn_pipeline_free(&p);
 }
 
+/* Default options, silent, with a target patch count and a solver. */
+static void quiet_opts(bn_pipeline_opts *o, size_t patches, bn_solve_method method)
+{
+    bn_pipeline_opts_default(o);
+    o->load.log.quiet = 1;
+    o->mesh.target_patches = patches;
+    o->ff.quiet = 1;
+    o->solve.quiet = 1;
+    o->solve.log_sink.quiet = 1;
+    o->solve.method = method;
+}
+
+/* The unit cube seen from inside, one quad a face, reflectance rho and Le 1 everywhere, written
+ * as NAME.obj and NAME.mtl in the test's directory; returns the .obj's path. */
+static const char *write_furnace(const char *name, double rho)
+{
+    static char obj[512];
+    char file[64];
+    FILE *fp;
+    snprintf(file, sizeof file, "%s.mtl", name);
+    fp = fopen(bn_test_tmp(file), "w");
+    fprintf(fp, "newmtl furnace\nKd %.17g %.17g %.17g\nKe 1 1 1\n", rho, rho, rho);
+    fclose(fp);
+    snprintf(file, sizeof file, "%s.obj", name);
+    snprintf(obj, sizeof obj, "%s", bn_test_tmp(file));
+    fp = fopen(obj, "w");
+    fprintf(fp, "mtllib %s.mtl\nusemtl furnace\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
+                "f 1 2 3 4\nf 5 8 7 6\nf 1 5 6 2\nf 2 6 7 3\nf 3 7 8 4\nf 4 8 5 1\n", name);
+    fclose(fp);
+    return obj;
+}
+
 /* F's precision by need: float's rounding 2^-24 amplified by 1 / (1 - rho_max) against the
  * tolerance. rho 0.5: 1.2e-7 < 1e-6, float; rho 0.999: 6e-5 > 1e-6, double (and the answer then
  * meets the tolerance the float storage could not); auto off keeps what was asked. */
@@ -69,26 +101,13 @@ static bn_precision chosen(double rho, int auto_precision, double *L0)
     bn_pipeline_opts o;
     bn_pipeline p;
     bn_error err;
-    FILE *fp = fopen(bn_test_tmp("f.mtl"), "w");
     char name[64];
     bn_precision prec;
-    fprintf(fp, "newmtl furnace\nKd %.17g %.17g %.17g\nKe 1 1 1\n", rho, rho, rho);
-    fclose(fp);
-    fp = fopen(bn_test_tmp("f.obj"), "w");
-    /* the unit cube seen from inside, one quad a face */
-    fprintf(fp, "mtllib f.mtl\nusemtl furnace\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
-                "f 1 2 3 4\nf 5 8 7 6\nf 1 5 6 2\nf 2 6 7 3\nf 3 7 8 4\nf 4 8 5 1\n");
-    fclose(fp);
-    bn_pipeline_opts_default(&o);
-    o.load.log.quiet = 1;
-    o.mesh.target_patches = 54;
-    o.ff.quiet = 1;
-    o.ff.tolerance = 1e-9;   /* quadrature far below what float storage costs */
-    o.solve.quiet = 1;
-    o.solve.log_sink.quiet = 1;
-    o.solve.method = BN_SOLVE_DIRECT;
+    const char *obj = write_furnace("f", rho);
+    quiet_opts(&o, 54, BN_SOLVE_DIRECT);
+    o.ff.tolerance = 1e-9;   /* far below what float storage costs */
     o.auto_precision = auto_precision;
-    if (bn_pipeline_run(bn_test_tmp("f.obj"), &o, &p, &err) != BN_OK)
+    if (bn_pipeline_run(obj, &o, &p, &err) != BN_OK)
         BN_FAIL("%s", err.msg);
     snprintf(name, sizeof name, "%s", bn_transport_name(p.k));
     prec = strstr(name, "double") ? BN_PRECISION_DOUBLE : BN_PRECISION_FLOAT;
@@ -119,26 +138,13 @@ static void furnace_defaults(double rho, bn_solve_method method)
     bn_pipeline_opts o;
     bn_pipeline p;
     bn_error err;
-    char mtl[64], obj[64];
+    char name[64];
+    const char *obj;
     double worst = 0, worst_term = 0, Lx = 1 / (1 - rho);
-    FILE *fp;
-    snprintf(mtl, sizeof mtl, "fd%g.mtl", rho);
-    snprintf(obj, sizeof obj, "fd%g.obj", rho);
-    fp = fopen(bn_test_tmp(mtl), "w");
-    fprintf(fp, "newmtl furnace\nKd %.17g %.17g %.17g\nKe 1 1 1\n", rho, rho, rho);
-    fclose(fp);
-    fp = fopen(bn_test_tmp(obj), "w");
-    fprintf(fp, "mtllib %s\nusemtl furnace\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
-                "f 1 2 3 4\nf 5 8 7 6\nf 1 5 6 2\nf 2 6 7 3\nf 3 7 8 4\nf 4 8 5 1\n", mtl);
-    fclose(fp);
-    bn_pipeline_opts_default(&o);
-    o.load.log.quiet = 1;
-    o.mesh.target_patches = 150;
-    o.ff.quiet = 1;
-    o.solve.quiet = 1;
-    o.solve.log_sink.quiet = 1;
-    o.solve.method = method;
-    if (bn_pipeline_run(bn_test_tmp(obj), &o, &p, &err) != BN_OK)
+    snprintf(name, sizeof name, "fd%g", rho);
+    obj = write_furnace(name, rho);
+    quiet_opts(&o, 150, method);
+    if (bn_pipeline_run(obj, &o, &p, &err) != BN_OK)
         BN_FAIL("rho %g, %s: %s", rho, bn_solve_method_name(method), err.msg);
     BN_ASSERT_GT(p.n, 100);
     for (size_t i = 0; i < 3 * p.n; i++) {
@@ -191,13 +197,7 @@ static double *solve_scaled(const char *name, double scale, size_t *n)
     }
     fclose(in);
     fclose(out);
-    bn_pipeline_opts_default(&o);
-    o.load.log.quiet = 1;
-    o.mesh.target_patches = 300;
-    o.ff.quiet = 1;
-    o.solve.quiet = 1;
-    o.solve.log_sink.quiet = 1;
-    o.solve.method = BN_SOLVE_DIRECT;
+    quiet_opts(&o, 300, BN_SOLVE_DIRECT);
     if (bn_pipeline_run(bn_test_tmp(dst), &o, &p, &err) != BN_OK)
         BN_FAIL("%s at scale %g: %s", name, scale, err.msg);
     *n = p.n;

@@ -402,17 +402,26 @@ static void bn__pair_points(bn__rng *r, const bn__pair *p, bn__scratch *s)
  * n_i.w / cmax: cosine-weighted), and the weight w_k = F(x_k -> b) from the contour integral.
  * Then E[w_k V_k] = int_b k(x_k, y) V dy / pi and E[w_k] = F(x_k -> b): no 1/r^2 in any weight,
  * so nothing to regularise, and every weight lies in [0, 1]. */
-static void bn__kernel_points(bn__rng *r, const bn__pair *p, const double ni[3], const double nj[3], bn__scratch *s)
+/* Sample k of S in four dimensions, stratified in each (Latin hypercube over s->perm, which
+ * bn__perms filled): u1 by k, the others by the three permutations. */
+static void bn__lhs4(bn__rng *r, const bn__scratch *s, size_t k, double *u1, double *v1, double *u2, double *v2)
 {
     size_t S = s->S;
     double inv = 1.0 / (double)S;
+    *u1 = ((double)k + bn__rng_uniform(r)) * inv;
+    *v1 = ((double)s->perm[k] + bn__rng_uniform(r)) * inv;
+    *u2 = ((double)s->perm[S + k] + bn__rng_uniform(r)) * inv;
+    *v2 = ((double)s->perm[2 * S + k] + bn__rng_uniform(r)) * inv;
+}
+
+static void bn__kernel_points(bn__rng *r, const bn__pair *p, const double ni[3], const double nj[3], bn__scratch *s)
+{
+    size_t S = s->S;
     bn__perms(r, s->perm, S);
     for (size_t k = 0; k < S; k++) {
-        double u1 = ((double)k + bn__rng_uniform(r)) * inv, v1 = ((double)s->perm[k] + bn__rng_uniform(r)) * inv;
-        double u2 = ((double)s->perm[S + k] + bn__rng_uniform(r)) * inv;
-        double v2 = ((double)s->perm[2 * S + k] + bn__rng_uniform(r)) * inv;
-        double *x = s->x + 3 * k, *y = s->y + 3 * k, dir[3] = {0, 0, 0}, h;
+        double u1, v1, u2, v2, *x = s->x + 3 * k, *y = s->y + 3 * k, dir[3] = {0, 0, 0}, h;
         bn__sph_poly sp;
+        bn__lhs4(r, s, k, &u1, &v1, &u2, &v2);
         bn__poly_sample(p->a, p->na, u1, v1, x);
         s->w[k] = bn__ff_point_polygon(x, ni, p->b, p->nb);
         memcpy(y, x, 3 * sizeof(double));
@@ -443,13 +452,10 @@ static void bn__kernel_points(bn__rng *r, const bn__pair *p, const double ni[3],
 static void bn__area_points(bn__rng *r, const bn__pair *p, const double ni[3], const double nj[3], bn__scratch *s)
 {
     size_t S = s->S;
-    double inv = 1.0 / (double)S;
     bn__perms(r, s->perm, S);
     for (size_t k = 0; k < S; k++) {
-        double u1 = ((double)k + bn__rng_uniform(r)) * inv, v1 = ((double)s->perm[k] + bn__rng_uniform(r)) * inv;
-        double u2 = ((double)s->perm[S + k] + bn__rng_uniform(r)) * inv;
-        double v2 = ((double)s->perm[2 * S + k] + bn__rng_uniform(r)) * inv;
-        double *x = s->x + 3 * k, *y = s->y + 3 * k, d[3], r2, cx, cy;
+        double u1, v1, u2, v2, *x = s->x + 3 * k, *y = s->y + 3 * k, d[3], r2, cx, cy;
+        bn__lhs4(r, s, k, &u1, &v1, &u2, &v2);
         bn__poly_sample(p->a, p->na, u1, v1, x);
         bn__poly_sample(p->b, p->nb, u2, v2, y);
         bn_v3_sub(y, x, d);
