@@ -8,6 +8,7 @@ void bn_cli_hier_opts(const bn_cli_ff *ff, bn_hierarchy_opts *h)
     if (ff->eps >= 0)
         h->eps = ff->eps;
     h->clusters = !ff->no_clusters;
+    h->flat_clusters = !ff->no_flat_clusters;
     if (ff->link_samples > 0)
         h->samples = ff->link_samples;
     if (ff->min_area != 0)
@@ -27,6 +28,9 @@ void bn_cli_add_ff(bn_optset *s, bn_cli_ff *o)
                               "emitted radiance (default 1e-3; 0: every link down to the patches)"});
     bn_optset_add(s, (bn_opt){"no-clusters", 0, BN_OPT_FLAG, &o->no_clusters, NULL, 0, 0, NULL,
                               "hierarchy: no volume clusters; start from every pair of input polygons"});
+    bn_optset_add(s, (bn_opt){"no-flat-clusters", 0, BN_OPT_FLAG, &o->no_flat_clusters, NULL, 0, 0, NULL,
+                              "hierarchy: clusters never receive as one node, only polygons' nodes do (default: "
+                              "nearly flat clusters facing a source may, each polygon taking its cosine's share)"});
     bn_optset_add(s, (bn_opt){"link-samples", 0, BN_OPT_INT, &o->link_samples, NULL, 1, 1 << 16, "N",
                               "hierarchy: point pairs and rays per link above the patches (default 8; x4 when "
                               "partly visible)"});
