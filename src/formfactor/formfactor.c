@@ -396,12 +396,6 @@ static void bn__pair_points(bn__rng *r, const bn__pair *p, bn__scratch *s)
  * extreme grazing polygons, so 2^-64 or less is the chance of reaching it. */
 #define BN__COS_TRIES 64
 
-/* Point pairs distributed as the kernel, for the visible fraction of the analytic method:
- * x_k stratified uniformly on a, y_k on b with density proportional to cos(ti) cos(tj) / r^2
- * given x_k (a direction uniform in b's solid angle from x_k, kept with probability
- * n_i.w / cmax: cosine-weighted), and the weight w_k = F(x_k -> b) from the contour integral.
- * Then E[w_k V_k] = int_b k(x_k, y) V dy / pi and E[w_k] = F(x_k -> b): no 1/r^2 in any weight,
- * so nothing to regularise, and every weight lies in [0, 1]. */
 /* Sample k of S in four dimensions, stratified in each (Latin hypercube over s->perm, which
  * bn__perms filled): u1 by k, the others by the three permutations. */
 static void bn__lhs4(bn__rng *r, const bn__scratch *s, size_t k, double *u1, double *v1, double *u2, double *v2)
@@ -414,6 +408,12 @@ static void bn__lhs4(bn__rng *r, const bn__scratch *s, size_t k, double *u1, dou
     *v2 = ((double)s->perm[2 * S + k] + bn__rng_uniform(r)) * inv;
 }
 
+/* Point pairs distributed as the kernel, for the visible fraction of the analytic method:
+ * x_k stratified uniformly on a, y_k on b with density proportional to cos(ti) cos(tj) / r^2
+ * given x_k (a direction uniform in b's solid angle from x_k, kept with probability
+ * n_i.w / cmax: cosine-weighted), and the weight w_k = F(x_k -> b) from the contour integral.
+ * Then E[w_k V_k] = int_b k(x_k, y) V dy / pi and E[w_k] = F(x_k -> b): no 1/r^2 in any weight,
+ * so nothing to regularise, and every weight lies in [0, 1]. */
 static void bn__kernel_points(bn__rng *r, const bn__pair *p, const double ni[3], const double nj[3], bn__scratch *s)
 {
     size_t S = s->S;

@@ -541,6 +541,7 @@ typedef struct {
     size_t nj;
     double lnc;
     double v[BN__FF_POLY_MAX][3], L[BN__FF_POLY_MAX];
+    double Lc[BN__FF_POLY_MAX];   /* L_q (1 + lnc): the -z terms of G and the length constant */
 } bn__cctx;
 
 /* sum_q (u . v_q) int_q ln(r / c) dt at the point x; *mag: the sum of the terms' sizes, which
@@ -562,7 +563,7 @@ static double bn__contour_inner(const bn__cctx *cc, const double x[3], const dou
             double z1 = cc->L[q] - tau, z0 = -tau, r1 = z1 * z1 + h * h, r0 = z0 * z0 + h * h;
             g1 = r1 > 0 ? z1 * 0.5 * log(r1) : 0;
             g0 = r0 > 0 ? z0 * 0.5 * log(r0) : 0;
-            gc = cc->L[q] * (1 + cc->lnc) - (h > 0 ? h * atan2(h * cc->L[q], h * h - z1 * tau) : 0);
+            gc = cc->Lc[q] - (h > 0 ? h * atan2(h * cc->L[q], h * h - z1 * tau) : 0);
         }
         f += dot * (g1 - g0 - gc);
         m += fabs(dot) * (fabs(g1) + fabs(g0) + fabs(gc));
@@ -635,6 +636,8 @@ double bn__ff_contour(const double *pi, size_t ni, const double *pj, size_t nj, 
             dj = fmax(dj, bn_v3_dist(pj + 3 * q, cj));
         cc.lnc = log(fmax(bn_v3_dist(ci, cj), fmax(di, dj)));
     }
+    for (size_t q = 0; q < nj; q++)
+        cc.Lc[q] = cc.L[q] * (1 + cc.lnc);
     for (size_t p = 0; p < ni; p++) {
         double L = bn_v3_dist(pi + 3 * p, pi + 3 * ((p + 1) % ni));
         if (!(L > 0))
@@ -653,7 +656,7 @@ double bn__ff_contour(const double *pi, size_t ni, const double *pj, size_t nj, 
         bn__panel a, b;
         /* or the absolute floor (atol, on A_i F_ij), or the rounding floor: terms of total size
          * mag cancel to the result */
-        if (err <= fmax(fmax(rtol * fabs(sum), 2 * BN_PI * atol), 1 * DBL_EPSILON * mag))
+        if (err <= fmax(fmax(rtol * fabs(sum), 2 * BN_PI * atol), DBL_EPSILON * mag))
             break;
         for (size_t k = 1; k < np; k++)
             if (pan[k].err > pan[w].err)
