@@ -683,11 +683,16 @@ double bn__ff_contour(const double *pi, size_t ni, const double *pj, size_t nj, 
         pan[np++] = b;
     }
     /* the running sums drift by rounding: add the panels afresh */
-    sum = err = 0;
+    sum = err = mag = 0;
     for (size_t k = 0; k < np; k++) {
         sum += pan[k].val;
         err += pan[k].err;
+        mag += pan[k].mag;
     }
+    /* the integrand is >= 0: a result below zero by no more than its error and rounding (terms of
+     * size mag cancelling to nothing, as between polygons that see each other edge-on) is 0 */
+    if (sum < 0 && -sum <= err + 64 * DBL_EPSILON * mag + 2 * BN_PI * atol)
+        sum = 0;
     if (st) {
         memset(st, 0, sizeof *st);
         st->evals = evals;
