@@ -121,7 +121,9 @@ void bn_crosscheck_opts_default(bn_crosscheck_opts *o);
 
 typedef struct bn_crosscheck_run {
     bn_pipeline fine, other;     /* the mesh asked, and the second level (other.scene NULL: none) */
-    double seconds_fine, seconds_other;
+    bn_pipeline other_eps;       /* under the hierarchy: the mesh asked at eps x (or /) r^2, whose
+                                    difference adds to the mesh level's (other_eps.scene NULL: none) */
+    double seconds_fine, seconds_other, seconds_other_eps;
     double *layers_fine, *layers_other;   /* bn_layers_stack of each level */
     double *tol, *power_tol;     /* the discretisation tolerances (NULL without a second level) */
     bn_trace_patches trace;

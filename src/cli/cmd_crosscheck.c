@@ -112,8 +112,12 @@ int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c)
         printf("# discretisation: second level %zu patches (patch size %.6g, %s by r = %g%s), %.2f s; tolerance = "
                "Fs %g x %s|difference| / (r - 1) = %g x |difference| (two-level GCI, order 1)\n",
                run.other.n, bn_scene_patch_size(run.other.scene), disc == 0 ? "coarser" : "finer", ratio,
-               run.other.hierarchical ? (disc == 0 ? ", hierarchy eps x r^2" : ", hierarchy eps / r^2") : "",
-               run.seconds_other, tol_scale, disc == 0 ? "" : "r ", run.in.tol_scale);
+               run.other_eps.scene ? ", hierarchy eps as asked" : "", run.seconds_other, tol_scale,
+               disc == 0 ? "" : "r ", run.in.tol_scale);
+    if (run.other_eps.scene)
+        printf("# discretisation: eps level %zu patches (the mesh asked, hierarchy eps %s r^2, %zu links), %.2f s; its "
+               "|difference| adds to the mesh level's in the tolerance\n",
+               run.other_eps.n, disc == 0 ? "x" : "/", run.other_eps.hier.links, run.seconds_other_eps);
     else
         printf("# discretisation: no allowance (--disc none)\n");
     if (regions)

@@ -60,47 +60,64 @@ static bn_status bn__second_mesh(const bn_crosscheck_opts *o, const bn_pipeline 
     return BN_OK;
 }
 
-/* The discretisation tolerance between the levels, per patch (or region) and per layer's power. */
-static bn_status bn__tolerance(const bn_crosscheck_opts *o, bn_crosscheck_run *run, bn_error *err)
+/* The discretisation tolerance between the fine level and another (scene2, layers2), per patch (or
+ * region) and per layer's power, added to run->tol and run->power_tol (allocated, zero, at the
+ * first call): each discretisation parameter's own estimate, so that two errors of opposite sign
+ * cannot hide each other. */
+static bn_status bn__tolerance(const bn_crosscheck_opts *o, bn_crosscheck_run *run, const bn_scene *scene2,
+                               const double *layers2, bn_error *err)
 {
-    size_t nl = (size_t)bn_layer_count(o->bounces);
-    run->tol = bn__malloc_array(run->fine.n * nl, 3 * sizeof(double));
-    run->power_tol = bn__malloc_array(nl, 3 * sizeof(double));
-    if (!run->tol || !run->power_tol)
-        return bn_error_set(err, BN_ENOMEM, "crosscheck: out of memory");
-    if (!o->regions)
-        return bn_crosscheck_mesh_tolerance(run->fine.scene, run->layers_fine, run->other.scene, run->layers_other,
-                                            o->bounces, run->tol, run->power_tol, err);
-    {   /* regions are whole polygons, so both levels have the same ones: compare their means */
-        bn_partition q;
-        size_t n = run->part.n;
-        double m = bn_unit_to_metres(bn_scene_unit(run->fine.scene)), *b;
-        bn_status st = bn_partition_regions(run->other.scene, o->regions, &q, err);
-        if (st != BN_OK)
-            return st;
-        b = bn__malloc_array(n * nl, 3 * sizeof(double));
-        if (!b || q.n != n) {
-            free(b);
-            bn_partition_free(&q);
-            return b ? bn_error_set(err, BN_EINTERNAL, "crosscheck: the levels have %zu and %zu regions", n, q.n)
-                     : bn_error_set(err, BN_ENOMEM, "crosscheck: out of memory");
-        }
-        bn_partition_mean(&q, run->other.scene, run->layers_other, (int)nl, b);
-        for (size_t l = 0; l < nl; l++)
-            for (int c = 0; c < 3; c++) {
-                double pa = 0, pb = 0;
-                for (size_t g = 0; g < n; g++) {
-                    size_t k = (l * n + g) * 3 + (size_t)c;
-                    run->tol[k] = fabs(run->rad_regions[k] - b[k]);
-                    pa += run->part.area[g] * run->rad_regions[k];
-                    pb += q.area[g] * b[k];
-                }
-                run->power_tol[3 * l + (size_t)c] = BN_PI * m * m * fabs(pa - pb);
-            }
-        free(b);
-        bn_partition_free(&q);
-        return BN_OK;
+    size_t nl = (size_t)bn_layer_count(o->bounces), n = o->regions ? run->part.n : run->fine.n;
+    double *tol = bn__malloc_array(n * nl, 3 * sizeof(double)), *ptol = bn__malloc_array(nl, 3 * sizeof(double));
+    bn_status st = BN_OK;
+    if (!run->tol) {
+        run->tol = bn__calloc(n * nl, 3 * sizeof(double));
+        run->power_tol = bn__calloc(nl, 3 * sizeof(double));
     }
+    if (!tol || !ptol || !run->tol || !run->power_tol) {
+        free(tol);
+        free(ptol);
+        return bn_error_set(err, BN_ENOMEM, "crosscheck: out of memory");
+    }
+    if (!o->regions) {
+        st = bn_crosscheck_mesh_tolerance(run->fine.scene, run->layers_fine, scene2, layers2, o->bounces, tol, ptol,
+                                          err);
+    } else {   /* regions are whole polygons, so both levels have the same ones: compare their means */
+        bn_partition q;
+        double m = bn_unit_to_metres(bn_scene_unit(run->fine.scene)), *b = NULL;
+        st = bn_partition_regions(scene2, o->regions, &q, err);
+        if (st == BN_OK) {
+            b = bn__malloc_array(n * nl, 3 * sizeof(double));
+            if (!b || q.n != n)
+                st = b ? bn_error_set(err, BN_EINTERNAL, "crosscheck: the levels have %zu and %zu regions", n, q.n)
+                       : bn_error_set(err, BN_ENOMEM, "crosscheck: out of memory");
+        }
+        if (st == BN_OK) {
+            bn_partition_mean(&q, scene2, layers2, (int)nl, b);
+            for (size_t l = 0; l < nl; l++)
+                for (int c = 0; c < 3; c++) {
+                    double pa = 0, pb = 0;
+                    for (size_t g = 0; g < n; g++) {
+                        size_t k = (l * n + g) * 3 + (size_t)c;
+                        tol[k] = fabs(run->rad_regions[k] - b[k]);
+                        pa += run->part.area[g] * run->rad_regions[k];
+                        pb += q.area[g] * b[k];
+                    }
+                    ptol[3 * l + (size_t)c] = BN_PI * m * m * fabs(pa - pb);
+                }
+            bn_partition_free(&q);
+        }
+        free(b);
+    }
+    if (st == BN_OK) {
+        for (size_t k = 0; k < n * nl * 3; k++)
+            run->tol[k] += tol[k];
+        for (size_t k = 0; k < nl * 3; k++)
+            run->power_tol[k] += ptol[k];
+    }
+    free(tol);
+    free(ptol);
+    return st;
 }
 
 bn_status bn_crosscheck_run_scene(const char *path, const bn_crosscheck_opts *o, bn_crosscheck_run *run,
@@ -127,17 +144,23 @@ bn_status bn_crosscheck_run_scene(const char *path, const bn_crosscheck_opts *o,
     if (st == BN_OK && o->disc != BN_DISC_NONE) {
         bn_crosscheck_opts o2 = *o;
         o2.pipeline.ff.cache_path = NULL;   /* the cache holds the mesh asked for */
-        if (run->fine.hierarchical && o->pipeline.hier.eps > 0) {
-            /* the hierarchy's other discretisation parameter, coarsened with the mesh: eps x r^2 (its
-             * error falls about as sqrt(eps) on the Cornell box, so as h, and one order fits both) */
-            double r2 = o->ratio * o->ratio;
-            o2.pipeline.hier.eps = o->disc == BN_DISC_FINE ? o->pipeline.hier.eps / r2 : o->pipeline.hier.eps * r2;
-        }
         st = bn__second_mesh(o, &run->fine, &m2, err);
         if (st == BN_OK)
             st = bn__level(path, &o2, &m2, &run->other, &run->layers_other, &run->seconds_other, err);
         if (st == BN_OK)
-            st = bn__tolerance(o, run, err);
+            st = bn__tolerance(o, run, run->other.scene, run->layers_other, err);
+        if (st == BN_OK && run->fine.hierarchical && o->pipeline.hier.eps > 0) {
+            /* the hierarchy's other discretisation parameter on the mesh asked: eps x r^2 (its error
+             * falls about as sqrt(eps) on the Cornell box, so as h, and one order fits both). Coarsened
+             * together with the mesh, the two errors cancelled at the bunny box's base (the regions'
+             * values there move one way with eps and the other with h): each counts on its own. */
+            double r2 = o->ratio * o->ratio, *layers = NULL;
+            o2.pipeline.hier.eps = o->disc == BN_DISC_FINE ? o->pipeline.hier.eps / r2 : o->pipeline.hier.eps * r2;
+            st = bn__level(path, &o2, &o2.pipeline.mesh, &run->other_eps, &layers, &run->seconds_other_eps, err);
+            if (st == BN_OK)
+                st = bn__tolerance(o, run, run->other_eps.scene, layers, err);
+            free(layers);
+        }
     }
     if (st != BN_OK)
         return st;
@@ -172,5 +195,6 @@ void bn_crosscheck_run_free(bn_crosscheck_run *run)
     bn_partition_free(&run->part);
     bn_pipeline_free(&run->fine);
     bn_pipeline_free(&run->other);
+    bn_pipeline_free(&run->other_eps);
     memset(run, 0, sizeof *run);
 }
