@@ -6,6 +6,7 @@
 #include "bounce/rt.h"
 #include "bounce/solve.h"
 #include "bounce/trace.h"
+#include "bounce/pipeline.h"
 
 #include <math.h>
 
@@ -235,4 +236,59 @@ BN_TEST(cornell_regions)
     bn_trace_patches_free(&tr);
     bn_partition_free(&part);
     cornell_free(&c);
+}
+
+/* Under the hierarchy the cross-check's tolerance adds the eps level's difference to the mesh
+ * level's: recomputed here from the mesh level alone (its region means, Fs |R_h - R_mesh| / (r - 1)),
+ * the tolerance is at least that everywhere and larger somewhere, and the eps level has the mesh
+ * asked with fewer links (eps x 4). Cornell box, 8 regions, 64 paths each (the verdict is not the
+ * point here). */
+BN_TEST(hierarchy_tolerance_adds_eps_level)
+{
+    bn_crosscheck_opts o;
+    bn_crosscheck_run run;
+    bn_partition q;
+    bn_error err;
+    size_t nl = (size_t)bn_layer_count(3), n, more = 0;
+    double *b, fs;
+    bn_crosscheck_opts_default(&o);
+    o.pipeline.load.unit = BN_UNIT_MM;
+    o.pipeline.transport = "hierarchical";
+    o.pipeline.method_auto = 1;
+    o.pipeline.mesh.target_patches = 600;
+    o.pipeline.hier.quiet = 1;
+    o.pipeline.hier.log.quiet = 1;
+    o.pipeline.ff.quiet = 1;
+    o.pipeline.ff.log.quiet = 1;
+    o.pipeline.solve.quiet = 1;
+    o.pipeline.solve.log_sink = (bn_log){NULL, NULL, 1};
+    o.trace.spp = 64;
+    o.trace.quiet = 1;
+    o.regions = 8;
+    if (bn_crosscheck_run_scene(bn_test_path("meshes/cornell-box.obj"), &o, &run, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    BN_ASSERT(run.fine.hierarchical);
+    BN_ASSERT(run.other.scene != NULL);
+    BN_ASSERT(run.other_eps.scene != NULL);
+    BN_ASSERT_EQ(run.other_eps.n, run.fine.n);
+    BN_ASSERT_LT(run.other_eps.hier.links, run.fine.hier.links);
+    n = run.part.n;
+    if (bn_partition_regions(run.other.scene, o.regions, &q, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    BN_ASSERT_EQ(q.n, n);
+    b = malloc(n * nl * 3 * sizeof(double));
+    bn_partition_mean(&q, run.other.scene, run.layers_other, (int)nl, b);
+    fs = run.in.tol_scale;
+    BN_ASSERT_REL(fs, o.tol_scale / (o.ratio - 1), 1e-15);
+    for (size_t k = 0; k < n * nl * 3; k++) {
+        double mesh_only = fabs(run.rad_regions[k] - b[k]);
+        BN_ASSERT_GE(run.tol[k], mesh_only * (1 - 1e-12));
+        more += run.tol[k] > mesh_only * (1 + 1e-9) + 1e-300;
+    }
+    fprintf(stderr, "hierarchy tolerance: %zu of %zu entries above the mesh level's alone; links %zu (eps level %zu)\n",
+            more, n * nl * 3, run.fine.hier.links, run.other_eps.hier.links);
+    BN_ASSERT_GT(more, n * nl);   /* the eps level adds to every layer but E, more or less */
+    free(b);
+    bn_partition_free(&q);
+    bn_crosscheck_run_free(&run);
 }
