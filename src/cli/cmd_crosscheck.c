@@ -32,7 +32,8 @@ int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c)
         "Compares the radiosity solution (form factors + solve, bounce terms E, KE, ..., K{n}E, rest, L)\n"
         "with the independent path tracer's per-patch estimates, per patch, layer and channel:\n"
         "z = (radiosity - trace) / se. Radiosity's discretisation error is estimated by solving a second\n"
-        "mesh level (--disc) and allowed as a tolerance tol = |R(mesh) - R(other mesh)| per patch, so the\n"
+        "mesh level (--disc) and allowed as a tolerance tol = |R(mesh) - R(other mesh)| per patch (under\n"
+        "the hierarchy plus |R(eps) - R(eps x or / ratio^2)| on the mesh asked: each parameter's own), so the\n"
         "test is z_excess = max(0, |R - T| - tol) / se <= the Sidak-corrected Student-t bound at --alpha\n"
         "over the family patches x layers x channels. Per-layer powers pi sum A_i L_i are tested the same\n"
         "way. The last line is the machine-readable verdict; exit code 6 when it fails.";
