@@ -15,6 +15,7 @@ PACKAGES=(
   fonts-dejavu-core          # labels on the contact sheet
   clang libclang-rt-14-dev   # libFuzzer harnesses
   chromium                   # headless browser: tests open the study report page
+  python3                    # tests: the glTF bake read back by a reader of its own
 )
 
 missing=()
@@ -23,7 +24,21 @@ for p in "${PACKAGES[@]}"; do
     missing+=("$p")
   fi
 done
+# Node.js and npm (the npm registry's packages in web/: the Khronos glTF validator): Debian's
+# nodejs and npm unless a node with npm is already there (a NodeSource nodejs carries its own npm,
+# and Debian's npm package would conflict with it).
+if ! command -v npm >/dev/null 2>&1; then
+  missing+=(nodejs npm)
+fi
+web_deps() {
+  if [ ! -d web/node_modules/gltf-validator ]; then
+    echo "setup: npm ci in web/ (gltf-validator)" >&2
+    (cd web && npm ci --no-audit --no-fund --loglevel=error)
+  fi
+}
+cd "$(dirname "$0")/.."
 if [ ${#missing[@]} -eq 0 ]; then
+  web_deps
   exit 0
 fi
 echo "setup: installing ${missing[*]}" >&2
@@ -37,3 +52,4 @@ fi
 export DEBIAN_FRONTEND=noninteractive
 $SUDO apt-get update -qq
 $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+web_deps

@@ -2,6 +2,7 @@
  * OM (OpenMesh), OBJ with `v x y z r g b` written directly (OpenMesh's OBJ writer refuses
  * vertex colours). Colours are radiance in W m^-2 sr^-1 as float, or 8-bit sRGB with --ldr. */
 #include "bounce/bake.h"
+#include "bake/bake_internal.h"
 #include "adapters/adapters.h"
 #include "base/internal.h"
 
@@ -179,9 +180,11 @@ bn_status bn_bake_write(const bn_bake *b, const char *path, const bn_bake_layer 
     char *tmp = NULL, *prov = NULL;
     bn_status st = BN_OK;
     int is_ply = strcasecmp(ext, "ply") == 0, is_om = strcasecmp(ext, "om") == 0, is_obj = strcasecmp(ext, "obj") == 0;
+    int is_glb = strcasecmp(ext, "glb") == 0, is_gltf = strcasecmp(ext, "gltf") == 0;
 
-    if (!is_ply && !is_om && !is_obj)
-        return bn_error_set(err, BN_EUSAGE, "%s: unknown mesh format '.%s' (bake writes .ply, .om and .obj)", path, ext);
+    if (!is_ply && !is_om && !is_obj && !is_glb && !is_gltf)
+        return bn_error_set(err, BN_EUSAGE, "%s: unknown mesh format '.%s' (bake writes .ply, .om, .obj, .glb and .gltf)",
+                            path, ext);
     if (nlayers == 0)
         return bn_error_set(err, BN_EINTERNAL, "%s: nothing to bake", path);
     if (is_obj && nlayers > 1)
@@ -260,6 +263,27 @@ bn_status bn_bake_write(const bn_bake *b, const char *path, const bn_bake_layer 
     }
     if (is_obj) {
         st = bn__write_obj(path, nv, opos, nf, face_n, face_idx, vals[0], c8, o, err);
+        goto done;
+    }
+    if (is_glb || is_gltf) {
+        const bn_face *faces = bn_scene_faces(bn_bake_scene(b), &(size_t){0});
+        unsigned *fm = bn__malloc_array(nf + 1, sizeof *fm);
+        const char **lnames = bn__malloc_array(nlayers, sizeof *lnames);
+        bn__bake_out g;
+        if (!fm || !lnames) {
+            free(fm);
+            free(lnames);
+            goto oom;
+        }
+        for (size_t k = 0; k < nf; k++)
+            fm[k] = o->input_mesh ? faces[k].material : patches[k].material;
+        for (size_t l = 0; l < nlayers; l++)
+            lnames[l] = layers[l].name;
+        g = (bn__bake_out){nv, opos, nf, face_n, face_idx, fm, nlayers, (const float *const *)vals, lnames, c8,
+                           o->exposure_ev};
+        st = bn__write_gltf(path, is_glb, &g, bn_bake_scene(b), o, err);
+        free(fm);
+        free(lnames);
         goto done;
     }
     {

@@ -30,7 +30,7 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
     bn_cli_solution sol;
     const char *pos[1], *out = "baked.ply";
     size_t np, nl = 1;
-    int n = 3, ldr = 0, per_bounce = 0, rc = 0, mesh = 0, elements;
+    int n = 3, ldr = 0, per_bounce = 0, rc = 0, mesh = 0, elements, is_gltf = 0;
     double ev = 0, crease = BN_BAKE_DEFAULT_CREASE;
     bn_error err;
     bn_pipeline p;
@@ -38,7 +38,7 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
     bn_status st;
     bn_bake_layer *layers = NULL;
     char (*names)[16] = NULL;
-    char solver[256], ffdesc[256], patches[32], evbuf[64], creasebuf[32], verts[32];
+    char solver[256], ffdesc[256], patches[32], evbuf[160], creasebuf[32], verts[32];
     bn_formfactor_opts fo;
     bn_bake_write_opts wo;
 
@@ -47,7 +47,7 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
     memset(&ff, 0, sizeof ff);
     memset(&sol, 0, sizeof sol);
     memset(&p, 0, sizeof p);
-    set.usage = "bounce bake SCENE [-o baked.ply|.om|.obj] [--ldr] [--per-bounce -n K] [options]";
+    set.usage = "bounce bake SCENE [-o baked.ply|.om|.obj|.glb|.gltf] [--ldr] [--per-bounce -n K] [options]";
     set.summary =
         "Solves L = E + K L and bakes L to vertex colours on the patches (--mesh input: on the input\n"
         "polygons alone): each vertex takes the area-weighted mean of the patches around it within one\n"
@@ -55,9 +55,12 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
         "vertices are split at creases and material seams. Colours are float radiance (W m^-2 sr^-1) by\n"
         "default, 8-bit sRGB with --ldr. .ply (binary) and .om are written through OpenMesh,\n"
         ".obj directly as `v x y z r g b`. --per-bounce adds float vertex properties E_red, E_green, E_blue,\n"
-        "KE_red, ..., K{K}E_*, rest_* (PLY, OM) so engines can blend bounces; their sum is L.";
+        "KE_red, ..., K{K}E_*, rest_* (PLY, OM) so engines can blend bounces; their sum is L.\n"
+        ".glb / .gltf (+ .bin): glTF 2.0 in metres, COLOR_0 = L as float radiance, --per-bounce adds the\n"
+        "attributes _E, _KE, ..., _REST, unlit materials with the reflectance in their extras, provenance in\n"
+        "the asset's extras; --ldr adds COLOR_1, the 8-bit sRGB display set, beside the float ones.";
     bn_optset_add(&set, (bn_opt){"output", 'o', BN_OPT_STRING, &out, NULL, 0, 0, "FILE",
-                                 "baked mesh: .ply, .om or .obj (default baked.ply)"});
+                                 "baked mesh: .ply, .om, .obj, .glb or .gltf (default baked.ply)"});
     bn_optset_add(&set, (bn_opt){"crease", 0, BN_OPT_DOUBLE, &crease, NULL, 0, 180, "DEG",
                                  "faces whose normals differ by more do not share vertices (default 30)"});
     bn_optset_add(&set, (bn_opt){"ldr", 0, BN_OPT_FLAG, &ldr, NULL, 0, 0, NULL,
@@ -66,7 +69,7 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
                                  "--ldr: value * 2^EV before sRGB (default: auto, the 99th percentile of the "
                                  "patches' L at 0.9)"});
     bn_optset_add(&set, (bn_opt){"per-bounce", 0, BN_OPT_FLAG, &per_bounce, NULL, 0, 0, NULL,
-                                 "also write each term E .. K^K E and rest as float vertex properties (PLY, OM)"});
+                                 "also write each term E .. K^K E and rest as float vertex properties (PLY, OM, glTF)"});
     bn_optset_add(&set, (bn_opt){"bounces", 'n', BN_OPT_INT, &n, NULL, 0, 64, "K",
                                  "--per-bounce: terms E .. K^K E (default 3)"});
     bn_optset_add(&set, (bn_opt){"mesh", 0, BN_OPT_CHOICE, &mesh, "elements|input", 0, 0, "elements|input",
@@ -86,10 +89,12 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
     elements = mesh == 0;
     {
         const char *dot = strrchr(out, '.');
-        if (!dot || (strcmp(dot, ".ply") && strcmp(dot, ".om") && strcmp(dot, ".obj"))) {
-            bn_error_set(&err, BN_EUSAGE, "-o %s: bake writes .ply, .om or .obj", out);
+        if (!dot || (strcmp(dot, ".ply") && strcmp(dot, ".om") && strcmp(dot, ".obj") && strcmp(dot, ".glb") &&
+                     strcmp(dot, ".gltf"))) {
+            bn_error_set(&err, BN_EUSAGE, "-o %s: bake writes .ply, .om, .obj, .glb or .gltf", out);
             return bn_cli_fail(&err);
         }
+        is_gltf = strcmp(dot, ".glb") == 0 || strcmp(dot, ".gltf") == 0;
         if (per_bounce && strcmp(dot, ".obj") == 0) {
             bn_error_set(&err, BN_EUSAGE, "--per-bounce needs .ply or .om (OBJ holds one colour per vertex)");
             return bn_cli_fail(&err);
@@ -120,7 +125,7 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
         rc = bn_cli_fail(&err);
         goto done;
     }
-    if (ldr && !bn_cli_given(&set, "exposure"))
+    if ((ldr || is_gltf) && !bn_cli_given(&set, "exposure"))
         ev = bn__patch_exposure(p.res.L, np);
     bn_cli_ff_opts(&ff, c, &fo);
     bn_formfactor_opts_describe(&fo, ffdesc, sizeof ffdesc);
@@ -130,7 +135,10 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
     else
         snprintf(verts, sizeof verts, "input polygons' corners");
     snprintf(creasebuf, sizeof creasebuf, "%g degrees", crease);
-    if (ldr)
+    if (is_gltf)
+        snprintf(evbuf, sizeof evbuf, "COLOR_0 L x 2^%+.4f clamped to [0, 1]; _L radiance W m^-2 sr^-1%s", ev,
+                 ldr ? "; COLOR_1 8-bit sRGB" : "");
+    else if (ldr)
         snprintf(evbuf, sizeof evbuf, "8-bit sRGB at %+.4f EV", ev);
     else
         snprintf(evbuf, sizeof evbuf, "float radiance, W m^-2 sr^-1");

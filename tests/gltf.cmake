@@ -1,0 +1,17 @@
+# glTF bakes: read back by a reader of the test's own (tests/gltf_check.py, against the same bake
+# as PLY through OpenMesh and the scene's MTL), and through the Khronos validator from npm
+# (tests/gltf_validate.sh; web/node_modules from scripts/setup.sh).
+find_program(BN_PYTHON3 python3)
+if(BN_PYTHON3)
+  add_test(NAME gltf.cornell_readback COMMAND ${BN_PYTHON3} ${CMAKE_CURRENT_LIST_DIR}/gltf_check.py
+    $<TARGET_FILE:bounce_cli> ${PROJECT_SOURCE_DIR}/meshes/cornell-box.obj mm ${CMAKE_CURRENT_BINARY_DIR}/tmp/gltf_check)
+  set_tests_properties(gltf.cornell_readback PROPERTIES LABELS gltf TIMEOUT 600)
+endif()
+if(BOUNCE_SANITIZE)
+  set(BN_GLTF_SANITIZED 1)
+else()
+  set(BN_GLTF_SANITIZED 0)
+endif()
+add_test(NAME gltf.validator COMMAND ${CMAKE_CURRENT_LIST_DIR}/gltf_validate.sh $<TARGET_FILE:bounce_cli>
+  ${PROJECT_SOURCE_DIR} ${CMAKE_CURRENT_BINARY_DIR}/tmp/gltf_validate ${BN_GLTF_SANITIZED})
+set_tests_properties(gltf.validator PROPERTIES LABELS gltf TIMEOUT 900 SKIP_RETURN_CODE 77)
