@@ -1,4 +1,4 @@
-# glTF bakes: read back by a reader of the test's own (tests/gltf_check.py, against the same bake
+# glTF bakes and the viewer page. Bakes: read back by a reader of the test's own (tests/gltf_check.py, against the same bake
 # as PLY through OpenMesh and the scene's MTL), and through the Khronos validator from npm
 # (tests/gltf_validate.sh; web/node_modules from scripts/setup.sh).
 find_program(BN_PYTHON3 python3)
@@ -15,3 +15,10 @@ endif()
 add_test(NAME gltf.validator COMMAND ${CMAKE_CURRENT_LIST_DIR}/gltf_validate.sh $<TARGET_FILE:bounce_cli>
   ${PROJECT_SOURCE_DIR} ${CMAKE_CURRENT_BINARY_DIR}/tmp/gltf_validate ${BN_GLTF_SANITIZED})
 set_tests_properties(gltf.validator PROPERTIES LABELS gltf TIMEOUT 900 SKIP_RETURN_CODE 77)
+# The viewer page (bounce view) in headless Chromium: screenshots of L, E, KE and K2E alone checked
+# against the physics (tests/view_check.py); skipped (77) where no browser is installed.
+if(BN_PYTHON3)
+  add_test(NAME view.cornell_in_chromium COMMAND ${BN_PYTHON3} ${CMAKE_CURRENT_LIST_DIR}/view_check.py
+    $<TARGET_FILE:bounce_cli> ${PROJECT_SOURCE_DIR} ${CMAKE_CURRENT_BINARY_DIR}/tmp/view_check)
+  set_tests_properties(view.cornell_in_chromium PROPERTIES LABELS gltf TIMEOUT 600 SKIP_RETURN_CODE 77)
+endif()

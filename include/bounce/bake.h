@@ -62,6 +62,12 @@ typedef struct bn_bake_write_opts {
 bn_status bn_bake_write(const bn_bake *b, const char *path, const bn_bake_layer *layers, size_t nlayers,
                         const bn_bake_write_opts *o, bn_error *err);
 
+/* The viewer page: one self-contained HTML file (the .glb bake at glb_path and three.js embedded;
+ * no network at view time) with an orbit camera, a control per bounce term (shown summed, or one
+ * alone), exposure, a false-colour mode with its scale and the per-bounce power table. Atomic.
+ * BN_EUSAGE when this build has no three.js (scripts/setup.sh installs it). */
+bn_status bn_view_write(const char *glb_path, const char *title, const char *out, bn_error *err);
+
 #ifdef __cplusplus
 }
 #endif

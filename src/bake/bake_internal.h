@@ -19,6 +19,7 @@ typedef struct bn__bake_out {
     const char *const *names;
     const unsigned char *c8;
     double exposure_ev;
+    const double *power;      /* nlayers x 3: each layer's power pi sum_p A_p x_p over the patches (W) */
 } bn__bake_out;
 
 /* glTF 2.0: binary .glb (binary = 1), or .gltf with a .bin of the same stem beside it. Atomic per

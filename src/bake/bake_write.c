@@ -5,6 +5,7 @@
 #include "bake/bake_internal.h"
 #include "adapters/adapters.h"
 #include "base/internal.h"
+#include "base/vec.h"
 
 #include <math.h>
 #include <string.h>
@@ -277,13 +278,25 @@ bn_status bn_bake_write(const bn_bake *b, const char *path, const bn_bake_layer 
         }
         for (size_t k = 0; k < nf; k++)
             fm[k] = o->input_mesh ? faces[k].material : patches[k].material;
-        for (size_t l = 0; l < nlayers; l++)
+        double *power = bn__calloc(3 * nlayers, sizeof(double)),
+               m2 = bn_unit_to_metres(bn_scene_unit(bn_bake_scene(b)));
+        if (!power) {
+            free(fm);
+            free(lnames);
+            goto oom;
+        }
+        for (size_t l = 0; l < nlayers; l++) {
             lnames[l] = layers[l].name;
+            for (size_t p = 0; p < np; p++)
+                for (int c = 0; c < 3; c++)
+                    power[3 * l + (size_t)c] += BN_PI * patches[p].area * m2 * m2 * layers[l].patch_values[3 * p + (size_t)c];
+        }
         g = (bn__bake_out){nv, opos, nf, face_n, face_idx, fm, nlayers, (const float *const *)vals, lnames, c8,
-                           o->exposure_ev};
+                           o->exposure_ev, power};
         st = bn__write_gltf(path, is_glb, &g, bn_bake_scene(b), o, err);
         free(fm);
         free(lnames);
+        free(power);
         goto done;
     }
     {

@@ -266,6 +266,17 @@ bn_status bn__write_gltf(const char *path, int binary, const bn__bake_out *m, co
         bn__str_add(&js, ":");
         bn__str_json(&js, m->names[l]);
     }
+    bn__str_add(&js, "},\"power_W\":{");
+    for (size_t l = 0; l < m->nlayers; l++) {   /* pi sum A L over the patches, per layer and channel */
+        bn__str_add(&js, "%s", l ? "," : "");
+        bn__str_json(&js, m->names[l]);
+        bn__str_add(&js, ":[");
+        for (int c = 0; c < 3; c++) {
+            bn__str_add(&js, "%s", c ? "," : "");
+            bn__str_num(&js, m->power ? m->power[3 * l + (size_t)c] : 0.0);
+        }
+        bn__str_add(&js, "]");
+    }
     bn__str_add(&js, "}");
     if (m->c8) {
         bn__str_add(&js, ",\"display\":{\"attribute\":\"COLOR_1\",\"encoding\":\"8-bit sRGB of L\",\"exposure_ev\":");

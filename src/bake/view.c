@@ -1,0 +1,106 @@
+/* The viewer page (bounce view): one self-contained HTML file, the bake (.glb) and three.js
+ * embedded as base64, our page template (web/viewer.html) around them; both vendored into the
+ * library at build time (cmake/embed.cmake). No network at view time. */
+#include "bounce/bake.h"
+#include "base/internal.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+extern const unsigned char bn__web_viewer[], bn__web_three[], bn__web_orbit[];
+extern const size_t bn__web_viewer_size, bn__web_three_size, bn__web_orbit_size;
+extern const int bn__web_have_assets;
+
+static void bn__base64(FILE *fp, const unsigned char *p, size_t n)
+{
+    static const char a[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    char q[4];
+    for (size_t i = 0; i < n; i += 3) {
+        unsigned v = (unsigned)p[i] << 16 | (i + 1 < n ? (unsigned)p[i + 1] << 8 : 0) | (i + 2 < n ? p[i + 2] : 0);
+        q[0] = a[v >> 18 & 63];
+        q[1] = a[v >> 12 & 63];
+        q[2] = i + 1 < n ? a[v >> 6 & 63] : '=';
+        q[3] = i + 2 < n ? a[v & 63] : '=';
+        fwrite(q, 1, 4, fp);
+    }
+}
+
+static void bn__html_text(FILE *fp, const char *s)
+{
+    for (; *s; s++) {
+        switch (*s) {
+        case '&': fputs("&amp;", fp); break;
+        case '<': fputs("&lt;", fp); break;
+        case '>': fputs("&gt;", fp); break;
+        case '"': fputs("&quot;", fp); break;
+        default: fputc(*s, fp);
+        }
+    }
+}
+
+bn_status bn_view_write(const char *glb_path, const char *title, const char *out, bn_error *err)
+{
+    FILE *in;
+    unsigned char *glb = NULL;
+    long len;
+    bn__outfile f;
+    bn_status st;
+    const char *t = (const char *)bn__web_viewer, *end = t + bn__web_viewer_size;
+    if (!bn__web_have_assets)
+        return bn_error_set(err, BN_EUSAGE, "this bounce was built without three.js (web/node_modules/three was "
+                                            "missing): run scripts/setup.sh, which installs it, and rebuild");
+    if (!(in = fopen(glb_path, "rb")))
+        return bn_error_set(err, BN_EIO, "%s: cannot open the bake", glb_path);
+    if (fseek(in, 0, SEEK_END) != 0 || (len = ftell(in)) < 0 || fseek(in, 0, SEEK_SET) != 0) {
+        fclose(in);
+        return bn_error_set(err, BN_EIO, "%s: cannot read the bake", glb_path);
+    }
+    glb = bn__malloc_array((size_t)len + 1, 1);
+    if (!glb) {
+        fclose(in);
+        return bn_error_set(err, BN_ENOMEM, "%s: out of memory for %ld bytes", glb_path, len);
+    }
+    if (fread(glb, 1, (size_t)len, in) != (size_t)len) {
+        fclose(in);
+        free(glb);
+        return bn_error_set(err, BN_EIO, "%s: short read", glb_path);
+    }
+    fclose(in);
+    if (len < 28 || memcmp(glb, "glTF", 4) != 0) {
+        free(glb);
+        return bn_error_set(err, BN_EINPUT, "%s: not a glTF binary (.glb): bounce view takes a scene or a .glb bake",
+                            glb_path);
+    }
+    st = bn__outfile_open(&f, out, "wb", err);
+    if (st != BN_OK) {
+        free(glb);
+        return st;
+    }
+    while (t < end) {   /* the template, its __BN_*__ placeholders filled */
+        const char *m = strstr(t, "__BN_");
+        if (!m || m >= end) {
+            fwrite(t, 1, (size_t)(end - t), f.fp);
+            break;
+        }
+        fwrite(t, 1, (size_t)(m - t), f.fp);
+        if (strncmp(m, "__BN_TITLE__", 12) == 0) {
+            bn__html_text(f.fp, title);
+            t = m + 12;
+        } else if (strncmp(m, "__BN_THREE__", 12) == 0) {
+            bn__base64(f.fp, bn__web_three, bn__web_three_size);
+            t = m + 12;
+        } else if (strncmp(m, "__BN_ORBIT__", 12) == 0) {
+            bn__base64(f.fp, bn__web_orbit, bn__web_orbit_size);
+            t = m + 12;
+        } else if (strncmp(m, "__BN_GLB__", 10) == 0) {
+            bn__base64(f.fp, glb, (size_t)len);
+            t = m + 10;
+        } else {
+            fwrite(m, 1, 5, f.fp);
+            t = m + 5;
+        }
+    }
+    free(glb);
+    return bn__outfile_commit(&f, err);
+}

@@ -1,0 +1,170 @@
+#!/usr/bin/env python3
+"""The viewer page (bounce view) in headless Chromium on the Cornell box: screenshots of L, E alone,
+KE alone and K2E alone, checked against what the physics says, not against earlier screenshots:
+
+- E alone shows only the light: a few percent of the pixels lit, the light's centre bright, the
+  blocks black;
+- the block faces that look at the red wall (the tall block's) and at the green wall (the short
+  block's) do not see the light, so KE leaves them dark; from K2E on they carry the walls' colour
+  (light reflected once by a coloured wall): red over green well above the light's own 17:12 on the
+  first, green over red above the light's 12:17 on the second;
+- the screenshots differ where they should (E from L, KE from K2E), and the page loads its three.js
+  and bake with no network.
+
+usage: view_check.py BOUNCE SOURCE_DIR OUT_DIR
+Exit 77 (skipped) when no browser is installed.
+"""
+import os
+import shutil
+import struct
+import subprocess
+import sys
+import zlib
+
+W, H = 800, 600
+failures = []
+
+
+def check(cond, what):
+    print(("ok   " if cond else "FAIL ") + what)
+    if not cond:
+        failures.append(what)
+
+
+def read_png(path):
+    """8-bit RGB or RGBA, not interlaced (what Chromium writes): rows of (r, g, b) tuples."""
+    d = open(path, "rb").read()
+    assert d[:8] == b"\x89PNG\r\n\x1a\n", path
+    pos, idat, w = 8, b"", 0
+    while pos < len(d):
+        n, kind = struct.unpack(">I4s", d[pos:pos + 8])
+        body = d[pos + 8:pos + 8 + n]
+        if kind == b"IHDR":
+            w, h, depth, ctype, _, _, interlace = struct.unpack(">IIBBBBB", body)
+            assert depth == 8 and ctype in (2, 6) and interlace == 0, (depth, ctype, interlace)
+            bpp = 3 if ctype == 2 else 4
+        elif kind == b"IDAT":
+            idat += body
+        pos += 12 + n
+    raw = zlib.decompress(idat)
+    stride = w * bpp
+    rows, prev = [], bytearray(stride)
+    for y in range(h):
+        f = raw[y * (stride + 1)]
+        line = bytearray(raw[y * (stride + 1) + 1:(y + 1) * (stride + 1)])
+        for i in range(stride):
+            a = line[i - bpp] if i >= bpp else 0
+            b = prev[i]
+            c = prev[i - bpp] if i >= bpp else 0
+            if f == 1:
+                line[i] = (line[i] + a) & 255
+            elif f == 2:
+                line[i] = (line[i] + b) & 255
+            elif f == 3:
+                line[i] = (line[i] + (a + b) // 2) & 255
+            elif f == 4:
+                p = a + b - c
+                pa, pb, pc = abs(p - a), abs(p - b), abs(p - c)
+                line[i] = (line[i] + (a if pa <= pb and pa <= pc else b if pb <= pc else c)) & 255
+        rows.append([tuple(line[x * bpp:x * bpp + 3]) for x in range(w)])
+        prev = line
+    return rows
+
+
+def lin(v):
+    v /= 255.0
+    return v / 12.92 if v <= 0.04045 else ((v + 0.055) / 1.055) ** 2.4
+
+
+def patch_mean(img, x, y, r=2):
+    """Linear RGB mean over a (2r+1)^2 window at (x, y)."""
+    s = [0.0, 0.0, 0.0]
+    n = 0
+    for yy in range(int(round(y)) - r, int(round(y)) + r + 1):
+        for xx in range(int(round(x)) - r, int(round(x)) + r + 1):
+            for c in range(3):
+                s[c] += lin(img[yy][xx][c])
+            n += 1
+    return [v / n for v in s]
+
+
+def main():
+    bounce, src, out = sys.argv[1:4]
+    browser = next((shutil.which(b) for b in ("chromium", "chromium-browser", "google-chrome") if shutil.which(b)), None)
+    if not browser:
+        print("SKIP: no browser: install Debian's chromium (scripts/setup.sh does) to run this test")
+        sys.exit(77)
+    os.makedirs(out, exist_ok=True)
+    page = os.path.join(out, "cornell.html")
+    r = subprocess.run([bounce, "view", os.path.join(src, "meshes/cornell-box.obj"), "--unit", "mm", "-q",
+                        "-o", page], capture_output=True, text=True)
+    check(r.returncode == 0, "bounce view wrote the page (exit %d)" % r.returncode)
+    if r.returncode:
+        print(r.stderr)
+        sys.exit(1)
+    html = open(page, encoding="utf-8").read()
+    check("http://" not in html.split("<script type=\"importmap\">")[0] and "https://" not in html.split("<script")[0],
+          "the page loads nothing from the network")
+    base = [browser, "--headless", "--no-sandbox", "--use-gl=swiftshader", "--enable-unsafe-swiftshader",
+            "--virtual-time-budget=8000", "--window-size=%d,%d" % (W, H), "--hide-scrollbars"]
+    url = "file://" + os.path.abspath(page)
+    # where the probes land: the light's centre, the tall block's face toward the red wall, the short
+    # block's face toward the green wall (centroids, metres), the floor between the blocks
+    probes = [(0.278, 0.5485, 0.2795), (0.4475, 0.165, 0.3265), (0.106, 0.0825, 0.145), (0.28, 0.0, 0.06)]
+    q = ";".join(",".join("%g" % c for c in p) for p in probes)
+    fixed = "#panel=0&size=%dx%d&" % (W, H)   # the same canvas and projection in every run
+    dom = subprocess.run(base + ["--dump-dom", url + fixed + "probe=" + q], capture_output=True, text=True).stdout
+    mark = '<pre id="probe" style'
+    check(mark in dom, "the page ran (its probe output is in the DOM)")
+    if mark not in dom:
+        sys.exit(1)
+    txt = dom.rsplit(mark, 1)[1].split(">", 1)[1].split("</pre>")[0]
+    pts = [tuple(float(v) for v in ln.split()) for ln in txt.strip().splitlines()]
+    light, red_face, green_face, floor = pts
+    shots = {}
+    for name, frag in (("L", ""), ("E", "terms=E"), ("KE", "terms=KE&ev=3"), ("K2E", "terms=K2E&ev=3")):
+        png = os.path.join(out, "view-%s.png" % name)
+        if os.path.exists(png):
+            os.remove(png)
+        subprocess.run(base + ["--screenshot=" + png, url + fixed + frag], capture_output=True)
+        check(os.path.exists(png), "screenshot %s" % name)
+        if not os.path.exists(png):
+            sys.exit(1)
+        shots[name] = read_png(png)
+
+    def lit_fraction(img):
+        return sum(1 for row in img for p in row if max(p) > 12) / float(len(img) * len(img[0]))
+
+    fe, fl = lit_fraction(shots["E"]), lit_fraction(shots["L"])
+    check(fe < 0.03, "E alone: %.2f%% of the pixels lit (only the light)" % (100 * fe))
+    check(fl > 0.3, "L: %.1f%% of the pixels lit" % (100 * fl))
+    check(min(patch_mean(shots["E"], *light)) > 0.5, "E alone: the light's centre is bright")
+    for nm, p in (("red-facing", red_face), ("green-facing", green_face), ("floor", floor)):
+        check(max(patch_mean(shots["E"], *p)) < 0.01, "E alone: the %s probe is black" % nm)
+    ke_red, ke_green = patch_mean(shots["KE"], *red_face), patch_mean(shots["KE"], *green_face)
+    ke_floor = patch_mean(shots["KE"], *floor)
+    k2_red, k2_green = patch_mean(shots["K2E"], *red_face), patch_mean(shots["K2E"], *green_face)
+    print("linear RGB: KE red-facing %s, green-facing %s, floor %s; K2E red-facing %s, green-facing %s"
+          % tuple(["(%.3f %.3f %.3f)" % tuple(v) for v in (ke_red, ke_green, ke_floor, k2_red, k2_green)]))
+    check(max(ke_red) < 0.1 * max(ke_floor) and max(ke_green) < 0.1 * max(ke_floor),
+          "KE alone: the block faces toward the coloured walls see no light (dark beside the lit floor)")
+    check(k2_red[0] > 3 * (17.0 / 12.0) * k2_red[1] and k2_red[0] > 0.02,
+          "K2E: the tall block's face toward the red wall is red (R/G %.2f, the light's 1.42)"
+          % (k2_red[0] / max(k2_red[1], 1e-9)))
+    check(k2_green[1] > 2 * (12.0 / 17.0) * k2_green[0] and k2_green[1] > 0.02,
+          "K2E: the short block's face toward the green wall is green (G/R %.2f, the light's 0.71)"
+          % (k2_green[1] / max(k2_green[0], 1e-9)))
+
+    def mean_diff(a, b):
+        return sum(abs(p[c] - q[c]) for ra, rb in zip(a, b) for p, q in zip(ra, rb) for c in range(3)) / (
+            3.0 * 255 * len(a) * len(a[0]))
+
+    check(mean_diff(shots["L"], shots["E"]) > 0.02, "L and E alone differ (%.3f)" % mean_diff(shots["L"], shots["E"]))
+    check(mean_diff(shots["KE"], shots["K2E"]) > 0.01,
+          "KE and K2E alone differ (%.3f)" % mean_diff(shots["KE"], shots["K2E"]))
+    print("%d failures" % len(failures))
+    sys.exit(1 if failures else 0)
+
+
+if __name__ == "__main__":
+    main()
