@@ -466,6 +466,34 @@ if [ "$big" = 1 ]; then
     fi
 fi
 
+# ---- the viewer page: frames per second in headless Chromium (software WebGL: SwiftShader) ----
+if command -v chromium >/dev/null 2>&1 && command -v python3 >/dev/null 2>&1; then
+    note "viewer page: frames per second"
+    {
+        echo "## The viewer page (\`bounce view\`): frames per second"
+        echo
+        echo "Measured by the page itself (#fps=1: two seconds of real time under requestAnimationFrame, the camera"
+        echo "turning), 800 x 600, headless Chromium with SwiftShader (software WebGL on these cores), medians of 3."
+        echo
+        echo "| page | triangles | antialiasing | fps (median, min-max) |"
+        echo "|---|---|---|---|"
+    } >>"$report"
+    "$bounce" view "$root/meshes/cornell-box.obj" --unit mm -q -o "$work/view-cornell.html" 2>/dev/null
+    pages="$work/view-cornell.html:1788:on $work/view-cornell.html#aa=0:1788:off"
+    bb="$root/../shared/data/scenes/bunny-box.obj"
+    if [ "$big" = 1 ] && [ -f "$bb" ]; then
+        "$bounce" bake "$bb" --unit mm -q --eps 1e-2 --per-bounce --mesh input -o "$work/bunny-box.glb" 2>/dev/null &&
+            "$bounce" view "$work/bunny-box.glb" -q -o "$work/view-bunny.html" &&
+            pages="$pages $work/view-bunny.html:69469:off $work/view-bunny.html#aa=1:69469:on"
+    fi
+    for pg in $pages; do
+        url=${pg%%:*}; rest=${pg#*:}; tris=${rest%%:*}; aa=${rest#*:}
+        for i in 1 2 3; do python3 "$root/bench/view_fps.py" "$url" | awk '{ print $2 }'; done >"$work/fps.txt"
+        echo "| $(basename "$url") | $tris | $aa | $(stats "$work/fps.txt" | awk '{ printf "%s (%s-%s)", $1, $2, $3 }') |" >>"$report"
+    done
+    echo >>"$report"
+fi
+
 end=$(date +%s)
 echo >>"$report"
 echo "_Total: $((end - start)) s, the build excluded (bench/run.sh$( [ "$quick" = 1 ] && echo " --quick"))._" >>"$report"

@@ -57,8 +57,10 @@ int bn_cmd_view(int argc, char **argv, bn_cli_common *c)
             out = argv[i] + 9;
             continue;
         }
-        if (strcmp(argv[i], "-q") == 0 || strcmp(argv[i], "--quiet") == 0)
+        if (strcmp(argv[i], "-q") == 0 || strcmp(argv[i], "--quiet") == 0) {
             quiet = 1;
+            continue;   /* the bake is quiet anyway (below) */
+        }
         if (argv[i][0] != '-' && !in)
             in = argv[i];
         bargv[bargc++] = argv[i];
