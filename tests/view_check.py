@@ -102,6 +102,14 @@ def main():
     if r.returncode:
         print(r.stderr)
         sys.exit(1)
+    # bad input: a file that is not a .glb gives a clear error, a non-zero exit and no page
+    bad, badpage = os.path.join(out, "not-a-bake.glb"), os.path.join(out, "bad.html")
+    open(bad, "w").write("solid nothing\n")
+    if os.path.exists(badpage):
+        os.remove(badpage)
+    rb = subprocess.run([bounce, "view", bad, "-o", badpage], capture_output=True, text=True)
+    check(rb.returncode != 0 and "not a glTF binary" in rb.stderr and bad in rb.stderr and not os.path.exists(badpage),
+          "a .glb that is not one: exit %d, '%s', no page" % (rb.returncode, rb.stderr.strip()[-120:]))
     html = open(page, encoding="utf-8").read()
     check("http://" not in html.split("<script type=\"importmap\">")[0] and "https://" not in html.split("<script")[0],
           "the page loads nothing from the network")
