@@ -16,6 +16,7 @@ PACKAGES=(
   clang libclang-rt-14-dev   # libFuzzer harnesses
   chromium                   # headless browser: tests open the study report page
   python3                    # tests: the glTF bake read back by a reader of its own
+  python3-numpy python3-pytest   # the Python package (python/bounce) and its tests
 )
 
 missing=()

@@ -14,5 +14,6 @@
 #include "bounce/trace.h"
 #include "bounce/study.h"
 #include "bounce/pipeline.h"
+#include "bounce/flat.h"
 
 #endif

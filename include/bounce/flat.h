@@ -1,0 +1,55 @@
+/* bounce: a C API of plain types for bindings (the Python package in python/bounce, through
+ * ctypes): one call solves a scene file, accessors hand out the library's own arrays (no copies),
+ * errors come back as a status and a message. */
+#ifndef BOUNCE_FLAT_H
+#define BOUNCE_FLAT_H
+
+#include <stddef.h>
+#include "bounce/status.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct bn_flat bn_flat;   /* a solved scene: patches, K's report, L, the terms, rest */
+
+/* Options by name, as on the command line; NULL or 0 for the default of each. */
+typedef struct bn_flat_opts {
+    const char *unit;         /* "m" (default), "cm", "mm" */
+    const char *method;       /* "auto" (default), "jacobi", "gauss-seidel", "neumann", "direct" */
+    const char *transport;    /* "auto" (default), "dense", "sparse", "hierarchical" */
+    int bounces;              /* terms kept: K^0 E .. K^bounces E (default 3; < 0: none) */
+    double tol;               /* solver tolerance, relative (default 1e-6) */
+    size_t patches;           /* target patch count (default: as `bounce solve`) */
+    double patch_size;        /* largest patch edge, scene units (overrides patches) */
+    double eps;               /* hierarchy eps (default 1e-3) */
+    int threads;              /* 0: all cores */
+    int quiet;                /* no progress bars (default 1 here: 0 shows them on stderr) */
+} bn_flat_opts;
+void bn_flat_opts_default(bn_flat_opts *o);
+
+/* Loads, meshes, builds K and solves `path`. On failure *out is NULL, the status is returned and
+ * msg (msglen bytes) holds bounce's message. BN_ENOTCONV keeps the unconverged answer in *out. */
+bn_status bn_flat_solve(const char *path, const bn_flat_opts *o, bn_flat **out, char *msg, size_t msglen);
+void bn_flat_free(bn_flat *f);   /* NULL is a no-op */
+
+size_t bn_flat_patches(const bn_flat *f);
+int bn_flat_terms(const bn_flat *f);                        /* terms kept (bounces + 1, or 0) */
+const double *bn_flat_L(const bn_flat *f);                  /* N x 3, owned by f */
+const double *bn_flat_term(const bn_flat *f, int k);        /* N x 3: K^k E, or NULL past the last */
+const double *bn_flat_rest(const bn_flat *f);               /* N x 3: L - the kept terms, or NULL */
+const double *bn_flat_emission(const bn_flat *f);           /* N x 3 */
+/* Per-patch geometry and materials, written into caller arrays: area (N), normal (N x 3),
+ * centroid (N x 3), reflectance (N x 3), face (N, the input polygon's index); any may be NULL. */
+void bn_flat_patch_data(const bn_flat *f, double *area, double *normal, double *centroid, double *reflectance,
+                        size_t *face);
+const char *bn_flat_stop_reason(const bn_flat *f);         /* "converged-rtol", ... */
+const char *bn_flat_method(const bn_flat *f);              /* the solver that ran */
+size_t bn_flat_iterations(const bn_flat *f);
+double bn_flat_residual(const bn_flat *f);                  /* final max residual */
+const char *bn_flat_transport(const bn_flat *f);           /* "dense", "sparse" or "hierarchy" */
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,162 @@
+"""bounce from Python: a thin layer over the C library (libbounce.so) through ctypes.
+
+    import bounce
+    r = bounce.solve("meshes/cornell-box.obj", unit="mm", bounces=3)
+    r.L          # patches x 3 radiance, W m^-2 sr^-1 (numpy, sharing the library's memory)
+    r.terms[k]   # K^k E, patches x 3: r.terms[0] = E, r.terms[1] = KE (direct light), ...
+    r.rest       # L minus the kept terms (the longer paths)
+    r.area, r.normal, r.centroid, r.reflectance, r.face   # per patch (numpy copies, small)
+
+The library is found as the environment variable BOUNCE_LIBRARY names it, else in the build tree
+beside this package (build/libbounce.so). Errors raise bounce.BounceError with bounce's message
+and status name. Nothing here computes: every number comes from the C library.
+"""
+import ctypes
+import os
+
+import numpy as np
+
+__all__ = ["solve", "Result", "BounceError", "library_path"]
+
+
+class BounceError(RuntimeError):
+    """A bounce call failed: .status is bounce's status name ("EINPUT", ...), str() its message."""
+
+    def __init__(self, status, message):
+        super().__init__(message)
+        self.status = status
+
+
+def library_path():
+    env = os.environ.get("BOUNCE_LIBRARY")
+    if env:
+        return env
+    here = os.path.dirname(os.path.abspath(__file__))
+    root = os.path.dirname(os.path.dirname(here))
+    for build in ("build", "build-asan", "build-bench"):
+        p = os.path.join(root, build, "libbounce.so")
+        if os.path.exists(p):
+            return p
+    raise BounceError("EUSAGE", "libbounce.so not found: build bounce (scripts/test.sh or cmake) or set BOUNCE_LIBRARY")
+
+
+class _Opts(ctypes.Structure):
+    _fields_ = [("unit", ctypes.c_char_p), ("method", ctypes.c_char_p), ("transport", ctypes.c_char_p),
+                ("bounces", ctypes.c_int), ("tol", ctypes.c_double), ("patches", ctypes.c_size_t),
+                ("patch_size", ctypes.c_double), ("eps", ctypes.c_double), ("threads", ctypes.c_int),
+                ("quiet", ctypes.c_int)]
+
+
+_lib = None
+
+
+def _load():
+    global _lib
+    if _lib is not None:
+        return _lib
+    lib = ctypes.CDLL(library_path())
+    P, D, S, I = ctypes.c_void_p, ctypes.POINTER(ctypes.c_double), ctypes.c_size_t, ctypes.c_int
+    lib.bn_flat_opts_default.argtypes = [ctypes.POINTER(_Opts)]
+    lib.bn_flat_solve.argtypes = [ctypes.c_char_p, ctypes.POINTER(_Opts), ctypes.POINTER(P), ctypes.c_char_p, S]
+    lib.bn_flat_solve.restype = I
+    lib.bn_flat_free.argtypes = [P]
+    for name, res in (("bn_flat_patches", S), ("bn_flat_terms", I), ("bn_flat_iterations", S),
+                      ("bn_flat_residual", ctypes.c_double)):
+        getattr(lib, name).argtypes = [P]
+        getattr(lib, name).restype = res
+    for name in ("bn_flat_L", "bn_flat_rest", "bn_flat_emission"):
+        getattr(lib, name).argtypes = [P]
+        getattr(lib, name).restype = D
+    lib.bn_flat_term.argtypes = [P, I]
+    lib.bn_flat_term.restype = D
+    for name in ("bn_flat_stop_reason", "bn_flat_method", "bn_flat_transport"):
+        getattr(lib, name).argtypes = [P]
+        getattr(lib, name).restype = ctypes.c_char_p
+    lib.bn_flat_patch_data.argtypes = [P, D, D, D, D, ctypes.POINTER(ctypes.c_size_t)]
+    lib.bn_status_name.argtypes = [I]
+    lib.bn_status_name.restype = ctypes.c_char_p
+    _lib = lib
+    return lib
+
+
+class Result:
+    """A solved scene. L, terms and rest are numpy views of the library's arrays (no copies): they
+    stay valid while this object lives (each view keeps it alive)."""
+
+    def __init__(self, handle, lib):
+        self._h, self._lib = handle, lib
+        n = lib.bn_flat_patches(handle)
+        self.patches = n
+
+        def view(ptr):
+            if not ptr:
+                return None
+            a = np.ctypeslib.as_array(ptr, shape=(n, 3))
+            a.flags.writeable = False
+            return _Owned(a, self)
+
+        self.L = view(lib.bn_flat_L(handle))
+        self.terms = [view(lib.bn_flat_term(handle, k)) for k in range(lib.bn_flat_terms(handle))]
+        self.rest = view(lib.bn_flat_rest(handle))
+        self.emission = view(lib.bn_flat_emission(handle))
+        self.area = np.empty(n)
+        self.normal = np.empty((n, 3))
+        self.centroid = np.empty((n, 3))
+        self.reflectance = np.empty((n, 3))
+        self.face = np.empty(n, dtype=np.uintp)
+        Dp = ctypes.POINTER(ctypes.c_double)
+        lib.bn_flat_patch_data(handle, self.area.ctypes.data_as(Dp), self.normal.ctypes.data_as(Dp),
+                               self.centroid.ctypes.data_as(Dp), self.reflectance.ctypes.data_as(Dp),
+                               self.face.ctypes.data_as(ctypes.POINTER(ctypes.c_size_t)))
+        self.stop_reason = lib.bn_flat_stop_reason(handle).decode()
+        self.method = lib.bn_flat_method(handle).decode()
+        self.transport = lib.bn_flat_transport(handle).decode()
+        self.iterations = lib.bn_flat_iterations(handle)
+        self.residual = lib.bn_flat_residual(handle)
+
+    def __del__(self):
+        if getattr(self, "_h", None):
+            self._lib.bn_flat_free(self._h)
+            self._h = None
+
+    def __repr__(self):
+        return "<bounce.Result %d patches, %s on %s, %s after %d iterations, %d terms>" % (
+            self.patches, self.method, self.transport, self.stop_reason, self.iterations, len(self.terms))
+
+
+class _Owned(np.ndarray):
+    """A numpy view that keeps its Result (the owner of the memory) alive."""
+
+    def __new__(cls, a, owner):
+        obj = a.view(cls)
+        obj._owner = owner
+        return obj
+
+    def __array_finalize__(self, obj):
+        self._owner = getattr(obj, "_owner", None)
+
+
+def solve(path, unit="m", method="auto", transport="auto", bounces=3, tol=None, patches=None, patch_size=None,
+          eps=None, threads=0, progress=False):
+    """Loads, meshes, builds K and solves L = E + K L for the scene file at `path`, keeping the
+    terms K^0 E .. K^bounces E. Options are those of `bounce solve` (defaults alike). Raises
+    BounceError with bounce's message on bad input; an unconverged solve raises too."""
+    lib = _load()
+    o = _Opts()
+    lib.bn_flat_opts_default(ctypes.byref(o))
+    o.unit, o.method, o.transport = unit.encode(), method.encode(), transport.encode()
+    o.bounces = bounces
+    o.tol = tol or 0.0
+    o.patches = patches or 0
+    o.patch_size = patch_size or 0.0
+    o.eps = eps or 0.0
+    o.threads = threads
+    o.quiet = 0 if progress else 1
+    h = ctypes.c_void_p()
+    msg = ctypes.create_string_buffer(2048)
+    st = lib.bn_flat_solve(os.fsencode(path), ctypes.byref(o), ctypes.byref(h), msg, len(msg))
+    if st != 0:
+        if h:
+            lib.bn_flat_free(h)
+        raise BounceError(lib.bn_status_name(st).decode(), msg.value.decode(errors="replace"))
+    return Result(h, lib)

@@ -1,0 +1,152 @@
+/* The flat C API for bindings (include/bounce/flat.h): the pipeline behind plain types. */
+#include "bounce/flat.h"
+#include "bounce/pipeline.h"
+#include "base/internal.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+struct bn_flat {
+    bn_pipeline p;
+    char transport[32];
+};
+
+void bn_flat_opts_default(bn_flat_opts *o)
+{
+    memset(o, 0, sizeof *o);
+    o->bounces = 3;
+    o->quiet = 1;
+}
+
+static bn_status bn__flat_fail(bn_status st, const char *text, char *msg, size_t msglen)
+{
+    if (msg && msglen)
+        snprintf(msg, msglen, "%s", text);
+    return st;
+}
+
+bn_status bn_flat_solve(const char *path, const bn_flat_opts *o, bn_flat **out, char *msg, size_t msglen)
+{
+    static const char *methods[] = {"jacobi", "gauss-seidel", "neumann", "direct"};
+    bn_flat_opts d;
+    bn_pipeline_opts po;
+    bn_error err;
+    bn_flat *f;
+    bn_status st;
+    if (out)
+        *out = NULL;
+    if (msg && msglen)
+        msg[0] = '\0';
+    if (!out || !path)
+        return bn__flat_fail(BN_EUSAGE, "bn_flat_solve: path and out are required", msg, msglen);
+    if (!o) {
+        bn_flat_opts_default(&d);
+        o = &d;
+    }
+    bn_pipeline_opts_default(&po);
+    if (o->unit && bn_unit_parse(o->unit, &po.load.unit) != 0) {
+        char t[128];
+        snprintf(t, sizeof t, "unit '%s' is not one of m, cm, mm", o->unit);
+        return bn__flat_fail(BN_EUSAGE, t, msg, msglen);
+    }
+    po.method_auto = 1;
+    if (o->method && strcmp(o->method, "auto") != 0) {
+        int k = -1;
+        for (int i = 0; i < 4; i++)
+            if (strcmp(o->method, methods[i]) == 0)
+                k = i;
+        if (k < 0) {
+            char t[160];
+            snprintf(t, sizeof t, "method '%s' is not one of auto, jacobi, gauss-seidel, neumann, direct", o->method);
+            return bn__flat_fail(BN_EUSAGE, t, msg, msglen);
+        }
+        po.method_auto = 0;
+        po.solve.method = (bn_solve_method)k;
+    }
+    if (o->transport) {
+        const char *names[] = {"auto", "dense", "sparse", "hierarchical"};
+        int ok = 0;
+        for (int i = 0; i < 4; i++)
+            ok |= strcmp(o->transport, names[i]) == 0;
+        if (!ok) {
+            char t[160];
+            snprintf(t, sizeof t, "transport '%s' is not one of auto, dense, sparse, hierarchical", o->transport);
+            return bn__flat_fail(BN_EUSAGE, t, msg, msglen);
+        }
+        po.transport = o->transport;
+    }
+    po.solve.bounces = o->bounces < 0 ? 0 : o->bounces;
+    if (o->tol > 0)
+        po.solve.tol = o->tol;
+    if (o->patch_size > 0)
+        po.mesh.patch_size = o->patch_size;
+    else if (o->patches)
+        po.mesh.target_patches = o->patches;
+    po.mesh_auto = !(o->patch_size > 0) && !o->patches;
+    if (o->eps > 0)
+        po.hier.eps = o->eps;
+    po.threads = o->threads;
+    po.ff.quiet = po.hier.quiet = po.solve.quiet = o->quiet;
+    po.load.log.quiet = po.ff.log.quiet = po.hier.log.quiet = po.solve.log_sink.quiet = 1;   /* warnings only */
+    f = bn__calloc(1, sizeof *f);
+    if (!f)
+        return bn__flat_fail(BN_ENOMEM, "out of memory", msg, msglen);
+    bn_error_clear(&err);
+    st = bn_pipeline_run(path, &po, &f->p, &err);
+    if (st != BN_OK && st != BN_ENOTCONV) {
+        bn__flat_fail(st, err.msg, msg, msglen);
+        bn_pipeline_free(&f->p);
+        free(f);
+        return st;
+    }
+    if (st == BN_ENOTCONV)
+        bn__flat_fail(st, err.msg, msg, msglen);
+    snprintf(f->transport, sizeof f->transport, "%s", f->p.k ? bn_transport_name(f->p.k) : "");
+    *out = f;
+    return st;
+}
+
+void bn_flat_free(bn_flat *f)
+{
+    if (!f)
+        return;
+    bn_pipeline_free(&f->p);
+    free(f);
+}
+
+size_t bn_flat_patches(const bn_flat *f) { return f->p.n; }
+int bn_flat_terms(const bn_flat *f) { return f->p.res.nterms; }
+const double *bn_flat_L(const bn_flat *f) { return f->p.res.L; }
+const double *bn_flat_term(const bn_flat *f, int k)
+{
+    return k >= 0 && k < f->p.res.nterms ? f->p.res.terms[k] : NULL;
+}
+const double *bn_flat_rest(const bn_flat *f) { return f->p.rest; }
+const double *bn_flat_emission(const bn_flat *f) { return f->p.E; }
+const char *bn_flat_stop_reason(const bn_flat *f) { return bn_stop_reason_name(f->p.res.reason); }
+const char *bn_flat_method(const bn_flat *f) { return bn_solve_method_name(f->p.method_used); }
+size_t bn_flat_iterations(const bn_flat *f) { return f->p.res.iterations; }
+double bn_flat_residual(const bn_flat *f) { return f->p.res.residual_max; }
+const char *bn_flat_transport(const bn_flat *f) { return f->transport; }
+
+void bn_flat_patch_data(const bn_flat *f, double *area, double *normal, double *centroid, double *reflectance,
+                        size_t *face)
+{
+    size_t n;
+    const bn_patch *pa = bn_scene_patches(f->p.scene, &n);
+    if (reflectance)
+        bn_scene_patch_reflectance(f->p.scene, reflectance);
+    for (size_t i = 0; i < n; i++) {
+        if (area)
+            area[i] = pa[i].area;
+        if (face)
+            face[i] = pa[i].face;
+        for (int c = 0; c < 3; c++) {
+            if (normal)
+                normal[3 * i + c] = pa[i].normal[c];
+            if (centroid)
+                centroid[3 * i + c] = pa[i].centroid[c];
+        }
+    }
+}

@@ -1,0 +1,83 @@
+"""The Python package (python/bounce) against independent answers: the white furnace's closed form
+through every method, the CLI's own CSV for the Cornell box, bounce's errors as exceptions, and
+arrays that are the library's memory, not copies. Run by ctest (tests/python/run.sh)."""
+import ctypes
+import os
+import subprocess
+
+import numpy as np
+import pytest
+
+import bounce
+
+SRC = os.environ.get("BOUNCE_SOURCE_DIR", os.path.join(os.path.dirname(__file__), "..", ".."))
+EXE = os.environ.get("BOUNCE_EXE", os.path.join(SRC, "build", "bounce"))
+CORNELL = os.path.join(SRC, "meshes", "cornell-box.obj")
+
+
+def furnace(tmp_path, rho):
+    """The shipped unit furnace (meshes/furnace-box.obj) with reflectance rho, Le 1."""
+    obj = open(os.path.join(SRC, "meshes", "furnace-box.obj")).read()
+    (tmp_path / "furnace-box.obj").write_text(obj)
+    (tmp_path / "furnace-box.mtl").write_text("newmtl furnace\nKd %r %r %r\nKe 1 1 1\n" % (rho, rho, rho))
+    return str(tmp_path / "furnace-box.obj")
+
+
+@pytest.mark.parametrize("method", ["jacobi", "gauss-seidel", "neumann", "direct"])
+@pytest.mark.parametrize("rho", [0.5, 0.9])
+def test_furnace_every_method(tmp_path, method, rho):
+    r = bounce.solve(furnace(tmp_path, rho), method=method, bounces=4, patches=150)
+    assert r.method == method
+    assert r.stop_reason.startswith("converged") or method == "direct"
+    # L = Le / (1 - rho) on every patch and channel; K^k E = rho^k Le
+    assert np.abs(r.L - 1.0 / (1.0 - rho)).max() <= 1e-6 / (1.0 - rho)
+    assert len(r.terms) == 5
+    for k, t in enumerate(r.terms):
+        assert np.abs(t - rho ** k).max() <= 1e-6 * rho ** k, (k, np.abs(t - rho ** k).max())
+    # rest is what the kept terms leave: sum_{k>4} rho^k = rho^5 / (1 - rho)
+    assert np.abs(r.rest - rho ** 5 / (1 - rho)).max() <= 1e-6 / (1.0 - rho)
+
+
+def test_cornell_equals_the_cli_csv(tmp_path):
+    csv = tmp_path / "cb.csv"
+    subprocess.run([EXE, "solve", CORNELL, "--unit", "mm", "-q", "-o", str(csv)], check=True,
+                   stderr=subprocess.DEVNULL)
+    rows = [ln.split(",") for ln in csv.read_text().splitlines() if ln and not ln.startswith("#")]
+    head, rows = rows[0], rows[1:]
+    cols = [head.index(c) for c in ("L_R", "L_G", "L_B")]
+    r = bounce.solve(CORNELL, unit="mm")
+    assert r.patches == len(rows)
+    area = head.index("area")
+    mismatch = 0
+    for i, row in enumerate(rows):
+        for c, j in enumerate(cols):
+            mismatch += row[j] != "%.9g" % r.L[i, c]   # the CSV's own format: every printed digit
+        mismatch += abs(float(row[area]) - r.area[i] * 1e-6) > 1e-9 * float(row[area])   # printed to 10 digits
+    assert mismatch == 0
+
+
+def test_errors_raise_with_bounces_message(tmp_path):
+    with pytest.raises(bounce.BounceError) as e:
+        bounce.solve(str(tmp_path / "missing.obj"))
+    assert e.value.status == "EIO" and "missing.obj" in str(e.value)
+    bad = tmp_path / "bad.obj"
+    bad.write_text("mtllib bad.mtl\nusemtl m\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    (tmp_path / "bad.mtl").write_text("newmtl m\nKd 1.5 0.5 0.5\n")
+    with pytest.raises(bounce.BounceError) as e:
+        bounce.solve(str(bad))
+    assert e.value.status == "EINPUT" and "Kd" in str(e.value) and "1.5" in str(e.value)
+    with pytest.raises(bounce.BounceError) as e:
+        bounce.solve(CORNELL, method="cholesky")
+    assert e.value.status == "EUSAGE" and "cholesky" in str(e.value)
+
+
+def test_arrays_share_the_library_memory():
+    r = bounce.solve(CORNELL, unit="mm", patches=300)
+    lib, h = r._lib, r._h
+    addr = lambda p: ctypes.cast(p, ctypes.c_void_p).value
+    assert r.L.__array_interface__["data"][0] == addr(lib.bn_flat_L(h))
+    assert r.terms[2].__array_interface__["data"][0] == addr(lib.bn_flat_term(h, 2))
+    assert not r.L.flags.owndata and not r.L.flags.writeable
+    L = r.L
+    del r   # the view keeps the result (and its memory) alive
+    assert np.isfinite(L).all() and L.max() > 1
