@@ -49,6 +49,19 @@ size_t bn_flat_iterations(const bn_flat *f);
 double bn_flat_residual(const bn_flat *f);                  /* final max residual */
 const char *bn_flat_transport(const bn_flat *f);           /* "dense", "sparse" or "hierarchy" */
 
+/* F of a solved scene as a row-major N x N array of doubles (caller allocates N*N): the stored
+ * values (float storage gives float values). BN_ENOTSUP under the hierarchy, which keeps no pairs. */
+bn_status bn_flat_form_factors(const bn_flat *f, double *F, char *msg, size_t msglen);
+
+/* A caller's own operator: apply(user, x, y) sets y = K x for N x 3 interleaved x (no aliasing)
+ * and returns 0, or nonzero to stop the solve (BN_EINPUT, "the operator failed"). */
+typedef int (*bn_flat_apply_fn)(void *user, const double *x, double *y);
+/* Solves L = E + K L with K given by apply (only y = K x: Jacobi, the Neumann series and the terms;
+ * method "auto" is Jacobi; Gauss-Seidel and direct need rows and entries and are refused). n patches,
+ * E (N x 3) copied. The result has no scene: bn_flat_patch_data leaves its arrays untouched. */
+bn_status bn_flat_solve_operator(size_t n, const double *E, bn_flat_apply_fn apply, void *user, const bn_flat_opts *o,
+                                 bn_flat **out, char *msg, size_t msglen);
+
 #ifdef __cplusplus
 }
 #endif

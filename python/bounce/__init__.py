@@ -16,7 +16,7 @@ import os
 
 import numpy as np
 
-__all__ = ["solve", "Result", "BounceError", "library_path"]
+__all__ = ["solve", "Result", "Operator", "BounceError", "library_path"]
 
 
 class BounceError(RuntimeError):
@@ -48,6 +48,7 @@ class _Opts(ctypes.Structure):
 
 
 _lib = None
+_APPLY = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_double))
 
 
 def _load():
@@ -75,6 +76,10 @@ def _load():
     lib.bn_flat_patch_data.argtypes = [P, D, D, D, D, ctypes.POINTER(ctypes.c_size_t)]
     lib.bn_status_name.argtypes = [I]
     lib.bn_status_name.restype = ctypes.c_char_p
+    lib.bn_flat_form_factors.argtypes = [P, D, ctypes.c_char_p, S]
+    lib.bn_flat_form_factors.restype = I
+    lib.bn_flat_solve_operator.argtypes = [S, D, _APPLY, P, ctypes.POINTER(_Opts), ctypes.POINTER(P), ctypes.c_char_p, S]
+    lib.bn_flat_solve_operator.restype = I
     _lib = lib
     return lib
 
@@ -114,6 +119,17 @@ class Result:
         self.iterations = lib.bn_flat_iterations(handle)
         self.residual = lib.bn_flat_residual(handle)
 
+    def form_factors(self):
+        """F as a dense patches x patches array (a copy: the library may store it in float, as here
+        its values are). Raises BounceError under the hierarchy, which keeps no pairs."""
+        n = self.patches
+        F = np.empty((n, n))
+        msg = ctypes.create_string_buffer(1024)
+        st = self._lib.bn_flat_form_factors(self._h, F.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), msg, len(msg))
+        if st != 0:
+            raise BounceError(self._lib.bn_status_name(st).decode(), msg.value.decode(errors="replace"))
+        return F
+
     def __del__(self):
         if getattr(self, "_h", None):
             self._lib.bn_flat_free(self._h)
@@ -136,11 +152,68 @@ class _Owned(np.ndarray):
         self._owner = getattr(obj, "_owner", None)
 
 
+class Operator:
+    """A transport operator of your own: apply(x) returns K x for x of shape (patches, 3) (radiance
+    per patch and channel; K includes the reflectance). bounce's Jacobi iteration, Neumann series and
+    per-bounce terms run on it (Gauss-Seidel and the direct solve need rows and entries, which a
+    callable does not offer). Pass it to bounce.solve with the emission E (patches x 3)."""
+
+    def __init__(self, patches, apply):
+        self.patches = int(patches)
+        self.apply = apply
+
+
+def _solve_operator(op, emission, method, bounces, tol, threads, progress):
+    lib = _load()
+    n = op.patches
+    E = np.ascontiguousarray(emission, dtype=np.float64)
+    if E.shape != (n, 3):
+        raise BounceError("EUSAGE", "emission has shape %s, not (%d, 3)" % (E.shape, n))
+    caught = []
+
+    def tramp(_user, x, y):
+        try:
+            xa = np.ctypeslib.as_array(x, shape=(n, 3))
+            ya = np.ctypeslib.as_array(y, shape=(n, 3))
+            ya[...] = op.apply(xa)
+            return 0
+        except BaseException as e:   # raised again below, after the C loop has stopped
+            caught.append(e)
+            return 1
+
+    cb = _APPLY(tramp)
+    o = _Opts()
+    lib.bn_flat_opts_default(ctypes.byref(o))
+    o.method = method.encode()
+    o.bounces = bounces
+    o.tol = tol or 0.0
+    o.threads = threads
+    o.quiet = 0 if progress else 1
+    h = ctypes.c_void_p()
+    msg = ctypes.create_string_buffer(2048)
+    st = lib.bn_flat_solve_operator(n, E.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), cb, None, ctypes.byref(o),
+                                    ctypes.byref(h), msg, len(msg))
+    if caught:
+        if h:
+            lib.bn_flat_free(h)
+        raise caught[0]
+    if st != 0:
+        if h:
+            lib.bn_flat_free(h)
+        raise BounceError(lib.bn_status_name(st).decode(), msg.value.decode(errors="replace"))
+    return Result(h, lib)
+
+
 def solve(path, unit="m", method="auto", transport="auto", bounces=3, tol=None, patches=None, patch_size=None,
-          eps=None, threads=0, progress=False):
+          eps=None, threads=0, progress=False, emission=None):
     """Loads, meshes, builds K and solves L = E + K L for the scene file at `path`, keeping the
     terms K^0 E .. K^bounces E. Options are those of `bounce solve` (defaults alike). Raises
-    BounceError with bounce's message on bad input; an unconverged solve raises too."""
+    BounceError with bounce's message on bad input; an unconverged solve raises too.
+    With a bounce.Operator in place of the path, K is yours and `emission` (patches x 3) is E."""
+    if isinstance(path, Operator):
+        if emission is None:
+            raise BounceError("EUSAGE", "an Operator needs emission= (patches x 3)")
+        return _solve_operator(path, emission, method, bounces, tol, threads, progress)
     lib = _load()
     o = _Opts()
     lib.bn_flat_opts_default(ctypes.byref(o))

@@ -10,6 +10,7 @@
 struct bn_flat {
     bn_pipeline p;
     char transport[32];
+    void *op;   /* a caller's operator's context (bn_flat_solve_operator), freed after K */
 };
 
 void bn_flat_opts_default(bn_flat_opts *o)
@@ -112,6 +113,7 @@ void bn_flat_free(bn_flat *f)
     if (!f)
         return;
     bn_pipeline_free(&f->p);
+    free(f->op);
     free(f);
 }
 
@@ -134,6 +136,8 @@ void bn_flat_patch_data(const bn_flat *f, double *area, double *normal, double *
                         size_t *face)
 {
     size_t n;
+    if (!f->p.scene)
+        return;
     const bn_patch *pa = bn_scene_patches(f->p.scene, &n);
     if (reflectance)
         bn_scene_patch_reflectance(f->p.scene, reflectance);
@@ -149,4 +153,127 @@ void bn_flat_patch_data(const bn_flat *f, double *area, double *normal, double *
                 centroid[3 * i + c] = pa[i].centroid[c];
         }
     }
+}
+
+bn_status bn_flat_form_factors(const bn_flat *f, double *F, char *msg, size_t msglen)
+{
+    bn_error err;
+    bn_status st;
+    bn_error_clear(&err);
+    if (!f->p.k)
+        return bn__flat_fail(BN_EUSAGE, "no operator", msg, msglen);
+    st = bn_transport_to_dense(f->p.k, F, &err);
+    if (st != BN_OK)
+        bn__flat_fail(st, err.msg, msg, msglen);
+    return st;
+}
+
+/* ---- a caller's operator ---- */
+
+typedef struct bn__flat_op {
+    bn_flat_apply_fn fn;
+    void *user;
+} bn__flat_op;
+
+static bn_status bn__flat_op_apply(void *ctx, const double *x, double *y, bn_error *err)
+{
+    bn__flat_op *op = ctx;
+    int rc = op->fn(op->user, x, y);
+    if (rc != 0)
+        return bn_error_set(err, BN_EINPUT, "the operator failed (its apply returned %d)", rc);
+    return bn_interrupted() != BN_OK ? bn_error_set(err, bn_interrupted(), "interrupted") : BN_OK;
+}
+
+static const bn_transport_ops bn__flat_op_ops = {.name = "caller", .caps = 0, .apply = bn__flat_op_apply};
+
+bn_status bn_flat_solve_operator(size_t n, const double *E, bn_flat_apply_fn apply, void *user, const bn_flat_opts *o,
+                                 bn_flat **out, char *msg, size_t msglen)
+{
+    static const char *methods[] = {"jacobi", "gauss-seidel", "neumann", "direct"};
+    bn_flat_opts d;
+    bn_solve_opts so;
+    bn_error err;
+    bn_flat *f;
+    bn__flat_op *op;
+    double *ones;
+    bn_status st;
+    if (out)
+        *out = NULL;
+    if (msg && msglen)
+        msg[0] = '\0';
+    if (!out || !E || !apply || n == 0)
+        return bn__flat_fail(BN_EUSAGE, "bn_flat_solve_operator: n, E, apply and out are required", msg, msglen);
+    if (!o) {
+        bn_flat_opts_default(&d);
+        o = &d;
+    }
+    bn_solve_opts_default(&so);
+    so.method = BN_SOLVE_JACOBI;
+    if (o->method && strcmp(o->method, "auto") != 0) {
+        int k = -1;
+        for (int i = 0; i < 4; i++)
+            if (strcmp(o->method, methods[i]) == 0)
+                k = i;
+        if (k < 0) {
+            char t[160];
+            snprintf(t, sizeof t, "method '%s' is not one of auto, jacobi, gauss-seidel, neumann, direct", o->method);
+            return bn__flat_fail(BN_EUSAGE, t, msg, msglen);
+        }
+        so.method = (bn_solve_method)k;
+    }
+    so.bounces = o->bounces < 0 ? -1 : o->bounces;
+    if (o->tol > 0)
+        so.tol = o->tol;
+    so.quiet = o->quiet;
+    so.log_sink.quiet = 1;
+    so.threads = o->threads;
+    f = bn__calloc(1, sizeof *f);
+    op = bn__malloc_array(1, sizeof *op);
+    ones = bn__malloc_array(3 * n, sizeof(double));
+    if (f)
+        f->p.E = bn__malloc_array(3 * n, sizeof(double));
+    if (!f || !op || !ones || !f->p.E) {
+        if (f)
+            free(f->p.E);
+        free(f);
+        free(op);
+        free(ones);
+        return bn__flat_fail(BN_ENOMEM, "out of memory", msg, msglen);
+    }
+    for (size_t i = 0; i < 3 * n; i++)
+        ones[i] = 1;   /* K itself is the caller's: no reflectance applied on top */
+    memcpy(f->p.E, E, 3 * n * sizeof(double));
+    op->fn = apply;
+    op->user = user;
+    bn_error_clear(&err);
+    st = bn_transport_create(n, ones, &bn__flat_op_ops, op, &f->p.k, &err);
+    free(ones);
+    if (st == BN_OK) {
+        f->p.n = n;
+        f->op = op;
+        op = NULL;
+        st = bn_solve(f->p.k, f->p.E, &so, &f->p.res, &err);
+        f->p.method_used = so.method;
+    }
+    free(op);
+    if (st == BN_OK || st == BN_ENOTCONV) {
+        if (f->p.res.nterms > 0) {   /* rest = L - the kept terms */
+            f->p.rest = bn__malloc_array(3 * n, sizeof(double));
+            if (f->p.rest)
+                for (size_t i = 0; i < 3 * n; i++) {
+                    double r = f->p.res.L[i];
+                    for (int k = 0; k < f->p.res.nterms; k++)
+                        r -= f->p.res.terms[k][i];
+                    f->p.rest[i] = r;
+                }
+        }
+        snprintf(f->transport, sizeof f->transport, "caller");
+        if (st == BN_ENOTCONV)
+            bn__flat_fail(st, err.msg, msg, msglen);
+        *out = f;
+        return st;
+    }
+    bn__flat_fail(st, err.msg, msg, msglen);
+    bn_flat_free(f);
+    return st;
 }

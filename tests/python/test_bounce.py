@@ -81,3 +81,36 @@ def test_arrays_share_the_library_memory():
     L = r.L
     del r   # the view keeps the result (and its memory) alive
     assert np.isfinite(L).all() and L.max() > 1
+
+
+def test_form_factors_rows_and_reciprocity(tmp_path):
+    # the closed furnace cube (no occluders): every row of F sums to 1 (float storage: 1e-6)
+    f = bounce.solve(furnace(tmp_path, 0.5), patches=150).form_factors()
+    assert np.abs(f.sum(axis=1) - 1).max() <= 1e-6
+    # the Cornell box, open at the front: rows at most 1 plus its visibility noise (0.3%)
+    r = bounce.solve(CORNELL, unit="mm", patches=300)
+    F = r.form_factors()
+    assert F.shape == (r.patches, r.patches) and (F >= 0).all()
+    assert F.sum(axis=1).max() <= 1.003
+    # reciprocity A_i F_ij = A_j F_ji (float storage: 1e-6 relative, plus the occluded pairs' noise)
+    AF = r.area[:, None] * F
+    assert np.abs(AF - AF.T).max() <= 1e-3 * AF.max()
+
+
+def test_a_python_operator_reproduces_the_dense_solve():
+    r = bounce.solve(CORNELL, unit="mm", patches=300, method="jacobi", tol=1e-13, bounces=3)
+    F = r.form_factors()
+    rho = r.reflectance
+    op = bounce.Operator(r.patches, lambda x: rho * (F @ x))
+    mine = bounce.solve(op, emission=np.array(r.emission), method="jacobi", tol=1e-13, bounces=3)
+    assert mine.transport == "caller" and mine.method == "jacobi"
+    assert np.abs(mine.L - r.L).max() <= 1e-12 * np.abs(r.L).max()
+    for k in range(4):
+        assert np.abs(mine.terms[k] - r.terms[k]).max() <= 1e-12 * np.abs(r.L).max()
+
+
+def test_an_operator_that_raises_stops_the_solve():
+    def broken(x):
+        raise ValueError("my operator broke")
+    with pytest.raises(ValueError, match="my operator broke"):
+        bounce.solve(bounce.Operator(4, broken), emission=np.ones((4, 3)))
