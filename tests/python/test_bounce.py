@@ -4,6 +4,7 @@ arrays that are the library's memory, not copies. Run by ctest (tests/python/run
 import ctypes
 import os
 import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -114,3 +115,17 @@ def test_an_operator_that_raises_stops_the_solve():
         raise ValueError("my operator broke")
     with pytest.raises(ValueError, match="my operator broke"):
         bounce.solve(bounce.Operator(4, broken), emission=np.ones((4, 3)))
+
+
+def test_the_doc_example_runs(tmp_path):
+    """doc/python_example.py: its table says what the series must: the shares add up to L, and the
+    truncation error falls with every term kept."""
+    env = dict(os.environ)
+    out = subprocess.run([sys.executable, os.path.join(SRC, "doc", "python_example.py"), str(tmp_path / "ex")],
+                         capture_output=True, text=True, env=env, check=True).stdout
+    rows = [ln.split() for ln in out.splitlines() if ln[:2].strip().isdigit()]
+    assert len(rows) == 11
+    errors = [float(r[3]) for r in rows]
+    assert all(b < a for a, b in zip(errors, errors[1:]))
+    ratios = [float(q) for q in out.split("last three):")[1].split()[:3]]
+    assert all(0 < q < 1 for q in ratios)
