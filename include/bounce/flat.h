@@ -25,6 +25,10 @@ typedef struct bn_flat_opts {
     double eps;               /* hierarchy eps (default 1e-3) */
     int threads;              /* 0: all cores */
     int quiet;                /* no progress bars (default 1 here: 0 shows them on stderr) */
+    int sigint;               /* 1: while the call runs, SIGINT stops bounce's loops (the call returns
+                                 BN_EINTR) and the caller's handler is restored after; for
+                                 interpreters whose own handler runs only between their steps
+                                 (Python's). Default 0: signals are the caller's business */
 } bn_flat_opts;
 void bn_flat_opts_default(bn_flat_opts *o);
 

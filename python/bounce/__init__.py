@@ -44,7 +44,7 @@ class _Opts(ctypes.Structure):
     _fields_ = [("unit", ctypes.c_char_p), ("method", ctypes.c_char_p), ("transport", ctypes.c_char_p),
                 ("bounces", ctypes.c_int), ("tol", ctypes.c_double), ("patches", ctypes.c_size_t),
                 ("patch_size", ctypes.c_double), ("eps", ctypes.c_double), ("threads", ctypes.c_int),
-                ("quiet", ctypes.c_int)]
+                ("quiet", ctypes.c_int), ("sigint", ctypes.c_int)]
 
 
 _lib = None
@@ -82,6 +82,19 @@ def _load():
     lib.bn_flat_solve_operator.restype = I
     _lib = lib
     return lib
+
+
+def _raise(lib, st, msg):
+    name = lib.bn_status_name(st).decode()
+    text = msg.value.decode(errors="replace")
+    if name == "EINTR":   # Ctrl-C stopped the C loops (opts.sigint): the Python way to say so
+        raise KeyboardInterrupt("bounce: " + (text or "interrupted"))
+    raise BounceError(name, text)
+
+
+def _main_thread():
+    import threading
+    return threading.current_thread() is threading.main_thread()
 
 
 class Result:
@@ -189,6 +202,7 @@ def _solve_operator(op, emission, method, bounces, tol, threads, progress):
     o.tol = tol or 0.0
     o.threads = threads
     o.quiet = 0 if progress else 1
+    o.sigint = 1 if _main_thread() else 0   # Ctrl-C stops the C loops, then raises KeyboardInterrupt
     h = ctypes.c_void_p()
     msg = ctypes.create_string_buffer(2048)
     st = lib.bn_flat_solve_operator(n, E.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), cb, None, ctypes.byref(o),
@@ -200,7 +214,7 @@ def _solve_operator(op, emission, method, bounces, tol, threads, progress):
     if st != 0:
         if h:
             lib.bn_flat_free(h)
-        raise BounceError(lib.bn_status_name(st).decode(), msg.value.decode(errors="replace"))
+        _raise(lib, st, msg)
     return Result(h, lib)
 
 
@@ -225,11 +239,12 @@ def solve(path, unit="m", method="auto", transport="auto", bounces=3, tol=None, 
     o.eps = eps or 0.0
     o.threads = threads
     o.quiet = 0 if progress else 1
+    o.sigint = 1 if _main_thread() else 0   # Ctrl-C stops the C loops, then raises KeyboardInterrupt
     h = ctypes.c_void_p()
     msg = ctypes.create_string_buffer(2048)
     st = lib.bn_flat_solve(os.fsencode(path), ctypes.byref(o), ctypes.byref(h), msg, len(msg))
     if st != 0:
         if h:
             lib.bn_flat_free(h)
-        raise BounceError(lib.bn_status_name(st).decode(), msg.value.decode(errors="replace"))
+        _raise(lib, st, msg)
     return Result(h, lib)

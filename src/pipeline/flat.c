@@ -3,6 +3,7 @@
 #include "bounce/pipeline.h"
 #include "base/internal.h"
 
+#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -12,6 +13,38 @@ struct bn_flat {
     char transport[32];
     void *op;   /* a caller's operator's context (bn_flat_solve_operator), freed after K */
 };
+
+/* SIGINT during a call (opts.sigint): the library's interrupt flag, which every long loop polls. */
+static void bn__flat_on_sigint(int sig)
+{
+    (void)sig;
+    bn_interrupt_raise(BN_EINTR);
+}
+
+typedef struct bn__flat_sig {
+    struct sigaction old;
+    int on;
+} bn__flat_sig;
+
+static void bn__flat_sig_begin(bn__flat_sig *s, int want)
+{
+    struct sigaction sa;
+    s->on = 0;
+    bn_interrupt_raise(BN_OK);
+    if (!want)
+        return;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = bn__flat_on_sigint;
+    sigemptyset(&sa.sa_mask);
+    s->on = sigaction(SIGINT, &sa, &s->old) == 0;
+}
+
+static void bn__flat_sig_end(bn__flat_sig *s)
+{
+    if (s->on)
+        sigaction(SIGINT, &s->old, NULL);
+    bn_interrupt_raise(BN_OK);
+}
 
 void bn_flat_opts_default(bn_flat_opts *o)
 {
@@ -94,7 +127,12 @@ bn_status bn_flat_solve(const char *path, const bn_flat_opts *o, bn_flat **out, 
     if (!f)
         return bn__flat_fail(BN_ENOMEM, "out of memory", msg, msglen);
     bn_error_clear(&err);
-    st = bn_pipeline_run(path, &po, &f->p, &err);
+    {
+        bn__flat_sig sg;
+        bn__flat_sig_begin(&sg, o->sigint);
+        st = bn_pipeline_run(path, &po, &f->p, &err);
+        bn__flat_sig_end(&sg);
+    }
     if (st != BN_OK && st != BN_ENOTCONV) {
         bn__flat_fail(st, err.msg, msg, msglen);
         bn_pipeline_free(&f->p);
@@ -250,9 +288,12 @@ bn_status bn_flat_solve_operator(size_t n, const double *E, bn_flat_apply_fn app
     free(ones);
     if (st == BN_OK) {
         f->p.n = n;
+        bn__flat_sig sg;
         f->op = op;
         op = NULL;
+        bn__flat_sig_begin(&sg, o->sigint);
         st = bn_solve(f->p.k, f->p.E, &so, &f->p.res, &err);
+        bn__flat_sig_end(&sg);
         f->p.method_used = so.method;
     }
     free(op);

@@ -129,3 +129,26 @@ def test_the_doc_example_runs(tmp_path):
     assert all(b < a for a, b in zip(errors, errors[1:]))
     ratios = [float(q) for q in out.split("last three):")[1].split()[:3]]
     assert all(0 < q < 1 for q in ratios)
+
+
+def test_ctrl_c_stops_the_c_loops():
+    """SIGINT during a long solve (form factors of 6,000 patches take tens of seconds) stops bounce's
+    loops within seconds and comes out as KeyboardInterrupt; the interpreter's handler is back after."""
+    import signal
+    import time
+    code = ("import bounce, signal, sys\n"
+            "try:\n"
+            "    bounce.solve(%r, unit='mm', patches=6000, transport='dense')\n"
+            "    print('finished')\n"
+            "except KeyboardInterrupt as e:\n"
+            "    print('interrupted:', e)\n"
+            "    print('handler back:', signal.getsignal(signal.SIGINT) is signal.default_int_handler)\n" % CORNELL)
+    p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+                         env=dict(os.environ))
+    time.sleep(3)
+    t0 = time.time()
+    p.send_signal(signal.SIGINT)
+    out, _ = p.communicate(timeout=60)
+    took = time.time() - t0
+    assert "interrupted: bounce:" in out and "handler back: True" in out, out
+    assert took < 15, took
