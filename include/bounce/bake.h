@@ -62,6 +62,10 @@ typedef struct bn_bake_write_opts {
 bn_status bn_bake_write(const bn_bake *b, const char *path, const bn_bake_layer *layers, size_t nlayers,
                         const bn_bake_write_opts *o, bn_error *err);
 
+/* An exposure (EV) for 8-bit colours and glTF's COLOR_0: the 99th percentile of the patches' L
+ * (N x 3) luminance at 0.9. */
+double bn_bake_auto_exposure(const double *L, size_t n);
+
 /* The viewer page: one self-contained HTML file (the .glb bake at glb_path and three.js embedded;
  * no network at view time) with an orbit camera, a control per bounce term (shown summed, or one
  * alone), exposure, a false-colour mode with its scale and the per-bounce power table. Atomic.

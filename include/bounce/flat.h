@@ -57,6 +57,13 @@ const char *bn_flat_transport(const bn_flat *f);           /* "dense", "sparse" 
  * values (float storage gives float values). BN_ENOTSUP under the hierarchy, which keeps no pairs. */
 bn_status bn_flat_form_factors(const bn_flat *f, double *F, char *msg, size_t msglen);
 
+/* Bakes the solution to vertex colours as `bounce bake` does: out by extension (.ply, .om, .obj,
+ * .glb, .gltf); per_bounce adds every term; input_mesh: the scene's polygons instead of the patches;
+ * ldr: 8-bit sRGB colours (glTF: the COLOR_1 set beside); exposure_ev: NAN or inf for automatic;
+ * crease_deg <= 0: the default 30. Provenance names the caller ("python" for the package). */
+bn_status bn_flat_bake(const bn_flat *f, const char *out, int per_bounce, int input_mesh, int ldr, double exposure_ev,
+                       double crease_deg, const char *caller, char *msg, size_t msglen);
+
 /* A caller's own operator: apply(user, x, y) sets y = K x for N x 3 interleaved x (no aliasing)
  * and returns 0, or nonzero to stop the solve (BN_EINPUT, "the operator failed"). */
 typedef int (*bn_flat_apply_fn)(void *user, const double *x, double *y);

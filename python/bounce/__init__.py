@@ -76,6 +76,9 @@ def _load():
     lib.bn_flat_patch_data.argtypes = [P, D, D, D, D, ctypes.POINTER(ctypes.c_size_t)]
     lib.bn_status_name.argtypes = [I]
     lib.bn_status_name.restype = ctypes.c_char_p
+    lib.bn_flat_bake.argtypes = [P, ctypes.c_char_p, I, I, I, ctypes.c_double, ctypes.c_double, ctypes.c_char_p,
+                                 ctypes.c_char_p, S]
+    lib.bn_flat_bake.restype = I
     lib.bn_flat_form_factors.argtypes = [P, D, ctypes.c_char_p, S]
     lib.bn_flat_form_factors.restype = I
     lib.bn_flat_solve_operator.argtypes = [S, D, _APPLY, P, ctypes.POINTER(_Opts), ctypes.POINTER(P), ctypes.c_char_p, S]
@@ -142,6 +145,20 @@ class Result:
         if st != 0:
             raise BounceError(self._lib.bn_status_name(st).decode(), msg.value.decode(errors="replace"))
         return F
+
+    def bake(self, path, per_bounce=True, mesh="elements", ldr=False, exposure=None, crease=30.0):
+        """Bakes this solution to vertex colours as `bounce bake` does, by the extension of `path`
+        (.ply, .om, .obj, .glb, .gltf): per_bounce adds every term; mesh="input" bakes the scene's
+        own polygons; ldr writes 8-bit sRGB (glTF: a COLOR_1 set beside the float ones) at
+        `exposure` EV (None: automatic). Atomic, as every bounce output."""
+        if mesh not in ("elements", "input"):
+            raise BounceError("EUSAGE", "mesh must be 'elements' or 'input', not %r" % (mesh,))
+        msg = ctypes.create_string_buffer(2048)
+        ev = float("nan") if exposure is None else float(exposure)
+        st = self._lib.bn_flat_bake(self._h, os.fsencode(path), int(per_bounce), int(mesh == "input"), int(ldr), ev,
+                                    float(crease), b"python bounce package", msg, len(msg))
+        if st != 0:
+            _raise(self._lib, st, msg)
 
     def __del__(self):
         if getattr(self, "_h", None):

@@ -7,21 +7,6 @@
 #include <math.h>
 #include <string.h>
 
-/* Auto exposure for --ldr: the 99th percentile of the patches' L luminance at 0.9. */
-static double bn__patch_exposure(const double *L, size_t np)
-{
-    bn_image img;
-    double ev = 0;
-    if (bn_image_alloc(&img, (int)(np < 1 ? 1 : np > 1u << 30 ? 1u << 30 : np), 1, NULL) != BN_OK)
-        return 0;
-    for (size_t i = 0; i < np && i < (size_t)img.width; i++)
-        for (int c = 0; c < 3; c++)
-            img.rgb[3 * i + c] = (float)L[3 * i + c];
-    ev = bn_image_auto_exposure(&img);
-    bn_image_free(&img);
-    return ev;
-}
-
 int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
 {
     bn_optset set;
@@ -126,7 +111,7 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
         goto done;
     }
     if ((ldr || is_gltf) && !bn_cli_given(&set, "exposure"))
-        ev = bn__patch_exposure(p.res.L, np);
+        ev = bn_bake_auto_exposure(p.res.L, np);
     bn_cli_ff_opts(&ff, c, &fo);
     bn_formfactor_opts_describe(&fo, ffdesc, sizeof ffdesc);
     snprintf(patches, sizeof patches, "%zu", np);

@@ -1,7 +1,10 @@
 /* The flat C API for bindings (include/bounce/flat.h): the pipeline behind plain types. */
 #include "bounce/flat.h"
 #include "bounce/pipeline.h"
+#include "bounce/bake.h"
 #include "base/internal.h"
+
+#include <math.h>
 
 #include <signal.h>
 #include <stdio.h>
@@ -316,5 +319,51 @@ bn_status bn_flat_solve_operator(size_t n, const double *E, bn_flat_apply_fn app
     }
     bn__flat_fail(st, err.msg, msg, msglen);
     bn_flat_free(f);
+    return st;
+}
+
+bn_status bn_flat_bake(const bn_flat *f, const char *out, int per_bounce, int input_mesh, int ldr, double exposure_ev,
+                       double crease_deg, const char *caller, char *msg, size_t msglen)
+{
+    int nb = f->p.res.nterms - 1;
+    size_t nl = per_bounce && nb >= 0 ? (size_t)bn_layer_count(nb) : 1;
+    bn_bake_layer layers[72];
+    char names[72][16], solver[160], patches[32], tol[48];
+    bn_bake *b = NULL;
+    bn_bake_write_opts wo;
+    bn_error err;
+    bn_status st;
+    if (!f->p.scene)
+        return bn__flat_fail(BN_EUSAGE, "bake: this result has no scene (a caller's operator)", msg, msglen);
+    if (nl > 72)
+        return bn__flat_fail(BN_EUSAGE, "bake: too many terms", msg, msglen);
+    layers[0] = (bn_bake_layer){"L", f->p.res.L};
+    for (size_t l = 1; l < nl; l++) {
+        int layer = (int)l - 1;
+        bn_layer_name(layer, nb, names[l], sizeof names[l]);
+        layers[l] = (bn_bake_layer){names[l], layer <= nb ? f->p.res.terms[layer] : f->p.rest};
+    }
+    bn_error_clear(&err);
+    st = bn_bake_create(f->p.scene, crease_deg > 0 ? crease_deg : BN_BAKE_DEFAULT_CREASE, &b, &err);
+    if (st != BN_OK)
+        return bn__flat_fail(st, err.msg, msg, msglen);
+    snprintf(solver, sizeof solver, "%s: %s after %zu iterations, residual %.3g", bn_solve_method_name(f->p.method_used),
+             bn_stop_reason_name(f->p.res.reason), f->p.res.iterations, f->p.res.residual_max);
+    snprintf(patches, sizeof patches, "%zu", f->p.n);
+    snprintf(tol, sizeof tol, "K: %s", f->transport);
+    {
+        bn_attr attrs[] = {{"caller", caller ? caller : "bn_flat_bake"}, {"scene", bn_scene_path(f->p.scene)},
+                           {"solver", solver}, {"patches", patches}, {"operator", tol}};
+        memset(&wo, 0, sizeof wo);
+        wo.input_mesh = input_mesh;
+        wo.ldr = ldr;
+        wo.exposure_ev = isfinite(exposure_ev) ? exposure_ev : bn_bake_auto_exposure(f->p.res.L, f->p.n);
+        wo.attrs = attrs;
+        wo.nattrs = sizeof attrs / sizeof attrs[0];
+        st = bn_bake_write(b, out, layers, nl, &wo, &err);
+    }
+    bn_bake_destroy(b);
+    if (st != BN_OK)
+        bn__flat_fail(st, err.msg, msg, msglen);
     return st;
 }

@@ -152,3 +152,32 @@ def test_ctrl_c_stops_the_c_loops():
     took = time.time() - t0
     assert "interrupted: bounce:" in out and "handler back: True" in out, out
     assert took < 15, took
+
+
+def test_bake_from_python_equals_the_cli(tmp_path):
+    """A bake from Python and `bounce bake` of the same scene and options write the same vertices and
+    colours (the glTF's float attributes compared value by value; the header may differ in provenance)."""
+    import json
+    import struct
+
+    def glb_floats(path, attr):
+        d = open(path, "rb").read()
+        jl = struct.unpack_from("<I", d, 12)[0]
+        g = json.loads(d[20:20 + jl])
+        binary = d[28 + jl:]
+        a = g["accessors"][g["meshes"][0]["primitives"][0]["attributes"][attr]]
+        v = g["bufferViews"][a["bufferView"]]
+        return np.frombuffer(binary, dtype="<f4", count=3 * a["count"], offset=v["byteOffset"])
+
+    r = bounce.solve(CORNELL, unit="mm", patches=400)
+    mine = tmp_path / "py.glb"
+    r.bake(str(mine))
+    cli = tmp_path / "cli.glb"
+    subprocess.run([EXE, "bake", CORNELL, "--unit", "mm", "--patches", "400", "--per-bounce", "-q", "-o", str(cli)],
+                   check=True, stderr=subprocess.DEVNULL)
+    for attr in ("POSITION", "COLOR_0", "_L", "_E", "_KE", "_K2E", "_K3E", "_REST"):
+        a, b = glb_floats(mine, attr), glb_floats(cli, attr)
+        assert a.shape == b.shape and np.array_equal(a, b), attr
+    with pytest.raises(bounce.BounceError) as e:
+        r.bake(str(tmp_path / "x.stl"))
+    assert e.value.status == "EUSAGE" and ".stl" in str(e.value)
