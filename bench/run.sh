@@ -485,6 +485,11 @@ if command -v chromium >/dev/null 2>&1 && command -v python3 >/dev/null 2>&1; th
         "$bounce" bake "$bb" --unit mm -q --eps 1e-2 --per-bounce --mesh input -o "$work/bunny-box.glb" 2>/dev/null &&
             "$bounce" view "$work/bunny-box.glb" -q -o "$work/view-bunny.html" &&
             pages="$pages $work/view-bunny.html:69469:off $work/view-bunny.html#aa=1:69469:on"
+        # the bunny box's bake through the Khronos validator (the tests validate the small scenes)
+        if [ -f "$work/bunny-box.glb" ] && command -v node >/dev/null 2>&1; then
+            val=$(NODE_PATH="$root/web/node_modules" node "$root/tests/gltf_validate.js" "$work/bunny-box.glb" 2>&1 | head -1)
+            echo "glTF validator on the bunny box's bake: \`${val#"$work/"}\`" >>"$report.val"
+        fi
     fi
     for pg in $pages; do
         url=${pg%%:*}; rest=${pg#*:}; tris=${rest%%:*}; aa=${rest#*:}
@@ -492,6 +497,7 @@ if command -v chromium >/dev/null 2>&1 && command -v python3 >/dev/null 2>&1; th
         echo "| $(basename "$url") | $tris | $aa | $(stats "$work/fps.txt" | awk '{ printf "%s (%s-%s)", $1, $2, $3 }') |" >>"$report"
     done
     echo >>"$report"
+    if [ -f "$report.val" ]; then cat "$report.val" >>"$report"; echo >>"$report"; rm -f "$report.val"; fi
 fi
 
 end=$(date +%s)

@@ -7,13 +7,8 @@ if(BN_PYTHON3)
     $<TARGET_FILE:bounce_cli> ${PROJECT_SOURCE_DIR}/meshes/cornell-box.obj mm ${CMAKE_CURRENT_BINARY_DIR}/tmp/gltf_check)
   set_tests_properties(gltf.cornell_readback PROPERTIES LABELS gltf TIMEOUT 600)
 endif()
-if(BOUNCE_SANITIZE)
-  set(BN_GLTF_SANITIZED 1)
-else()
-  set(BN_GLTF_SANITIZED 0)
-endif()
 add_test(NAME gltf.validator COMMAND ${CMAKE_CURRENT_LIST_DIR}/gltf_validate.sh $<TARGET_FILE:bounce_cli>
-  ${PROJECT_SOURCE_DIR} ${CMAKE_CURRENT_BINARY_DIR}/tmp/gltf_validate ${BN_GLTF_SANITIZED})
+  ${PROJECT_SOURCE_DIR} ${CMAKE_CURRENT_BINARY_DIR}/tmp/gltf_validate)
 set_tests_properties(gltf.validator PROPERTIES LABELS gltf TIMEOUT 900 SKIP_RETURN_CODE 77)
 # The viewer page (bounce view) in headless Chromium: screenshots of L, E, KE and K2E alone checked
 # against the physics (tests/view_check.py); skipped (77) where no browser is installed.
