@@ -53,6 +53,16 @@ size_t bn_flat_iterations(const bn_flat *f);
 double bn_flat_residual(const bn_flat *f);                  /* final max residual */
 const char *bn_flat_transport(const bn_flat *f);           /* "dense", "sparse" or "hierarchy" */
 
+/* Loads and meshes `path` only (no K, no solve): the patch accessors and bn_flat_emission work,
+ * L and the terms are NULL until bn_flat_operator and a solve. */
+bn_status bn_flat_load(const char *path, const bn_flat_opts *o, bn_flat **out, char *msg, size_t msglen);
+/* Builds K for a loaded scene (no-op when built): then bn_flat_form_factors and the diagnostics. */
+bn_status bn_flat_operator(bn_flat *f, char *msg, size_t msglen);
+/* The form factors' diagnostics, in this order (NAN where K is not built): row_sum_min, row_sum_max,
+ * row_sum_rms_dev, reciprocity_residual, k_norm_inf, occluded_fraction, rays, nonzeros, bytes,
+ * seconds, rows_above_one, row_sum_tol (12 values). */
+void bn_flat_ff_diagnostics(const bn_flat *f, double out[12]);
+
 /* F of a solved scene as a row-major N x N array of doubles (caller allocates N*N): the stored
  * values (float storage gives float values). BN_ENOTSUP under the hierarchy, which keeps no pairs. */
 bn_status bn_flat_form_factors(const bn_flat *f, double *F, char *msg, size_t msglen);
@@ -63,6 +73,14 @@ bn_status bn_flat_form_factors(const bn_flat *f, double *F, char *msg, size_t ms
  * crease_deg <= 0: the default 30. Provenance names the caller ("python" for the package). */
 bn_status bn_flat_bake(const bn_flat *f, const char *out, int per_bounce, int input_mesh, int ldr, double exposure_ev,
                        double crease_deg, const char *caller, char *msg, size_t msglen);
+
+/* Camera images of every layer as `bounce bounces` writes them: out (FILE.exr, one layer per term,
+ * rest and L) and, with previews, FILE.<layer>.png and the contact sheet. The camera is the scene's
+ * NAME.camera sidecar, else the default in front of the box; eye, look (3 each) and fov_deg > 0
+ * override it; width, height, spp > 0 override its size and supersampling. */
+bn_status bn_flat_images(const bn_flat *f, const char *out, int width, int height, int spp, const double *eye,
+                         const double *look, double fov_deg, int previews, int smooth, int half, const char *caller,
+                         char *msg, size_t msglen);
 
 /* A caller's own operator: apply(user, x, y) sets y = K x for N x 3 interleaved x (no aliasing)
  * and returns 0, or nonzero to stop the solve (BN_EINPUT, "the operator failed"). */

@@ -16,7 +16,7 @@ import os
 
 import numpy as np
 
-__all__ = ["solve", "Result", "Operator", "BounceError", "library_path"]
+__all__ = ["Scene", "solve", "Result", "Operator", "BounceError", "library_path"]
 
 
 class BounceError(RuntimeError):
@@ -79,6 +79,14 @@ def _load():
     lib.bn_flat_bake.argtypes = [P, ctypes.c_char_p, I, I, I, ctypes.c_double, ctypes.c_double, ctypes.c_char_p,
                                  ctypes.c_char_p, S]
     lib.bn_flat_bake.restype = I
+    lib.bn_flat_images.argtypes = [P, ctypes.c_char_p, I, I, I, D, D, ctypes.c_double, I, I, I, ctypes.c_char_p,
+                                   ctypes.c_char_p, S]
+    lib.bn_flat_images.restype = I
+    lib.bn_flat_load.argtypes = [ctypes.c_char_p, ctypes.POINTER(_Opts), ctypes.POINTER(P), ctypes.c_char_p, S]
+    lib.bn_flat_load.restype = I
+    lib.bn_flat_operator.argtypes = [P, ctypes.c_char_p, S]
+    lib.bn_flat_operator.restype = I
+    lib.bn_flat_ff_diagnostics.argtypes = [P, D]
     lib.bn_flat_form_factors.argtypes = [P, D, ctypes.c_char_p, S]
     lib.bn_flat_form_factors.restype = I
     lib.bn_flat_solve_operator.argtypes = [S, D, _APPLY, P, ctypes.POINTER(_Opts), ctypes.POINTER(P), ctypes.c_char_p, S]
@@ -160,6 +168,24 @@ class Result:
         if st != 0:
             _raise(self._lib, st, msg)
 
+    def images(self, path, size=None, spp=None, eye=None, look=None, fov=None, previews=True, smooth=False,
+               half=False):
+        """Camera images of every layer as `bounce bounces` writes them: path (FILE.exr, a layer per
+        term, rest and L) and with previews FILE.<layer>.png and the contact sheet. The camera is the
+        scene's NAME.camera sidecar, else in front of the box; size=(w, h), spp, eye, look (scene
+        units) and fov (degrees) override it."""
+        Dp = ctypes.POINTER(ctypes.c_double)
+        vec = lambda v: None if v is None else (ctypes.c_double * 3)(*[float(x) for x in v])
+        e, lk = vec(eye), vec(look)
+        w, h = size if size else (0, 0)
+        msg = ctypes.create_string_buffer(2048)
+        st = self._lib.bn_flat_images(self._h, os.fsencode(path), int(w), int(h), int(spp or 0),
+                                      ctypes.cast(e, Dp) if e else None, ctypes.cast(lk, Dp) if lk else None,
+                                      float(fov or 0), int(previews), int(smooth), int(half),
+                                      b"python bounce package", msg, len(msg))
+        if st != 0:
+            _raise(self._lib, st, msg)
+
     def __del__(self):
         if getattr(self, "_h", None):
             self._lib.bn_flat_free(self._h)
@@ -180,6 +206,89 @@ class _Owned(np.ndarray):
 
     def __array_finalize__(self, obj):
         self._owner = getattr(obj, "_owner", None)
+
+
+_DIAG = ("row_sum_min", "row_sum_max", "row_sum_rms_dev", "reciprocity_residual", "k_norm_inf",
+         "occluded_fraction", "rays", "nonzeros", "bytes", "seconds", "rows_above_one", "row_sum_tol")
+
+
+def _opts(lib, unit="m", method="auto", transport="auto", bounces=3, tol=None, patches=None, patch_size=None,
+          eps=None, threads=0, progress=False):
+    o = _Opts()
+    lib.bn_flat_opts_default(ctypes.byref(o))
+    o.unit, o.method, o.transport = unit.encode(), method.encode(), transport.encode()
+    o.bounces = bounces
+    o.tol = tol or 0.0
+    o.patches = patches or 0
+    o.patch_size = patch_size or 0.0
+    o.eps = eps or 0.0
+    o.threads = threads
+    o.quiet = 0 if progress else 1
+    o.sigint = 1 if _main_thread() else 0   # Ctrl-C stops the C loops, then raises KeyboardInterrupt
+    return o
+
+
+class Scene:
+    """A scene file loaded and cut into patches, with its per-patch arrays (numpy): area (scene
+    units^2), normal, centroid, reflectance, emission (W m^-2 sr^-1), face (the input polygon).
+    form_factors() builds F (with the meshing options given here) and returns it;
+    bounce.solve(scene, ...) solves it."""
+
+    @classmethod
+    def load(cls, path, unit="m", patches=None, patch_size=None, transport="auto", eps=None, threads=0,
+             progress=False):
+        lib = _load()
+        self = cls()
+        self.path = os.fspath(path)
+        self.options = dict(unit=unit, patches=patches, patch_size=patch_size, transport=transport, eps=eps,
+                            threads=threads, progress=progress)
+        o = _opts(lib, **self.options)
+        h = ctypes.c_void_p()
+        msg = ctypes.create_string_buffer(2048)
+        st = lib.bn_flat_load(os.fsencode(path), ctypes.byref(o), ctypes.byref(h), msg, len(msg))
+        if st != 0:
+            _raise(lib, st, msg)
+        self._lib, self._h = lib, h
+        n = self.patches = lib.bn_flat_patches(h)
+        Dp = ctypes.POINTER(ctypes.c_double)
+        self.area, self.normal, self.centroid = np.empty(n), np.empty((n, 3)), np.empty((n, 3))
+        self.reflectance, self.face = np.empty((n, 3)), np.empty(n, dtype=np.uintp)
+        lib.bn_flat_patch_data(h, self.area.ctypes.data_as(Dp), self.normal.ctypes.data_as(Dp),
+                               self.centroid.ctypes.data_as(Dp), self.reflectance.ctypes.data_as(Dp),
+                               self.face.ctypes.data_as(ctypes.POINTER(ctypes.c_size_t)))
+        self.emission = np.ctypeslib.as_array(lib.bn_flat_emission(h), shape=(n, 3)).copy()
+        self.diagnostics = None
+        return self
+
+    def form_factors(self, sparse=False):
+        """F (patches x patches, row i: the share of patch i's view that each patch fills, with
+        visibility), as bounce assembles it for the solve. A dense numpy array, or with sparse=True
+        a scipy.sparse CSR matrix when scipy is installed. self.diagnostics then holds the
+        assembly's report (row sums, reciprocity, ||K||_inf, rays, seconds, ...)."""
+        msg = ctypes.create_string_buffer(2048)
+        st = self._lib.bn_flat_operator(self._h, msg, len(msg))
+        if st != 0:
+            _raise(self._lib, st, msg)
+        d = (ctypes.c_double * 12)()
+        self._lib.bn_flat_ff_diagnostics(self._h, d)
+        self.diagnostics = dict(zip(_DIAG, list(d)))
+        n = self.patches
+        F = np.empty((n, n))
+        st = self._lib.bn_flat_form_factors(self._h, F.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), msg, len(msg))
+        if st != 0:
+            _raise(self._lib, st, msg)
+        if sparse:
+            try:
+                import scipy.sparse
+            except ImportError:
+                raise BounceError("EUSAGE", "sparse=True needs scipy (python3-scipy)")
+            return scipy.sparse.csr_matrix(F)
+        return F
+
+    def __del__(self):
+        if getattr(self, "_h", None):
+            self._lib.bn_flat_free(self._h)
+            self._h = None
 
 
 class Operator:
@@ -246,17 +355,13 @@ def solve(path, unit="m", method="auto", transport="auto", bounces=3, tol=None, 
             raise BounceError("EUSAGE", "an Operator needs emission= (patches x 3)")
         return _solve_operator(path, emission, method, bounces, tol, threads, progress)
     lib = _load()
-    o = _Opts()
-    lib.bn_flat_opts_default(ctypes.byref(o))
-    o.unit, o.method, o.transport = unit.encode(), method.encode(), transport.encode()
-    o.bounces = bounces
-    o.tol = tol or 0.0
-    o.patches = patches or 0
-    o.patch_size = patch_size or 0.0
-    o.eps = eps or 0.0
-    o.threads = threads
-    o.quiet = 0 if progress else 1
-    o.sigint = 1 if _main_thread() else 0   # Ctrl-C stops the C loops, then raises KeyboardInterrupt
+    if isinstance(path, Scene):   # its file and meshing options (K is built again for the solve)
+        so = path.options
+        o = _opts(lib, so["unit"], method, so["transport"], bounces, tol, so["patches"], so["patch_size"],
+                  so["eps"], threads or so["threads"], progress or so["progress"])
+        path = path.path
+    else:
+        o = _opts(lib, unit, method, transport, bounces, tol, patches, patch_size, eps, threads, progress)
     h = ctypes.c_void_p()
     msg = ctypes.create_string_buffer(2048)
     st = lib.bn_flat_solve(os.fsencode(path), ctypes.byref(o), ctypes.byref(h), msg, len(msg))

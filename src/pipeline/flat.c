@@ -2,6 +2,7 @@
 #include "bounce/flat.h"
 #include "bounce/pipeline.h"
 #include "bounce/bake.h"
+#include "bounce/image.h"
 #include "base/internal.h"
 
 #include <math.h>
@@ -13,7 +14,10 @@
 
 struct bn_flat {
     bn_pipeline p;
-    char transport[32];
+    bn_pipeline_opts po;   /* as loaded (bn_flat_load): the operator and solve stages use them */
+    char transport[32];    /* the operator's name, once built */
+    char transport_opt[16];   /* po.transport points here */
+    int sigint;            /* catch SIGINT in later stages too (opts.sigint at load) */
     void *op;   /* a caller's operator's context (bn_flat_solve_operator), freed after K */
 };
 
@@ -63,31 +67,18 @@ static bn_status bn__flat_fail(bn_status st, const char *text, char *msg, size_t
     return st;
 }
 
-bn_status bn_flat_solve(const char *path, const bn_flat_opts *o, bn_flat **out, char *msg, size_t msglen)
+/* The pipeline options from the flat ones (strings checked; transport copied into f). */
+static bn_status bn__flat_popts(const bn_flat_opts *o, bn_flat *f, char *msg, size_t msglen)
 {
     static const char *methods[] = {"jacobi", "gauss-seidel", "neumann", "direct"};
-    bn_flat_opts d;
-    bn_pipeline_opts po;
-    bn_error err;
-    bn_flat *f;
-    bn_status st;
-    if (out)
-        *out = NULL;
-    if (msg && msglen)
-        msg[0] = '\0';
-    if (!out || !path)
-        return bn__flat_fail(BN_EUSAGE, "bn_flat_solve: path and out are required", msg, msglen);
-    if (!o) {
-        bn_flat_opts_default(&d);
-        o = &d;
-    }
-    bn_pipeline_opts_default(&po);
-    if (o->unit && bn_unit_parse(o->unit, &po.load.unit) != 0) {
+    bn_pipeline_opts *po = &f->po;
+    bn_pipeline_opts_default(po);
+    if (o->unit && bn_unit_parse(o->unit, &po->load.unit) != 0) {
         char t[128];
         snprintf(t, sizeof t, "unit '%s' is not one of m, cm, mm", o->unit);
         return bn__flat_fail(BN_EUSAGE, t, msg, msglen);
     }
-    po.method_auto = 1;
+    po->method_auto = 1;
     if (o->method && strcmp(o->method, "auto") != 0) {
         int k = -1;
         for (int i = 0; i < 4; i++)
@@ -98,8 +89,8 @@ bn_status bn_flat_solve(const char *path, const bn_flat_opts *o, bn_flat **out, 
             snprintf(t, sizeof t, "method '%s' is not one of auto, jacobi, gauss-seidel, neumann, direct", o->method);
             return bn__flat_fail(BN_EUSAGE, t, msg, msglen);
         }
-        po.method_auto = 0;
-        po.solve.method = (bn_solve_method)k;
+        po->method_auto = 0;
+        po->solve.method = (bn_solve_method)k;
     }
     if (o->transport) {
         const char *names[] = {"auto", "dense", "sparse", "hierarchical"};
@@ -111,42 +102,133 @@ bn_status bn_flat_solve(const char *path, const bn_flat_opts *o, bn_flat **out, 
             snprintf(t, sizeof t, "transport '%s' is not one of auto, dense, sparse, hierarchical", o->transport);
             return bn__flat_fail(BN_EUSAGE, t, msg, msglen);
         }
-        po.transport = o->transport;
+        snprintf(f->transport_opt, sizeof f->transport_opt, "%s", o->transport);
+        po->transport = f->transport_opt;
     }
-    po.solve.bounces = o->bounces < 0 ? 0 : o->bounces;
+    po->solve.bounces = o->bounces < 0 ? 0 : o->bounces;
     if (o->tol > 0)
-        po.solve.tol = o->tol;
+        po->solve.tol = o->tol;
     if (o->patch_size > 0)
-        po.mesh.patch_size = o->patch_size;
+        po->mesh.patch_size = o->patch_size;
     else if (o->patches)
-        po.mesh.target_patches = o->patches;
-    po.mesh_auto = !(o->patch_size > 0) && !o->patches;
+        po->mesh.target_patches = o->patches;
+    po->mesh_auto = !(o->patch_size > 0) && !o->patches;
     if (o->eps > 0)
-        po.hier.eps = o->eps;
-    po.threads = o->threads;
-    po.ff.quiet = po.hier.quiet = po.solve.quiet = o->quiet;
-    po.load.log.quiet = po.ff.log.quiet = po.hier.log.quiet = po.solve.log_sink.quiet = 1;   /* warnings only */
-    f = bn__calloc(1, sizeof *f);
-    if (!f)
-        return bn__flat_fail(BN_ENOMEM, "out of memory", msg, msglen);
-    bn_error_clear(&err);
-    {
-        bn__flat_sig sg;
-        bn__flat_sig_begin(&sg, o->sigint);
-        st = bn_pipeline_run(path, &po, &f->p, &err);
-        bn__flat_sig_end(&sg);
+        po->hier.eps = o->eps;
+    po->threads = o->threads;
+    po->keep_rt = 1;   /* images (bn_flat_images) */
+    po->ff.quiet = po->hier.quiet = po->solve.quiet = o->quiet;
+    po->load.log.quiet = po->ff.log.quiet = po->hier.log.quiet = po->solve.log_sink.quiet = 1;   /* warnings only */
+    return BN_OK;
+}
+
+/* Runs fn(f) with SIGINT caught when asked. */
+static bn_status bn__flat_stage(bn_flat *f, int sigint, int stage, const char *path, bn_error *err)
+{
+    bn__flat_sig sg;
+    bn_status st;
+    bn__flat_sig_begin(&sg, sigint);
+    st = stage == 0 ? bn_pipeline_scene(path, &f->po, &f->p, err)
+         : stage == 1 ? bn_pipeline_operator(&f->po, &f->p, err)
+                      : bn_pipeline_solve(&f->po, &f->p, err);
+    bn__flat_sig_end(&sg);
+    return st;
+}
+
+bn_status bn_flat_load(const char *path, const bn_flat_opts *o, bn_flat **out, char *msg, size_t msglen)
+{
+    bn_flat_opts d;
+    bn_error err;
+    bn_flat *f;
+    bn_status st;
+    if (out)
+        *out = NULL;
+    if (msg && msglen)
+        msg[0] = '\0';
+    if (!out || !path)
+        return bn__flat_fail(BN_EUSAGE, "path and out are required", msg, msglen);
+    if (!o) {
+        bn_flat_opts_default(&d);
+        o = &d;
     }
-    if (st != BN_OK && st != BN_ENOTCONV) {
+    if (!(f = bn__calloc(1, sizeof *f)))
+        return bn__flat_fail(BN_ENOMEM, "out of memory", msg, msglen);
+    if ((st = bn__flat_popts(o, f, msg, msglen)) != BN_OK) {
+        free(f);
+        return st;
+    }
+    f->sigint = o->sigint;
+    bn_error_clear(&err);
+    st = bn__flat_stage(f, o->sigint, 0, path, &err);
+    if (st == BN_OK && !(f->p.E = bn__malloc_array(3 * f->p.n + 1, sizeof(double))))
+        st = bn_error_set(&err, BN_ENOMEM, "out of memory");
+    if (st != BN_OK) {
         bn__flat_fail(st, err.msg, msg, msglen);
         bn_pipeline_free(&f->p);
         free(f);
         return st;
     }
+    bn_scene_patch_emission(f->p.scene, f->p.E);
+    *out = f;
+    return BN_OK;
+}
+
+bn_status bn_flat_operator(bn_flat *f, char *msg, size_t msglen)
+{
+    bn_error err;
+    bn_status st;
+    if (msg && msglen)
+        msg[0] = '\0';
+    if (f->p.k)
+        return BN_OK;
+    bn_error_clear(&err);
+    st = bn__flat_stage(f, f->sigint, 1, NULL, &err);
+    if (st != BN_OK)
+        return bn__flat_fail(st, err.msg, msg, msglen);
+    snprintf(f->transport, sizeof f->transport, "%s", bn_transport_name(f->p.k));
+    return BN_OK;
+}
+
+bn_status bn_flat_solve(const char *path, const bn_flat_opts *o, bn_flat **out, char *msg, size_t msglen)
+{
+    bn_flat_opts d;
+    bn_error err;
+    bn_flat *f = NULL;
+    bn_status st;
+    if (!o) {
+        bn_flat_opts_default(&d);
+        o = &d;
+    }
+    if ((st = bn_flat_load(path, o, &f, msg, msglen)) != BN_OK)
+        return st;
+    free(f->p.E);   /* the solve stage makes its own */
+    f->p.E = NULL;
+    if ((st = bn_flat_operator(f, msg, msglen)) != BN_OK) {
+        bn_flat_free(f);
+        return st;
+    }
+    bn_error_clear(&err);
+    st = bn__flat_stage(f, o->sigint, 2, NULL, &err);
+    if (st != BN_OK && st != BN_ENOTCONV) {
+        bn__flat_fail(st, err.msg, msg, msglen);
+        bn_flat_free(f);
+        return st;
+    }
     if (st == BN_ENOTCONV)
         bn__flat_fail(st, err.msg, msg, msglen);
-    snprintf(f->transport, sizeof f->transport, "%s", f->p.k ? bn_transport_name(f->p.k) : "");
     *out = f;
     return st;
+}
+
+void bn_flat_ff_diagnostics(const bn_flat *f, double out[12])
+{
+    const bn_ff_diagnostics *d = &f->p.ff;
+    int built = f->p.k != NULL;
+    double v[12] = {d->row_sum_min, d->row_sum_max, d->row_sum_rms_dev, d->reciprocity_residual, d->k_norm_inf,
+                    d->occluded_fraction, (double)d->rays, (double)d->nonzeros, (double)d->bytes, d->seconds,
+                    (double)d->rows_above_one, d->row_sum_tol};
+    for (int k = 0; k < 12; k++)
+        out[k] = built ? v[k] : NAN;
 }
 
 void bn_flat_free(bn_flat *f)
@@ -363,6 +445,69 @@ bn_status bn_flat_bake(const bn_flat *f, const char *out, int per_bounce, int in
         st = bn_bake_write(b, out, layers, nl, &wo, &err);
     }
     bn_bake_destroy(b);
+    if (st != BN_OK)
+        bn__flat_fail(st, err.msg, msg, msglen);
+    return st;
+}
+
+bn_status bn_flat_images(const bn_flat *f, const char *out, int width, int height, int spp, const double *eye,
+                         const double *look, double fov_deg, int previews, int smooth, int half, const char *caller,
+                         char *msg, size_t msglen)
+{
+    int nb = f->p.res.nterms - 1;
+    const double *layers[72];
+    bn_camera cam;
+    bn_bounces_opts bo;
+    bn_error err;
+    bn_status st;
+    char solver[160], patches[32];
+    if (!f->p.scene || !f->p.rt)
+        return bn__flat_fail(BN_EUSAGE, "images: this result has no scene (a caller's operator)", msg, msglen);
+    if (nb < 0 || bn_layer_count(nb) > 72)
+        return bn__flat_fail(BN_EUSAGE, "images: the solve kept no terms (bounces >= 0 needed)", msg, msglen);
+    bn_error_clear(&err);
+    bn_camera_default(f->p.scene, &cam);
+    if ((st = bn_camera_load_sidecar(bn_scene_path(f->p.scene), &cam, NULL, &err)) != BN_OK)
+        return bn__flat_fail(st, err.msg, msg, msglen);
+    if (eye)
+        memcpy(cam.eye, eye, sizeof cam.eye);
+    if (look)
+        memcpy(cam.look, look, sizeof cam.look);
+    if (fov_deg > 0)
+        cam.fov_deg = fov_deg;
+    if (width > 0)
+        cam.width = width;
+    if (height > 0)
+        cam.height = height;
+    if (spp > 0)
+        cam.spp = spp;
+    if ((st = bn_camera_validate(&cam, &err)) != BN_OK)
+        return bn__flat_fail(st, err.msg, msg, msglen);
+    for (int l = 0; l < bn_layer_count(nb); l++)
+        layers[l] = l <= nb ? f->p.res.terms[l] : l == nb + 1 ? f->p.rest : f->p.res.L;
+    snprintf(solver, sizeof solver, "%s: %s after %zu iterations, residual %.3g", bn_solve_method_name(f->p.method_used),
+             bn_stop_reason_name(f->p.res.reason), f->p.res.iterations, f->p.res.residual_max);
+    snprintf(patches, sizeof patches, "%zu", f->p.n);
+    {
+        const bn_attr attrs[] = {
+            {"bounce:caller", caller ? caller : "bn_flat_images"},
+            {"bounce:version", bn_version()},
+            {"bounce:scene", bn_scene_path(f->p.scene)},
+            {"bounce:solver", solver},
+            {"bounce:patches", patches},
+            {"bounce:units", "radiance, W m^-2 sr^-1 (L = E + K L solved in radiance)"},
+            {"bounce:layers", "E = K^0 E (emission), KE = K^1 E (direct), K2E = K^2 E, ...; rest = L - their sum"},
+        };
+        bn_bounces_opts_default(&bo);
+        bo.output = out;
+        bo.previews = previews;
+        bo.smooth = smooth;
+        bo.half = half;
+        bo.attrs = attrs;
+        bo.nattrs = sizeof attrs / sizeof attrs[0];
+        bo.log.quiet = 1;
+        st = bn_bounces_write(f->p.scene, f->p.rt, &cam, layers, nb, &bo, NULL, &err);
+    }
     if (st != BN_OK)
         bn__flat_fail(st, err.msg, msg, msglen);
     return st;

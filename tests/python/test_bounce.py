@@ -181,3 +181,41 @@ def test_bake_from_python_equals_the_cli(tmp_path):
     with pytest.raises(bounce.BounceError) as e:
         r.bake(str(tmp_path / "x.stl"))
     assert e.value.status == "EUSAGE" and ".stl" in str(e.value)
+
+
+def test_images_from_python_equal_the_cli(tmp_path):
+    """r.images writes what `bounce bounces` writes for the same solve and camera: every layer's mean
+    (read back by OpenImageIO's oiiotool, a reader of its own) is the same number."""
+    import shutil
+    oiio = shutil.which("oiiotool")
+    if not oiio:
+        pytest.skip("no oiiotool (Debian's openimageio-tools, which scripts/setup.sh installs)")
+    r = bounce.solve(CORNELL, unit="mm", patches=400)
+    mine = tmp_path / "py.exr"
+    r.images(str(mine), size=(96, 96), previews=False)
+    cli = tmp_path / "cli.exr"
+    subprocess.run([EXE, "bounces", CORNELL, "--unit", "mm", "--patches", "400", "--size", "96x96", "--no-previews",
+                    "-q", "-o", str(cli)], check=True, stderr=subprocess.DEVNULL)
+
+    def means(p):
+        out = subprocess.run([oiio, "--stats", str(p)], capture_output=True, text=True, check=True).stdout
+        return [ln.split("Stats Avg:")[1].split() for ln in out.splitlines() if "Stats Avg:" in ln]
+
+    a, b = means(mine), means(cli)
+    assert a and a == b
+    with pytest.raises(bounce.BounceError) as e:
+        r.images(str(tmp_path / "x.exr"), eye=(278, 273, -800), look=(278, 273, -800))
+    assert e.value.status in ("EUSAGE", "EINPUT") and "eye" in str(e.value)
+
+
+def test_scene_arrays_form_factors_and_solve(tmp_path):
+    s = bounce.Scene.load(furnace(tmp_path, 0.9), patches=150)
+    assert s.patches >= 150 and s.area.shape == (s.patches,)
+    assert abs(s.area.sum() - 6.0) < 1e-12                      # the unit cube's six faces
+    assert np.allclose(np.linalg.norm(s.normal, axis=1), 1)
+    assert (s.reflectance == 0.9).all() and (s.emission == 1).all()
+    F = s.form_factors()
+    assert np.abs(F.sum(axis=1) - 1).max() <= 1e-6 and s.diagnostics["row_sum_max"] <= 1 + 1e-6
+    assert s.diagnostics["rays"] >= 0 and s.diagnostics["k_norm_inf"] == pytest.approx(0.9, abs=1e-6)
+    r = bounce.solve(s, bounces=2)
+    assert r.patches == s.patches and np.abs(r.L - 10).max() <= 1e-5
