@@ -52,6 +52,11 @@ const char *bn_flat_method(const bn_flat *f);              /* the solver that ra
 size_t bn_flat_iterations(const bn_flat *f);
 double bn_flat_residual(const bn_flat *f);                  /* final max residual */
 const char *bn_flat_transport(const bn_flat *f);           /* "dense", "sparse" or "hierarchy" */
+/* The solver's monitor, one row per iteration (row 0: the initial guess E), BN_FLAT_HISTORY values
+ * each: iteration, residual_max, residual_rms, change, bound, error_bound, seconds. *rows (may be
+ * NULL) gets the array, owned by f; returns the row count. */
+#define BN_FLAT_HISTORY 7
+size_t bn_flat_history(const bn_flat *f, const double **rows);
 
 /* Loads and meshes `path` only (no K, no solve): the patch accessors and bn_flat_emission work,
  * L and the terms are NULL until bn_flat_operator and a solve. */

@@ -82,6 +82,8 @@ def _load():
     lib.bn_flat_images.argtypes = [P, ctypes.c_char_p, I, I, I, D, D, ctypes.c_double, I, I, I, ctypes.c_char_p,
                                    ctypes.c_char_p, S]
     lib.bn_flat_images.restype = I
+    lib.bn_flat_history.argtypes = [P, ctypes.POINTER(D)]
+    lib.bn_flat_history.restype = S
     lib.bn_flat_load.argtypes = [ctypes.c_char_p, ctypes.POINTER(_Opts), ctypes.POINTER(P), ctypes.c_char_p, S]
     lib.bn_flat_load.restype = I
     lib.bn_flat_operator.argtypes = [P, ctypes.c_char_p, S]
@@ -142,6 +144,12 @@ class Result:
         self.transport = lib.bn_flat_transport(handle).decode()
         self.iterations = lib.bn_flat_iterations(handle)
         self.residual = lib.bn_flat_residual(handle)
+        # the monitor's rows (row 0: the initial guess E): arrays per column
+        rows = ctypes.POINTER(ctypes.c_double)()
+        m = lib.bn_flat_history(handle, ctypes.byref(rows))
+        table = np.ctypeslib.as_array(rows, shape=(m, 7)).copy() if m else np.zeros((0, 7))
+        self.history = {k: table[:, j] for j, k in enumerate(
+            ("iteration", "residual_max", "residual_rms", "change", "bound", "error_bound", "seconds"))}
 
     def form_factors(self):
         """F as a dense patches x patches array (a copy: the library may store it in float, as here

@@ -18,6 +18,8 @@ struct bn_flat {
     char transport[32];    /* the operator's name, once built */
     char transport_opt[16];   /* po.transport points here */
     int sigint;            /* catch SIGINT in later stages too (opts.sigint at load) */
+    double *hist;          /* the monitor's rows, BN_FLAT_HISTORY values each */
+    size_t nhist, caphist;
     void *op;   /* a caller's operator's context (bn_flat_solve_operator), freed after K */
 };
 
@@ -122,6 +124,37 @@ static bn_status bn__flat_popts(const bn_flat_opts *o, bn_flat *f, char *msg, si
     return BN_OK;
 }
 
+/* The solver's monitor: keeps every row (a failed allocation drops the row, never the solve). */
+static int bn__flat_monitor(void *user, const bn_solve_row *row, const double *L)
+{
+    bn_flat *f = user;
+    (void)L;
+    if (f->nhist == f->caphist) {
+        size_t cap = f->caphist ? 2 * f->caphist : 64;
+        double *h = bn__realloc_array(f->hist, cap, BN_FLAT_HISTORY * sizeof(double));
+        if (!h)
+            return 0;
+        f->hist = h;
+        f->caphist = cap;
+    }
+    double *r = f->hist + BN_FLAT_HISTORY * f->nhist++;
+    r[0] = (double)row->iteration;
+    r[1] = row->residual_max;
+    r[2] = row->residual_rms;
+    r[3] = row->change;
+    r[4] = row->bound;
+    r[5] = row->error_bound;
+    r[6] = row->seconds;
+    return 0;
+}
+
+size_t bn_flat_history(const bn_flat *f, const double **rows)
+{
+    if (rows)
+        *rows = f->hist;
+    return f->nhist;
+}
+
 /* Runs fn(f) with SIGINT caught when asked. */
 static bn_status bn__flat_stage(bn_flat *f, int sigint, int stage, const char *path, bn_error *err)
 {
@@ -208,6 +241,8 @@ bn_status bn_flat_solve(const char *path, const bn_flat_opts *o, bn_flat **out, 
         return st;
     }
     bn_error_clear(&err);
+    f->po.solve.monitor = bn__flat_monitor;
+    f->po.solve.monitor_user = f;
     st = bn__flat_stage(f, o->sigint, 2, NULL, &err);
     if (st != BN_OK && st != BN_ENOTCONV) {
         bn__flat_fail(st, err.msg, msg, msglen);
@@ -237,6 +272,7 @@ void bn_flat_free(bn_flat *f)
         return;
     bn_pipeline_free(&f->p);
     free(f->op);
+    free(f->hist);
     free(f);
 }
 
@@ -376,6 +412,8 @@ bn_status bn_flat_solve_operator(size_t n, const double *E, bn_flat_apply_fn app
         bn__flat_sig sg;
         f->op = op;
         op = NULL;
+        so.monitor = bn__flat_monitor;
+        so.monitor_user = f;
         bn__flat_sig_begin(&sg, o->sigint);
         st = bn_solve(f->p.k, f->p.E, &so, &f->p.res, &err);
         bn__flat_sig_end(&sg);

@@ -219,3 +219,17 @@ def test_scene_arrays_form_factors_and_solve(tmp_path):
     assert s.diagnostics["rays"] >= 0 and s.diagnostics["k_norm_inf"] == pytest.approx(0.9, abs=1e-6)
     r = bounce.solve(s, bounces=2)
     assert r.patches == s.patches and np.abs(r.L - 10).max() <= 1e-5
+
+
+def test_monitor_history(tmp_path):
+    """The solver's monitor as arrays: in the furnace Jacobi's residual falls by exactly rho each
+    iteration (K = rho F with rows of F summing to 1, so the error is rho^k times the first), and
+    the last row is the result's own residual."""
+    rho = 0.9
+    r = bounce.solve(furnace(tmp_path, rho), method="jacobi", patches=150, tol=1e-10)
+    h = r.history
+    assert len(h["iteration"]) == r.iterations + 1 and h["iteration"][0] == 0
+    assert h["residual_max"][-1] == r.residual
+    q = h["residual_max"][2:12] / h["residual_max"][1:11]
+    assert np.abs(q - rho).max() <= 1e-3, q
+    assert (h["error_bound"][1:] >= 0).all()
