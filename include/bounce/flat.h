@@ -90,11 +90,14 @@ bn_status bn_flat_images(const bn_flat *f, const char *out, int width, int heigh
 /* A caller's own operator: apply(user, x, y) sets y = K x for N x 3 interleaved x (no aliasing)
  * and returns 0, or nonzero to stop the solve (BN_EINPUT, "the operator failed"). */
 typedef int (*bn_flat_apply_fn)(void *user, const double *x, double *y);
-/* Solves L = E + K L with K given by apply (only y = K x: Jacobi, the Neumann series and the terms;
- * method "auto" is Jacobi; Gauss-Seidel and direct need rows and entries and are refused). n patches,
- * E (N x 3) copied. The result has no scene: bn_flat_patch_data leaves its arrays untouched. */
-bn_status bn_flat_solve_operator(size_t n, const double *E, bn_flat_apply_fn apply, void *user, const bn_flat_opts *o,
-                                 bn_flat **out, char *msg, size_t msglen);
+/* Optional: out[c] = (K x)_i for one patch i (Gauss-Seidel's rows); 0, or nonzero to stop. */
+typedef int (*bn_flat_row_fn)(void *user, size_t i, const double *x, double *out);
+/* Solves L = E + K L with K given by apply (Jacobi, the Neumann series and the terms need only
+ * y = K x) and row (may be NULL; with it Gauss-Seidel too; method "auto" is then Gauss-Seidel, else
+ * Jacobi; the direct solve needs entries and is refused). n patches, E (N x 3) copied. The result
+ * has no scene: bn_flat_patch_data leaves its arrays untouched. */
+bn_status bn_flat_solve_operator(size_t n, const double *E, bn_flat_apply_fn apply, bn_flat_row_fn row, void *user,
+                                 const bn_flat_opts *o, bn_flat **out, char *msg, size_t msglen);
 
 #ifdef __cplusplus
 }

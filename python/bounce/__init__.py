@@ -49,6 +49,8 @@ class _Opts(ctypes.Structure):
 
 _lib = None
 _APPLY = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_double))
+_ROW = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_size_t, ctypes.POINTER(ctypes.c_double),
+                        ctypes.POINTER(ctypes.c_double))
 
 
 def _load():
@@ -91,7 +93,8 @@ def _load():
     lib.bn_flat_ff_diagnostics.argtypes = [P, D]
     lib.bn_flat_form_factors.argtypes = [P, D, ctypes.c_char_p, S]
     lib.bn_flat_form_factors.restype = I
-    lib.bn_flat_solve_operator.argtypes = [S, D, _APPLY, P, ctypes.POINTER(_Opts), ctypes.POINTER(P), ctypes.c_char_p, S]
+    lib.bn_flat_solve_operator.argtypes = [S, D, _APPLY, _ROW, P, ctypes.POINTER(_Opts), ctypes.POINTER(P),
+                                           ctypes.c_char_p, S]
     lib.bn_flat_solve_operator.restype = I
     _lib = lib
     return lib
@@ -302,12 +305,14 @@ class Scene:
 class Operator:
     """A transport operator of your own: apply(x) returns K x for x of shape (patches, 3) (radiance
     per patch and channel; K includes the reflectance). bounce's Jacobi iteration, Neumann series and
-    per-bounce terms run on it (Gauss-Seidel and the direct solve need rows and entries, which a
-    callable does not offer). Pass it to bounce.solve with the emission E (patches x 3)."""
+    per-bounce terms run on it; give row(i, x) returning (K x)_i (3 values) too and Gauss-Seidel runs
+    on it as well (one call per patch per sweep). The direct solve needs entries and is refused. Pass
+    it to bounce.solve with the emission E (patches x 3)."""
 
-    def __init__(self, patches, apply):
+    def __init__(self, patches, apply, row=None):
         self.patches = int(patches)
         self.apply = apply
+        self.row = row
 
 
 def _solve_operator(op, emission, method, bounces, tol, threads, progress):
@@ -328,7 +333,18 @@ def _solve_operator(op, emission, method, bounces, tol, threads, progress):
             caught.append(e)
             return 1
 
+    def rtramp(_user, i, x, out):
+        try:
+            xa = np.ctypeslib.as_array(x, shape=(n, 3))
+            oa = np.ctypeslib.as_array(out, shape=(3,))
+            oa[...] = op.row(i, xa)
+            return 0
+        except BaseException as e:
+            caught.append(e)
+            return 1
+
     cb = _APPLY(tramp)
+    rb = _ROW(rtramp) if op.row is not None else _ROW()
     o = _Opts()
     lib.bn_flat_opts_default(ctypes.byref(o))
     o.method = method.encode()
@@ -339,7 +355,7 @@ def _solve_operator(op, emission, method, bounces, tol, threads, progress):
     o.sigint = 1 if _main_thread() else 0   # Ctrl-C stops the C loops, then raises KeyboardInterrupt
     h = ctypes.c_void_p()
     msg = ctypes.create_string_buffer(2048)
-    st = lib.bn_flat_solve_operator(n, E.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), cb, None, ctypes.byref(o),
+    st = lib.bn_flat_solve_operator(n, E.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), cb, rb, None, ctypes.byref(o),
                                     ctypes.byref(h), msg, len(msg))
     if caught:
         if h:

@@ -331,6 +331,7 @@ bn_status bn_flat_form_factors(const bn_flat *f, double *F, char *msg, size_t ms
 
 typedef struct bn__flat_op {
     bn_flat_apply_fn fn;
+    bn_flat_row_fn row;
     void *user;
 } bn__flat_op;
 
@@ -343,10 +344,21 @@ static bn_status bn__flat_op_apply(void *ctx, const double *x, double *y, bn_err
     return bn_interrupted() != BN_OK ? bn_error_set(err, bn_interrupted(), "interrupted") : BN_OK;
 }
 
-static const bn_transport_ops bn__flat_op_ops = {.name = "caller", .caps = 0, .apply = bn__flat_op_apply};
+static bn_status bn__flat_op_row(void *ctx, size_t i, const double *x, double out[3], bn_error *err)
+{
+    bn__flat_op *op = ctx;
+    int rc = op->row(op->user, i, x, out);
+    if (rc != 0)
+        return bn_error_set(err, BN_EINPUT, "the operator failed (its row %zu returned %d)", i, rc);
+    return BN_OK;
+}
 
-bn_status bn_flat_solve_operator(size_t n, const double *E, bn_flat_apply_fn apply, void *user, const bn_flat_opts *o,
-                                 bn_flat **out, char *msg, size_t msglen)
+static const bn_transport_ops bn__flat_op_ops = {.name = "caller", .caps = 0, .apply = bn__flat_op_apply};
+static const bn_transport_ops bn__flat_op_rows = {
+    .name = "caller", .caps = BN_OP_ROWS, .apply = bn__flat_op_apply, .row = bn__flat_op_row};
+
+bn_status bn_flat_solve_operator(size_t n, const double *E, bn_flat_apply_fn apply, bn_flat_row_fn row, void *user,
+                                 const bn_flat_opts *o, bn_flat **out, char *msg, size_t msglen)
 {
     static const char *methods[] = {"jacobi", "gauss-seidel", "neumann", "direct"};
     bn_flat_opts d;
@@ -367,7 +379,7 @@ bn_status bn_flat_solve_operator(size_t n, const double *E, bn_flat_apply_fn app
         o = &d;
     }
     bn_solve_opts_default(&so);
-    so.method = BN_SOLVE_JACOBI;
+    so.method = row ? BN_SOLVE_GAUSS_SEIDEL : BN_SOLVE_JACOBI;
     if (o->method && strcmp(o->method, "auto") != 0) {
         int k = -1;
         for (int i = 0; i < 4; i++)
@@ -403,9 +415,10 @@ bn_status bn_flat_solve_operator(size_t n, const double *E, bn_flat_apply_fn app
         ones[i] = 1;   /* K itself is the caller's: no reflectance applied on top */
     memcpy(f->p.E, E, 3 * n * sizeof(double));
     op->fn = apply;
+    op->row = row;
     op->user = user;
     bn_error_clear(&err);
-    st = bn_transport_create(n, ones, &bn__flat_op_ops, op, &f->p.k, &err);
+    st = bn_transport_create(n, ones, row ? &bn__flat_op_rows : &bn__flat_op_ops, op, &f->p.k, &err);
     free(ones);
     if (st == BN_OK) {
         f->p.n = n;

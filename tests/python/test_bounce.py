@@ -108,6 +108,15 @@ def test_a_python_operator_reproduces_the_dense_solve():
     assert np.abs(mine.L - r.L).max() <= 1e-12 * np.abs(r.L).max()
     for k in range(4):
         assert np.abs(mine.terms[k] - r.terms[k]).max() <= 1e-12 * np.abs(r.L).max()
+    # with rows, Gauss-Seidel runs on it too, and agrees with the built-in Gauss-Seidel
+    gs = bounce.solve(CORNELL, unit="mm", patches=300, method="gauss-seidel", tol=1e-13, bounces=3)
+    op_rows = bounce.Operator(r.patches, lambda x: rho * (F @ x), row=lambda i, x: rho[i] * (F[i] @ x))
+    mine_gs = bounce.solve(op_rows, emission=np.array(r.emission), tol=1e-13, bounces=3)
+    assert mine_gs.method == "gauss-seidel"
+    assert np.abs(mine_gs.L - gs.L).max() <= 1e-12 * np.abs(gs.L).max()
+    # and the Neumann series
+    mine_n = bounce.solve(op, emission=np.array(r.emission), method="neumann", tol=1e-13, bounces=3)
+    assert np.abs(mine_n.L - r.L).max() <= 1e-11 * np.abs(r.L).max()
 
 
 def test_an_operator_that_raises_stops_the_solve():
