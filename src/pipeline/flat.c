@@ -228,6 +228,10 @@ bn_status bn_flat_solve(const char *path, const bn_flat_opts *o, bn_flat **out, 
     bn_error err;
     bn_flat *f = NULL;
     bn_status st;
+    if (out)
+        *out = NULL;
+    if (!out)
+        return bn__flat_fail(BN_EUSAGE, "bn_flat_solve: out is required", msg, msglen);
     if (!o) {
         bn_flat_opts_default(&d);
         o = &d;
