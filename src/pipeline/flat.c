@@ -69,10 +69,25 @@ static bn_status bn__flat_fail(bn_status st, const char *text, char *msg, size_t
     return st;
 }
 
+/* A solver by its name (as on the command line). */
+static bn_status bn__flat_method(const char *name, bn_solve_method *out, char *msg, size_t msglen)
+{
+    static const char *methods[] = {"jacobi", "gauss-seidel", "neumann", "direct"};
+    for (int i = 0; i < 4; i++)
+        if (strcmp(name, methods[i]) == 0) {
+            *out = (bn_solve_method)i;
+            return BN_OK;
+        }
+    {
+        char t[160];
+        snprintf(t, sizeof t, "method '%s' is not one of auto, jacobi, gauss-seidel, neumann, direct", name);
+        return bn__flat_fail(BN_EUSAGE, t, msg, msglen);
+    }
+}
+
 /* The pipeline options from the flat ones (strings checked; transport copied into f). */
 static bn_status bn__flat_popts(const bn_flat_opts *o, bn_flat *f, char *msg, size_t msglen)
 {
-    static const char *methods[] = {"jacobi", "gauss-seidel", "neumann", "direct"};
     bn_pipeline_opts *po = &f->po;
     bn_pipeline_opts_default(po);
     if (o->unit && bn_unit_parse(o->unit, &po->load.unit) != 0) {
@@ -82,17 +97,10 @@ static bn_status bn__flat_popts(const bn_flat_opts *o, bn_flat *f, char *msg, si
     }
     po->method_auto = 1;
     if (o->method && strcmp(o->method, "auto") != 0) {
-        int k = -1;
-        for (int i = 0; i < 4; i++)
-            if (strcmp(o->method, methods[i]) == 0)
-                k = i;
-        if (k < 0) {
-            char t[160];
-            snprintf(t, sizeof t, "method '%s' is not one of auto, jacobi, gauss-seidel, neumann, direct", o->method);
-            return bn__flat_fail(BN_EUSAGE, t, msg, msglen);
-        }
+        bn_status st = bn__flat_method(o->method, &po->solve.method, msg, msglen);
+        if (st != BN_OK)
+            return st;
         po->method_auto = 0;
-        po->solve.method = (bn_solve_method)k;
     }
     if (o->transport) {
         const char *names[] = {"auto", "dense", "sparse", "hierarchical"};
@@ -364,7 +372,6 @@ static const bn_transport_ops bn__flat_op_rows = {
 bn_status bn_flat_solve_operator(size_t n, const double *E, bn_flat_apply_fn apply, bn_flat_row_fn row, void *user,
                                  const bn_flat_opts *o, bn_flat **out, char *msg, size_t msglen)
 {
-    static const char *methods[] = {"jacobi", "gauss-seidel", "neumann", "direct"};
     bn_flat_opts d;
     bn_solve_opts so;
     bn_error err;
@@ -384,18 +391,8 @@ bn_status bn_flat_solve_operator(size_t n, const double *E, bn_flat_apply_fn app
     }
     bn_solve_opts_default(&so);
     so.method = row ? BN_SOLVE_GAUSS_SEIDEL : BN_SOLVE_JACOBI;
-    if (o->method && strcmp(o->method, "auto") != 0) {
-        int k = -1;
-        for (int i = 0; i < 4; i++)
-            if (strcmp(o->method, methods[i]) == 0)
-                k = i;
-        if (k < 0) {
-            char t[160];
-            snprintf(t, sizeof t, "method '%s' is not one of auto, jacobi, gauss-seidel, neumann, direct", o->method);
-            return bn__flat_fail(BN_EUSAGE, t, msg, msglen);
-        }
-        so.method = (bn_solve_method)k;
-    }
+    if (o->method && strcmp(o->method, "auto") != 0 && (st = bn__flat_method(o->method, &so.method, msg, msglen)) != BN_OK)
+        return st;
     so.bounces = o->bounces < 0 ? -1 : o->bounces;
     if (o->tol > 0)
         so.tol = o->tol;
