@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The main job: install what is missing, build, and run bounce on the default scene (the
-# published Cornell box, millimetres): per-bounce EXR, PNG previews, contact sheet, baked PLY.
+# published Cornell box, millimetres): per-bounce EXR, PNG previews, contact sheet, baked PLY,
+# and the viewer page (the glTF bake with every term, in a browser).
 # Outputs go to out/ (override: OUT=dir scripts/run.sh).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -15,8 +16,10 @@ COMMON=(--unit mm --cache "$OUT/cornell-box.F")
 ./build/bounce info "$SCENE" --unit mm -q | sed -n '1,9p'
 ./build/bounce bounces "$SCENE" "${COMMON[@]}" -n 4 -o "$OUT/cornell-box.exr"
 ./build/bounce bake "$SCENE" "${COMMON[@]}" -o "$OUT/cornell-box.ply"
+./build/bounce view "$SCENE" "${COMMON[@]}" -o "$OUT/cornell-box.html"
 echo
 echo "bounce: outputs in $OUT/:"
 echo "  cornell-box.exr         layers E, KE, K2E, K3E, K4E, rest, L (radiance, W m^-2 sr^-1)"
 echo "  cornell-box.<layer>.png sRGB previews; cornell-box.sheet.png: all layers side by side"
 echo "  cornell-box.ply         baked per-vertex radiance (float colours)"
+echo "  cornell-box.html        the viewer: open it in a browser, show each bounce alone or summed"

@@ -100,7 +100,11 @@ int bn_cmd_view(int argc, char **argv, bn_cli_common *c)
             bargv[bargc++] = "-q";
             bargv[bargc++] = "-o";
             bargv[bargc++] = tmp;
-            rc = bn_cmd_bake(bargc, bargv, c);
+            {
+                int q = c->quiet;   /* the bake runs with -q, which sets it */
+                rc = bn_cmd_bake(bargc, bargv, c);
+                c->quiet = q;
+            }
             if (rc != 0) {
                 unlink(tmp);
                 free(tmp);
