@@ -25,15 +25,16 @@ for p in "${PACKAGES[@]}"; do
     missing+=("$p")
   fi
 done
-# Node.js and npm (the npm registry's packages in web/: three.js, the Khronos glTF validator): Debian's
+# Node.js and npm (the npm registry's packages in web/: three.js, meshoptimizer, the Khronos glTF validator): Debian's
 # nodejs and npm unless a node with npm is already there (a NodeSource nodejs carries its own npm,
 # and Debian's npm package would conflict with it).
 if ! command -v npm >/dev/null 2>&1; then
   missing+=(nodejs npm)
 fi
 web_deps() {
-  if [ ! -d web/node_modules/gltf-validator ] || [ ! -d web/node_modules/three ]; then
-    echo "setup: npm ci in web/ (three.js, gltf-validator)" >&2
+  if [ ! -d web/node_modules/gltf-validator ] || [ ! -d web/node_modules/three ] ||
+     [ ! -d web/node_modules/meshoptimizer ]; then
+    echo "setup: npm ci in web/ (three.js, meshoptimizer, gltf-validator)" >&2
     (cd web && npm ci --no-audit --no-fund --loglevel=error)
   fi
 }

@@ -15,6 +15,7 @@ usage: view_check.py BOUNCE SOURCE_DIR OUT_DIR
 Exit 77 (skipped) when no browser is installed.
 """
 import os
+import re
 import shutil
 import struct
 import subprocess
@@ -110,6 +111,13 @@ def main():
     rb = subprocess.run([bounce, "view", bad, "-o", badpage], capture_output=True, text=True)
     check(rb.returncode != 0 and "not a glTF binary" in rb.stderr and bad in rb.stderr and not os.path.exists(badpage),
           "a .glb that is not one: exit %d, '%s', no page" % (rb.returncode, rb.stderr.strip()[-120:]))
+    # a .glb cut short: its header's length word says more than the file holds
+    cut = os.path.join(out, "cut.glb")
+    with open(cut, "wb") as fh:
+        fh.write(b"glTF" + struct.pack("<II", 2, 4096) + struct.pack("<I", 8) + b"JSON" + b'{"asset":')
+    rc = subprocess.run([bounce, "view", cut, "-o", badpage], capture_output=True, text=True)
+    check(rc.returncode != 0 and "truncated" in rc.stderr and "4096" in rc.stderr and not os.path.exists(badpage),
+          "a .glb cut short: exit %d, '%s', no page" % (rc.returncode, rc.stderr.strip()[-120:]))
     html = open(page, encoding="utf-8").read()
     check("http://" not in html.split("<script type=\"importmap\">")[0] and "https://" not in html.split("<script")[0],
           "the page loads nothing from the network")
@@ -121,7 +129,7 @@ def main():
     probes = [(0.278, 0.5485, 0.2795), (0.4475, 0.165, 0.3265), (0.106, 0.0825, 0.145), (0.28, 0.0, 0.06)]
     q = ";".join(",".join("%g" % c for c in p) for p in probes)
     fixed = "#panel=0&size=%dx%d&" % (W, H)   # the same canvas and projection in every run
-    dom = subprocess.run(base + ["--dump-dom", url + fixed + "probe=" + q], capture_output=True, text=True).stdout
+    dom = subprocess.run(base + ["--dump-dom", url + fixed + "lod=1&probe=" + q], capture_output=True, text=True).stdout
     mark = '<pre id="probe" style'
     check(mark in dom, "the page ran (its probe output is in the DOM)")
     if mark not in dom:
@@ -129,8 +137,13 @@ def main():
     txt = dom.rsplit(mark, 1)[1].split(">", 1)[1].split("</pre>")[0]
     pts = [tuple(float(v) for v in ln.split()) for ln in txt.strip().splitlines()]
     light, red_face, green_face, floor = pts
+    # the simplified copy drawn while the camera moves (forced here with #lod=1; by default above 20k triangles)
+    m = re.search(r'id="info">(\d+) vertices, (\d+) triangles;[^<]*?; (\d+) while the camera moves', dom)
+    check(m is not None and int(m.group(3)) < int(m.group(2)),
+          "#lod=1: a simplified copy for when the camera moves (%s)" % (", ".join(m.groups()) if m else "none"))
     shots = {}
-    for name, frag in (("L", ""), ("E", "terms=E"), ("KE", "terms=KE&ev=3"), ("K2E", "terms=K2E&ev=3")):
+    for name, frag in (("L", ""), ("E", "terms=E"), ("KE", "terms=KE&ev=3"), ("K2E", "terms=K2E&ev=3"),
+                       ("K2E-moving", "terms=K2E&ev=3&lod=1&moving=1")):
         png = os.path.join(out, "view-%s.png" % name)
         if os.path.exists(png):
             os.remove(png)
@@ -162,6 +175,12 @@ def main():
     check(k2_green[1] > 2 * (12.0 / 17.0) * k2_green[0] and k2_green[1] > 0.02,
           "K2E: the short block's face toward the green wall is green (G/R %.2f, the light's 0.71)"
           % (k2_green[1] / max(k2_green[0], 1e-9)))
+
+    # the simplified copy keeps the colour bleeding where the full mesh has it (the same independent answer)
+    m_red, m_green = patch_mean(shots["K2E-moving"], *red_face), patch_mean(shots["K2E-moving"], *green_face)
+    check(m_red[0] > 3 * (17.0 / 12.0) * m_red[1] and m_green[1] > 2 * (12.0 / 17.0) * m_green[0],
+          "K2E, simplified copy: red-facing R/G %.2f, green-facing G/R %.2f"
+          % (m_red[0] / max(m_red[1], 1e-9), m_green[1] / max(m_green[0], 1e-9)))
 
     def mean_diff(a, b):
         return sum(abs(p[c] - q[c]) for ra, rb in zip(a, b) for p, q in zip(ra, rb) for c in range(3)) / (

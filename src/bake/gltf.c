@@ -118,17 +118,26 @@ static void bn__attr_name(const char *layer, char *out, size_t n)
     out[k] = '\0';
 }
 
-static bn_status bn__write_bytes(const char *path, const void *a, size_t na, const void *b, size_t nb, bn_error *err)
+/* Writes the n pieces (p[i], len[i]) one after another to path, atomically (a temporary name renamed
+ * when complete; bn__outfile_commit reports a failed write). */
+static bn_status bn__write_pieces(const char *path, int n, const void *const *p, const size_t *len, bn_error *err)
 {
     bn__outfile f;
     bn_status st = bn__outfile_open(&f, path, "wb", err);
     if (st != BN_OK)
         return st;
-    if (na)
-        fwrite(a, 1, na, f.fp);
-    if (nb)
-        fwrite(b, 1, nb, f.fp);
+    for (int i = 0; i < n; i++)
+        if (len[i])
+            fwrite(p[i], 1, len[i], f.fp);
     return bn__outfile_commit(&f, err);
+}
+
+static void bn__le32_put(unsigned char *b, uint32_t w)
+{
+    b[0] = (unsigned char)(w & 0xFFu);
+    b[1] = (unsigned char)(w >> 8 & 0xFFu);
+    b[2] = (unsigned char)(w >> 16 & 0xFFu);
+    b[3] = (unsigned char)(w >> 24 & 0xFFu);
 }
 
 bn_status bn__write_gltf(const char *path, int binary, const bn__bake_out *m, const bn_scene *scene,
@@ -373,34 +382,31 @@ bn_status bn__write_gltf(const char *path, int binary, const bn__bake_out *m, co
             goto oom;
     }
 
-    if (binary) {
-        unsigned char head[20];
-        uint32_t w[5] = {0x46546C67u, 2u, (uint32_t)(12 + 8 + js.n + 8 + blob.n), (uint32_t)js.n, 0x4E4F534Au};
-        unsigned char binhead[8];
-        uint32_t b2[2] = {(uint32_t)blob.n, 0x004E4942u};
-        unsigned char *all;
+    if (binary) {   /* header, JSON chunk, BIN chunk: little-endian words, written piece by piece */
+        unsigned char head[20], binhead[8];
         size_t total = 20 + js.n + 8 + blob.n;
         if (total > UINT32_MAX) {
             st = bn_error_set(err, BN_EUSAGE, "%s: %zu bytes are more than a .glb holds (4 GiB); write .gltf", path,
                               total);
             goto done;
         }
-        /* little-endian words (as the machines bounce builds on) */
-        memcpy(head, w, sizeof head);
-        memcpy(binhead, b2, sizeof binhead);
-        all = malloc(total);
-        if (!all)
-            goto oom;
-        memcpy(all, head, 20);
-        memcpy(all + 20, js.s, js.n);
-        memcpy(all + 20 + js.n, binhead, 8);
-        memcpy(all + 28 + js.n, blob.p, blob.n);
-        st = bn__write_bytes(path, all, total, NULL, 0, err);
-        free(all);
+        bn__le32_put(head, 0x46546C67u);   /* "glTF" */
+        bn__le32_put(head + 4, 2u);
+        bn__le32_put(head + 8, (uint32_t)total);
+        bn__le32_put(head + 12, (uint32_t)js.n);
+        bn__le32_put(head + 16, 0x4E4F534Au);   /* "JSON" */
+        bn__le32_put(binhead, (uint32_t)blob.n);
+        bn__le32_put(binhead + 4, 0x004E4942u);   /* "BIN\0" */
+        {
+            const void *p[4] = {head, js.s, binhead, blob.p};
+            size_t len[4] = {20, js.n, 8, blob.n};
+            st = bn__write_pieces(path, 4, p, len, err);
+        }
     } else {
-        st = bn__write_bytes(binpath, blob.p, blob.n, NULL, 0, err);
+        const void *pb = blob.p, *pj = js.s;
+        st = bn__write_pieces(binpath, 1, &pb, &blob.n, err);
         if (st == BN_OK)
-            st = bn__write_bytes(path, js.s, js.n, NULL, 0, err);
+            st = bn__write_pieces(path, 1, &pj, &js.n, err);
     }
     goto done;
 oom:

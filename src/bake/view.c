@@ -8,8 +8,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-extern const unsigned char bn__web_viewer[], bn__web_three[], bn__web_orbit[];
-extern const size_t bn__web_viewer_size, bn__web_three_size, bn__web_orbit_size;
+extern const unsigned char bn__web_viewer[], bn__web_three[], bn__web_orbit[], bn__web_meshopt[];
+extern const size_t bn__web_viewer_size, bn__web_three_size, bn__web_orbit_size, bn__web_meshopt_size;
 extern const int bn__web_have_assets;
 
 static void bn__base64(FILE *fp, const unsigned char *p, size_t n)
@@ -39,6 +39,11 @@ static void bn__html_text(FILE *fp, const char *s)
     }
 }
 
+static unsigned long bn__le32(const unsigned char *p)
+{
+    return (unsigned long)p[0] | (unsigned long)p[1] << 8 | (unsigned long)p[2] << 16 | (unsigned long)p[3] << 24;
+}
+
 bn_status bn_view_write(const char *glb_path, const char *title, const char *out, bn_error *err)
 {
     FILE *in;
@@ -48,8 +53,8 @@ bn_status bn_view_write(const char *glb_path, const char *title, const char *out
     bn_status st;
     const char *t = (const char *)bn__web_viewer, *end = t + bn__web_viewer_size;
     if (!bn__web_have_assets)
-        return bn_error_set(err, BN_EUSAGE, "this bounce was built without three.js (web/node_modules/three was "
-                                            "missing): run scripts/setup.sh, which installs it, and rebuild");
+        return bn_error_set(err, BN_EUSAGE, "this bounce was built without three.js or meshoptimizer "
+                                            "(web/node_modules was incomplete): run scripts/setup.sh, which installs it, and rebuild");
     if (!(in = fopen(glb_path, "rb")))
         return bn_error_set(err, BN_EIO, "%s: cannot open the bake", glb_path);
     if (fseek(in, 0, SEEK_END) != 0 || (len = ftell(in)) < 0 || fseek(in, 0, SEEK_SET) != 0) {
@@ -67,10 +72,27 @@ bn_status bn_view_write(const char *glb_path, const char *title, const char *out
         return bn_error_set(err, BN_EIO, "%s: short read", glb_path);
     }
     fclose(in);
-    if (len < 28 || memcmp(glb, "glTF", 4) != 0) {
+    if (len < 12 || memcmp(glb, "glTF", 4) != 0) {
         free(glb);
         return bn_error_set(err, BN_EINPUT, "%s: not a glTF binary (.glb): bounce view takes a scene or a .glb bake",
                             glb_path);
+    }
+    {   /* the header's version and length words, and the JSON chunk's, against the file */
+        unsigned long version = bn__le32(glb + 4), total = bn__le32(glb + 8);
+        unsigned long jlen = len >= 20 ? bn__le32(glb + 12) : 0;
+        const char *why = NULL;
+        if (version != 2)
+            why = "is not glTF 2.0";
+        else if (total != (unsigned long)len)
+            why = "is truncated or has trailing bytes (its header's length differs from the file's size)";
+        else if (len < 20 || memcmp(glb + 16, "JSON", 4) != 0 || jlen > (unsigned long)len - 20)
+            why = "has no whole JSON chunk first";
+        if (why) {
+            bn_error_set(err, BN_EINPUT, "%s: a .glb that %s: %lu bytes, header says version %lu and %lu bytes",
+                         glb_path, why, (unsigned long)len, version, total);
+            free(glb);
+            return BN_EINPUT;
+        }
     }
     st = bn__outfile_open(&f, out, "wb", err);
     if (st != BN_OK) {
@@ -93,6 +115,9 @@ bn_status bn_view_write(const char *glb_path, const char *title, const char *out
         } else if (strncmp(m, "__BN_ORBIT__", 12) == 0) {
             bn__base64(f.fp, bn__web_orbit, bn__web_orbit_size);
             t = m + 12;
+        } else if (strncmp(m, "__BN_MESHOPT__", 14) == 0) {
+            bn__base64(f.fp, bn__web_meshopt, bn__web_meshopt_size);
+            t = m + 14;
         } else if (strncmp(m, "__BN_GLB__", 10) == 0) {
             bn__base64(f.fp, glb, (size_t)len);
             t = m + 10;
