@@ -13,7 +13,11 @@ Checks, on the element mesh with --per-bounce:
 - each primitive's material carries the MTL's Kd and Ke, and E is nonzero only on emitters;
 - the triangles are the PLY's faces fanned (same count, indices in range);
 and on the input mesh as .gltf + .bin with --ldr: the external buffer, COLOR_1 as bytes, fewer
-vertices than the element mesh, provenance naming the command.
+vertices than the element mesh, provenance naming the command;
+and against the solve: `bounce solve -n 3` writes every patch's area and terms to a CSV in a run of
+its own; a bake with --flat (no vertex shared between patches, so each vertex carries its patch's
+value) is grouped into patches by shared vertices here, and every CSV patch must have one group of its
+own with the same area (from the glTF's positions) and the same L, E, KE, K2E, K3E.
 """
 import json
 import os
@@ -124,6 +128,75 @@ def close(a, b, rtol, atol=0.0):
     return abs(a - b) <= atol + rtol * max(abs(a), abs(b))
 
 
+def check_against_solve(bounce, scene, unit, outdir):
+    csv, glb = os.path.join(outdir, "solve.csv"), os.path.join(outdir, "flat.glb")
+    common = [scene, "--unit", unit, "-q", "--patches", "400"]
+    for cmd in ([bounce, "solve"] + common + ["-n", "3", "-o", csv],
+                [bounce, "bake"] + common + ["--per-bounce", "--flat", "-o", glb]):
+        r = subprocess.run(cmd, capture_output=True, text=True)
+        if r.returncode != 0:
+            print(r.stderr)
+            sys.exit("%s failed (exit %d)" % (" ".join(cmd[:2]), r.returncode))
+    r = subprocess.run([bounce, "bake"] + common + ["--flat", "--crease", "10", "-o", glb + ".x.glb"],
+                       capture_output=True, text=True)
+    check(r.returncode != 0 and "--flat and --crease" in r.stderr and not os.path.exists(glb + ".x.glb"),
+          "--flat with --crease is refused (exit %d: %s)" % (r.returncode, r.stderr.strip()))
+    rows = [ln.strip().split(",") for ln in open(csv) if not ln.startswith("#")]
+    head, rows = rows[0], rows[1:]
+    cols = ["area"] + ["%s_%s" % (t, c) for t in ("L", "E", "KE", "K2E", "K3E") for c in "RGB"]
+    want = [[float(r[head.index(c)]) for c in cols] for r in rows]
+    gl, binary = read_glb(glb)
+    attrs = gl["meshes"][0]["primitives"][0]["attributes"]
+    pos, _ = accessor(gl, binary, attrs["POSITION"])
+    terms = [accessor(gl, binary, attrs[n])[0] for n in ("_L", "_E", "_KE", "_K2E", "_K3E")]
+    nv = len(pos) // 3
+    parent = list(range(nv))
+
+    def find(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    tris = []
+    for p in gl["meshes"][0]["primitives"]:
+        idx, _ = accessor(gl, binary, p["indices"])
+        for t in range(0, len(idx), 3):
+            a, b, c = idx[t:t + 3]
+            tris.append((a, b, c))
+            parent[find(b)] = find(a)
+            parent[find(c)] = find(a)
+    groups = {}
+    for a, b, c in tris:
+        u = [pos[3 * b + k] - pos[3 * a + k] for k in range(3)]
+        v = [pos[3 * c + k] - pos[3 * a + k] for k in range(3)]
+        cr = (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
+        g = groups.setdefault(find(a), [0.0, set()])
+        g[0] += 0.5 * (cr[0] ** 2 + cr[1] ** 2 + cr[2] ** 2) ** 0.5
+        g[1].update((a, b, c))
+    got, spread = [], 0.0
+    for area, vs in groups.values():
+        vals = [[t[3 * i + c] for t in terms for c in range(3)] for i in vs]
+        spread = max(spread, max(abs(x - y) for vv in vals for x, y in zip(vv, vals[0])))
+        got.append([area] + vals[0])
+    check(spread == 0.0, "--flat: every vertex of a patch carries the same values (largest spread %g)" % spread)
+    check(len(got) == len(want), "--flat bake: %d patches, the solve's CSV %d" % (len(got), len(want)))
+
+    def diff(a, b):   # relative for the area, relative above 1e-6 W m^-2 sr^-1 for the radiances
+        return max([abs(a[0] - b[0]) / b[0]] + [abs(x - y) / max(abs(y), 1e-6) for x, y in zip(a[1:], b[1:])])
+
+    unused, worst = list(range(len(got))), 0.0
+    for w in want:   # each patch of the solve, its own group of the bake
+        j = min(unused, key=lambda k: diff(got[k], w)) if unused else None
+        if j is None:
+            break
+        worst = max(worst, diff(got[j], w))
+        unused.remove(j)
+    check(worst < 1e-5, "each of the solve's %d patches matches a patch of the bake: area, L and every term "
+          "(worst relative %.2e; float storage)" % (len(want), worst))
+    print("against the solve: %d patches, worst relative difference %.2e" % (len(want), worst))
+
+
 def main():
     bounce, scene, unit, outdir = sys.argv[1:5]
     scale_m = {"m": 1.0, "cm": 0.01, "mm": 0.001}[unit]
@@ -202,6 +275,8 @@ def main():
     n_in = gi["accessors"][pa["POSITION"]]["count"]
     check(0 < n_in < nv, "input mesh: %d vertices, fewer than the element mesh's %d" % (n_in, nv))
     check("display" in gi["asset"]["extras"], "the display set's exposure is recorded")
+
+    check_against_solve(bounce, scene, unit, outdir)
 
     print("glTF read back: %d vertices, %d triangles, %d primitives; colour scale %.4g; %d failures"
           % (nv, ntri, len(prim), cs, len(failures)))

@@ -14,6 +14,7 @@ extern "C" {
 typedef struct bn_bake bn_bake;   /* opaque: the output vertices and their patch groups */
 
 #define BN_BAKE_DEFAULT_CREASE 30.0
+#define BN_BAKE_FLAT (-1.0)   /* as crease_deg: no two patches share a vertex (each carries its own value) */
 /* Builds the baking mesh of `scene`'s patches (borrowed: it must outlive *out and not be
  * re-meshed). Patch vertices at the same position (within a tolerance scaled to the scene) are
  * one point; at each point the patches touching it are grouped into smooth surfaces: two

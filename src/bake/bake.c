@@ -62,7 +62,8 @@ bn_status bn_bake_create(const bn_scene *scene, double crease_deg, bn_bake **out
     bn_status st = BN_ENOMEM;
 
     *out = NULL;
-    if (!(crease_deg >= 0 && crease_deg <= 180))
+    int flat = crease_deg == BN_BAKE_FLAT;
+    if (!flat && !(crease_deg >= 0 && crease_deg <= 180))
         return bn_error_set(err, BN_EINPUT, "crease angle %g is not within [0, 180] degrees", crease_deg);
     if (np == 0)
         return bn_error_set(err, BN_EINPUT, "%s: the scene has no patches to bake", bn_scene_path(scene));
@@ -125,7 +126,8 @@ bn_status bn_bake_create(const bn_scene *scene, double crease_deg, bn_bake **out
         for (size_t i = s; i < e; i++)
             for (size_t j = i + 1; j < e; j++) {
                 const bn_patch *pi = &patches[inc[i] / 4], *pj = &patches[inc[j] / 4];
-                if (pi->material == pj->material && bn_v3_dot(pi->normal, pj->normal) >= cos_crease - 1e-12)
+                if (!flat && pi->material == pj->material &&
+                    bn_v3_dot(pi->normal, pj->normal) >= cos_crease - 1e-12)
                     bn__union(local + s, i - s, j - s);
             }
         for (size_t i = s; i < e; i++) {

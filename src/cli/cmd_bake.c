@@ -15,7 +15,7 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
     bn_cli_solution sol;
     const char *pos[1], *out = "baked.ply";
     size_t np, nl = 1;
-    int n = 3, ldr = 0, per_bounce = 0, rc = 0, mesh = 0, elements, is_gltf = 0;
+    int n = 3, ldr = 0, flat = 0, per_bounce = 0, rc = 0, mesh = 0, elements, is_gltf = 0;
     double ev = 0, crease = BN_BAKE_DEFAULT_CREASE;
     bn_error err;
     bn_pipeline p;
@@ -48,6 +48,9 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
                                  "baked mesh: .ply, .om, .obj, .glb or .gltf (default baked.ply)"});
     bn_optset_add(&set, (bn_opt){"crease", 0, BN_OPT_DOUBLE, &crease, NULL, 0, 180, "DEG",
                                  "faces whose normals differ by more do not share vertices (default 30)"});
+    bn_optset_add(&set, (bn_opt){"flat", 0, BN_OPT_FLAG, &flat, NULL, 0, 0, NULL,
+                                 "every patch its own vertices, each with its patch's value (no blending: the patches "
+                                 "as the solve sees them)"});
     bn_optset_add(&set, (bn_opt){"ldr", 0, BN_OPT_FLAG, &ldr, NULL, 0, 0, NULL,
                                  "8-bit sRGB colours at --exposure instead of float radiance"});
     bn_optset_add(&set, (bn_opt){"exposure", 0, BN_OPT_DOUBLE, &ev, NULL, -64, 64, "EV",
@@ -72,6 +75,10 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
             return prc;
     }
     elements = mesh == 0;
+    if (flat && bn_cli_given(&set, "crease")) {
+        bn_error_set(&err, BN_EUSAGE, "--flat and --crease: a flat bake shares no vertices, so no crease applies");
+        return bn_cli_fail(&err);
+    }
     {
         const char *dot = strrchr(out, '.');
         if (!dot || (strcmp(dot, ".ply") && strcmp(dot, ".om") && strcmp(dot, ".obj") && strcmp(dot, ".glb") &&
@@ -105,7 +112,7 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
         bn_layer_name(layer, n, names[l], sizeof names[l]);
         layers[l] = (bn_bake_layer){names[l], layer <= n ? p.res.terms[layer] : p.rest};
     }
-    st = bn_bake_create(p.scene, crease, &bake, &err);
+    st = bn_bake_create(p.scene, flat ? BN_BAKE_FLAT : crease, &bake, &err);
     if (st != BN_OK) {
         rc = bn_cli_fail(&err);
         goto done;
@@ -119,7 +126,10 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
         snprintf(verts, sizeof verts, "%zu", bn_bake_vertex_count(bake));
     else
         snprintf(verts, sizeof verts, "input polygons' corners");
-    snprintf(creasebuf, sizeof creasebuf, "%g degrees", crease);
+    if (flat)
+        snprintf(creasebuf, sizeof creasebuf, "flat (no shared vertices)");
+    else
+        snprintf(creasebuf, sizeof creasebuf, "%g degrees", crease);
     if (is_gltf)
         snprintf(evbuf, sizeof evbuf, "COLOR_0 L x 2^%+.4f clamped to [0, 1]; _L radiance W m^-2 sr^-1%s", ev,
                  ldr ? "; COLOR_1 8-bit sRGB" : "");
