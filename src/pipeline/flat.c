@@ -246,8 +246,6 @@ bn_status bn_flat_solve(const char *path, const bn_flat_opts *o, bn_flat **out, 
     }
     if ((st = bn_flat_load(path, o, &f, msg, msglen)) != BN_OK)
         return st;
-    free(f->p.E);   /* the solve stage makes its own */
-    f->p.E = NULL;
     if ((st = bn_flat_operator(f, msg, msglen)) != BN_OK) {
         bn_flat_free(f);
         return st;

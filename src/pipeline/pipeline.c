@@ -214,10 +214,12 @@ bn_status bn_pipeline_solve(const bn_pipeline_opts *o, bn_pipeline *p, bn_error 
     if (!so.threads)
         so.threads = o->threads;
     bn_status st;
-    p->E = bn__malloc_array(p->n ? 3 * p->n : 1, sizeof(double));
-    if (!p->E)
-        return bn_error_set(err, BN_ENOMEM, "out of memory for the emission of %zu patches", p->n);
-    bn_scene_patch_emission(p->scene, p->E);
+    if (!p->E) {   /* the patches' emission (a caller that loaded the scene may have made it already) */
+        p->E = bn__malloc_array(p->n ? 3 * p->n : 1, sizeof(double));
+        if (!p->E)
+            return bn_error_set(err, BN_ENOMEM, "out of memory for the emission of %zu patches", p->n);
+        bn_scene_patch_emission(p->scene, p->E);
+    }
     /* The hierarchy's row sums carry the sampling noise of its links (reported, not a sign of a
      * singular system): its singularity check rests on the spectral radius alone. */
     if (o->tie_threshold && !p->hierarchical && p->ff.row_sum_max - 1.0 > so.singular_threshold) {
