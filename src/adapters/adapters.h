@@ -19,7 +19,12 @@ typedef struct bn__label {
 /* Writes an 8-bit RGB image (w*h*3, row 0 on top) to `path` through OpenImageIO (format from the
  * extension; the caller manages temp names), drawing `labels` in white with the TrueType font
  * `font`. *labels_ok = 0 when text could not be drawn (font missing or OIIO without FreeType);
- * the image is written anyway. attrs become metadata (PNG text chunks). */
+ * the image is written anyway. attrs become metadata (PNG text chunks).
+ * bn__oiio_write_rgb8 (src/image/oiio_module.c) opens the module libbounce_oiio.so on first use
+ * and calls its bn__oiio_module_write_rgb8 (src/adapters/oiio_io.cpp), which has this signature. */
+typedef bn_status bn__oiio_write_rgb8_fn(const char *path, int w, int h, const unsigned char *rgb,
+                                         const bn__label *labels, size_t nlabels, const char *font,
+                                         const bn_attr *attrs, size_t nattrs, int *labels_ok, bn_error *err);
 bn_status bn__oiio_write_rgb8(const char *path, int w, int h, const unsigned char *rgb, const bn__label *labels,
                               size_t nlabels, const char *font, const bn_attr *attrs, size_t nattrs, int *labels_ok,
                               bn_error *err);

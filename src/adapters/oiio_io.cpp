@@ -1,4 +1,7 @@
 // OpenImageIO behind extern "C": 8-bit image writing with text labels (ImageBufAlgo::render_text).
+// Built as a module of its own (libbounce_oiio.so, beside libbounce.so) that the library opens on
+// the first preview (src/image/oiio_module.c): OpenImageIO brings some 260 shared libraries, whose
+// loading and relocation cost every bounce process 0.4 s at start when linked directly.
 #include "adapters/adapters.h"
 #include "base/internal.h"
 
@@ -9,9 +12,10 @@
 #include <new>
 #include <string>
 
-extern "C" bn_status bn__oiio_write_rgb8(const char *path, int w, int h, const unsigned char *rgb,
-                                         const bn__label *labels, size_t nlabels, const char *font,
-                                         const bn_attr *attrs, size_t nattrs, int *labels_ok, bn_error *err)
+extern "C" bn_status bn__oiio_module_write_rgb8(const char *path, int w, int h, const unsigned char *rgb,
+                                                const bn__label *labels, size_t nlabels, const char *font,
+                                                const bn_attr *attrs, size_t nattrs, int *labels_ok,
+                                                bn_error *err)
 {
     try {
         OIIO::ImageSpec spec(w, h, 3, OIIO::TypeDesc::UINT8);

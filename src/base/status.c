@@ -47,11 +47,13 @@ void bn_error_clear(bn_error *err)
 
 bn_status bn_error_set(bn_error *err, bn_status s, const char *fmt, ...)
 {
-    if (err) {
+    if (err) {   /* through a buffer of its own: the arguments may include err->msg (wrapping a message) */
+        char buf[sizeof err->msg];
         va_list ap;
         va_start(ap, fmt);
-        vsnprintf(err->msg, sizeof err->msg, fmt, ap);
+        vsnprintf(buf, sizeof buf, fmt, ap);
         va_end(ap);
+        memcpy(err->msg, buf, sizeof buf);
         err->status = s;
     }
     return s;
