@@ -361,20 +361,21 @@ fi
 
 # ---- equal error per patch: the hierarchy, dense radiosity and the tracer on one reporting mesh ----
 if [ "$quick" = 1 ]; then
-    pref=1200; pspp="16,64,256"; hpl="1200,4800"; h4pl="1200"; dpl="300,1200"; prefspp=4096
+    pref=1200; pspp="16,64,256"; hpl="1200,4800"; hel="4e-3,1e-3,2.5e-4"; dpl="300,1200"; prefspp=4096
 else
-    pref=4800; pspp="16,64,256,1024,4096"; hpl="4800,19200,76800"; h4pl="4800,19200"; dpl="1200,2400,4800"; prefspp=16384
+    pref=4800; pspp="16,64,256,1024,4096"; hpl="4800,19200,76800"; hel="4e-3,2e-3,1e-3,5e-4,2.5e-4,1e-4"; dpl="1200,2400,4800"; prefspp=16384
 fi
-note "equal error per patch on $pref patches: hierarchy (eps 1e-3 and 1e-4), dense, tracer"
+note "equal error per patch on $pref patches: hierarchy (eps 1e-3 over meshes; eps over $hel on the reference's mesh), dense, tracer"
 pe_ok=1
-for kind in hier hier4 dense; do
+for kind in hier heps dense; do
     case $kind in
-    hier) tr="--transport hierarchical"; pl=$hpl ;;
-    hier4) tr="--transport hierarchical --eps 1e-4"; pl=$h4pl ;;
-    dense) tr="--transport dense"; pl=$dpl ;;
+    hier) vary="patches=$hpl"; tr="--transport hierarchical" ;;
+    heps) vary="eps=$hel"; tr="--transport hierarchical --patches $pref" ;;
+    dense) vary="patches=$dpl"; tr="--transport dense" ;;
     esac
+    # the eps study's mesh is the reference's (--patches $pref): its reference is the same tracer run
     # shellcheck disable=SC2086
-    timeout $((timeout_s * 4)) "$bounce" study "$scene" --unit mm --vary patches="$pl" $tr --against-spp "$pspp" \
+    timeout $((timeout_s * 4)) "$bounce" study "$scene" --unit mm --vary "$vary" $tr --against-spp "$pspp" \
         --metric patch --ref-patches "$pref" --ref-spp "$prefspp" --target 0.03 -o "$work/pe-$kind.csv" -q \
         >/dev/null 2>"$work/pe-$kind.err" || { pe_ok=0; echo "_per-patch study ($kind) failed: $(tail -1 "$work/pe-$kind.err")_" >>"$report"; }
 done
@@ -393,15 +394,21 @@ if [ "$pe_ok" = 1 ]; then
     {
         echo "Time to equal per-patch error on the Cornell box's $pref-patch mesh: RMS relative error per patch on the"
         echo "reference's patches (\`bounce study --metric patch --ref-patches $pref --ref-spp $prefspp --against-spp $pspp\`;"
-        echo "hierarchy \`--vary patches=$hpl --transport hierarchical\` at the default eps 1e-3 and \`--vary patches=$h4pl\`"
-        echo "at \`--eps 1e-4\`, dense \`--vary patches=$dpl --transport dense\`; each radiosity setting is read on the"
-        echo "reference's patches as area means; the tracer runs on the reference's mesh). Times by log-log interpolation"
-        echo "between settings. Reference: $(metaget "$work/pe-hier.csv" reference); its error: $(metaget "$work/pe-hier.csv" reference_error_how)."
+        echo "hierarchy \`--vary patches=$hpl --transport hierarchical\` at the default eps 1e-3, and \`--vary eps=$hel\`"
+        echo "on the reference's own mesh (\`--patches $pref\`: eps is the hierarchy's accuracy knob, as the patch count is"
+        echo "dense radiosity's and spp the tracer's), dense \`--vary patches=$dpl --transport dense\`; each radiosity setting"
+        echo "is read on the reference's patches as area means; the tracer runs on the reference's mesh). Times by log-log"
+        echo "interpolation between settings. Reference: $(metaget "$work/pe-hier.csv" reference) (the eps study's:"
+        echo "$(metaget "$work/pe-heps.csv" reference), the same seed and mesh); its error: $(metaget "$work/pe-hier.csv" reference_error_how)."
         echo
-        echo "| target RMS per patch | hierarchy eps 1e-3 | hierarchy eps 1e-4 | dense radiosity | path tracer |"
-        echo "|---|---|---|---|---|"
+        echo "| target RMS per patch | hierarchy, eps varied | hierarchy eps 1e-3, mesh varied | dense radiosity | path tracer | tracer / hierarchy (best) |"
+        echo "|---|---|---|---|---|---|"
         for T in 0.03 0.02 0.01; do
-            echo "| $T | $(tto "$work/pe-hier.csv" radiosity $T) | $(tto "$work/pe-hier4.csv" radiosity $T) | $(tto "$work/pe-dense.csv" radiosity $T) | $(tto "$work/pe-hier.csv" trace $T) |"
+            he=$(tto "$work/pe-heps.csv" hierarchy $T); hm=$(tto "$work/pe-hier.csv" radiosity $T); tr=$(tto "$work/pe-hier.csv" trace $T)
+            ratio=$(awk -v a="$he" -v b="$hm" -v t="$tr" 'BEGIN { h = 1e300
+                     if (a ~ / s$/) h = a + 0; if (b ~ / s$/ && b + 0 < h) h = b + 0
+                     if (t ~ / s$/ && h < 1e300) printf "%.2f", (t + 0) / h; else printf "-" }')
+            echo "| $T | $he | $hm | $(tto "$work/pe-dense.csv" radiosity $T) | $tr | $ratio |"
         done
         echo
         echo "Per setting (err_rms = RMS relative error per patch on the reference's patches; ground 0: the reference's own"
@@ -409,7 +416,7 @@ if [ "$pe_ok" = 1 ]; then
         echo
         echo "| study | method | setting | patches | ground | err_rms | t_total s |"
         echo "|---|---|---|---|---|---|---|"
-        for kind in hier hier4 dense; do
+        for kind in hier heps dense; do
             awk -F, -v k="$kind" '/^#/ { next } !h { for (i = 1; i <= NF; i++) c[$i] = i; h = 1; next }
                 k != "hier" && $(c["method"]) == "trace" { next }
                 { printf "| %s | %s | %s | %s | %s | %.4g | %.4g |\n", k, $(c["method"]), $(c["value"]), $(c["patches"]),

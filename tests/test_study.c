@@ -307,6 +307,44 @@ BN_TEST(study_mesh_converges)
     free(out);
 }
 
+BN_TEST(study_eps_against_the_tracer)
+{
+    /* The hierarchy's accuracy knob against the light itself: --vary eps with --against-spp takes the
+     * path tracer on the study's own mesh as the reference (not dense K, which would measure K_H alone),
+     * compares every row patch by patch on that mesh (ground 0), and the hierarchy's error falls as eps
+     * falls, towards the radiosity discretisation the tracer does not share. */
+    char args[1024], *out = NULL;
+    csv *c;
+    int hier = 0, trace = 0;
+    double e_coarse = NAN, e_fine = NAN;
+    snprintf(args, sizeof args,
+             "study %s --unit mm --vary eps=2e-2,5e-4 --transport hierarchical --patches 300 --against-spp 16,64 "
+             "--metric patch --ref-spp 1024 --target 0.2 -o %s -q",
+             bn_test_path("meshes/cornell-box.obj"), bn_test_tmp("eps.csv"));
+    if (bn_test_bounce(args, &out) != 0)
+        BN_FAIL("bounce study failed:\n%s", out ? out : "");
+    c = csv_read(bn_test_tmp("eps.csv"));
+    BN_ASSERT(strstr(c->meta, "# reference=path tracer") != NULL);
+    for (int r = 0; r < c->nrow; r++) {
+        const char *m = csv_str(c, r, "method");
+        BN_ASSERT_EQ(csv_num(c, r, "ground"), 0);   /* the reference's own mesh */
+        BN_ASSERT_EQ(csv_num(c, r, "patches"), meta_num(c, "reference_patches"));
+        if (strcmp(m, "hierarchy") == 0) {
+            if (csv_num(c, r, "x") > 1e-2)
+                e_coarse = csv_num(c, r, "err_rms_rel");
+            else
+                e_fine = csv_num(c, r, "err_rms_rel");
+            hier++;
+        } else if (strcmp(m, "trace") == 0)
+            trace++;
+    }
+    BN_ASSERT_EQ(hier, 2);
+    BN_ASSERT_EQ(trace, 2);
+    BN_ASSERT_LT(e_fine, e_coarse);
+    csv_free(c);
+    free(out);
+}
+
 BN_TEST(study_plot_files)
 {
     char args[1024], *out = NULL, *png, *svg;

@@ -75,7 +75,8 @@ typedef struct bn_study_opts {
                                     per-surface standard error is target / 8, at most 65536) */
     int    ref_samples;          /* samples, ff: shadow rays of the analytic reference (0: 8x the largest
                                     setting, at least 256) */
-    const size_t *against_spp;   /* patches, patch-size: path-tracer runs for the equal-error comparison */
+    const size_t *against_spp;   /* patches, patch-size, eps: path-tracer runs for the equal-error comparison
+                                    (eps: the reference is then the tracer on the study's mesh) */
     size_t nagainst;
     double target;               /* equal-error target: per-surface relative error (default 0.01) */
     int    metric_patch;         /* 1: the equal-error target is on err_rms_rel (RMS relative error per
@@ -150,7 +151,7 @@ typedef struct bn_study_result {
     double k_norm, spectral_radius;  /* of the fixed-mesh K (bounces, max-iter, tol) */
     size_t ncurves;
     bn_study_curve *curves;          /* owned */
-    /* The equal-error comparison (patches/patch-size with against_spp): seconds to reach `target`
+    /* The equal-error comparison (patches/patch-size/eps with against_spp): seconds to reach `target`
      * in err_surface_max (err_rms_rel with metric_patch), by log-log interpolation; NAN when a method
      * never reached it. */
     double target, t_radiosity, t_trace, ratio;   /* ratio = t_trace / t_radiosity */

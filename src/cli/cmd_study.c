@@ -110,7 +110,8 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
         "bounces (the truncated series S_n, beside the bound ||K||^(n+1)/(1-||K||) ||E||, and Jacobi, Gauss-Seidel,\n"
         "Neumann and direct to each --tols), max-iter, tol, patches, patch-size, samples, ff (analytic,montecarlo,\n"
         "hemisphere), spp (path tracer), precision (float,double) or eps (the hierarchy's link tolerance: K_H on\n"
-        "the fixed mesh against dense K with --ref-samples rays). --transport hierarchical makes every setting's K\n"
+        "the fixed mesh against dense K with --ref-samples rays; with --against-spp against the path tracer on that\n"
+        "mesh, the equal-error comparison). --transport hierarchical makes every setting's K\n"
         "the hierarchy (references stay dense). Each setting is compared with a stated, more\n"
         "accurate reference whose own error is estimated and printed: bounces/max-iter/tol/precision: a direct solve\n"
         "of the same K (double for precision); patches/patch-size/spp: a finer mesh (--ref-patches) or the path\n"
@@ -151,7 +152,7 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
     bn_optset_add(&set, (bn_opt){"rr-depth", 0, BN_OPT_INT, &rr_depth, NULL, 0, 1000, "N",
                                  "path tracer: reflections before Russian roulette (default 3)"});
     bn_optset_add(&set, (bn_opt){"against-spp", 0, BN_OPT_STRING, &against, NULL, 0, 0, "S1,S2",
-                                 "patches/patch-size: also run the path tracer at these spp (equal-error comparison)"});
+                                 "patches/patch-size/eps: also run the path tracer at these spp (equal-error comparison)"});
     bn_optset_add(&set, (bn_opt){"target", 0, BN_OPT_DOUBLE, &target, NULL, 1e-9, 1, "E",
                                  "equal-error target, per-surface relative error (default 0.01)"});
     bn_optset_add(&set, (bn_opt){"metric", 0, BN_OPT_CHOICE, &metric, "surface|patch", 0, 0, "surface|patch",

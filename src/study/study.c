@@ -1043,6 +1043,13 @@ static void bn__ref_levels(const bn_study_opts *o, bn__ref_plan *P)
                 mref.patch_size = mcoarse.patch_size;
         }
     }
+    if (o->param == BN_STUDY_EPS &&
+        (o->ref == BN_STUDY_REF_TRACE || (o->ref == BN_STUDY_REF_AUTO && o->nagainst > 0))) {
+        /* the equal-error comparison: the tracer on the study's own mesh, the reference of every method
+         * (dense K with many rays would be a reference of K_H alone, not of the light) */
+        use_trace = 1;
+        mref = o->mesh;
+    }
     P->mref = mref;
     P->mcoarse = mcoarse;
     P->fref = fref;
@@ -1291,7 +1298,7 @@ static bn_status bn__equal_error(bn__study *S, const bn__study_ref *rr, const bn
     bn_mesh_opts m = o->mesh;
     bn_status st = BN_OK;
     double b;
-    if (o->metric_patch) {
+    if (o->metric_patch || o->param == BN_STUDY_EPS) {
         m = *mref;
     } else if (o->param == BN_STUDY_PATCHES) {
         m.patch_size = 0;
@@ -1306,12 +1313,13 @@ static bn_status bn__equal_error(bn__study *S, const bn__study_ref *rr, const bn
     }
     if (st != BN_OK)
         return st;
-    R->t_radiosity = bn__time_to(R, "radiosity", R->target, &R->best_radiosity);
+    const char *rad = o->param == BN_STUDY_EPS ? "hierarchy" : "radiosity";   /* the rows' method */
+    R->t_radiosity = bn__time_to(R, rad, R->target, &R->best_radiosity);
     R->t_trace = bn__time_to(R, "trace", R->target, &R->best_trace);
     R->ratio = R->t_trace / R->t_radiosity;
     R->fine_target = 3 * (o->metric_patch ? R->ref_error_patch : R->ref_error);
     if (R->fine_target > 0 && R->fine_target < R->target) {
-        R->t_radiosity_fine = bn__time_to(R, "radiosity", R->fine_target, &b);
+        R->t_radiosity_fine = bn__time_to(R, rad, R->fine_target, &b);
         R->t_trace_fine = bn__time_to(R, "trace", R->fine_target, &b);
         R->ratio_fine = R->t_trace_fine / R->t_radiosity_fine;
     }
@@ -1353,7 +1361,7 @@ static bn_status bn__study_settings(bn__study *S, bn_error *err)
     }
     if (st == BN_OK)
         bn__warn_reference(S);
-    if (st == BN_OK && P.mesh_study && o->nagainst > 0)
+    if (st == BN_OK && (P.mesh_study || (o->param == BN_STUDY_EPS && P.use_trace)) && o->nagainst > 0)
         st = bn__equal_error(S, &rr, &P.mref, err);
     bn__study_ref_free(&rr);
     bn__sol_free(&ref);

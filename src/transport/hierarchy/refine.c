@@ -45,6 +45,7 @@ typedef struct bn__ref {
     const bn_hierarchy_opts *o;
     const bn_patch *patch;
     const double *pverts;
+    double *fan0;             /* per patch: the share of a quad's area in its first fan triangle (0, 1, 2) */
     double *Bmax;             /* 3 per node: the largest radiance estimate below (oracle) */
     double eps_abs;
     double min_area;          /* planar nodes below this area are not split */
@@ -189,11 +190,27 @@ static void bn__node_point(const bn__ref *R, uint32_t v, double u1, double u2, d
         else
             hi = mid;
     }
-    const bn_patch *p = &R->patch[t->order[lo]];
-    double v4[12];
-    for (unsigned k = 0; k < p->ncorners; k++)
-        memcpy(v4 + 3 * k, R->pverts + 3 * p->corner[k], 3 * sizeof(double));
-    bn__poly_sample(v4, p->ncorners, u2, u3, x);
+    size_t i = t->order[lo];
+    const bn_patch *p = &R->patch[i];
+    const double *pa = R->pverts + 3 * p->corner[0], *pb = R->pverts + 3 * p->corner[1];
+    const double *pc = R->pverts + 3 * p->corner[2];
+    double f = R->fan0[i], s, b0, b1, b2;
+    if (p->ncorners == 4) {   /* the fan triangle by area, as bn__poly_sample chooses it, its share precomputed */
+        if (u2 < f)
+            u2 = f > 0 ? u2 / f : 0.5;
+        else {
+            pb = pc;
+            pc = R->pverts + 3 * p->corner[3];
+            u2 = f < 1 ? (u2 - f) / (1 - f) : 0.5;
+        }
+        u2 = bn_clamp(u2, 0, 1);
+    }
+    s = sqrt(u2);   /* square to triangle (Shirley) */
+    b0 = 1 - s;
+    b1 = s * (1 - u3);
+    b2 = s * u3;
+    for (int k = 0; k < 3; k++)
+        x[k] = b0 * pa[k] + b1 * pb[k] + b2 * pc[k];
     *n = p->normal;
 }
 
@@ -521,6 +538,26 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
         size_t npv;
         R.pverts = bn_scene_patch_vertices(scene, &npv);
     }
+    if (!(R.fan0 = bn__malloc_array(np + 1, sizeof(double)))) {
+        st = bn_error_set(err, BN_ENOMEM, "out of memory for the hierarchy of %zu patches", np);
+        goto done;
+    }
+    for (size_t i = 0; i < np; i++) {
+        const bn_patch *p = &R.patch[i];
+        const double *v0 = R.pverts + 3 * p->corner[0], *v2 = R.pverts + 3 * p->corner[2];
+        double a0 = 0, a1 = 0;
+        if (p->ncorners == 4) {
+            double e1[3], e2[3], e3[3], c[3];
+            bn_v3_sub(R.pverts + 3 * p->corner[1], v0, e1);
+            bn_v3_sub(v2, v0, e2);
+            bn_v3_sub(R.pverts + 3 * p->corner[3], v0, e3);
+            bn_v3_cross(e1, e2, c);
+            a0 = 0.5 * bn_v3_len(c);
+            bn_v3_cross(e2, e3, c);
+            a1 = 0.5 * bn_v3_len(c);
+        }
+        R.fan0[i] = a0 + a1 > 0 ? a0 / (a0 + a1) : 1;
+    }
     bn_scene_bounds(scene, lo, hi);
     R.tol = 1e-9 * fmax(bn_v3_dist(lo, hi), 1e-300);
     R.ray_eps = bn_rt_epsilon(rt);
@@ -643,6 +680,7 @@ done:
     bn__hop_destroy(h);
     bn__ff_pairs_destroy(R.pairs);
     free(R.Bmax);
+    free(R.fan0);
     free(work.a);
     free(E);
     free(rho);
