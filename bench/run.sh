@@ -482,29 +482,33 @@ if command -v chromium >/dev/null 2>&1 && command -v python3 >/dev/null 2>&1; th
         echo "Measured by the page itself (#fps=1: two seconds of real time under requestAnimationFrame, the camera"
         echo "turning), 800 x 600, headless Chromium with SwiftShader (software WebGL on these cores), medians of 3."
         echo "Above 20,000 triangles the page draws a simplified copy while the camera moves (meshoptimizer; every"
-        echo "triangle again at rest); #lod=0 measures the full mesh in motion."
+        echo "triangle again at rest); #lod=0 measures the full mesh in motion. Antialiasing is off by default on software"
+        echo "WebGL (the page asks WebGL for its renderer) and above 20,000 triangles; #aa=1 forces it."
         echo
         echo "| page | triangles | antialiasing | drawn while moving | fps (median, min-max) |"
         echo "|---|---|---|---|---|"
     } >>"$report"
     "$bounce" view "$root/meshes/cornell-box.obj" --unit mm -q -o "$work/view-cornell.html" 2>/dev/null
-    pages="$work/view-cornell.html:1788:on:all $work/view-cornell.html#aa=0:1788:off:all"
+    # one page per line: URL:TRIANGLES:ANTIALIASING:DRAWN WHILE MOVING
+    pages="$work/view-cornell.html:1788:off (the default on software WebGL):all
+$work/view-cornell.html#aa=1:1788:on (#aa=1; the default on a GPU):all"
     bb="$root/../shared/data/scenes/bunny-box.obj"
     if [ "$quick" != 1 ] && [ -f "$bb" ]; then
         "$bounce" bake "$bb" --unit mm -q --eps 1e-2 --per-bounce --mesh input -o "$work/bunny-box.glb" 2>/dev/null &&
             "$bounce" view "$work/bunny-box.glb" -q -o "$work/view-bunny.html" &&
-            pages="$pages $work/view-bunny.html:69469:off:simplified $work/view-bunny.html#lod=0:69469:off:all"
+            pages="$pages
+$work/view-bunny.html:69469:off:simplified (the default above 20k)
+$work/view-bunny.html#lod=0:69469:off:all (#lod=0)"
         # the bunny box's bake through the Khronos validator (the tests validate the small scenes)
         if [ -f "$work/bunny-box.glb" ] && command -v node >/dev/null 2>&1; then
             val=$(NODE_PATH="$root/web/node_modules" node "$root/tests/gltf_validate.js" "$work/bunny-box.glb" 2>&1 | head -1)
             echo "glTF validator on the bunny box's bake: \`${val#"$work/"}\`" >>"$report.val"
         fi
     fi
-    for pg in $pages; do
-        IFS=: read -r url tris aa lod <<<"$pg"
-        for i in 1 2 3; do python3 "$root/bench/view_fps.py" "$url" | awk '{ print $2 }'; done >"$work/fps.txt"
+    while IFS=: read -r url tris aa lod; do
+        for i in 1 2 3; do python3 "$root/bench/view_fps.py" "$url" </dev/null | awk '{ print $2 }'; done >"$work/fps.txt"
         echo "| $(basename "$url") | $tris | $aa | $lod | $(stats "$work/fps.txt" | awk '{ printf "%s (%s-%s)", $1, $2, $3 }') |" >>"$report"
-    done
+    done <<<"$pages"
     echo >>"$report"
     if [ -f "$report.val" ]; then cat "$report.val" >>"$report"; echo >>"$report"; rm -f "$report.val"; fi
 fi

@@ -139,6 +139,8 @@ def main():
     light, red_face, green_face, floor = pts
     # the simplified copy drawn while the camera moves (forced here with #lod=1; by default above 20k triangles)
     m = re.search(r'id="info">(\d+) vertices, (\d+) triangles;[^<]*?; (\d+) while the camera moves', dom)
+    check("no antialiasing (software WebGL)" in dom,
+          "SwiftShader is recognised as software WebGL: antialiasing off by default (a third of the frame rate)")
     check(m is not None and int(m.group(3)) < int(m.group(2)),
           "#lod=1: a simplified copy for when the camera moves (%s)" % (", ".join(m.groups()) if m else "none"))
     shots = {}
