@@ -143,7 +143,8 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
             {"command line", c->cmdline}, {"scene", bn_scene_path(p.scene)}, {"solver", solver}, {"tolerance", tolbuf},
             {"form factors", ffdesc},      {"patches", patches},         {"vertices", verts}, {"crease", creasebuf},
             {"colours", evbuf},           {"faces", elements ? "the patches (element mesh)" : "the input polygons"},
-            {"vertex colour", "L, area-weighted mean of the patches around the vertex within its smooth surface"},
+            {"vertex colour", flat ? "L of the vertex's own patch (flat: no vertex shared between patches)"
+                                   : "L, area-weighted mean of the patches around the vertex within its smooth surface"},
         };
         snprintf(tolbuf, sizeof tolbuf, "%g", sol.tol > 0 ? sol.tol : 1e-6);
         memset(&wo, 0, sizeof wo);
