@@ -9,6 +9,7 @@ PACKAGES=(
   libopenexr-dev             # OpenEXRCore: multi-layer EXR (C API)
   libopenimageio-dev openimageio-tools   # PNG previews, contact sheet, image comparison
   libembree-dev              # all ray casting
+  libopenmpi-dev openmpi-bin # bounce under mpirun -np P (include/bounce/dist.h)
   liblapacke-dev libopenblas-dev         # the dense direct solve (reference answer)
   libtinyobjloader-dev       # an independent OBJ reader the tests compare ours with
   libplplot-dev plplot-driver-cairo      # study plots (PNG, SVG)

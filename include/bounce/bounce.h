@@ -15,5 +15,6 @@
 #include "bounce/study.h"
 #include "bounce/pipeline.h"
 #include "bounce/flat.h"
+#include "bounce/dist.h"
 
 #endif

@@ -1,6 +1,7 @@
 /* Checked allocation, clocks, counter-based RNG, atomic output files and progress bars. */
 #define _POSIX_C_SOURCE 200809L
 #include "base/internal.h"
+#include "bounce/dist.h"
 
 #include <errno.h>
 #include <signal.h>
@@ -160,6 +161,10 @@ bn_status bn__tmpname_reserve(const char *path, char **tmp, bn_error *err)
 bn_status bn__tmpname_commit(const char *path, char *tmp, bn_error *err)
 {
     bn_status st = BN_OK;
+    if (bn_dist_rank() != 0) {   /* under mpirun, rank 0 alone writes outputs: the others drop theirs */
+        bn__tmpname_abort(tmp);
+        return BN_OK;
+    }
     if (rename(tmp, path) != 0) {
         st = bn_error_set(err, BN_EIO, "%s: cannot rename %s into place: %s", path, tmp, strerror(errno));
         unlink(tmp);

@@ -22,7 +22,8 @@ void bn_cli_add_ff(bn_optset *s, bn_cli_ff *o)
                               "auto|dense|sparse|hierarchical",
                               "how K is made: every pair's form factor kept dense or sparse, or hierarchical links "
                               "between clusters and elements; auto (default): hierarchical when dense F would not fit "
-                              "or the scene has more than 6000 patches (--storage given: that storage)"});
+                              "or the scene has more than 6000 patches (--storage given: that storage); under mpirun -np P > 1 "
+                              "hierarchical only (dense and sparse are single-process)"});
     bn_optset_add(s, (bn_opt){"eps", 0, BN_OPT_DOUBLE, &o->eps, NULL, 0, 1, "EPS",
                               "hierarchy: split a link while rho x B_source x F_bound exceeds EPS x the largest "
                               "emitted radiance (default 1e-3; 0: every link down to the patches)"});

@@ -1,8 +1,11 @@
 /* `bounce`: argv -> subcommand -> option structs -> library calls. */
 #include "cli/cli.h"
 #include "base/internal.h"
+#include "bounce/dist.h"
 
 #include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
 
@@ -93,9 +96,31 @@ int main(int argc, char **argv)
         printf("bounce %s\n", bn_version());
         return 0;
     }
+    {   /* under mpirun: join MPI; rank 0 alone prints (outputs: bn__tmpname_commit) */
+        bn_error err;
+        bn_error_clear(&err);
+        if (bn_dist_init(&argc, &argv, &err) != BN_OK) {
+            fprintf(stderr, "bounce: error: %s\n", err.msg);
+            return bn_status_exit_code(err.status);
+        }
+        if (bn_dist_rank() != 0) {
+            if (!freopen("/dev/null", "w", stdout) || !freopen("/dev/null", "w", stderr))
+                bn_dist_abort(1);
+        }
+    }
     memset(&common, 0, sizeof common);
     common.seed = 1;
+    common.quiet = bn_dist_rank() != 0;
     cmdline = bn__join_cmdline(argc, argv);
+    if (cmdline && bn_dist_size() > 1) {   /* every output's provenance records the process count */
+        size_t n = strlen(cmdline) + 48;
+        char *m = malloc(n);
+        if (m) {
+            snprintf(m, n, "mpirun -np %d %s", bn_dist_size(), cmdline);
+            free(cmdline);
+            cmdline = m;
+        }
+    }
     common.cmdline = cmdline ? cmdline : "bounce";
     for (size_t i = 0; i < BN__NCOMMANDS; i++)
         if (strcmp(argv[1], bn__commands[i].name) == 0) {
@@ -106,6 +131,7 @@ int main(int argc, char **argv)
                 rc = bn_cli_interrupted();
             }
             free(cmdline);
+            bn_dist_finalize();
             return rc;
         }
     fprintf(stderr, "bounce: error: unknown command '%s'\n\n", argv[1]);

@@ -3,6 +3,7 @@
  * stored. */
 #include "bounce/pipeline.h"
 #include "base/internal.h"
+#include "bounce/dist.h"
 
 #include <math.h>
 #include <string.h>
@@ -161,6 +162,14 @@ bn_status bn_pipeline_operator(const bn_pipeline_opts *o, bn_pipeline *p, bn_err
     double t0 = bn__now(), amp;
     char why[160];
     p->hierarchical = bn_pipeline_use_hierarchy(o, p->n, why, sizeof why);
+    if (bn_dist_size() > 1 && !p->hierarchical) {   /* dense and sparse K are single-process */
+        if (o->transport && strcmp(o->transport, "auto"))
+            return bn_error_set(err, BN_EUSAGE,
+                                "--transport %s is single-process: under mpirun -np %d use --transport hierarchical "
+                                "(auto picks it there)", o->transport, bn_dist_size());
+        p->hierarchical = 1;
+        snprintf(why, sizeof why, "%d MPI processes: dense and sparse K are single-process", bn_dist_size());
+    }
     if (o->transport && !strcmp(o->transport, "auto"))
         bn_logf(&o->solve.log_sink, BN_LOG_INFO, "transport: %s (%s)", p->hierarchical ? "hierarchical" : "dense",
                 why);

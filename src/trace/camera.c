@@ -1,6 +1,7 @@
 /* Camera images from the path tracer: per pixel and layer, the mean of `spp` independent samples
  * (uniform jitter inside the pixel) of the radiance leaving the surface seen, and its variance. */
 #include "trace/trace_internal.h"
+#include "bounce/dist.h"
 #include "base/vec.h"
 
 #include <math.h>
@@ -68,8 +69,9 @@ static bn_status bn__trace_image_run_body(const bn_rt *rt, const bn_camera *cam,
         }
 #pragma omp for schedule(dynamic, 1)
         for (int row = 0; row < H; row++) {
-            /* after an interrupt (or without buffers) the remaining iterations do nothing */
-            if (!sample || !mean || !m2 || bn_interrupted() != BN_OK)
+            /* after an interrupt (or without buffers) the remaining iterations do nothing; under
+             * mpirun each rank traces its own rows (bn_dist_mine), whole, as one process would */
+            if (!sample || !mean || !m2 || bn_interrupted() != BN_OK || !bn_dist_mine((size_t)row))
                 continue;
             for (int col = 0; col < W; col++) {
                 size_t px = (size_t)row * (size_t)W + (size_t)col;
@@ -109,6 +111,26 @@ static bn_status bn__trace_image_run_body(const bn_rt *rt, const bn_camera *cam,
     }
     bn__progress_end(&prog);
     bn__tracer_free(&t);
+    {   /* every rank's rows to every rank: each pixel was written by one rank only (exact) */
+        bn_status here = no_buffers ? BN_ENOMEM : bn_interrupted(), all = bn_dist_agree(here);
+        if (all != BN_OK && here == BN_OK) {
+            bn_trace_image_free(out);
+            return bn_error_set(err, all, "trace: another MPI process failed (%s)", bn_status_str(all));
+        }
+        if (all == BN_OK) {
+            unsigned long long r = rays;
+            st = bn_dist_sum_float(out->mean, npx * nl * 3, err);
+            if (st == BN_OK)
+                st = bn_dist_sum_float(out->var, npx * nl * 3, err);
+            if (st == BN_OK)
+                st = bn_dist_sum_u64(&r, 1, err);
+            if (st != BN_OK) {
+                bn_trace_image_free(out);
+                return st;
+            }
+            rays = r;
+        }
+    }
     out->rays = rays;
     out->seconds = bn__now() - t0;
     if (no_buffers || bn_interrupted() != BN_OK) {

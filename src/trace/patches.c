@@ -4,6 +4,7 @@
  * Each sample draws x uniform on the patch and one path from it (path.c); samples are independent
  * (stream keyed by (seed, patch, sample)), so the standard error comes from the samples alone. */
 #include "trace/trace_internal.h"
+#include "bounce/dist.h"
 #include "base/vec.h"
 
 #include <math.h>
@@ -63,8 +64,9 @@ static bn_status bn__trace_items_run_body(const bn_rt *rt, const bn_partition *p
         }
 #pragma omp for schedule(dynamic, 1)
         for (size_t i = 0; i < n; i++) {
-            /* after an interrupt (or without buffers) the remaining iterations do nothing */
-            if (!sample || !mean || !m2 || bn_interrupted() != BN_OK)
+            /* after an interrupt (or without buffers) the remaining iterations do nothing; under
+             * mpirun each rank traces its own items (bn_dist_mine), whole, as one process would */
+            if (!sample || !mean || !m2 || bn_interrupted() != BN_OK || !bn_dist_mine(i))
                 continue;
             memset(mean, 0, m * sizeof(double));
             memset(m2, 0, m * sizeof(double));
@@ -111,6 +113,26 @@ static bn_status bn__trace_items_run_body(const bn_rt *rt, const bn_partition *p
     }
     bn__progress_end(&prog);
     bn__tracer_free(&t);
+    {   /* every rank's items to every rank: each element was written by one rank only (exact) */
+        bn_status here = no_buffers ? BN_ENOMEM : bn_interrupted(), all = bn_dist_agree(here);
+        if (all != BN_OK && here == BN_OK) {
+            bn_trace_patches_free(out);
+            return bn_error_set(err, all, "trace: another MPI process failed (%s)", bn_status_str(all));
+        }
+        if (all == BN_OK) {
+            unsigned long long r = rays;
+            st = bn_dist_sum(out->mean, n * nl * 3, err);
+            if (st == BN_OK)
+                st = bn_dist_sum(out->se, n * nl * 3, err);
+            if (st == BN_OK)
+                st = bn_dist_sum_u64(&r, 1, err);
+            if (st != BN_OK) {
+                bn_trace_patches_free(out);
+                return st;
+            }
+            rays = r;
+        }
+    }
     out->rays = rays;
     out->seconds = bn__now() - t0;
     if (no_buffers || bn_interrupted() != BN_OK) {

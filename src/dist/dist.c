@@ -1,0 +1,136 @@
+/* bounce over MPI processes (include/bounce/dist.h). Without BN_HAVE_MPI: rank 0 of 1. */
+#include "bounce/dist.h"
+#include "base/internal.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+#ifdef BN_HAVE_MPI
+#include <mpi.h>
+#endif
+
+static int bn__rank = 0, bn__size = 1, bn__joined = 0;
+
+int bn_dist_built(void)
+{
+#ifdef BN_HAVE_MPI
+    return 1;
+#else
+    return 0;
+#endif
+}
+
+bn_status bn_dist_init(int *argc, char ***argv, bn_error *err)
+{
+#ifdef BN_HAVE_MPI
+    int provided = 0;
+    if (!getenv("OMPI_COMM_WORLD_SIZE") && !getenv("PMIX_RANK") && !getenv("PMI_SIZE"))
+        return BN_OK;   /* not started by mpirun: one process, no MPI */
+    /* funneled: only the main thread calls MPI; OpenMP threads work between the calls */
+    if (MPI_Init_thread(argc, argv, MPI_THREAD_FUNNELED, &provided) != MPI_SUCCESS)
+        return bn_error_set(err, BN_EINTERNAL, "MPI_Init_thread failed");
+    MPI_Comm_set_errhandler(MPI_COMM_WORLD, MPI_ERRORS_RETURN);
+    MPI_Comm_rank(MPI_COMM_WORLD, &bn__rank);
+    MPI_Comm_size(MPI_COMM_WORLD, &bn__size);
+    bn__joined = 1;
+#else
+    (void)argc;
+    (void)argv;
+    (void)err;
+#endif
+    return BN_OK;
+}
+
+void bn_dist_finalize(void)
+{
+#ifdef BN_HAVE_MPI
+    if (bn__joined)
+        MPI_Finalize();
+    bn__joined = 0;
+#endif
+}
+
+int bn_dist_rank(void) { return bn__rank; }
+int bn_dist_size(void) { return bn__size; }
+int bn_dist_mine(size_t i) { return bn__size == 1 || (int)(i % (size_t)bn__size) == bn__rank; }
+
+bn_status bn_dist_sum(double *x, size_t n, bn_error *err)
+{
+    for (size_t k = 0; k < n; k++)   /* -0 + 0 = +0 on some ranks only: write every zero as +0 */
+        if (x[k] == 0)
+            x[k] = 0;
+#ifdef BN_HAVE_MPI
+    if (bn__size > 1) {
+        size_t done = 0;
+        while (done < n) {   /* MPI counts are int */
+            int c = n - done > (size_t)(1 << 28) ? 1 << 28 : (int)(n - done);
+            if (MPI_Allreduce(MPI_IN_PLACE, x + done, c, MPI_DOUBLE, MPI_SUM, MPI_COMM_WORLD) != MPI_SUCCESS)
+                return bn_error_set(err, BN_EINTERNAL, "MPI_Allreduce of %zu values failed (rank %d of %d)", n,
+                                    bn__rank, bn__size);
+            done += (size_t)c;
+        }
+    }
+#else
+    (void)err;
+#endif
+    return BN_OK;
+}
+
+bn_status bn_dist_sum_float(float *x, size_t n, bn_error *err)
+{
+    for (size_t k = 0; k < n; k++)
+        if (x[k] == 0)
+            x[k] = 0;
+#ifdef BN_HAVE_MPI
+    if (bn__size > 1) {
+        size_t done = 0;
+        while (done < n) {
+            int c = n - done > (size_t)(1 << 28) ? 1 << 28 : (int)(n - done);
+            if (MPI_Allreduce(MPI_IN_PLACE, x + done, c, MPI_FLOAT, MPI_SUM, MPI_COMM_WORLD) != MPI_SUCCESS)
+                return bn_error_set(err, BN_EINTERNAL, "MPI_Allreduce of %zu values failed (rank %d of %d)", n,
+                                    bn__rank, bn__size);
+            done += (size_t)c;
+        }
+    }
+#else
+    (void)err;
+#endif
+    return BN_OK;
+}
+
+bn_status bn_dist_sum_u64(unsigned long long *x, size_t n, bn_error *err)
+{
+#ifdef BN_HAVE_MPI
+    if (bn__size > 1 && n > 0 &&
+        MPI_Allreduce(MPI_IN_PLACE, x, (int)n, MPI_UNSIGNED_LONG_LONG, MPI_SUM, MPI_COMM_WORLD) != MPI_SUCCESS)
+        return bn_error_set(err, BN_EINTERNAL, "MPI_Allreduce of %zu counts failed (rank %d of %d)", n, bn__rank,
+                            bn__size);
+#else
+    (void)x;
+    (void)n;
+    (void)err;
+#endif
+    return BN_OK;
+}
+
+bn_status bn_dist_agree(bn_status st)
+{
+#ifdef BN_HAVE_MPI
+    if (bn__size > 1) {
+        int mine = (int)st, all = mine;
+        if (MPI_Allreduce(&mine, &all, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD) != MPI_SUCCESS)
+            return BN_EINTERNAL;
+        return (bn_status)all;
+    }
+#endif
+    return st;
+}
+
+void bn_dist_abort(int code)
+{
+#ifdef BN_HAVE_MPI
+    if (bn__joined && bn__size > 1)
+        MPI_Abort(MPI_COMM_WORLD, code);
+#endif
+    exit(code);
+}

@@ -1,0 +1,75 @@
+#!/bin/bash
+# bounce under mpirun -np 1, 2 and 4 (oversubscribed on small machines) gives one process's bits:
+# - bounce trace: every pixel of every layer of the EXR (idiff -fail 0) and every row of the
+#   per-patch CSV (the '#' provenance lines record the process count and timings, so they may differ);
+# - bounce crosscheck (the tracer split among ranks, the hierarchy on each): every figure of its
+#   report (non-'#' lines);
+# - the bunny box (../shared, skipped visibly without it): the per-patch CSV of a short trace;
+# - dense K under P > 1 is refused with a clear message (exit 2) and leaves no output.
+# usage: mpi_check.sh BOUNCE SOURCE_DIR WORK_DIR
+set -u
+bounce=$1 src=$2 work=$3
+mkdir -p "$work" && cd "$work" || exit 1
+rm -f ./*.exr ./*.csv ./*.txt
+if ! command -v mpirun >/dev/null 2>&1; then
+    echo "SKIP: no mpirun (apt-get install openmpi-bin; scripts/setup.sh does)"
+    exit 77
+fi
+if [ "$(id -u)" = 0 ]; then   # OpenMPI refuses root unless told twice
+    export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
+fi
+export OMPI_MCA_btl_vader_single_copy_mechanism=none   # containers without CMA (ptrace) permissions
+fails=0
+check() {   # check CONDITION-EXIT-CODE MESSAGE
+    if [ "$1" = 0 ]; then echo "ok   $2"; else echo "FAIL $2"; fails=$((fails + 1)); fi
+}
+run() {   # run NP ARGS...: bounce under mpirun (NP 0: without mpirun)
+    local np=$1
+    shift
+    if [ "$np" = 0 ]; then "$bounce" "$@"; else mpirun --oversubscribe -np "$np" "$bounce" "$@"; fi
+}
+cornell="$src/meshes/cornell-box.obj"
+targs=(trace "$cornell" --unit mm --spp 8 --patches 300 --size 48x48 -n 3 -q)
+cargs=(crosscheck "$cornell" --unit mm --patches 300 --spp 256 --transport hierarchical -q)
+run 0 "${targs[@]}" -o t0.exr --patches-out t0.csv 2>/dev/null
+check $? "bounce trace, one process"
+run 0 "${cargs[@]}" >c0.txt 2>/dev/null
+check $? "bounce crosscheck, one process"
+for np in 1 2 4; do
+    run "$np" "${targs[@]}" -o "t$np.exr" --patches-out "t$np.csv" 2>"t$np.err"
+    check $? "trace under mpirun -np $np ($(tail -1 "t$np.err"))"
+    idiff -fail 0 -warn 0 -a t0.exr "t$np.exr" >/dev/null 2>&1
+    check $? "trace -np $np: every pixel of every layer equals one process's (idiff -fail 0)"
+    cmp -s <(grep -v '^#' t0.csv) <(grep -v '^#' "t$np.csv")
+    check $? "trace -np $np: every per-patch row equals one process's"
+    grep -q "^# command=mpirun -np $np " "t$np.csv" || [ "$np" = 1 ]
+    check $? "trace -np $np: the provenance records the process count"
+    n_tmp=$(find . -name '*.tmp*' | wc -l)
+    [ "$n_tmp" = 0 ]
+    check $? "trace -np $np: no temporary file left by any rank ($n_tmp)"
+    run "$np" "${cargs[@]}" >"c$np.txt" 2>"c$np.err"
+    check $? "crosscheck under mpirun -np $np ($(tail -1 "c$np.err"))"
+    cmp -s <(grep -v '^#' c0.txt) <(grep -v '^#' "c$np.txt")
+    check $? "crosscheck -np $np: every figure equals one process's ($(grep -c . "c$np.txt") lines)"
+done
+# dense K is single-process
+run 2 solve "$cornell" --unit mm --patches 100 --transport dense -o dense.csv >/dev/null 2>dense.err
+rc=$?
+[ "$rc" != 0 ] && grep -q "single-process" dense.err && [ ! -e dense.csv ]
+check $? "dense K under -np 2: refused (exit $rc: $(grep -m1 single-process dense.err | cut -c1-90)), no output"
+bb="$src/../shared/data/scenes/bunny-box.obj"
+if [ -f "$bb" ]; then
+    bargs=(trace "$bb" --unit mm --spp 2 --size 32x32 -n 2 -q)
+    run 0 "${bargs[@]}" -o b0.exr --patches-out b0.csv 2>/dev/null
+    check $? "bunny box: trace, one process"
+    for np in 2 4; do
+        run "$np" "${bargs[@]}" -o "b$np.exr" --patches-out "b$np.csv" 2>/dev/null
+        check $? "bunny box: trace under -np $np"
+        cmp -s <(grep -v '^#' b0.csv) <(grep -v '^#' "b$np.csv") && idiff -fail 0 -warn 0 -a b0.exr "b$np.exr" >/dev/null 2>&1
+        check $? "bunny box -np $np: every per-patch row ($(grep -vc '^#' b0.csv)) and pixel equals one process's"
+    done
+else
+    echo "SKIP (part): $bb is not there (../shared beside the checkout): the bunny box's rows not run"
+fi
+echo "$fails failures"
+[ "$fails" = 0 ]
