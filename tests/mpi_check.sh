@@ -2,9 +2,12 @@
 # bounce under mpirun -np 1, 2 and 4 (oversubscribed on small machines) gives one process's bits:
 # - bounce trace: every pixel of every layer of the EXR (idiff -fail 0) and every row of the
 #   per-patch CSV (the '#' provenance lines record the process count and timings, so they may differ);
-# - bounce crosscheck (the tracer split among ranks, the hierarchy on each): every figure of its
-#   report (non-'#' lines);
-# - the bunny box (../shared, skipped visibly without it): the per-patch CSV of a short trace;
+# - bounce crosscheck (the tracer split among ranks, the hierarchy too): every figure of its report
+#   (non-'#' lines);
+# - the hierarchical solve (each rank refines and gathers its share of the receivers): every row of
+#   the solve CSV with every bounce term, and every pixel of every layer of `bounce bounces`' EXR;
+# - the bunny box (../shared, skipped visibly without it): a short trace, and the hierarchical solve
+#   at eps 1e-2 under -np 2;
 # - dense K under P > 1 is refused with a clear message (exit 2) and leaves no output.
 # usage: mpi_check.sh BOUNCE SOURCE_DIR WORK_DIR
 set -u
@@ -31,10 +34,16 @@ run() {   # run NP ARGS...: bounce under mpirun (NP 0: without mpirun)
 cornell="$src/meshes/cornell-box.obj"
 targs=(trace "$cornell" --unit mm --spp 8 --patches 300 --size 48x48 -n 3 -q)
 cargs=(crosscheck "$cornell" --unit mm --patches 300 --spp 256 --transport hierarchical -q)
+sargs=(solve "$cornell" --unit mm --patches 3000 --transport hierarchical -n 3 -q)
+bargs0=(bounces "$cornell" --unit mm --patches 1200 --transport hierarchical --size 64x64 --no-previews -q)
 run 0 "${targs[@]}" -o t0.exr --patches-out t0.csv 2>/dev/null
 check $? "bounce trace, one process"
 run 0 "${cargs[@]}" >c0.txt 2>/dev/null
 check $? "bounce crosscheck, one process"
+run 0 "${sargs[@]}" -o s0.csv 2>/dev/null
+check $? "bounce solve (hierarchical), one process"
+run 0 "${bargs0[@]}" -o i0.exr 2>/dev/null
+check $? "bounce bounces (hierarchical), one process"
 for np in 1 2 4; do
     run "$np" "${targs[@]}" -o "t$np.exr" --patches-out "t$np.csv" 2>"t$np.err"
     check $? "trace under mpirun -np $np ($(tail -1 "t$np.err"))"
@@ -51,6 +60,14 @@ for np in 1 2 4; do
     check $? "crosscheck under mpirun -np $np ($(tail -1 "c$np.err"))"
     cmp -s <(grep -v '^#' c0.txt) <(grep -v '^#' "c$np.txt")
     check $? "crosscheck -np $np: every figure equals one process's ($(grep -c . "c$np.txt") lines)"
+    run "$np" "${sargs[@]}" -o "s$np.csv" 2>"s$np.err"
+    check $? "solve (hierarchical) under -np $np"
+    cmp -s <(grep -v '^#' s0.csv) <(grep -v '^#' "s$np.csv")
+    check $? "solve -np $np: every row, L and each term, equals one process's ($(grep -vc '^#' s0.csv) rows)"
+    run "$np" "${bargs0[@]}" -o "i$np.exr" 2>/dev/null
+    check $? "bounces (hierarchical) under -np $np"
+    idiff -fail 0 -warn 0 -a i0.exr "i$np.exr" >/dev/null 2>&1
+    check $? "bounces -np $np: every pixel of E, KE, K2E, K3E, rest and L equals one process's"
 done
 # dense K is single-process
 run 2 solve "$cornell" --unit mm --patches 100 --transport dense -o dense.csv >/dev/null 2>dense.err
@@ -68,6 +85,13 @@ if [ -f "$bb" ]; then
         cmp -s <(grep -v '^#' b0.csv) <(grep -v '^#' "b$np.csv") && idiff -fail 0 -warn 0 -a b0.exr "b$np.exr" >/dev/null 2>&1
         check $? "bunny box -np $np: every per-patch row ($(grep -vc '^#' b0.csv)) and pixel equals one process's"
     done
+    hargs=(solve "$bb" --unit mm --eps 1e-2 -n 3 -q)
+    run 0 "${hargs[@]}" -o h0.csv 2>/dev/null
+    check $? "bunny box: hierarchical solve at eps 1e-2, one process"
+    run 2 "${hargs[@]}" -o h2.csv 2>h2.err
+    check $? "bunny box: hierarchical solve under -np 2"
+    cmp -s <(grep -v '^#' h0.csv) <(grep -v '^#' h2.csv)
+    check $? "bunny box -np 2: every row of the solve equals one process's ($(grep -vc '^#' h0.csv) rows)"
 else
     echo "SKIP (part): $bb is not there (../shared beside the checkout): the bunny box's rows not run"
 fi

@@ -73,11 +73,14 @@ typedef struct bn_hierarchy_report {
     size_t patches, nodes, clusters, planar_nodes;  /* leaves = patches; planar: inside one plane */
     size_t polygons, planes;                        /* input polygons, and the planes they form */
     double min_area;                                /* the smallest element split (scene units^2) */
-    size_t links, leaf_links, cluster_links;        /* leaf: patch to patch; cluster: a cluster at either end */
+    size_t links, leaf_links, cluster_links;        /* leaf: patch to patch; cluster: a cluster at either end
+                                                       (under mpirun: over all processes, as one process) */
+    size_t links_here;                              /* the links this process stores (under mpirun: those of
+                                                       receivers meeting its share of the patches) */
     size_t passes;                                  /* refine-gather passes */
     int    settled;                                 /* 1 if the last pass split fewer than 1e-3 of the links */
-    size_t rays;
-    size_t bytes;                                   /* the frozen operator: nodes and links */
+    size_t rays;                                    /* traced by this process */
+    size_t bytes;                                   /* the frozen operator: nodes and links (this process's) */
     double bytes_per_link;                          /* link storage alone / links */
     double eps_abs;                                 /* eps x the largest emitted radiance */
     double seconds_tree, seconds_refine;

@@ -78,7 +78,16 @@ typedef struct bn__hop {
     uint16_t *dir;            /* per link: the direction to the source (cluster receivers) */
     double *Bn, *G;           /* 3n each: scratch of apply */
     double *Gv;               /* 9 per cluster: what it gathers, per channel as a vector */
+    /* under mpirun (P > 1): this rank's leaves are [plo, phi) in the tree's leaf order; it holds the
+     * links of every receiver whose leaves meet that range, so its leaves' values are exact, and apply
+     * sums every rank's leaves (bn_dist_sum: one rank per element, so one process's bits) */
+    int distributed;
+    size_t plo, phi;
+    uint32_t *leaf_index;     /* per node: its first leaf's index in leaf order (t->lo) */
 } bn__hop;
+
+/* This rank's leaves in leaf order: [lo, hi) of npatch, an equal share (rank order). */
+void bn__dist_leaves(size_t npatch, size_t *lo, size_t *hi);
 
 /* Takes links (sorted by r then s; F > 0 only) and the tree's topology (copied). */
 bn_status bn__hop_make(const bn__tree *t, const bn__link *links, size_t nlinks, bn__hop **out, bn_error *err);

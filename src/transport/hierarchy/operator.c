@@ -2,6 +2,7 @@
  * one value per channel; (nearly flat) clusters one vector per channel, which each polygon below
  * dots with its normal (hierarchy_internal.h). */
 #include "transport/hierarchy/hierarchy_internal.h"
+#include "bounce/dist.h"
 #include "base/vec.h"
 
 #include <math.h>
@@ -51,6 +52,7 @@ void bn__hop_destroy(void *ctx)
     free(h->F);
     free(h->dir);
     free(h->Bn);
+    free(h->leaf_index);
     free(h->G);
     free(h->Gv);
     free(h);
@@ -59,7 +61,7 @@ void bn__hop_destroy(void *ctx)
 size_t bn__hop_bytes(const void *ctx)
 {
     const bn__hop *h = ctx;
-    return h->n * (4 * sizeof(uint32_t) + sizeof(double) + 3 * sizeof(float) + sizeof(size_t) + 6 * sizeof(double)) +
+    return h->n * (5 * sizeof(uint32_t) + sizeof(double) + 3 * sizeof(float) + sizeof(size_t) + 6 * sizeof(double)) +
            h->nclusters * 9 * sizeof(double) + h->nlinks * (sizeof(uint32_t) + sizeof(float) + sizeof(uint16_t));
 }
 
@@ -85,15 +87,19 @@ bn_status bn__hop_make(const bn__tree *t, const bn__link *links, size_t nlinks, 
     h->F = bn__malloc_array(nlinks ? nlinks : 1, sizeof(float));
     h->dir = bn__calloc(nlinks ? nlinks : 1, sizeof(uint16_t));
     h->Bn = bn__malloc_array(3 * n, sizeof(double));
+    h->leaf_index = bn__malloc_array(n, sizeof(uint32_t));
+    h->distributed = bn_dist_size() > 1;
+    bn__dist_leaves(t->npatch, &h->plo, &h->phi);
     h->G = bn__malloc_array(3 * n, sizeof(double));
     if (!h->child || !h->parent || !h->leaf_patch || !h->cl || !h->area || !h->normal || !h->start || !h->src ||
-        !h->F || !h->dir || !h->Bn || !h->G)
+        !h->F || !h->dir || !h->Bn || !h->G || !h->leaf_index)
         goto oom;
     memcpy(h->child, t->child, n * sizeof(uint32_t));
     memcpy(h->parent, t->parent, n * sizeof(uint32_t));
     memcpy(h->area, t->area, n * sizeof(double));
     for (size_t v = 0; v < n; v++) {
         h->leaf_patch[v] = t->child[v] == BN__NONE ? t->order[t->lo[v]] : BN__NONE;
+        h->leaf_index[v] = (uint32_t)t->lo[v];
         h->cl[v] = t->plane[v] < 0 ? (uint32_t)h->nclusters++ : BN__NONE;
         for (int c = 0; c < 3; c++)
             h->normal[3 * v + c] = (float)t->normal[3 * v + c];
@@ -195,9 +201,19 @@ bn_status bn__hop_apply(void *ctx, const double *x, double *y, bn_error *err)
         }
     }
     for (size_t v = 0; v < n; v++)
-        if (h->leaf_patch[v] != BN__NONE)
-            memcpy(y + 3 * (size_t)h->leaf_patch[v], G + 3 * v, 3 * sizeof(double));
-    return bn_interrupted() != BN_OK ? bn_error_set(err, bn_interrupted(), "interrupted") : BN_OK;
+        if (h->leaf_patch[v] != BN__NONE) {
+            double *yp = y + 3 * (size_t)h->leaf_patch[v];
+            if (!h->distributed || (h->leaf_index[v] >= h->plo && h->leaf_index[v] < h->phi))
+                memcpy(yp, G + 3 * v, 3 * sizeof(double));
+            else
+                yp[0] = yp[1] = yp[2] = 0;   /* another rank's leaf: its value comes in the sum */
+        }
+    {   /* every rank's status first (a rank that stops alone would leave the others in the sum) */
+        bn_status st = bn_dist_agree(bn_interrupted());
+        if (st != BN_OK)
+            return bn_error_set(err, st, "interrupted");
+    }
+    return h->distributed ? bn_dist_sum(y, 3 * h->npatch, err) : BN_OK;
 }
 
 /* No link joins a node to itself or to a node above or below it, so F_H has a zero diagonal. */

@@ -1,6 +1,7 @@
 /* Links by a brightness-weighted error oracle, refined and gathered until they settle, then
  * frozen into the operator (include/bounce/hierarchy.h). */
 #include "transport/hierarchy/hierarchy_internal.h"
+#include "bounce/dist.h"
 #include "formfactor/ff_internal.h"
 #include "formfactor/ff_pair.h"
 #include "base/vec.h"
@@ -52,7 +53,27 @@ typedef struct bn__ref {
     int force;                /* eps == 0: refine every link to the patches */
     double tol, ray_eps;
     bn__ff_pairs *pairs;
+    size_t plo, phi;          /* this rank's leaves (all of them with one process): bn__dist_leaves */
 } bn__ref;
+
+void bn__dist_leaves(size_t npatch, size_t *lo, size_t *hi)
+{
+    size_t P = (size_t)bn_dist_size(), k = (size_t)bn_dist_rank();
+    *lo = npatch * k / P;
+    *hi = npatch * (k + 1) / P;
+}
+
+/* Under mpirun a rank refines only receivers whose leaves meet its own (the others' links are theirs):
+ * each receiver's links are then exactly one process's. A receiver is counted (links, splits, rays) by
+ * the rank that holds its first leaf, so the counts summed over ranks are one process's. */
+static int bn__receiver_here(const bn__ref *R, uint32_t r)
+{
+    return R->t->lo[r] < R->phi && R->t->hi[r] > R->plo;
+}
+static int bn__receiver_counted(const bn__ref *R, uint32_t r)
+{
+    return R->t->lo[r] >= R->plo && R->t->lo[r] < R->phi;
+}
 
 typedef struct bn__vec {
     bn__link *a;
@@ -292,6 +313,8 @@ static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int par
 {
     const bn__tree *t = R->t;
     int lr = bn__tree_is_leaf(t, r), sr = bn__splittable(R, r), ss = bn__splittable(R, s), split;
+    if (!bn__receiver_here(R, r))
+        return;   /* another rank's receiver */
     if (r == s) {
         if (lr || t->plane[r] >= 0)
             return;   /* a plane does not see itself */
@@ -325,7 +348,7 @@ static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int par
             return;
         }
         if (F >= 0)
-            w->splits++;
+            w->splits += (size_t)bn__receiver_counted(R, r);
         bn__tree_sphere(t, r, cr, &rr);
         bn__tree_sphere(t, s, cs, &rs);
         if (sr && (!ss || rr >= rs || !bn__can_receive(R, r, s))) {
@@ -563,6 +586,7 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
     R.ray_eps = bn_rt_epsilon(rt);
     R.force = o->eps == 0;
     R.min_area = o->min_area > 0 ? o->min_area : o->min_area == 0 ? ldexp(t.area[0], -20) : 0;
+    bn__dist_leaves(np, &R.plo, &R.phi);
     E = bn__malloc_array(3 * np, sizeof(double));
     rho = bn__malloc_array(3 * np, sizeof(double));
     L = bn__malloc_array(3 * np, sizeof(double));
@@ -615,23 +639,31 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
         size_t splits = 0;
         char label[64];
         snprintf(label, sizeof label, "hierarchy pass %d", pass + 1);
-        if ((st = bn__pass(&R, W, nt, &work, &splits, &rep->rays, label, err)) != BN_OK)
-            goto done;
-        rep->passes = (size_t)pass + 1;
-        if (work.n * sizeof(bn__link) + bn__tree_bytes(&t) > limit) {
+        unsigned long long cnt[3] = {0, 0, 0};   /* links, links between patches, splits: over all ranks */
+        st = bn__pass(&R, W, nt, &work, &splits, &rep->rays, label, err);
+        if (st == BN_OK && work.n * sizeof(bn__link) + bn__tree_bytes(&t) > limit)
             st = bn_error_set(err, BN_ENOMEM,
                               "the hierarchy needs %zu links (%.3g GiB) at eps %g, above the memory limit: raise --eps",
                               work.n, (double)(work.n * sizeof(bn__link)) / (1 << 30), o->eps);
+        {   /* every rank stops together: one that failed alone would leave the others in a sum */
+            bn_status all = bn_dist_agree(st);
+            if (all != BN_OK && st == BN_OK)
+                st = bn_error_set(err, all, "hierarchy: another MPI process failed (%s)", bn_status_str(all));
+        }
+        if (st != BN_OK)
             goto done;
-        }
-        {
-            size_t leaf = 0;
-            for (size_t l = 0; l < work.n; l++)
-                leaf += bn__tree_is_leaf(&t, work.a[l].r) && bn__tree_is_leaf(&t, work.a[l].s);
-            bn_logf(&o->log, BN_LOG_INFO, "hierarchy pass %d: %zu links (%zu between patches), %zu split, %.1f s",
-                    pass + 1, work.n, leaf, splits, bn__now() - t0);
-        }
-        if (pass > 0 && (double)splits < BN__SETTLED * (double)work.n) {
+        rep->passes = (size_t)pass + 1;
+        for (size_t l = 0; l < work.n; l++)
+            if (bn__receiver_counted(&R, work.a[l].r)) {
+                cnt[0]++;
+                cnt[1] += bn__tree_is_leaf(&t, work.a[l].r) && bn__tree_is_leaf(&t, work.a[l].s);
+            }
+        cnt[2] = splits;
+        if ((st = bn_dist_sum_u64(cnt, 3, err)) != BN_OK)
+            goto done;
+        bn_logf(&o->log, BN_LOG_INFO, "hierarchy pass %d: %llu links (%llu between patches), %llu split, %.1f s",
+                pass + 1, cnt[0], cnt[1], cnt[2], bn__now() - t0);
+        if (pass > 0 && (double)cnt[2] < BN__SETTLED * (double)cnt[0]) {
             rep->settled = 1;
             break;
         }
@@ -647,10 +679,40 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
         bn_logf(&o->log, BN_LOG_WARN, "hierarchy: links still splitting after %d passes; frozen as they are",
                 o->max_passes);
     work.n = bn__compact(&work);
-    for (size_t l = 0; l < work.n; l++) {
-        int lr = bn__tree_is_leaf(&t, work.a[l].r), ls = bn__tree_is_leaf(&t, work.a[l].s);
-        rep->leaf_links += lr && ls;
-        rep->cluster_links += t.plane[work.a[l].r] < 0 || t.plane[work.a[l].s] < 0;
+    {   /* counted by the rank holding each receiver's first leaf, summed: one process's counts */
+        unsigned long long cnt[3] = {0, 0, 0};
+        for (size_t l = 0; l < work.n; l++) {
+            int lr = bn__tree_is_leaf(&t, work.a[l].r), ls = bn__tree_is_leaf(&t, work.a[l].s);
+            if (!bn__receiver_counted(&R, work.a[l].r))
+                continue;
+            cnt[0]++;
+            cnt[1] += lr && ls;
+            cnt[2] += t.plane[work.a[l].r] < 0 || t.plane[work.a[l].s] < 0;
+        }
+        if ((st = bn_dist_sum_u64(cnt, 3, err)) != BN_OK)
+            goto done;
+        rep->links = cnt[0];
+        rep->leaf_links = cnt[1];
+        rep->cluster_links = cnt[2];
+        rep->links_here = work.n;
+        if (bn_dist_size() > 1) {   /* what each process stores: its receivers' links and the shared top's */
+            unsigned long long here = work.n, most = 0, *all = bn__calloc((size_t)bn_dist_size(), sizeof *all);
+            if (!all) {
+                st = bn_error_set(err, BN_ENOMEM, "out of memory");
+                goto done;
+            }
+            all[bn_dist_rank()] = here;
+            if ((st = bn_dist_sum_u64(all, (size_t)bn_dist_size(), err)) != BN_OK) {
+                free(all);
+                goto done;
+            }
+            for (int k = 0; k < bn_dist_size(); k++)
+                most = all[k] > most ? all[k] : most;
+            bn_logf(&o->log, BN_LOG_INFO, "hierarchy: %d processes store %llu links at most each (%.2f of the %zu; "
+                    "rank 0 %llu)", bn_dist_size(), most, rep->links ? (double)most / (double)rep->links : 0.0,
+                    rep->links, all[0]);
+            free(all);
+        }
     }
     if ((st = bn__hop_make(&t, work.a, work.n, &h, err)) != BN_OK)
         goto done;
@@ -663,7 +725,6 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
         rep->clusters += t.plane[v] < 0;
         rep->planar_nodes += t.plane[v] >= 0 && t.child[v] != BN__NONE;
     }
-    rep->links = work.n;
     rep->bytes = bn__hop_bytes(h);
     rep->bytes_per_link = work.n ? (double)(sizeof(uint32_t) + sizeof(float) + 1) : 0;
     rep->seconds_refine = bn__now() - t0;
