@@ -8,6 +8,7 @@
 #   the solve CSV with every bounce term, and every pixel of every layer of `bounce bounces`' EXR;
 # - the bunny box (../shared, skipped visibly without it): a short trace, and the hierarchical solve
 #   at eps 1e-2 under -np 2;
+# - a rank killed, and SIGINT to mpirun: every rank ends, with a message, and no output is left;
 # - dense K under P > 1 is refused with a clear message (exit 2) and leaves no output.
 # usage: mpi_check.sh BOUNCE SOURCE_DIR WORK_DIR
 set -u
@@ -68,6 +69,36 @@ for np in 1 2 4; do
     check $? "bounces (hierarchical) under -np $np"
     idiff -fail 0 -warn 0 -a i0.exr "i$np.exr" >/dev/null 2>&1
     check $? "bounces -np $np: every pixel of E, KE, K2E, K3E, rest and L equals one process's"
+done
+# a rank that dies, and a run that is interrupted: every rank ends, a clear message, no output
+long=(trace "$cornell" --unit mm --spp 1000000 --patches 300 --size 16x16 -q -o k.exr --patches-out k.csv)
+for how in kill interrupt; do
+    rm -f k.exr k.csv k.err
+    mpirun --oversubscribe -np 2 "$bounce" "${long[@]}" >/dev/null 2>k.err &
+    mpid=$!
+    sleep 4
+    ranks=$(pgrep -P "$mpid" -f "bounce trace" | tr '\n' ' ')
+    if [ "$how" = kill ]; then
+        kill -9 "$(echo "$ranks" | awk '{ print $NF }')" 2>/dev/null   # one rank dies
+    else
+        kill -INT "$mpid"   # Ctrl-C on mpirun: it forwards SIGINT to every rank
+    fi
+    for _ in $(seq 60); do kill -0 "$mpid" 2>/dev/null || break; sleep 1; done
+    wait "$mpid"
+    rc=$?
+    alive() { for p in $ranks; do ps -o stat= -p "$p" 2>/dev/null | grep -qv Z && echo "$p"; done | wc -l; }
+    for _ in $(seq 20); do [ "$(alive)" = 0 ] && break; sleep 0.5; done
+    left=$(alive)
+    n_tmp=$(find . -name '*.tmp*' | wc -l)
+    [ "$rc" != 0 ] && [ "$left" = 0 ] && [ ! -e k.exr ] && [ ! -e k.csv ] && [ "$n_tmp" = 0 ]
+    check $? "$how: mpirun exit $rc, $left of the ranks ($ranks) left, no output, $n_tmp temporaries"
+    if [ "$how" = kill ]; then
+        grep -qiE "signal 9|killed" k.err
+        check $? "kill: mpirun says which rank died ($(grep -m1 -iE 'signal 9|killed' k.err | cut -c1-80))"
+    else
+        grep -q "interrupted; no partial output was left" k.err
+        check $? "interrupt: bounce says so ($(grep -m1 interrupted k.err))"
+    fi
 done
 # dense K is single-process
 run 2 solve "$cornell" --unit mm --patches 100 --transport dense -o dense.csv >/dev/null 2>dense.err
