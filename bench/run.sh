@@ -473,6 +473,47 @@ if [ "$big" = 1 ]; then
     fi
 fi
 
+# ---- MPI: the hierarchical solve over P processes (links and memory per rank, time, communication) ----
+if command -v mpirun >/dev/null 2>&1 && grep -q "BOUNCE_MPI:BOOL=ON" "$build/CMakeCache.txt" 2>/dev/null; then
+    note "MPI: the hierarchical solve at P = 1, 2, 4"
+    [ "$(id -u)" = 0 ] && export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
+    msc="$root/meshes/cornell-box.obj"
+    {
+        echo "## MPI: the hierarchical solve over P processes"
+        echo
+        echo "\`mpirun --oversubscribe -np P -x OMP_NUM_THREADS=T bounce solve meshes/cornell-box.obj --unit mm"
+        echo "--transport hierarchical -n 3\` (the default mesh, eps 1e-3), each rank under \`/usr/bin/time -v\`; P x T = 2"
+        echo "cores (P = 4: oversubscribed, T = 1). Links: those kept (F > 0), all and the most one rank stores (the log's"
+        echo "\"store N links at most each\"): a rank holds its receivers' links and those of the shared top of the tree."
+        echo "Communication per application of K_H: one all-reduce of 3 doubles per patch (24 B x patches from each"
+        echo "rank), whatever the link count. Every row of the CSV is identical to P = 1 (cmp)."
+        echo
+        echo "| P | threads per rank | wall s | links (all) | links, most on one rank | share | peak MiB per rank (largest) | K_H MiB (rank 0) | all-reduce B per K application | rows identical to P = 1 |"
+        echo "|---|---|---|---|---|---|---|---|---|---|"
+    } >>"$report"
+    for np in 1 2 4; do
+        th=$((2 / np)); [ "$th" -lt 1 ] && th=1
+        t0=$(date +%s.%N)
+        mpirun --oversubscribe -np "$np" -x OMP_NUM_THREADS=$th /usr/bin/time -v "$bounce" solve "$msc" --unit mm \
+            --transport hierarchical -n 3 -o "$work/mpi$np.csv" >"$work/mpi$np.out" 2>"$work/mpi$np.err"
+        rc=$?
+        t1=$(date +%s.%N)
+        if [ "$rc" != 0 ]; then
+            echo "| $np | $th | failed (exit $rc: $(grep -m1 error "$work/mpi$np.err")) | | | | | | | |" >>"$report"
+            continue
+        fi
+        links=$(sed -n 's/.* of the \([0-9]*\) kept.*/\1/p' "$work/mpi$np.err" | tail -1)
+        most=$(sed -n 's/.* store \([0-9]*\) links at most.*/\1/p' "$work/mpi$np.err" | tail -1)
+        peak=$(sed -n 's/.*Maximum resident set size (kbytes): //p' "$work/mpi$np.err" | sort -n | tail -1 | awk '{ printf "%.0f", $1 / 1024 }')
+        kmib=$(sed -n 's/.*K hierarchy (\([0-9.]*\) MiB).*/\1/p' "$work/mpi$np.err" | tail -1)
+        npatch=$(grep -vc '^#' "$work/mpi$np.csv"); npatch=$((npatch - 1))
+        same="-"
+        [ "$np" != 1 ] && { cmp -s <(grep -v '^#' "$work/mpi1.csv") <(grep -v '^#' "$work/mpi$np.csv") && same=yes || same=NO; }
+        echo "| $np | $th | $(awk -v a="$t0" -v b="$t1" 'BEGIN { printf "%.2f", b - a }') | $links | $most | $(awk -v m="$most" -v l="$links" 'BEGIN { if (l > 0) printf "%.2f", m / l }') | $peak | $kmib | $(( np > 1 ? 24 * npatch : 0 )) | $same |" >>"$report"
+    done
+    echo >>"$report"
+fi
+
 # ---- the viewer page: frames per second in headless Chromium (software WebGL: SwiftShader) ----
 if command -v chromium >/dev/null 2>&1 && command -v python3 >/dev/null 2>&1; then
     note "viewer page: frames per second"

@@ -695,7 +695,7 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
         rep->leaf_links = cnt[1];
         rep->cluster_links = cnt[2];
         rep->links_here = work.n;
-        if (bn_dist_size() > 1) {   /* what each process stores: its receivers' links and the shared top's */
+        {   /* what each process stores: its receivers' links and the shared top's (all with one process) */
             unsigned long long here = work.n, most = 0, *all = bn__calloc((size_t)bn_dist_size(), sizeof *all);
             if (!all) {
                 st = bn_error_set(err, BN_ENOMEM, "out of memory");
@@ -708,9 +708,9 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
             }
             for (int k = 0; k < bn_dist_size(); k++)
                 most = all[k] > most ? all[k] : most;
-            bn_logf(&o->log, BN_LOG_INFO, "hierarchy: %d processes store %llu links at most each (%.2f of the %zu; "
-                    "rank 0 %llu)", bn_dist_size(), most, rep->links ? (double)most / (double)rep->links : 0.0,
-                    rep->links, all[0]);
+            bn_logf(&o->log, BN_LOG_INFO, "hierarchy: %d process%s store %llu links at most each (%.2f of the %zu "
+                    "kept, F > 0; rank 0 %llu)", bn_dist_size(), bn_dist_size() > 1 ? "es" : "", most,
+                    rep->links ? (double)most / (double)rep->links : 0.0, rep->links, all[0]);
             free(all);
         }
     }
