@@ -54,26 +54,34 @@ int bn_dist_rank(void) { return bn__rank; }
 int bn_dist_size(void) { return bn__size; }
 int bn_dist_mine(size_t i) { return bn__size == 1 || (int)(i % (size_t)bn__size) == bn__rank; }
 
+#ifdef BN_HAVE_MPI
+/* In place over all ranks, in pieces (MPI counts are int). */
+static bn_status bn__allreduce_sum(void *x, size_t n, size_t elem, MPI_Datatype type, bn_error *err)
+{
+    size_t done = 0;
+    while (bn__size > 1 && done < n) {
+        int c = n - done > (size_t)(1 << 28) ? 1 << 28 : (int)(n - done);
+        if (MPI_Allreduce(MPI_IN_PLACE, (char *)x + done * elem, c, type, MPI_SUM, MPI_COMM_WORLD) != MPI_SUCCESS)
+            return bn_error_set(err, BN_EINTERNAL, "MPI_Allreduce of %zu values failed (rank %d of %d)", n, bn__rank,
+                                bn__size);
+        done += (size_t)c;
+    }
+    return BN_OK;
+}
+#endif
+
+/* -0 + 0 = +0 on some ranks only: every zero is written as +0 first */
 bn_status bn_dist_sum(double *x, size_t n, bn_error *err)
 {
-    for (size_t k = 0; k < n; k++)   /* -0 + 0 = +0 on some ranks only: write every zero as +0 */
+    for (size_t k = 0; k < n; k++)
         if (x[k] == 0)
             x[k] = 0;
 #ifdef BN_HAVE_MPI
-    if (bn__size > 1) {
-        size_t done = 0;
-        while (done < n) {   /* MPI counts are int */
-            int c = n - done > (size_t)(1 << 28) ? 1 << 28 : (int)(n - done);
-            if (MPI_Allreduce(MPI_IN_PLACE, x + done, c, MPI_DOUBLE, MPI_SUM, MPI_COMM_WORLD) != MPI_SUCCESS)
-                return bn_error_set(err, BN_EINTERNAL, "MPI_Allreduce of %zu values failed (rank %d of %d)", n,
-                                    bn__rank, bn__size);
-            done += (size_t)c;
-        }
-    }
+    return bn__allreduce_sum(x, n, sizeof *x, MPI_DOUBLE, err);
 #else
     (void)err;
-#endif
     return BN_OK;
+#endif
 }
 
 bn_status bn_dist_sum_float(float *x, size_t n, bn_error *err)
@@ -82,20 +90,11 @@ bn_status bn_dist_sum_float(float *x, size_t n, bn_error *err)
         if (x[k] == 0)
             x[k] = 0;
 #ifdef BN_HAVE_MPI
-    if (bn__size > 1) {
-        size_t done = 0;
-        while (done < n) {
-            int c = n - done > (size_t)(1 << 28) ? 1 << 28 : (int)(n - done);
-            if (MPI_Allreduce(MPI_IN_PLACE, x + done, c, MPI_FLOAT, MPI_SUM, MPI_COMM_WORLD) != MPI_SUCCESS)
-                return bn_error_set(err, BN_EINTERNAL, "MPI_Allreduce of %zu values failed (rank %d of %d)", n,
-                                    bn__rank, bn__size);
-            done += (size_t)c;
-        }
-    }
+    return bn__allreduce_sum(x, n, sizeof *x, MPI_FLOAT, err);
 #else
     (void)err;
-#endif
     return BN_OK;
+#endif
 }
 
 bn_status bn_dist_sum_u64(unsigned long long *x, size_t n, bn_error *err)

@@ -111,25 +111,9 @@ static bn_status bn__trace_image_run_body(const bn_rt *rt, const bn_camera *cam,
     }
     bn__progress_end(&prog);
     bn__tracer_free(&t);
-    {   /* every rank's rows to every rank: each pixel was written by one rank only (exact) */
-        bn_status here = no_buffers ? BN_ENOMEM : bn_interrupted(), all = bn_dist_agree(here);
-        if (all != BN_OK && here == BN_OK) {
-            bn_trace_image_free(out);
-            return bn_error_set(err, all, "trace: another MPI process failed (%s)", bn_status_str(all));
-        }
-        if (all == BN_OK) {
-            unsigned long long r = rays;
-            st = bn_dist_sum_float(out->mean, npx * nl * 3, err);
-            if (st == BN_OK)
-                st = bn_dist_sum_float(out->var, npx * nl * 3, err);
-            if (st == BN_OK)
-                st = bn_dist_sum_u64(&r, 1, err);
-            if (st != BN_OK) {
-                bn_trace_image_free(out);
-                return st;
-            }
-            rays = r;
-        }
+    if ((st = bn__trace_combine(no_buffers, out->mean, out->var, 0, npx * nl * 3, &rays, err)) != BN_OK) {
+        bn_trace_image_free(out);
+        return st;
     }
     out->rays = rays;
     out->seconds = bn__now() - t0;

@@ -113,25 +113,9 @@ static bn_status bn__trace_items_run_body(const bn_rt *rt, const bn_partition *p
     }
     bn__progress_end(&prog);
     bn__tracer_free(&t);
-    {   /* every rank's items to every rank: each element was written by one rank only (exact) */
-        bn_status here = no_buffers ? BN_ENOMEM : bn_interrupted(), all = bn_dist_agree(here);
-        if (all != BN_OK && here == BN_OK) {
-            bn_trace_patches_free(out);
-            return bn_error_set(err, all, "trace: another MPI process failed (%s)", bn_status_str(all));
-        }
-        if (all == BN_OK) {
-            unsigned long long r = rays;
-            st = bn_dist_sum(out->mean, n * nl * 3, err);
-            if (st == BN_OK)
-                st = bn_dist_sum(out->se, n * nl * 3, err);
-            if (st == BN_OK)
-                st = bn_dist_sum_u64(&r, 1, err);
-            if (st != BN_OK) {
-                bn_trace_patches_free(out);
-                return st;
-            }
-            rays = r;
-        }
+    if ((st = bn__trace_combine(no_buffers, out->mean, out->se, 1, n * nl * 3, &rays, err)) != BN_OK) {
+        bn_trace_patches_free(out);
+        return st;
     }
     out->rays = rays;
     out->seconds = bn__now() - t0;
@@ -202,4 +186,20 @@ void bn_trace_patches_power(const bn_scene *s, const bn_trace_patches *r, int la
         watts[c] *= BN_PI;
         se[c] = BN_PI * sqrt(v[c]);
     }
+}
+
+bn_status bn__trace_combine(int no_buffers, void *mean, void *spread, int dbl, size_t n, unsigned long long *rays,
+                            bn_error *err)
+{
+    bn_status here = no_buffers ? BN_ENOMEM : bn_interrupted(), all = bn_dist_agree(here), st;
+    if (all != BN_OK && here == BN_OK)
+        return bn_error_set(err, all, "trace: another MPI process failed (%s)", bn_status_str(all));
+    if (all != BN_OK)
+        return BN_OK;   /* this rank's own failure: reported by the caller */
+    st = dbl ? bn_dist_sum(mean, n, err) : bn_dist_sum_float(mean, n, err);
+    if (st == BN_OK)
+        st = dbl ? bn_dist_sum(spread, n, err) : bn_dist_sum_float(spread, n, err);
+    if (st == BN_OK)
+        st = bn_dist_sum_u64(rays, 1, err);
+    return st;
 }

@@ -26,6 +26,11 @@ typedef struct bn__tracer {
 
 bn_status bn__tracer_init(bn__tracer *t, const bn_rt *rt, const bn_trace_opts *o, bn_error *err);
 void bn__tracer_free(bn__tracer *t);
+/* Under mpirun, after each rank traced its own items into zeroed arrays: every rank's status first
+ * (all stop together), then mean and spread (doubles or floats: dbl) and the ray count summed over
+ * ranks (bn_dist_sum: each element from one rank, exact). BN_OK, or the status to stop with. */
+bn_status bn__trace_combine(int no_buffers, void *mean, void *spread, int dbl, size_t n, unsigned long long *rays,
+                            bn_error *err);
 
 /* A uniform point on patch p from two uniforms. */
 void bn__tracer_patch_point(const bn__tracer *t, size_t p, double u1, double u2, double u3, double x[3]);
