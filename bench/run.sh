@@ -503,7 +503,7 @@ if command -v mpirun >/dev/null 2>&1 && grep -q "BOUNCE_MPI:BOOL=ON" "$build/CMa
             continue
         fi
         links=$(sed -n 's/.* of the \([0-9]*\) kept.*/\1/p' "$work/mpi$np.err" | tail -1)
-        most=$(sed -n 's/.* store \([0-9]*\) links at most.*/\1/p' "$work/mpi$np.err" | tail -1)
+        most=$(sed -n 's/.* stores* \([0-9]*\) links at most.*/\1/p' "$work/mpi$np.err" | tail -1)
         peak=$(sed -n 's/.*Maximum resident set size (kbytes): //p' "$work/mpi$np.err" | sort -n | tail -1 | awk '{ printf "%.0f", $1 / 1024 }')
         kmib=$(sed -n 's/.*K hierarchy (\([0-9.]*\) MiB).*/\1/p' "$work/mpi$np.err" | tail -1)
         npatch=$(grep -vc '^#' "$work/mpi$np.csv"); npatch=$((npatch - 1))

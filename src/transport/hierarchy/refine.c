@@ -708,8 +708,8 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
             }
             for (int k = 0; k < bn_dist_size(); k++)
                 most = all[k] > most ? all[k] : most;
-            bn_logf(&o->log, BN_LOG_INFO, "hierarchy: %d process%s store %llu links at most each (%.2f of the %zu "
-                    "kept, F > 0; rank 0 %llu)", bn_dist_size(), bn_dist_size() > 1 ? "es" : "", most,
+            bn_logf(&o->log, BN_LOG_INFO, "hierarchy: %d process%s %llu links at most each (%.2f of the %zu "
+                    "kept, F > 0; rank 0 %llu)", bn_dist_size(), bn_dist_size() > 1 ? "es store" : " stores", most,
                     rep->links ? (double)most / (double)rep->links : 0.0, rep->links, all[0]);
             free(all);
         }
