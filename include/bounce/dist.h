@@ -31,6 +31,11 @@ int bn_dist_mine(size_t i);
 bn_status bn_dist_sum(double *x, size_t n, bn_error *err);
 bn_status bn_dist_sum_float(float *x, size_t n, bn_error *err);
 bn_status bn_dist_sum_u64(unsigned long long *x, size_t n, bn_error *err);
+/* Every rank sends count[q] items of `item` bytes to rank q (send: the blocks in rank order) and
+ * receives what every rank sends it, in rank order, into *recv (malloc'd; *nrecv items; NULL when
+ * none). One process: a copy of its own block. */
+bn_status bn_dist_exchange(const void *send, const size_t *count, size_t item, void **recv, size_t *nrecv,
+                           bn_error *err);
 /* Any rank's failure ends them all: the largest status over ranks (BN_OK only when all are OK). */
 bn_status bn_dist_agree(bn_status st);
 /* Ends every rank (MPI_Abort) with exit code `code`; a plain exit without MPI. */

@@ -2,6 +2,7 @@
 #include "bounce/dist.h"
 #include "base/internal.h"
 
+#include <limits.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -109,6 +110,75 @@ bn_status bn_dist_sum_u64(unsigned long long *x, size_t n, bn_error *err)
     (void)n;
     (void)err;
 #endif
+    return BN_OK;
+}
+
+bn_status bn_dist_exchange(const void *send, const size_t *count, size_t item, void **recv, size_t *nrecv,
+                           bn_error *err)
+{
+    size_t P = (size_t)bn__size, total = 0;
+    *recv = NULL;
+    *nrecv = 0;
+#ifdef BN_HAVE_MPI
+    if (P > 1) {
+        int *sc = bn__calloc(4 * P, sizeof(int)), *sd = sc + P, *rc = sc + 2 * P, *rd = sc + 3 * P;
+        unsigned long long *all = bn__calloc(P * P, sizeof *all);
+        MPI_Datatype type;
+        size_t off = 0;
+        bn_status st = BN_OK;
+        if (!sc || !all) {
+            free(sc);
+            free(all);
+            return bn_error_set(err, BN_ENOMEM, "out of memory for an exchange among %zu processes", P);
+        }
+        /* every rank's counts to every rank (as a sum: each row is one rank's) */
+        for (size_t q = 0; q < P; q++)
+            all[(size_t)bn__rank * P + q] = count[q];
+        if ((st = bn_dist_sum_u64(all, P * P, err)) != BN_OK)
+            goto out;
+        for (size_t q = 0; q < P; q++) {
+            unsigned long long in = all[q * P + (size_t)bn__rank];
+            if (count[q] > INT_MAX || in > INT_MAX || off > INT_MAX || total > INT_MAX) {
+                st = bn_error_set(err, BN_ENOMEM, "an exchange of more than 2^31 items between two processes");
+                goto out;
+            }
+            sc[q] = (int)count[q];
+            sd[q] = (int)off;
+            rc[q] = (int)in;
+            rd[q] = (int)total;
+            off += count[q];
+            total += in;
+        }
+        if (!(*recv = bn__malloc_array(total ? total : 1, item))) {
+            st = bn_error_set(err, BN_ENOMEM, "out of memory for %zu items received", total);
+            goto out;
+        }
+        if (MPI_Type_contiguous((int)item, MPI_BYTE, &type) != MPI_SUCCESS || MPI_Type_commit(&type) != MPI_SUCCESS) {
+            st = bn_error_set(err, BN_EINTERNAL, "MPI_Type_contiguous of %zu bytes failed", item);
+            goto out;
+        }
+        if (MPI_Alltoallv(send, sc, sd, type, *recv, rc, rd, type, MPI_COMM_WORLD) != MPI_SUCCESS)
+            st = bn_error_set(err, BN_EINTERNAL, "MPI_Alltoallv of %zu items failed (rank %d of %d)", total, bn__rank,
+                              bn__size);
+        MPI_Type_free(&type);
+    out:
+        free(sc);
+        free(all);
+        if (st != BN_OK) {
+            free(*recv);
+            *recv = NULL;
+            return st;
+        }
+        *nrecv = total;
+        return BN_OK;
+    }
+#endif
+    total = count[0];
+    if (!(*recv = bn__malloc_array(total ? total : 1, item)))
+        return bn_error_set(err, BN_ENOMEM, "out of memory for %zu items", total);
+    if (total)
+        memcpy(*recv, send, total * item);
+    *nrecv = total;
     return BN_OK;
 }
 

@@ -86,11 +86,10 @@ typedef struct bn__hop {
     uint32_t *leaf_index;     /* per node: its first leaf's index in leaf order (t->lo) */
 } bn__hop;
 
-/* This rank's leaves in leaf order: [lo, hi) of npatch, an equal share (rank order). */
-void bn__dist_leaves(size_t npatch, size_t *lo, size_t *hi);
-
-/* Takes links (sorted by r then s; F > 0 only) and the tree's topology (copied). */
-bn_status bn__hop_make(const bn__tree *t, const bn__link *links, size_t nlinks, bn__hop **out, bn_error *err);
+/* Takes links (sorted by r then s; F > 0 only) and the tree's topology (copied); [plo, phi): this
+ * rank's leaves in leaf order (all of them with one process). */
+bn_status bn__hop_make(const bn__tree *t, const bn__link *links, size_t nlinks, size_t plo, size_t phi, bn__hop **out,
+                       bn_error *err);
 bn_status bn__hop_apply(void *ctx, const double *x, double *y, bn_error *err);
 void bn__hop_destroy(void *ctx);
 size_t bn__hop_bytes(const void *ctx);

@@ -66,7 +66,8 @@ size_t bn__hop_bytes(const void *ctx)
 }
 
 
-bn_status bn__hop_make(const bn__tree *t, const bn__link *links, size_t nlinks, bn__hop **out, bn_error *err)
+bn_status bn__hop_make(const bn__tree *t, const bn__link *links, size_t nlinks, size_t plo, size_t phi, bn__hop **out,
+                       bn_error *err)
 {
     bn__hop *h = bn__calloc(1, sizeof *h);
     size_t n = t->n;
@@ -89,7 +90,8 @@ bn_status bn__hop_make(const bn__tree *t, const bn__link *links, size_t nlinks, 
     h->Bn = bn__malloc_array(3 * n, sizeof(double));
     h->leaf_index = bn__malloc_array(n, sizeof(uint32_t));
     h->distributed = bn_dist_size() > 1;
-    bn__dist_leaves(t->npatch, &h->plo, &h->phi);
+    h->plo = plo;
+    h->phi = phi;
     h->G = bn__malloc_array(3 * n, sizeof(double));
     if (!h->child || !h->parent || !h->leaf_patch || !h->cl || !h->area || !h->normal || !h->start || !h->src ||
         !h->F || !h->dir || !h->Bn || !h->G || !h->leaf_index)

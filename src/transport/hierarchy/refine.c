@@ -53,12 +53,14 @@ typedef struct bn__ref {
     int force;                /* eps == 0: refine every link to the patches */
     double tol, ray_eps;
     bn__ff_pairs *pairs;
-    size_t plo, phi;          /* this rank's leaves (all of them with one process): bn__dist_leaves */
+    size_t plo, phi;          /* this rank's leaves (all of them with one process): bound[rank .. rank + 1] */
+    size_t *bound;            /* P + 1: every rank's first leaf, then npatch */
 } bn__ref;
 
-void bn__dist_leaves(size_t npatch, size_t *lo, size_t *hi)
+/* The first split, before any link is known: an equal share of the leaves, in rank order (rank k's). */
+static void bn__dist_leaves_of(size_t npatch, size_t k, size_t *lo, size_t *hi)
 {
-    size_t P = (size_t)bn_dist_size(), k = (size_t)bn_dist_rank();
+    size_t P = (size_t)bn_dist_size();
     *lo = npatch * k / P;
     *hi = npatch * (k + 1) / P;
 }
@@ -477,8 +479,8 @@ static size_t bn__compact(bn__vec *v)
 /* L ~ E + K_H L by a few Jacobi sweeps over the current links: the brightness the next pass's
  * oracle weighs links by. L comes in as the previous pass's estimate (E before the first): the links
  * change little after the second pass, so a few sweeps settle it again. */
-static bn_status bn__estimate(const bn__tree *t, bn__vec *links, const double *E, const double *rho, double eps_abs,
-                              double *L, bn_error *err)
+static bn_status bn__estimate(const bn__tree *t, bn__vec *links, size_t plo, size_t phi, const double *E,
+                              const double *rho, double eps_abs, double *L, bn_error *err)
 {
     bn__vec live = *links;
     bn__hop *h = NULL;
@@ -495,7 +497,7 @@ static bn_status bn__estimate(const bn__tree *t, bn__vec *links, const double *E
         memcpy(copy, links->a, links->n * sizeof *copy);
     live.a = copy;
     live.n = bn__compact(&live);
-    st = bn__hop_make(t, live.a, live.n, &h, err);
+    st = bn__hop_make(t, live.a, live.n, plo, phi, &h, err);
     for (int it = 0; st == BN_OK && it < 200; it++) {
         double change = 0;
         st = bn__hop_apply(h, L, y, err);
@@ -510,6 +512,120 @@ static bn_status bn__estimate(const bn__tree *t, bn__vec *links, const double *E
     bn__hop_destroy(h);
     free(copy);
     free(y);
+    return st;
+}
+
+/* A rank's share is rebalanced when its most loaded rank holds more than this times the mean. */
+#define BN__IMBALANCE 1.05
+/* A link's cost spread over its receiver's leaves, in fixed point (integer sums: every rank gets the
+ * same figures, so the same ranges). */
+#define BN__COST_ONE ((unsigned long long)1 << 24)
+
+/* Under mpirun, after a pass: the leaves are split again so that every rank's receivers hold about the
+ * same number of links (each link's cost spread evenly over its receiver's leaves, counted once over
+ * ranks and summed), and the links move to the ranks whose new leaves their receivers meet (one
+ * all-to-all; each link is sent by the rank that counted it, so no link arrives twice). The links of a
+ * receiver do not depend on which rank refines them, so the answer stays one process's. *moved: links
+ * this rank received from others. */
+static bn_status bn__rebalance(bn__ref *R, bn__vec *work, double *imbalance, size_t *moved, bn_error *err)
+{
+    const bn__tree *t = R->t;
+    size_t np = t->npatch, P = (size_t)bn_dist_size(), me = (size_t)bn_dist_rank(), nrecv = 0;
+    unsigned long long *c = NULL, total = 0, most = 0;
+    size_t *bound = NULL, *cnt = NULL, *at = NULL;
+    bn__link *send = NULL;
+    void *recv = NULL;
+    bn_status st = BN_OK;
+    *imbalance = 1;
+    *moved = 0;
+    if (P == 1)
+        return BN_OK;
+    c = bn__calloc(np + 1, sizeof *c);
+    bound = bn__calloc(P + 1, sizeof *bound);
+    cnt = bn__calloc(2 * P, sizeof *cnt);
+    if (!c || !bound || !cnt) {
+        st = bn_error_set(err, BN_ENOMEM, "out of memory to balance %zu leaves among %zu processes", np, P);
+        goto done;
+    }
+    at = cnt + P;
+    for (size_t l = 0; l < work->n; l++) {   /* a difference array of per-leaf cost */
+        uint32_t r = work->a[l].r;
+        if (bn__receiver_counted(R, r)) {
+            unsigned long long w = BN__COST_ONE / (t->hi[r] - t->lo[r]);
+            c[t->lo[r]] += w;
+            c[t->hi[r]] -= w;   /* modular arithmetic: the prefix sums come out right */
+        }
+    }
+    if ((st = bn_dist_sum_u64(c, np + 1, err)) != BN_OK)
+        goto done;
+    for (size_t i = 1; i <= np; i++)
+        c[i] += c[i - 1];
+    for (size_t i = 0; i < np; i++)
+        total += c[i];
+    if (total == 0)
+        goto done;
+    for (size_t q = 0; q < P; q++) {   /* the present split's load */
+        unsigned long long load = 0;
+        for (size_t i = R->bound[q]; i < R->bound[q + 1]; i++)
+            load += c[i];
+        most = load > most ? load : most;
+    }
+    *imbalance = (double)most * (double)P / (double)total;
+    if (*imbalance <= BN__IMBALANCE)
+        goto done;
+    {   /* rank q's leaves begin where the running cost first reaches q/P of the total */
+        unsigned long long run = 0;
+        size_t q = 1;
+        for (size_t i = 0; i < np && q < P; i++) {
+            while (q < P && (long double)run * P >= (long double)total * q)
+                bound[q++] = i;
+            run += c[i];
+        }
+        while (q < P)
+            bound[q++] = np;
+        bound[P] = np;
+    }
+    /* each link this rank counted goes to every rank whose new leaves its receiver meets */
+    for (int pass = 0; pass < 2; pass++) {
+        size_t off = 0;
+        for (size_t q = 0; q < P; q++) {
+            at[q] = off;
+            off += cnt[q];
+        }
+        if (pass == 1 && !(send = bn__malloc_array(off ? off : 1, sizeof *send))) {
+            st = bn_error_set(err, BN_ENOMEM, "out of memory for %zu links to move among processes", off);
+            goto done;
+        }
+        for (size_t l = 0; l < work->n; l++) {
+            uint32_t r = work->a[l].r;
+            if (!bn__receiver_counted(R, r))
+                continue;
+            for (size_t q = 0; q < P; q++)
+                if (t->lo[r] < bound[q + 1] && t->hi[r] > bound[q]) {
+                    if (pass == 0)
+                        cnt[q]++;
+                    else
+                        send[at[q]++] = work->a[l];
+                }
+        }
+    }
+    free(work->a);
+    work->a = NULL;
+    work->n = work->cap = 0;
+    if ((st = bn_dist_exchange(send, cnt, sizeof *send, &recv, &nrecv, err)) != BN_OK)
+        goto done;
+    *moved = nrecv - cnt[me];
+    work->a = recv;
+    work->n = work->cap = nrecv;
+    qsort(work->a, work->n, sizeof *work->a, bn__link_cmp);
+    memcpy(R->bound, bound, (P + 1) * sizeof *bound);
+    R->plo = bound[me];
+    R->phi = bound[me + 1];
+done:
+    free(send);
+    free(c);
+    free(bound);
+    free(cnt);
     return st;
 }
 
@@ -586,7 +702,14 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
     R.ray_eps = bn_rt_epsilon(rt);
     R.force = o->eps == 0;
     R.min_area = o->min_area > 0 ? o->min_area : o->min_area == 0 ? ldexp(t.area[0], -20) : 0;
-    bn__dist_leaves(np, &R.plo, &R.phi);
+    if (!(R.bound = bn__calloc((size_t)bn_dist_size() + 1, sizeof *R.bound))) {
+        st = bn_error_set(err, BN_ENOMEM, "out of memory");
+        goto done;
+    }
+    for (int q = 0; q < bn_dist_size(); q++)
+        bn__dist_leaves_of(np, (size_t)q, &R.bound[q], &R.bound[q + 1]);
+    R.plo = R.bound[bn_dist_rank()];
+    R.phi = R.bound[bn_dist_rank() + 1];
     E = bn__malloc_array(3 * np, sizeof(double));
     rho = bn__malloc_array(3 * np, sizeof(double));
     L = bn__malloc_array(3 * np, sizeof(double));
@@ -669,7 +792,20 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
         }
         if (R.force || pass + 1 == o->max_passes)
             break;   /* eps 0: the links are at the patches already; nothing can split */
-        if ((st = bn__estimate(&t, &work, E, rho, R.eps_abs, L, err)) != BN_OK)
+        {
+            double imb;
+            unsigned long long mv = 0;
+            size_t moved;
+            if ((st = bn__rebalance(&R, &work, &imb, &moved, err)) != BN_OK)
+                goto done;
+            mv = moved;
+            if (imb > BN__IMBALANCE && (st = bn_dist_sum_u64(&mv, 1, err)) != BN_OK)
+                goto done;
+            if (imb > BN__IMBALANCE)
+                bn_logf(&o->log, BN_LOG_INFO, "hierarchy: leaves split again among %d processes (the most loaded "
+                        "held %.2fx the mean); %llu links moved", bn_dist_size(), imb, mv);
+        }
+        if ((st = bn__estimate(&t, &work, R.plo, R.phi, E, rho, R.eps_abs, L, err)) != BN_OK)
             goto done;
         bn__bmax(&t, L, R.Bmax);
     }
@@ -714,7 +850,7 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
             free(all);
         }
     }
-    if ((st = bn__hop_make(&t, work.a, work.n, &h, err)) != BN_OK)
+    if ((st = bn__hop_make(&t, work.a, work.n, R.plo, R.phi, &h, err)) != BN_OK)
         goto done;
     rep->patches = np;
     rep->nodes = t.n;
@@ -742,6 +878,7 @@ done:
     bn__ff_pairs_destroy(R.pairs);
     free(R.Bmax);
     free(R.fan0);
+    free(R.bound);
     free(work.a);
     free(E);
     free(rho);
