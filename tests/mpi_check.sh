@@ -6,8 +6,9 @@
 #   (non-'#' lines);
 # - the hierarchical solve (each rank refines and gathers its share of the receivers): every row of
 #   the solve CSV with every bounce term, and every pixel of every layer of `bounce bounces`' EXR;
-# - the bunny box (../shared, skipped visibly without it): a short trace, and the hierarchical solve
-#   at eps 1e-2 under -np 2;
+# - the bunny box (../shared, skipped visibly without it): a short trace under -np 2 and 4; the
+#   hierarchical solve's rows (bounces --patches-out) and EXR, and the crosscheck's figures, under
+#   -np 2 and 4 against -np 1;
 # - a rank killed, and SIGINT to mpirun: every rank ends, with a message, and no output is left;
 # - dense K under P > 1 is refused with a clear message (exit 2) and leaves no output.
 # usage: mpi_check.sh BOUNCE SOURCE_DIR WORK_DIR
@@ -30,7 +31,11 @@ check() {   # check CONDITION-EXIT-CODE MESSAGE
 run() {   # run NP ARGS...: bounce under mpirun (NP 0: without mpirun)
     local np=$1
     shift
-    if [ "$np" = 0 ]; then "$bounce" "$@"; else mpirun --oversubscribe -np "$np" "$bounce" "$@"; fi
+    # P ranks x T threads = the cores (two here): oversubscribed OpenMP threads spin at each barrier;
+    # the answer does not depend on T
+    local th=$(( $(nproc) / (np > 0 ? np : 1) ))
+    [ "$th" -lt 1 ] && th=1
+    if [ "$np" = 0 ]; then "$bounce" "$@"; else mpirun --oversubscribe -np "$np" -x OMP_NUM_THREADS=$th "$bounce" "$@"; fi
 }
 cornell="$src/meshes/cornell-box.obj"
 targs=(trace "$cornell" --unit mm --spp 8 --patches 300 --size 48x48 -n 3 -q)
@@ -121,13 +126,26 @@ if [ -f "$bb" ]; then
         cmp -s <(grep -v '^#' b0.csv) <(grep -v '^#' "b$np.csv") && idiff -fail 0 -warn 0 -a b0.exr "b$np.exr" >/dev/null 2>&1
         check $? "bunny box -np $np: every per-patch row ($(grep -vc '^#' b0.csv)) and pixel equals one process's"
     done
-    hargs=(solve "$bb" --unit mm --eps 1e-2 -n 3 -q)
-    run 0 "${hargs[@]}" -o h0.csv 2>/dev/null
-    check $? "bunny box: hierarchical solve at eps 1e-2, one process"
-    run 2 "${hargs[@]}" -o h2.csv 2>h2.err
-    check $? "bunny box: hierarchical solve under -np 2"
-    cmp -s <(grep -v '^#' h0.csv) <(grep -v '^#' h2.csv)
-    check $? "bunny box -np 2: every row of the solve equals one process's ($(grep -vc '^#' h0.csv) rows)"
+    # the hierarchical solve and its images (eps 1: the near field alone, 5 M links, ~25 s a run) and the
+    # crosscheck over regions, under -np 2 and 4 against -np 1 (one process: the same code as without
+    # mpirun, which the Cornell box checks above)
+    hargs=(bounces "$bb" --unit mm --eps 1 -n 3 --size 32x32 --no-previews -q)
+    xargs=(crosscheck "$bb" --unit mm --eps 1 --regions 20 --spp 64 --disc none -q)
+    for np in 1 2 4; do
+        run "$np" "${hargs[@]}" -o "h$np.exr" --patches-out "h$np.csv" 2>"h$np.err"
+        check $? "bunny box: hierarchical bounces at eps 1 under -np $np"
+        run "$np" "${xargs[@]}" >"x$np.txt" 2>"x$np.err"
+        rc=$?
+        [ "$rc" = 0 ] || [ "$rc" = 6 ]   # 6: the verdict fails (eps 1, no discretisation allowance); the figures count
+        check $? "bunny box: crosscheck over 20 regions under -np $np (exit $rc)"
+        [ "$np" = 1 ] && continue
+        cmp -s <(grep -v '^#' h1.csv) <(grep -v '^#' "h$np.csv")
+        check $? "bunny box -np $np: every row of the solve, L and each term, equals one process's ($(grep -vc '^#' h1.csv) rows)"
+        idiff -fail 0 -warn 0 -a h1.exr "h$np.exr" >/dev/null 2>&1
+        check $? "bunny box -np $np: every pixel of E, KE, K2E, K3E, rest and L equals one process's"
+        cmp -s <(grep -v '^#' x1.txt) <(grep -v '^#' "x$np.txt")
+        check $? "bunny box -np $np: every crosscheck figure equals one process's ($(grep -c . "x$np.txt") lines)"
+    done
 else
     echo "SKIP (part): $bb is not there (../shared beside the checkout): the bunny box's rows not run"
 fi

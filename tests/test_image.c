@@ -399,12 +399,42 @@ BN_TEST(cli_bounces_cornell)
     float *data[32];
     int w, h;
     snprintf(cmd, sizeof cmd,
-             "bounces '%s' -n 2 -o '%s' --patches 150 --ff hemisphere --samples 256 --size 40x32 --spp 2 --quiet",
-             bn_test_path("meshes/cornell-box.obj"), bn_test_tmp("cb.exr"));
+             "bounces '%s' -n 2 -o '%s' --patches 150 --ff hemisphere --samples 256 --size 40x32 --spp 2 --quiet "
+             "--patches-out '%s'",
+             bn_test_path("meshes/cornell-box.obj"), bn_test_tmp("cb.exr"), bn_test_tmp("cb.csv"));
     int rc = bn_test_bounce(cmd, &out);
     if (rc != 0)
         BN_FAIL("bounce exited %d: %s", rc, out ? out : "");
     free(out);
+    /* --patches-out: the rows `bounce solve -n 2` writes for the same scene and options */
+    snprintf(cmd, sizeof cmd, "solve '%s' -n 2 -o '%s' --patches 150 --ff hemisphere --samples 256 --quiet",
+             bn_test_path("meshes/cornell-box.obj"), bn_test_tmp("cs.csv"));
+    rc = bn_test_bounce(cmd, &out);
+    if (rc != 0)
+        BN_FAIL("bounce solve exited %d: %s", rc, out ? out : "");
+    free(out);
+    {
+        FILE *a = fopen(bn_test_tmp("cb.csv"), "r"), *b = fopen(bn_test_tmp("cs.csv"), "r");
+        char la[4096], lb[4096];
+        int rows = 0;
+        BN_ASSERT(a && b);
+        for (;;) {
+            char *ra, *rb;
+            while ((ra = fgets(la, sizeof la, a)) && la[0] == '#') {
+            }
+            while ((rb = fgets(lb, sizeof lb, b)) && lb[0] == '#') {
+            }
+            BN_ASSERT((ra == NULL) == (rb == NULL));
+            if (!ra || !rb)
+                break;
+            if (strcmp(la, lb) != 0)
+                BN_FAIL("row %d differs: bounces: %s solve: %s", rows, la, lb);
+            rows++;
+        }
+        BN_ASSERT(rows > 100);   /* the header and a row per patch (--patches 150 is a target) */
+        fclose(a);
+        fclose(b);
+    }
     int nch = read_exr(bn_test_tmp("cb.exr"), names, data, 32, &w, &h, line, sizeof line);
     BN_ASSERT_EQ(nch, 15);   /* E KE K2E rest L */
     BN_ASSERT_EQ(w, 40);

@@ -139,6 +139,14 @@ void bn_cli_add_solution(bn_optset *s, bn_cli_solution *o);
 /* The pipeline's options from the CLI groups (ff and sol may be NULL: the library's defaults). */
 void bn_cli_pipeline_opts(const bn_cli_scene *so, const bn_cli_ff *ff, const bn_cli_solution *sol,
                           const bn_cli_common *c, bn_pipeline_opts *out);
+/* Provenance of a solve as `# key=value` lines (command, scene, unit, seed, form factors, the
+ * hierarchy's figures) into buf; the solver's keys follow in bn_cli_patches_csv_write. */
+void bn_cli_provenance_run(char *buf, size_t n, const bn_cli_common *c, const bn_pipeline_opts *po,
+                           const bn_pipeline *p);
+/* The per-patch CSV (atomic): prov, the solver's keys, then per patch L and, with_terms, every term
+ * K^k E kept. */
+bn_status bn_cli_patches_csv_write(const char *path, const char *prov, const bn_solve_opts *o, const bn_pipeline *p,
+                                  int with_terms, bn_error *err);
 /* The whole pipeline for `path` with the ray scene kept, solving (I - K) L = E keeping K^0 E ..
  * K^bounces E and rest; describe (may be NULL) receives the solver line for provenance. Prints
  * errors; returns the status. *p is the caller's to free, also on failure. */

@@ -58,7 +58,7 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
     bn_cli_ff ff;
     bn_cli_solution sol;
     bn_cli_camera co;
-    const char *pos[1], *out = "bounces.exr";
+    const char *pos[1], *out = "bounces.exr", *patches_out = NULL;
     int n = 3, half = 0, smooth = 0, no_previews = 0, tile = 320, rc;
     double ev = 0, crease = BN_BAKE_DEFAULT_CREASE;
     bn_error err;
@@ -94,6 +94,9 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
                                  "--smooth: faces whose normals differ by more are not blended (default 30)"});
     bn_optset_add(&set, (bn_opt){"no-previews", 0, BN_OPT_FLAG, &no_previews, NULL, 0, 0, NULL,
                                  "write the EXR only"});
+    bn_optset_add(&set, (bn_opt){"patches-out", 0, BN_OPT_STRING, &patches_out, NULL, 0, 0, "FILE.csv",
+                                 "also write the per-patch CSV of `bounce solve -n K` (L and every term) from the "
+                                 "same solution"});
     bn_optset_add(&set, (bn_opt){"tile", 0, BN_OPT_INT, &tile, NULL, 16, 4096, "PX",
                                  "largest tile width on the contact sheet (default 320)"});
     bn_cli_add_camera(&set, &co);
@@ -127,6 +130,15 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
         bo.threads = c->threads;
         bo.log = (bn_log){bn_cli_stdout_log, c, c->quiet};
         st = bn__bounces_write(&p, &cam, n, &ff, &sol, c, &bo, &err);
+    }
+    if (st == BN_OK && patches_out) {
+        bn_pipeline_opts po;
+        char prov[4096];
+        bn_cli_pipeline_opts(&so, &ff, &sol, c, &po);
+        po.solve.bounces = n;
+        po.solve.method = p.method_used;
+        bn_cli_provenance_run(prov, sizeof prov, c, &po, &p);
+        st = bn_cli_patches_csv_write(patches_out, prov, &po.solve, &p, 1, &err);
     }
     rc = st == BN_OK ? 0 : err.status != BN_OK ? bn_cli_fail(&err) : bn_status_exit_code(st);
     bn_pipeline_free(&p);
