@@ -485,10 +485,11 @@ if command -v mpirun >/dev/null 2>&1 && grep -q "BOUNCE_MPI:BOOL=ON" "$build/CMa
         echo "--transport hierarchical -n 3\` (the default mesh, eps 1e-3), each rank under \`/usr/bin/time -v\`; P x T = 2"
         echo "cores (P = 4: oversubscribed, T = 1). Links: those kept (F > 0), all and the most one rank stores (the log's"
         echo "\"store N links at most each\"): a rank holds its receivers' links and those of the shared top of the tree."
-        echo "Communication per application of K_H: one all-reduce of 3 doubles per patch (24 B x patches from each"
-        echo "rank), whatever the link count. Every row of the CSV is identical to P = 1 (cmp)."
+        echo "The leaves are split again after each refinement pass by the links measured (see the log). Communication per"
+        echo "application of K_H: one all-gather of each rank's leaves, 3 doubles each, in leaf order: every rank receives"
+        echo "24 B x (patches it does not own), whatever the link count. Every row of the CSV is identical to P = 1 (cmp)."
         echo
-        echo "| P | threads per rank | wall s | links (all) | links, most on one rank | share | peak MiB per rank (largest) | K_H MiB (rank 0) | all-reduce B per K application | rows identical to P = 1 |"
+        echo "| P | threads per rank | wall s | links (all) | links, most on one rank | share | peak MiB per rank (largest) | K_H MiB (rank 0) | all-gather B received per rank per K application (largest) | rows identical to P = 1 |"
         echo "|---|---|---|---|---|---|---|---|---|---|"
     } >>"$report"
     for np in 1 2 4; do
@@ -505,11 +506,11 @@ if command -v mpirun >/dev/null 2>&1 && grep -q "BOUNCE_MPI:BOOL=ON" "$build/CMa
         links=$(sed -n 's/.* of the \([0-9]*\) kept.*/\1/p' "$work/mpi$np.err" | tail -1)
         most=$(sed -n 's/.* stores* \([0-9]*\) links at most.*/\1/p' "$work/mpi$np.err" | tail -1)
         peak=$(sed -n 's/.*Maximum resident set size (kbytes): //p' "$work/mpi$np.err" | sort -n | tail -1 | awk '{ printf "%.0f", $1 / 1024 }')
+        rbytes=$(sed -n 's/.*a process receives at most \([0-9]*\) bytes.*/\1/p' "$work/mpi$np.err" | tail -1)
         kmib=$(sed -n 's/.*K hierarchy (\([0-9.]*\) MiB).*/\1/p' "$work/mpi$np.err" | tail -1)
-        npatch=$(grep -vc '^#' "$work/mpi$np.csv"); npatch=$((npatch - 1))
         same="-"
         [ "$np" != 1 ] && { cmp -s <(grep -v '^#' "$work/mpi1.csv") <(grep -v '^#' "$work/mpi$np.csv") && same=yes || same=NO; }
-        echo "| $np | $th | $(awk -v a="$t0" -v b="$t1" 'BEGIN { printf "%.2f", b - a }') | $links | $most | $(awk -v m="$most" -v l="$links" 'BEGIN { if (l > 0) printf "%.2f", m / l }') | $peak | $kmib | $(( np > 1 ? 24 * npatch : 0 )) | $same |" >>"$report"
+        echo "| $np | $th | $(awk -v a="$t0" -v b="$t1" 'BEGIN { printf "%.2f", b - a }') | $links | $most | $(awk -v m="$most" -v l="$links" 'BEGIN { if (l > 0) printf "%.2f", m / l }') | $peak | $kmib | ${rbytes:-?} | $same |" >>"$report"
     done
     echo >>"$report"
 fi

@@ -31,6 +31,9 @@ int bn_dist_mine(size_t i);
 bn_status bn_dist_sum(double *x, size_t n, bn_error *err);
 bn_status bn_dist_sum_float(float *x, size_t n, bn_error *err);
 bn_status bn_dist_sum_u64(unsigned long long *x, size_t n, bn_error *err);
+/* In place: rank q's block x[bound[q] * width .. bound[q + 1] * width) goes to every rank (bound: P + 1
+ * nondecreasing element offsets, the same on every rank). Values are copied, not combined: exact. */
+bn_status bn_dist_allgather(double *x, const size_t *bound, size_t width, bn_error *err);
 /* Every rank sends count[q] items of `item` bytes to rank q (send: the blocks in rank order) and
  * receives what every rank sends it, in rank order, into *recv (malloc'd; *nrecv items; NULL when
  * none). One process: a copy of its own block. */

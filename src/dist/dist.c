@@ -113,6 +113,39 @@ bn_status bn_dist_sum_u64(unsigned long long *x, size_t n, bn_error *err)
     return BN_OK;
 }
 
+bn_status bn_dist_allgather(double *x, const size_t *bound, size_t width, bn_error *err)
+{
+#ifdef BN_HAVE_MPI
+    size_t P = (size_t)bn__size;
+    if (P > 1) {
+        int *cnt = bn__calloc(2 * P, sizeof(int)), *disp;
+        bn_status st = BN_OK;
+        if (!cnt)
+            return bn_error_set(err, BN_ENOMEM, "out of memory for an all-gather among %zu processes", P);
+        disp = cnt + P;
+        if (bound[P] * width > INT_MAX) {
+            free(cnt);
+            return bn_error_set(err, BN_ENOMEM, "an all-gather of more than 2^31 values");
+        }
+        for (size_t q = 0; q < P; q++) {
+            cnt[q] = (int)((bound[q + 1] - bound[q]) * width);
+            disp[q] = (int)(bound[q] * width);
+        }
+        if (MPI_Allgatherv(MPI_IN_PLACE, 0, MPI_DATATYPE_NULL, x, cnt, disp, MPI_DOUBLE, MPI_COMM_WORLD) != MPI_SUCCESS)
+            st = bn_error_set(err, BN_EINTERNAL, "MPI_Allgatherv of %zu values failed (rank %d of %d)",
+                              bound[P] * width, bn__rank, bn__size);
+        free(cnt);
+        return st;
+    }
+#else
+    (void)x;
+    (void)bound;
+    (void)width;
+#endif
+    (void)err;
+    return BN_OK;
+}
+
 bn_status bn_dist_exchange(const void *send, const size_t *count, size_t item, void **recv, size_t *nrecv,
                            bn_error *err)
 {

@@ -78,17 +78,18 @@ typedef struct bn__hop {
     uint16_t *dir;            /* per link: the direction to the source (cluster receivers) */
     double *Bn, *G;           /* 3n each: scratch of apply */
     double *Gv;               /* 9 per cluster: what it gathers, per channel as a vector */
-    /* under mpirun (P > 1): this rank's leaves are [plo, phi) in the tree's leaf order; it holds the
-     * links of every receiver whose leaves meet that range, so its leaves' values are exact, and apply
-     * sums every rank's leaves (bn_dist_sum: one rank per element, so one process's bits) */
+    /* under mpirun (P > 1): rank q's leaves are [bound[q], bound[q + 1]) in the tree's leaf order; a rank
+     * holds the links of every receiver whose leaves meet its own, so its leaves' values are exact, and
+     * apply all-gathers every rank's leaves in leaf order (values copied: one process's bits) */
     int distributed;
-    size_t plo, phi;
-    uint32_t *leaf_index;     /* per node: its first leaf's index in leaf order (t->lo) */
+    size_t plo, phi, *bound;
+    uint32_t *order;          /* npatch: patches in leaf order (P > 1) */
+    double *xchg;             /* 3 npatch: the leaves' values in leaf order (P > 1) */
 } bn__hop;
 
-/* Takes links (sorted by r then s; F > 0 only) and the tree's topology (copied); [plo, phi): this
- * rank's leaves in leaf order (all of them with one process). */
-bn_status bn__hop_make(const bn__tree *t, const bn__link *links, size_t nlinks, size_t plo, size_t phi, bn__hop **out,
+/* Takes links (sorted by r then s; F > 0 only) and the tree's topology (copied); bound: P + 1, every
+ * rank's first leaf in leaf order, then npatch (copied). */
+bn_status bn__hop_make(const bn__tree *t, const bn__link *links, size_t nlinks, const size_t *bound, bn__hop **out,
                        bn_error *err);
 bn_status bn__hop_apply(void *ctx, const double *x, double *y, bn_error *err);
 void bn__hop_destroy(void *ctx);

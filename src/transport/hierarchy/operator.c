@@ -52,7 +52,9 @@ void bn__hop_destroy(void *ctx)
     free(h->F);
     free(h->dir);
     free(h->Bn);
-    free(h->leaf_index);
+    free(h->bound);
+    free(h->order);
+    free(h->xchg);
     free(h->G);
     free(h->Gv);
     free(h);
@@ -61,12 +63,13 @@ void bn__hop_destroy(void *ctx)
 size_t bn__hop_bytes(const void *ctx)
 {
     const bn__hop *h = ctx;
-    return h->n * (5 * sizeof(uint32_t) + sizeof(double) + 3 * sizeof(float) + sizeof(size_t) + 6 * sizeof(double)) +
-           h->nclusters * 9 * sizeof(double) + h->nlinks * (sizeof(uint32_t) + sizeof(float) + sizeof(uint16_t));
+    return h->n * (4 * sizeof(uint32_t) + sizeof(double) + 3 * sizeof(float) + sizeof(size_t) + 6 * sizeof(double)) +
+           h->nclusters * 9 * sizeof(double) + h->nlinks * (sizeof(uint32_t) + sizeof(float) + sizeof(uint16_t)) +
+           (h->distributed ? h->npatch * (sizeof(uint32_t) + 3 * sizeof(double)) : 0);
 }
 
 
-bn_status bn__hop_make(const bn__tree *t, const bn__link *links, size_t nlinks, size_t plo, size_t phi, bn__hop **out,
+bn_status bn__hop_make(const bn__tree *t, const bn__link *links, size_t nlinks, const size_t *bound, bn__hop **out,
                        bn_error *err)
 {
     bn__hop *h = bn__calloc(1, sizeof *h);
@@ -88,20 +91,28 @@ bn_status bn__hop_make(const bn__tree *t, const bn__link *links, size_t nlinks, 
     h->F = bn__malloc_array(nlinks ? nlinks : 1, sizeof(float));
     h->dir = bn__calloc(nlinks ? nlinks : 1, sizeof(uint16_t));
     h->Bn = bn__malloc_array(3 * n, sizeof(double));
-    h->leaf_index = bn__malloc_array(n, sizeof(uint32_t));
     h->distributed = bn_dist_size() > 1;
-    h->plo = plo;
-    h->phi = phi;
+    if (h->distributed) {
+        size_t P = (size_t)bn_dist_size();
+        h->bound = bn__malloc_array(P + 1, sizeof *h->bound);
+        h->order = bn__malloc_array(t->npatch, sizeof(uint32_t));
+        h->xchg = bn__malloc_array(3 * t->npatch, sizeof(double));
+        if (!h->bound || !h->order || !h->xchg)
+            goto oom;
+        memcpy(h->bound, bound, (P + 1) * sizeof *h->bound);
+        memcpy(h->order, t->order, t->npatch * sizeof(uint32_t));
+        h->plo = bound[bn_dist_rank()];
+        h->phi = bound[bn_dist_rank() + 1];
+    }
     h->G = bn__malloc_array(3 * n, sizeof(double));
     if (!h->child || !h->parent || !h->leaf_patch || !h->cl || !h->area || !h->normal || !h->start || !h->src ||
-        !h->F || !h->dir || !h->Bn || !h->G || !h->leaf_index)
+        !h->F || !h->dir || !h->Bn || !h->G)
         goto oom;
     memcpy(h->child, t->child, n * sizeof(uint32_t));
     memcpy(h->parent, t->parent, n * sizeof(uint32_t));
     memcpy(h->area, t->area, n * sizeof(double));
     for (size_t v = 0; v < n; v++) {
         h->leaf_patch[v] = t->child[v] == BN__NONE ? t->order[t->lo[v]] : BN__NONE;
-        h->leaf_index[v] = (uint32_t)t->lo[v];
         h->cl[v] = t->plane[v] < 0 ? (uint32_t)h->nclusters++ : BN__NONE;
         for (int c = 0; c < 3; c++)
             h->normal[3 * v + c] = (float)t->normal[3 * v + c];
@@ -203,19 +214,23 @@ bn_status bn__hop_apply(void *ctx, const double *x, double *y, bn_error *err)
         }
     }
     for (size_t v = 0; v < n; v++)
-        if (h->leaf_patch[v] != BN__NONE) {
-            double *yp = y + 3 * (size_t)h->leaf_patch[v];
-            if (!h->distributed || (h->leaf_index[v] >= h->plo && h->leaf_index[v] < h->phi))
-                memcpy(yp, G + 3 * v, 3 * sizeof(double));
-            else
-                yp[0] = yp[1] = yp[2] = 0;   /* another rank's leaf: its value comes in the sum */
-        }
-    {   /* every rank's status first (a rank that stops alone would leave the others in the sum) */
+        if (h->leaf_patch[v] != BN__NONE)
+            memcpy(y + 3 * (size_t)h->leaf_patch[v], G + 3 * v, 3 * sizeof(double));
+    {   /* every rank's status first (a rank that stops alone would leave the others in the collective) */
         bn_status st = bn_dist_agree(bn_interrupted());
         if (st != BN_OK)
             return bn_error_set(err, st, "interrupted");
     }
-    return h->distributed ? bn_dist_sum(y, 3 * h->npatch, err) : BN_OK;
+    if (h->distributed) {   /* this rank's leaves (exact here) in leaf order, every rank's gathered */
+        bn_status st;
+        for (size_t i = h->plo; i < h->phi; i++)
+            memcpy(h->xchg + 3 * i, y + 3 * (size_t)h->order[i], 3 * sizeof(double));
+        if ((st = bn_dist_allgather(h->xchg, h->bound, 3, err)) != BN_OK)
+            return st;
+        for (size_t i = 0; i < h->npatch; i++)
+            memcpy(y + 3 * (size_t)h->order[i], h->xchg + 3 * i, 3 * sizeof(double));
+    }
+    return BN_OK;
 }
 
 /* No link joins a node to itself or to a node above or below it, so F_H has a zero diagonal. */

@@ -479,7 +479,7 @@ static size_t bn__compact(bn__vec *v)
 /* L ~ E + K_H L by a few Jacobi sweeps over the current links: the brightness the next pass's
  * oracle weighs links by. L comes in as the previous pass's estimate (E before the first): the links
  * change little after the second pass, so a few sweeps settle it again. */
-static bn_status bn__estimate(const bn__tree *t, bn__vec *links, size_t plo, size_t phi, const double *E,
+static bn_status bn__estimate(const bn__tree *t, bn__vec *links, const size_t *bound, const double *E,
                               const double *rho, double eps_abs, double *L, bn_error *err)
 {
     bn__vec live = *links;
@@ -497,7 +497,7 @@ static bn_status bn__estimate(const bn__tree *t, bn__vec *links, size_t plo, siz
         memcpy(copy, links->a, links->n * sizeof *copy);
     live.a = copy;
     live.n = bn__compact(&live);
-    st = bn__hop_make(t, live.a, live.n, plo, phi, &h, err);
+    st = bn__hop_make(t, live.a, live.n, bound, &h, err);
     for (int it = 0; st == BN_OK && it < 200; it++) {
         double change = 0;
         st = bn__hop_apply(h, L, y, err);
@@ -805,7 +805,7 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
                 bn_logf(&o->log, BN_LOG_INFO, "hierarchy: leaves split again among %d processes (the most loaded "
                         "held %.2fx the mean); %llu links moved", bn_dist_size(), imb, mv);
         }
-        if ((st = bn__estimate(&t, &work, R.plo, R.phi, E, rho, R.eps_abs, L, err)) != BN_OK)
+        if ((st = bn__estimate(&t, &work, R.bound, E, rho, R.eps_abs, L, err)) != BN_OK)
             goto done;
         bn__bmax(&t, L, R.Bmax);
     }
@@ -842,15 +842,21 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
                 free(all);
                 goto done;
             }
-            for (int k = 0; k < bn_dist_size(); k++)
+            size_t recv = 0;   /* the all-gather per application: the leaves a rank does not own, 3 doubles each */
+            for (int k = 0; k < bn_dist_size(); k++) {
                 most = all[k] > most ? all[k] : most;
+                if (bn_dist_size() > 1 && np - (R.bound[k + 1] - R.bound[k]) > recv)
+                    recv = np - (R.bound[k + 1] - R.bound[k]);
+            }
             bn_logf(&o->log, BN_LOG_INFO, "hierarchy: %d process%s %llu links at most each (%.2f of the %zu "
-                    "kept, F > 0; rank 0 %llu)", bn_dist_size(), bn_dist_size() > 1 ? "es store" : " stores", most,
-                    rep->links ? (double)most / (double)rep->links : 0.0, rep->links, all[0]);
+                    "kept, F > 0; rank 0 %llu); per application of K a process receives at most %zu bytes",
+                    bn_dist_size(), bn_dist_size() > 1 ? "es store" : " stores", most,
+                    rep->links ? (double)most / (double)rep->links : 0.0, rep->links, all[0],
+                    recv * 3 * sizeof(double));
             free(all);
         }
     }
-    if ((st = bn__hop_make(&t, work.a, work.n, R.plo, R.phi, &h, err)) != BN_OK)
+    if ((st = bn__hop_make(&t, work.a, work.n, R.bound, &h, err)) != BN_OK)
         goto done;
     rep->patches = np;
     rep->nodes = t.n;
