@@ -100,8 +100,12 @@ typedef struct bn_bounces_opts {
     double crease;             /* smooth: faces whose normals differ by more are not blended (degrees) */
     int    auto_exposure;      /* preview exposure from L's 99th percentile (default 1); else `ev` */
     double ev;
-    uint64_t seed;             /* pixel jitter */
+    uint64_t seed;             /* pixel jitter, and the gather's samples */
     int    threads;            /* 0 = the caller's (all cores by default) */
+    int    gather;             /* 1: a final gather per pixel (bounce/gather.h; needs bounces >= 1); 0: patch values */
+    int    light_samples;      /* gather: shadow rays per emitting face per pixel sample */
+    int    gather_samples;     /* gather: hemisphere rays per pixel sample */
+    int    quiet;              /* no progress bar */
     const bn_attr *attrs;      /* provenance for every file (borrowed); the first 4 go into PNG text */
     size_t nattrs;
     bn_log log;                /* one note per file written */

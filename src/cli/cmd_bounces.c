@@ -4,6 +4,7 @@
 #include "cli/cli.h"
 #include "base/internal.h"
 #include "bounce/bake.h"
+#include "bounce/gather.h"
 
 #include <string.h>
 
@@ -59,7 +60,8 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
     bn_cli_solution sol;
     bn_cli_camera co;
     const char *pos[1], *out = "bounces.exr", *patches_out = NULL;
-    int n = 3, half = 0, smooth = 0, no_previews = 0, tile = 320, rc;
+    int n = 3, half = 0, smooth = 0, no_previews = 0, tile = 320, rc, gather = 0;
+    int light_samples = BN_GATHER_LIGHT_SAMPLES, gather_samples = BN_GATHER_HEMI_SAMPLES;
     double ev = 0, crease = BN_BAKE_DEFAULT_CREASE;
     bn_error err;
     bn_pipeline p;
@@ -94,6 +96,16 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
                                  "--smooth: faces whose normals differ by more are not blended (default 30)"});
     bn_optset_add(&set, (bn_opt){"no-previews", 0, BN_OPT_FLAG, &no_previews, NULL, 0, 0, NULL,
                                  "write the EXR only"});
+    bn_optset_add(&set, (bn_opt){"gather", 0, BN_OPT_CHOICE, &gather, "final|none", 0, 0, "final|none",
+                                 "final (default): each pixel computed at the point it sees: E there, KE from every "
+                                 "emitting face in closed form with shadow rays, K^k E (k >= 2), rest and L gathered "
+                                 "from the solution over the hemisphere; none: each pixel the value of the patch it "
+                                 "sees (to look at the patches themselves)"});
+    bn_optset_add(&set, (bn_opt){"light-samples", 0, BN_OPT_INT, &light_samples, NULL, 1, 65536, "N",
+                                 "gather: shadow rays per emitting face per pixel sample, rounded up to a square "
+                                 "(default 16)"});
+    bn_optset_add(&set, (bn_opt){"gather-samples", 0, BN_OPT_INT, &gather_samples, NULL, 1, 1 << 20, "N",
+                                 "gather: hemisphere rays per pixel sample, rounded up to a square (default 64)"});
     bn_optset_add(&set, (bn_opt){"patches-out", 0, BN_OPT_STRING, &patches_out, NULL, 0, 0, "FILE.csv",
                                  "also write the per-patch CSV of `bounce solve -n K` (L and every term) from the "
                                  "same solution"});
@@ -109,6 +121,10 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
         int prc;
         if (!bn_cli_parse_scene_command(&set, argc, argv, pos, &prc))
             return prc;
+    }
+    if (gather == 0 && n < 1) {
+        bn_error_set(&err, BN_EUSAGE, "--gather final needs -n 1 or more (KE is computed per pixel); or --gather none");
+        return bn_cli_fail(&err);
     }
     st = bn_cli_run_solution(pos[0], &so, &ff, &sol, c, n, &p, NULL, 0);
     if (st == BN_OK)
@@ -128,6 +144,10 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
         bo.ev = ev;
         bo.seed = c->seed;
         bo.threads = c->threads;
+        bo.gather = gather == 0;
+        bo.light_samples = light_samples;
+        bo.gather_samples = gather_samples;
+        bo.quiet = c->quiet;
         bo.log = (bn_log){bn_cli_stdout_log, c, c->quiet};
         st = bn__bounces_write(&p, &cam, n, &ff, &sol, c, &bo, &err);
     }

@@ -3,6 +3,7 @@
  * a labelled contact sheet. */
 #include "bounce/image.h"
 #include "bounce/bake.h"
+#include "bounce/gather.h"
 #include "base/internal.h"
 
 #include <string.h>
@@ -16,6 +17,8 @@ void bn_bounces_opts_default(bn_bounces_opts *o)
     o->crease = BN_BAKE_DEFAULT_CREASE;
     o->auto_exposure = 1;
     o->seed = 1;
+    o->light_samples = BN_GATHER_LIGHT_SAMPLES;
+    o->gather_samples = BN_GATHER_HEMI_SAMPLES;
 }
 
 /* "dir/out.exr" + ".KE.png" -> "dir/out.KE.png" (the extension of `path` replaced). */
@@ -42,8 +45,27 @@ static bn_status bn__bounces_render(const bn_scene *scene, const bn_rt *rt, cons
         st = bn_image_alloc(&imgs[l], cam->width, cam->height, err);
     if (st == BN_OK && o->smooth)
         st = bn_bake_create(scene, o->crease, &bake, err);
-    if (st == BN_OK)
+    if (st == BN_OK && o->gather) {
+        bn_gather_opts go;
+        bn_gather_stats gs;
+        int n = (int)nl - 3;
+        bn_gather_opts_default(&go);
+        go.light_samples = o->light_samples;
+        go.hemi_samples = o->gather_samples;
+        go.smooth = bake;
+        go.seed = o->seed;
+        go.threads = o->threads;
+        go.quiet = o->quiet;
+        st = bn_gather_render(rt, cam, layers, n, layers[n + 1], &go, imgs, &gs, err);
+        if (st == BN_OK)
+            bn_logf(&o->log, BN_LOG_INFO,
+                    "gather: %dx%d x %d spp, %zu emitting face%s; %.3g shadow rays, %.3g gather rays, %.2f s (%.3g rays/s)",
+                    cam->width, cam->height, cam->spp, gs.emitters, gs.emitters == 1 ? "" : "s", gs.shadow_rays,
+                    gs.gather_rays, gs.seconds,
+                    (gs.shadow_rays + gs.gather_rays + gs.camera_rays) / (gs.seconds > 0 ? gs.seconds : 1e-9));
+    } else if (st == BN_OK) {
         st = bn_image_render(rt, cam, layers, nl, bake, o->seed, o->threads, imgs, err);
+    }
     bn_bake_destroy(bake);
     return st;
 }
@@ -85,7 +107,7 @@ bn_status bn_bounces_write(const bn_scene *scene, const bn_rt *rt, const bn_came
     bn_layer *named = bn__calloc(nl, sizeof *named);
     char (*names)[16] = bn__calloc(nl, sizeof *names);
     bn_attr *attrs = bn__calloc(na, sizeof *attrs);
-    char evbuf[32], shading[80];
+    char evbuf[32], shading[192];
     double ev = o->ev;
     bn_status st = imgs && named && names && attrs ? BN_OK : bn_error_set(err, BN_ENOMEM, "out of memory");
     if (st == BN_OK)
@@ -101,7 +123,11 @@ bn_status bn_bounces_write(const bn_scene *scene, const bn_rt *rt, const bn_came
             *ev_used = ev;
         memcpy(attrs, o->attrs, o->nattrs * sizeof *attrs);
         snprintf(evbuf, sizeof evbuf, "%.4f", ev);
-        if (o->smooth)
+        if (o->gather)
+            snprintf(shading, sizeof shading, "final gather: %d shadow rays per emitting face, %d gather rays per "
+                     "pixel sample; hits read %s", o->light_samples, o->gather_samples,
+                     o->smooth ? "smooth (baked vertex values)" : "flat (patch values)");
+        else if (o->smooth)
             snprintf(shading, sizeof shading, "smooth (baked vertex values), crease %g degrees", o->crease);
         else
             snprintf(shading, sizeof shading, "flat (patch values)");

@@ -1,0 +1,56 @@
+/* bounce: a final gather. Per-pixel images of the per-bounce terms, computed at each pixel's visible
+ * point x from the solved terms instead of read from the patch x lies on:
+ *   E(x)    the emission of the surface seen;
+ *   KE(x)   rho(x) sum over emitting faces e of Le_e F(x -> e) V_e(x): F by Lambert's contour
+ *           integral over the part of e in front of x (exact), V_e the visible fraction of e seen
+ *           from x, estimated with the same stratified directions (uniform in e's solid angle,
+ *           weighted by the cosine at x) as sum cos V / sum cos: exact where e is wholly visible or
+ *           wholly hidden, and sharp to the pixel at a shadow's edge;
+ *   K^k E(x), k >= 2: rho(x) times the cosine-weighted mean of the solved K^(k-1) E over the
+ *           hemisphere (stratified rays; the value at each hit read from its patch, or interpolated
+ *           across patches with `smooth`);
+ *   rest(x) rho(x) times the mean of K^n E + rest at the hits, and L(x) the sum of the layers.
+ * So every layer stays one term of the Neumann series, and L(x) = E(x) + rho(x) (gathered L - E).
+ * Results do not depend on the thread count (every stream keyed by pixel and sample) nor, under
+ * mpirun, on the process count (rows split among ranks, each pixel computed by one). */
+#ifndef BOUNCE_GATHER_H
+#define BOUNCE_GATHER_H
+
+#include <stdint.h>
+#include "bounce/image.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define BN_GATHER_LIGHT_SAMPLES 16   /* shadow rays per emitting face per pixel sample */
+#define BN_GATHER_HEMI_SAMPLES 64    /* gather rays per pixel sample */
+
+typedef struct bn_gather_opts {
+    int light_samples;               /* >= 1; rounded up to a stratified grid */
+    int hemi_samples;                /* >= 1; rounded up to a stratified grid */
+    const struct bn_bake *smooth;    /* hit values interpolated across patches (NULL: the patch's) */
+    uint64_t seed;
+    int threads;                     /* 0: the caller's */
+    int quiet;                       /* no progress bar */
+} bn_gather_opts;
+void bn_gather_opts_default(bn_gather_opts *o);
+
+/* Counts of one render. */
+typedef struct bn_gather_stats {
+    double shadow_rays, gather_rays, camera_rays;
+    size_t emitters;                 /* emitting faces */
+    double seconds;
+} bn_gather_stats;
+
+/* terms[0..n] = E, KE, ..., K^n E per patch (N*3 each, n >= 1) and rest (N*3), from one solve.
+ * out: n + 3 images at the camera's size (E, KE, ..., K^n E, rest, L), allocated by the caller.
+ * stats may be NULL. */
+bn_status bn_gather_render(const bn_rt *rt, const bn_camera *cam, const double *const *terms, int n,
+                           const double *rest, const bn_gather_opts *o, bn_image *out, bn_gather_stats *stats,
+                           bn_error *err);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

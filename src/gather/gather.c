@@ -1,0 +1,367 @@
+/* The final gather (include/bounce/gather.h): per pixel, direct light from the emitting faces by
+ * Lambert's closed form times a visibility ratio, and the higher terms gathered from the solution
+ * over the hemisphere. */
+#include "bounce/gather.h"
+#include "bounce/bake.h"
+#include "bounce/dist.h"
+#include "base/internal.h"
+#include "base/vec.h"
+#include "formfactor/ff_internal.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+void bn_gather_opts_default(bn_gather_opts *o)
+{
+    memset(o, 0, sizeof *o);
+    o->light_samples = BN_GATHER_LIGHT_SAMPLES;
+    o->hemi_samples = BN_GATHER_HEMI_SAMPLES;
+    o->seed = 1;
+}
+
+/* An emitting face: its corners (counter-clockwise from the front), normal and radiance. */
+typedef struct bn__emitter {
+    double v[3 * 4];
+    size_t nv, face;
+    double n[3], Le[3];
+} bn__emitter;
+
+typedef struct bn__gather {
+    const bn_rt *rt;
+    const bn_scene *scene;
+    const bn_patch *patch;
+    const bn_material *mat;
+    const bn_camera *cam;
+    const double *const *terms;
+    const double *rest;
+    double **vv;             /* smooth: vertex values of K^1 E .. K^n E, rest (n + 1 layers) */
+    const bn_bake *smooth;
+    int n, gl, gh;           /* terms kept; light and gather strata per side */
+    bn__emitter *em;
+    size_t nem;
+    double eps;
+    uint64_t seed;
+} bn__gather;
+
+/* Streams: the camera's jitter, then the light and gather samples, keyed by pixel and sample. */
+#define BN__GATHER_STREAM 0x67617468ULL
+
+static int bn__side(int samples)
+{
+    int g = (int)ceil(sqrt((double)samples) - 1e-9);
+    return g < 1 ? 1 : g;
+}
+
+/* The value of layer `l` (0 .. n - 1: K^(l+1) E; n: rest) at a hit. */
+static void bn__hit_value(const bn__gather *G, int l, const bn_hit *h, double v[3])
+{
+    if (G->vv) {
+        bn_bake_interpolate(G->smooth, G->vv[l], h->patch, h->p, v);
+        return;
+    }
+    const double *a = l < G->n ? G->terms[l + 1] : G->rest;
+    v[0] = a[3 * h->patch];
+    v[1] = a[3 * h->patch + 1];
+    v[2] = a[3 * h->patch + 2];
+}
+
+/* rho-free direct light at x (normal n, on face f): sum over emitters of Le F V. */
+static void bn__direct(const bn__gather *G, const double x[3], const double n[3], size_t f, bn__rng *r,
+                       double out[3], double *rays)
+{
+    double xo[3];
+    out[0] = out[1] = out[2] = 0;
+    for (int k = 0; k < 3; k++)
+        xo[k] = x[k] + G->eps * n[k];
+    for (size_t e = 0; e < G->nem; e++) {
+        const bn__emitter *em = &G->em[e];
+        double d, poly[3 * BN__FF_POLY_MAX], F, sc = 0, scv = 0, xv[3];
+        size_t m;
+        bn__sph_poly sp;
+        if (em->face == f)
+            continue;
+        bn_v3_sub(x, em->v, xv);
+        d = bn_v3_dot(xv, em->n);   /* x's height above the emitter's plane: it emits to its front only */
+        if (!(d > G->eps))
+            continue;
+        m = bn__poly_clip(em->v, em->nv, n, x, 0, poly);   /* the part in front of x */
+        if (m < 3)
+            continue;
+        F = bn__ff_point_polygon(x, n, poly, m);
+        if (!(F > 0) || !bn__sph_poly_init(&sp, x, n, poly, m))
+            continue;
+        for (int a = 0; a < G->gl; a++)
+            for (int b = 0; b < G->gl; b++) {
+                double u = (a + bn__rng_uniform(r)) / G->gl, w = (b + bn__rng_uniform(r)) / G->gl, dir[3], c, t;
+                bn__sph_poly_sample(&sp, u, w, dir);
+                c = bn_v3_dot(dir, n);
+                t = -d / bn_v3_dot(dir, em->n);   /* to the emitter's plane */
+                if (!(c > 0) || !(t > 0) || !isfinite(t))
+                    continue;
+                sc += c;
+                *rays += 1;
+                if (!bn_rt_occluded(G->rt, xo, dir, 0, t - 2 * G->eps))
+                    scv += c;
+            }
+        if (sc > 0)
+            for (int k = 0; k < 3; k++)
+                out[k] += em->Le[k] * F * (scv / sc);
+    }
+}
+
+/* An orthonormal basis around unit n (Duff et al. 2017). */
+static void bn__basis(const double n[3], double s[3], double t[3])
+{
+    double sign = copysign(1.0, n[2]), a = -1.0 / (sign + n[2]), b = n[0] * n[1] * a;
+    s[0] = 1 + sign * n[0] * n[0] * a;
+    s[1] = sign * b;
+    s[2] = -sign * n[0];
+    t[0] = b;
+    t[1] = sign + n[1] * n[1] * a;
+    t[2] = -n[1];
+}
+
+/* One camera sample: layers (n + 3) x 3 added to acc. */
+static void bn__sample(const bn__gather *G, const double o[3], const double d[3], bn__rng *r, double *acc,
+                       double *hv, bn_gather_stats *st)
+{
+    bn_hit h;
+    const bn_patch *p;
+    const double *rho;
+    double ke[3], s[3], t[3], xo[3];
+    int n = G->n, nl = n + 1;   /* gathered layers: K^1 E .. K^n E, rest */
+    st->camera_rays += 1;
+    if (!bn_rt_intersect(G->rt, o, d, 0, INFINITY, &h) || !h.front)
+        return;   /* misses and back faces are black: surfaces are one-sided */
+    p = &G->patch[h.patch];
+    rho = G->mat[p->material].rho;
+    for (int c = 0; c < 3; c++)
+        acc[c] += G->terms[0][3 * h.patch + c];
+    bn__direct(G, h.p, p->normal, p->face, r, ke, &st->shadow_rays);
+    memset(hv, 0, (size_t)nl * 3 * sizeof(double));
+    if (rho[0] > 0 || rho[1] > 0 || rho[2] > 0) {
+        bn__basis(p->normal, s, t);
+        for (int k = 0; k < 3; k++)
+            xo[k] = h.p[k] + G->eps * p->normal[k];
+        for (int a = 0; a < G->gh; a++)
+            for (int b = 0; b < G->gh; b++) {
+                double u1 = (a + bn__rng_uniform(r)) / G->gh, u2 = (b + bn__rng_uniform(r)) / G->gh;
+                double rr = sqrt(u1), ph = 2 * BN_PI * u2, lx = rr * cos(ph), ly = rr * sin(ph), lz = sqrt(1 - u1);
+                double dir[3];
+                bn_hit q;
+                for (int k = 0; k < 3; k++)
+                    dir[k] = lx * s[k] + ly * t[k] + lz * p->normal[k];
+                st->gather_rays += 1;
+                if (!bn_rt_intersect(G->rt, xo, dir, 0, INFINITY, &q) || !q.front)
+                    continue;
+                for (int l = 0; l < nl; l++) {
+                    double v[3];
+                    bn__hit_value(G, l, &q, v);
+                    for (int c = 0; c < 3; c++)
+                        hv[3 * l + c] += v[c];
+                }
+            }
+    }
+    {
+        double inv = 1.0 / ((double)G->gh * G->gh), tot[3] = {0, 0, 0};
+        for (int c = 0; c < 3; c++) {
+            double direct = rho[c] * ke[c];
+            acc[3 + c] += direct;   /* KE */
+            for (int k = 2; k <= n; k++) {   /* K^k E = rho x the gathered K^(k-1) E */
+                double v = rho[c] * hv[3 * (k - 2) + c] * inv;
+                acc[3 * k + c] += v;
+            }
+            /* rest = rho x the gathered K^n E + rest */
+            acc[3 * (n + 1) + c] += rho[c] * (hv[3 * (n - 1) + c] + hv[3 * n + c]) * inv;
+            for (int l = 0; l < nl; l++)
+                tot[c] += hv[3 * l + c];
+            acc[3 * (n + 2) + c] += G->terms[0][3 * h.patch + c] + direct + rho[c] * tot[c] * inv;   /* L */
+        }
+    }
+}
+
+static bn_status bn__gather_body(const bn_rt *rt, const bn_camera *cam, const double *const *terms, int n,
+                                 const double *rest, const bn_gather_opts *o, bn_image *out, bn_gather_stats *stats,
+                                 bn_error *err)
+{
+    bn__gather G;
+    const bn_scene *sc = bn_rt_scene(rt);
+    size_t nf, nm, nvert, nidx, np, nimg = (size_t)n + 3;
+    const bn_face *faces = bn_scene_faces(sc, &nf);
+    const double *verts = bn_scene_vertices(sc, &nvert);
+    const size_t *idx = bn_scene_face_indices(sc, &nidx);
+    bn_status st;
+    int sx, sy;
+    volatile int stop = 0;
+    double t0 = bn__now(), cr = 0, sr = 0, gr = 0;
+    bn__progress prog;
+    size_t done = 0;
+
+    memset(&G, 0, sizeof G);
+    if ((st = bn_camera_validate(cam, err)) != BN_OK)
+        return st;
+    if (n < 1)
+        return bn_error_set(err, BN_EINPUT, "gather: %d bounce terms; the gather needs E and KE at least (-n 1)", n);
+    if (o->light_samples < 1 || o->light_samples > (1 << 16) || o->hemi_samples < 1 || o->hemi_samples > (1 << 20))
+        return bn_error_set(err, BN_EINPUT, "gather: %d light and %d gather samples (1 .. 65536 and 1 .. 2^20)",
+                            o->light_samples, o->hemi_samples);
+    for (size_t l = 0; l < nimg; l++)
+        if (!out[l].rgb || out[l].width != cam->width || out[l].height != cam->height)
+            return bn_error_set(err, BN_EINTERNAL, "gather: output image %zu is not allocated at %dx%d", l, cam->width,
+                                cam->height);
+    G.rt = rt;
+    G.scene = sc;
+    G.patch = bn_scene_patches(sc, &np);
+    G.mat = bn_scene_materials(sc, &nm);
+    G.cam = cam;
+    G.terms = terms;
+    G.rest = rest;
+    G.n = n;
+    G.gl = bn__side(o->light_samples);
+    G.gh = bn__side(o->hemi_samples);
+    G.eps = bn_rt_epsilon(rt);
+    G.seed = o->seed;
+    G.smooth = o->smooth;
+    G.em = bn__calloc(bn_scene_emitter_count(sc) + 1, sizeof *G.em);
+    if (!G.em)
+        return bn_error_set(err, BN_ENOMEM, "out of memory");
+    for (size_t f = 0; f < nf; f++) {
+        const double *Le = G.mat[faces[f].material].Le;
+        bn__emitter *e = &G.em[G.nem];
+        if (!(Le[0] > 0 || Le[1] > 0 || Le[2] > 0))
+            continue;
+        e->nv = faces[f].nverts;
+        for (size_t k = 0; k < e->nv; k++)
+            memcpy(e->v + 3 * k, verts + 3 * idx[faces[f].first + k], 3 * sizeof(double));
+        memcpy(e->n, faces[f].normal, sizeof e->n);
+        memcpy(e->Le, Le, sizeof e->Le);
+        e->face = f;
+        G.nem++;
+    }
+    if (o->smooth) {
+        size_t nv = bn_bake_vertex_count(o->smooth);
+        G.vv = bn__calloc((size_t)n + 1, sizeof *G.vv);
+        for (int l = 0; G.vv && l <= n; l++) {
+            if (!(G.vv[l] = bn__malloc_array(nv, 3 * sizeof(double)))) {
+                st = bn_error_set(err, BN_ENOMEM, "out of memory for %zu vertex values", nv);
+                goto done;
+            }
+            bn_bake_vertex_values(o->smooth, l < n ? terms[l + 1] : rest, G.vv[l]);
+        }
+        if (!G.vv) {
+            st = bn_error_set(err, BN_ENOMEM, "out of memory");
+            goto done;
+        }
+    }
+    {
+        int a = (int)floor(sqrt((double)cam->spp));
+        while (a > 1 && cam->spp % a != 0)
+            a--;
+        sx = a;
+        sy = cam->spp / a;
+    }
+    bn__progress_begin(&prog, "gather", (size_t)cam->height, o->quiet);
+#pragma omp parallel reduction(+ : cr, sr, gr)
+    {
+        double *acc = malloc(nimg * 3 * sizeof(double)), *hv = malloc(((size_t)n + 1) * 3 * sizeof(double));
+#pragma omp for schedule(dynamic, 1)
+        for (int y = 0; y < cam->height; y++) {
+            if (stop || !bn_dist_mine((size_t)y)) {
+                for (size_t l = 0; l < nimg; l++)   /* another rank's row: zero here (summed exactly below) */
+                    memset(out[l].rgb + (size_t)3 * (size_t)y * (size_t)cam->width, 0,
+                           (size_t)3 * (size_t)cam->width * sizeof(float));
+                continue;
+            }
+            if (!acc || !hv) {
+                stop = 2;
+                continue;
+            }
+            if (bn_interrupted() != BN_OK) {
+                stop = 1;
+                continue;
+            }
+            for (int x = 0; x < cam->width; x++) {
+                size_t pix = (size_t)y * (size_t)cam->width + (size_t)x;
+                bn_gather_stats ls = {0};
+                memset(acc, 0, nimg * 3 * sizeof(double));
+                for (int s = 0; s < cam->spp; s++) {
+                    double fx = 0.5, fy = 0.5, org[3], dir[3];
+                    bn__rng r;
+                    if (cam->spp > 1) {
+                        bn__rng j = bn__rng_make(o->seed, pix, (uint64_t)s);
+                        fx = ((s % sx) + bn__rng_uniform(&j)) / sx;
+                        fy = ((s / sx) + bn__rng_uniform(&j)) / sy;
+                    }
+                    r = bn__rng_make(o->seed ^ BN__GATHER_STREAM, pix, (uint64_t)s);
+                    bn_camera_ray(cam, x + fx, y + fy, org, dir);
+                    bn__sample(&G, org, dir, &r, acc, hv, &ls);
+                }
+                cr += ls.camera_rays;
+                sr += ls.shadow_rays;
+                gr += ls.gather_rays;
+                for (size_t l = 0; l < nimg; l++)
+                    for (int c = 0; c < 3; c++)
+                        out[l].rgb[3 * pix + c] = (float)(acc[3 * l + c] / cam->spp);
+            }
+            bn__progress_step(&prog, &done, 1);
+        }
+        free(acc);
+        free(hv);
+    }
+    bn__progress_end(&prog);
+    {   /* every rank's status, then its rows to every rank (each pixel nonzero on one rank: exact) */
+        bn_status here = stop == 2 ? BN_ENOMEM : bn_interrupted() != BN_OK ? bn_interrupted() : stop ? BN_EINTR : BN_OK;
+        bn_status all = bn_dist_agree(here);
+        if (all != BN_OK) {
+            st = all == BN_ENOMEM ? bn_error_set(err, all, "out of memory while gathering")
+                                  : bn_error_set(err, all, "gather interrupted");
+            goto done;
+        }
+        for (size_t l = 0; l < nimg && bn_dist_size() > 1; l++)
+            if ((st = bn_dist_sum_float(out[l].rgb, (size_t)3 * (size_t)cam->width * (size_t)cam->height, err)) !=
+                BN_OK)
+                goto done;
+    }
+    for (size_t l = 0; l < nimg; l++)
+        for (size_t k = 0; k < (size_t)3 * (size_t)cam->width * (size_t)cam->height; k++)
+            if (!isfinite(out[l].rgb[k])) {
+                st = bn_error_set(err, BN_ENUMERIC, "gather: a non-finite value in layer %zu at pixel %zu", l, k / 3);
+                goto done;
+            }
+    if (stats) {
+        double c[3] = {cr, sr, gr};
+        if (bn_dist_size() > 1 && (st = bn_dist_sum(c, 3, err)) != BN_OK)
+            goto done;
+        stats->camera_rays = c[0];
+        stats->shadow_rays = c[1];
+        stats->gather_rays = c[2];
+        stats->emitters = G.nem;
+        stats->seconds = bn__now() - t0;
+    }
+    st = BN_OK;
+done:
+    if (G.vv)
+        for (int l = 0; l <= n; l++)
+            free(G.vv[l]);
+    free(G.vv);
+    free(G.em);
+    return st;
+}
+
+bn_status bn_gather_render(const bn_rt *rt, const bn_camera *cam, const double *const *terms, int n,
+                           const double *rest, const bn_gather_opts *o, bn_image *out, bn_gather_stats *stats,
+                           bn_error *err)
+{
+    bn_gather_opts def;
+    int prev;
+    bn_status st;
+    if (!o) {
+        bn_gather_opts_default(&def);
+        o = &def;
+    }
+    prev = bn__threads_begin(o->threads);
+    st = bn__gather_body(rt, cam, terms, n, rest, o, out, stats, err);
+    bn__threads_end(prev);
+    return st;
+}
