@@ -67,41 +67,52 @@ static void bn__hit_value(const bn__gather *G, int l, const bn_hit *h, double v[
 }
 
 /* rho-free direct light at x (normal n, on face f): sum over emitters of Le F V. */
-static void bn__direct(const bn__gather *G, const double x[3], const double n[3], size_t f, bn__rng *r,
+static void bn__direct(const bn__gather *G, const double x0[3], const double n[3], size_t f, bn__rng *r,
                        double out[3], double *rays)
 {
-    double xo[3];
     out[0] = out[1] = out[2] = 0;
-    for (int k = 0; k < 3; k++)
-        xo[k] = x[k] + G->eps * n[k];
     for (size_t e = 0; e < G->nem; e++) {
         const bn__emitter *em = &G->em[e];
-        double d, poly[3 * BN__FF_POLY_MAX], F, sc = 0, scv = 0, xv[3];
+        double d, dof, poly[3 * BN__FF_POLY_MAX], F, sc = 0, scv = 0, xv[3], x[3], xo[3];
         size_t m;
         bn__sph_poly sp;
         if (em->face == f)
             continue;
-        bn_v3_sub(x, em->v, xv);
+        bn_v3_sub(x0, em->v, xv);
         d = bn_v3_dot(xv, em->n);   /* x's height above the emitter's plane: it emits to its front only */
-        if (!(d > G->eps))
+        if (!(d > -2 * G->eps))
             continue;
+        /* x on (within 2 eps of) the emitter's plane, as where a floor meets a lit wall: the value is the
+         * limit from the front, so x is taken 2 eps in front of that plane (else every inner corner of
+         * a lit room would show a dark seam one pixel wide) */
+        memcpy(x, x0, sizeof x);
+        if (d < 2 * G->eps) {
+            bn_v3_madd(x0, 2 * G->eps - d, em->n, x);
+            d = 2 * G->eps;
+        }
+        for (int k = 0; k < 3; k++)
+            xo[k] = x[k] + G->eps * n[k];
         m = bn__poly_clip(em->v, em->nv, n, x, 0, poly);   /* the part in front of x */
         if (m < 3)
             continue;
         F = bn__ff_point_polygon(x, n, poly, m);
         if (!(F > 0) || !bn__sph_poly_init(&sp, x, n, poly, m))
             continue;
+        bn_v3_sub(xo, em->v, xv);
+        dof = bn_v3_dot(xv, em->n);   /* the shadow rays' origin's height */
         for (int a = 0; a < G->gl; a++)
             for (int b = 0; b < G->gl; b++) {
-                double u = (a + bn__rng_uniform(r)) / G->gl, w = (b + bn__rng_uniform(r)) / G->gl, dir[3], c, t;
+                double u = (a + bn__rng_uniform(r)) / G->gl, w = (b + bn__rng_uniform(r)) / G->gl, dir[3], c, t, ce;
                 bn__sph_poly_sample(&sp, u, w, dir);
                 c = bn_v3_dot(dir, n);
-                t = -d / bn_v3_dot(dir, em->n);   /* to the emitter's plane */
-                if (!(c > 0) || !(t > 0) || !isfinite(t))
+                ce = -bn_v3_dot(dir, em->n);
+                t = dof / ce;   /* from the offset origin to the emitter's plane, stopping short of it by
+                                   2 eps measured across the plane (eps / ce along a grazing ray) */
+                if (!(c > 0) || !(ce > 0) || !(t > 0) || !isfinite(t))
                     continue;
                 sc += c;
                 *rays += 1;
-                if (!bn_rt_occluded(G->rt, xo, dir, 0, t - 2 * G->eps))
+                if (!bn_rt_occluded(G->rt, xo, dir, 0, t - 2 * G->eps / ce))
                     scv += c;
             }
         if (sc > 0)
