@@ -82,10 +82,12 @@ bn_status bn_flat_bake(const bn_flat *f, const char *out, int per_bounce, int in
 /* Camera images of every layer as `bounce bounces` writes them: out (FILE.exr, one layer per term,
  * rest and L) and, with previews, FILE.<layer>.png and the contact sheet. The camera is the scene's
  * NAME.camera sidecar, else the default in front of the box; eye, look (3 each) and fov_deg > 0
- * override it; width, height, spp > 0 override its size and supersampling. */
+ * override it; width, height, spp > 0 override its size and supersampling. gather: 1 for the final
+ * gather per pixel (bounce/gather.h; `bounce bounces`' default; needs a solve keeping KE), 0 for the
+ * value of the patch each pixel sees (`--gather none`). */
 bn_status bn_flat_images(const bn_flat *f, const char *out, int width, int height, int spp, const double *eye,
-                         const double *look, double fov_deg, int previews, int smooth, int half, const char *caller,
-                         char *msg, size_t msglen);
+                         const double *look, double fov_deg, int previews, int smooth, int half, int gather,
+                         const char *caller, char *msg, size_t msglen);
 
 /* A caller's own operator: apply(user, x, y) sets y = K x for N x 3 interleaved x (no aliasing)
  * and returns 0, or nonzero to stop the solve (BN_EINPUT, "the operator failed"). */

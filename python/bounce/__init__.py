@@ -81,7 +81,7 @@ def _load():
     lib.bn_flat_bake.argtypes = [P, ctypes.c_char_p, I, I, I, ctypes.c_double, ctypes.c_double, ctypes.c_char_p,
                                  ctypes.c_char_p, S]
     lib.bn_flat_bake.restype = I
-    lib.bn_flat_images.argtypes = [P, ctypes.c_char_p, I, I, I, D, D, ctypes.c_double, I, I, I, ctypes.c_char_p,
+    lib.bn_flat_images.argtypes = [P, ctypes.c_char_p, I, I, I, D, D, ctypes.c_double, I, I, I, I, ctypes.c_char_p,
                                    ctypes.c_char_p, S]
     lib.bn_flat_images.restype = I
     lib.bn_flat_history.argtypes = [P, ctypes.POINTER(D)]
@@ -180,11 +180,13 @@ class Result:
             _raise(self._lib, st, msg)
 
     def images(self, path, size=None, spp=None, eye=None, look=None, fov=None, previews=True, smooth=False,
-               half=False):
+               half=False, gather=True):
         """Camera images of every layer as `bounce bounces` writes them: path (FILE.exr, a layer per
         term, rest and L) and with previews FILE.<layer>.png and the contact sheet. The camera is the
         scene's NAME.camera sidecar, else in front of the box; size=(w, h), spp, eye, look (scene
-        units) and fov (degrees) override it."""
+        units) and fov (degrees) override it. gather=True: the final gather per pixel (as `bounce
+        bounces` by default; the solve must keep KE, bounces >= 1); False: each pixel the value of
+        the patch it sees (`--gather none`)."""
         Dp = ctypes.POINTER(ctypes.c_double)
         vec = lambda v: None if v is None else (ctypes.c_double * 3)(*[float(x) for x in v])
         e, lk = vec(eye), vec(look)
@@ -192,7 +194,7 @@ class Result:
         msg = ctypes.create_string_buffer(2048)
         st = self._lib.bn_flat_images(self._h, os.fsencode(path), int(w), int(h), int(spp or 0),
                                       ctypes.cast(e, Dp) if e else None, ctypes.cast(lk, Dp) if lk else None,
-                                      float(fov or 0), int(previews), int(smooth), int(half),
+                                      float(fov or 0), int(previews), int(smooth), int(half), int(bool(gather)),
                                       b"python bounce package", msg, len(msg))
         if st != 0:
             _raise(self._lib, st, msg)

@@ -501,8 +501,8 @@ bn_status bn_flat_bake(const bn_flat *f, const char *out, int per_bounce, int in
 }
 
 bn_status bn_flat_images(const bn_flat *f, const char *out, int width, int height, int spp, const double *eye,
-                         const double *look, double fov_deg, int previews, int smooth, int half, const char *caller,
-                         char *msg, size_t msglen)
+                         const double *look, double fov_deg, int previews, int smooth, int half, int gather,
+                         const char *caller, char *msg, size_t msglen)
 {
     int nb = f->p.res.nterms - 1;
     const double *layers[72];
@@ -553,6 +553,7 @@ bn_status bn_flat_images(const bn_flat *f, const char *out, int width, int heigh
         bo.previews = previews;
         bo.smooth = smooth;
         bo.half = half;
+        bo.gather = gather;
         bo.attrs = attrs;
         bo.nattrs = sizeof attrs / sizeof attrs[0];
         bo.log.quiet = 1;

@@ -1,0 +1,318 @@
+/* The final gather against the path tracer at equal per-pixel error (issue 14): the Cornell box at
+ * WxW pixels, a long path-traced reference (bounce's own tracer, cached in a file), then the median
+ * per-pixel relative error of L (luminance) and the time to it for each gather setting (mesh, light
+ * rays, gather rays, camera samples; time = load, mesh, K, solve and gather) and for the tracer at a
+ * few sample counts, extrapolated to the target by its 1/sqrt(spp) law.
+ *
+ * The reference's own noise is taken out: per pixel, err^2 = max(0, (x - ref)^2 - var_ref), so the
+ * median measures the distance to the converged image, not to the reference's noise.
+ *
+ * usage: gather_bench [--size W] [--ref-spp N] [--ref-cache FILE] [--target E] [--quick] */
+#include "bounce/gather.h"
+#include "bounce/pipeline.h"
+#include "bounce/trace.h"
+#include "base/internal.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#ifndef BN_SOURCE_DIR
+#define BN_SOURCE_DIR "."
+#endif
+
+static const double WY[3] = {0.2126, 0.7152, 0.0722};
+
+typedef struct ref_img {
+    int w, h;
+    float *L, *var;   /* 3wh each */
+    double seconds;
+    size_t spp;
+} ref_img;
+
+static int cmp_d(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return x < y ? -1 : x > y;
+}
+
+/* Median relative error of luminance against the reference (noise-corrected), over pixels whose
+ * reference luminance exceeds 1e-3 of the brightest; *raw: without the correction. */
+static double median_err(const ref_img *r, const float *L, double *raw, double *ref_se)
+{
+    size_t n = (size_t)r->w * (size_t)r->h, m = 0;
+    double *e = malloc(n * sizeof *e), *q = malloc(n * sizeof *q), *s = malloc(n * sizeof *s), ymax = 0, med;
+    for (size_t i = 0; i < n; i++) {
+        double y = 0;
+        for (int c = 0; c < 3; c++)
+            y += WY[c] * r->L[3 * i + c];
+        ymax = fmax(ymax, y);
+    }
+    for (size_t i = 0; i < n; i++) {
+        double y = 0, x = 0, v = 0, d;
+        for (int c = 0; c < 3; c++) {
+            y += WY[c] * r->L[3 * i + c];
+            x += WY[c] * L[3 * i + c];
+            v += WY[c] * WY[c] * r->var[3 * i + c];
+        }
+        if (!(y > 1e-3 * ymax))
+            continue;
+        d = x - y;
+        e[m] = sqrt(fmax(0, d * d - v)) / y;
+        q[m] = fabs(d) / y;
+        s[m] = sqrt(v) / y;
+        m++;
+    }
+    qsort(e, m, sizeof *e, cmp_d);
+    qsort(q, m, sizeof *q, cmp_d);
+    qsort(s, m, sizeof *s, cmp_d);
+    med = m ? e[m / 2] : NAN;
+    if (raw)
+        *raw = m ? q[m / 2] : NAN;
+    if (ref_se)
+        *ref_se = m ? s[m / 2] : NAN;
+    free(e);
+    free(q);
+    free(s);
+    return med;
+}
+
+static void camera(const bn_scene *s, const char *path, int w, bn_camera *cam)
+{
+    bn_error err;
+    bn_camera_default(s, cam);
+    if (bn_camera_load_sidecar(path, cam, NULL, &err) != BN_OK) {
+        fprintf(stderr, "gather_bench: %s\n", err.msg);
+        exit(1);
+    }
+    cam->width = cam->height = w;
+    cam->spp = 1;
+}
+
+static bn_status run_pipeline(const char *path, size_t patches, bn_pipeline *p, bn_error *err)
+{
+    bn_pipeline_opts o;
+    bn_pipeline_opts_default(&o);
+    o.load.log.quiet = 1;
+    o.load.unit = BN_UNIT_MM;
+    o.ff.quiet = 1;
+    o.solve.quiet = 1;
+    o.solve.bounces = 3;
+    o.keep_rt = 1;
+    o.mesh.target_patches = patches;
+    return bn_pipeline_run(path, &o, p, err);
+}
+
+/* The tracer's L image at `spp`, its time. */
+static int trace_L(const bn_rt *rt, const bn_camera *cam, size_t spp, uint64_t seed, float **L, float **var,
+                   double *seconds)
+{
+    bn_trace_opts to;
+    bn_trace_image img;
+    bn_error err;
+    size_t n = (size_t)cam->width * (size_t)cam->height * 3, off;
+    double t0 = bn__now();
+    bn_trace_opts_default(&to);
+    to.spp = spp;
+    to.seed = seed;
+    to.quiet = 1;
+    if (bn_trace_image_run(rt, cam, &to, &img, &err) != BN_OK) {
+        fprintf(stderr, "gather_bench: trace: %s\n", err.msg);
+        return 0;
+    }
+    *seconds = bn__now() - t0;
+    off = (size_t)(img.nlayers - 1) * n;   /* L is the last layer */
+    *L = malloc(n * sizeof(float));
+    memcpy(*L, img.mean + off, n * sizeof(float));
+    if (var) {
+        *var = malloc(n * sizeof(float));
+        memcpy(*var, img.var + off, n * sizeof(float));
+    }
+    bn_trace_image_free(&img);
+    return 1;
+}
+
+static int ref_load(const char *file, unsigned long long key, ref_img *r)
+{
+    FILE *fp = fopen(file, "rb");
+    unsigned long long k = 0;
+    size_t n;
+    if (!fp)
+        return 0;
+    if (fread(&k, sizeof k, 1, fp) != 1 || k != key || fread(&r->seconds, sizeof r->seconds, 1, fp) != 1) {
+        fclose(fp);
+        return 0;
+    }
+    n = (size_t)3 * (size_t)r->w * (size_t)r->h;
+    r->L = malloc(n * sizeof(float));
+    r->var = malloc(n * sizeof(float));
+    if (fread(r->L, sizeof(float), n, fp) != n || fread(r->var, sizeof(float), n, fp) != n) {
+        fclose(fp);
+        free(r->L);
+        free(r->var);
+        return 0;
+    }
+    fclose(fp);
+    return 1;
+}
+
+static void ref_save(const char *file, unsigned long long key, const ref_img *r)
+{
+    char tmp[4096];
+    size_t n = (size_t)3 * (size_t)r->w * (size_t)r->h;
+    FILE *fp;
+    snprintf(tmp, sizeof tmp, "%s.tmp", file);
+    if (!(fp = fopen(tmp, "wb")))
+        return;
+    fwrite(&key, sizeof key, 1, fp);
+    fwrite(&r->seconds, sizeof r->seconds, 1, fp);
+    fwrite(r->L, sizeof(float), n, fp);
+    fwrite(r->var, sizeof(float), n, fp);
+    if (fclose(fp) == 0)
+        rename(tmp, file);
+}
+
+int main(int argc, char **argv)
+{
+    const char *path = BN_SOURCE_DIR "/meshes/cornell-box.obj", *cache = NULL;
+    int w = 256, quick = 0;
+    size_t ref_spp = 4096;
+    double target = 0.01;
+    bn_pipeline base;
+    bn_error err;
+    bn_camera cam;
+    ref_img ref;
+    unsigned long long key;
+    for (int i = 1; i < argc; i++) {
+        if (!strcmp(argv[i], "--size") && i + 1 < argc)
+            w = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--ref-spp") && i + 1 < argc)
+            ref_spp = (size_t)atoll(argv[++i]);
+        else if (!strcmp(argv[i], "--ref-cache") && i + 1 < argc)
+            cache = argv[++i];
+        else if (!strcmp(argv[i], "--target") && i + 1 < argc)
+            target = atof(argv[++i]);
+        else if (!strcmp(argv[i], "--quick"))
+            quick = 1;
+        else {
+            fprintf(stderr, "usage: gather_bench [--size W] [--ref-spp N] [--ref-cache FILE] [--target E] [--quick]\n");
+            return 2;
+        }
+    }
+    /* the reference: the tracer on the scene's default mesh (the tracer's answer does not depend on it) */
+    if (run_pipeline(path, 300, &base, &err) != BN_OK) {
+        fprintf(stderr, "gather_bench: %s\n", err.msg);
+        return 1;
+    }
+    camera(base.scene, path, w, &cam);
+    cam.spp = 1;
+    memset(&ref, 0, sizeof ref);
+    ref.w = ref.h = w;
+    ref.spp = ref_spp;
+    key = bn_scene_digest(base.scene) ^ ((unsigned long long)w << 40) ^ ((unsigned long long)ref_spp << 8) ^ 0x9e37;
+    if (!cache || !ref_load(cache, key, &ref)) {
+        bn_camera rc = cam;
+        float *L = NULL, *var = NULL;
+        fprintf(stderr, "gather_bench: reference: the tracer at %zu spp, %dx%d...\n", ref_spp, w, w);
+        if (!trace_L(base.rt, &rc, ref_spp, 7777, &L, &var, &ref.seconds))
+            return 1;
+        ref.L = L;
+        ref.var = var;
+        if (cache)
+            ref_save(cache, key, &ref);
+    }
+    {
+        float zero_var_dummy = 0;
+        (void)zero_var_dummy;
+    }
+    double ref_se;
+    (void)median_err(&ref, ref.L, NULL, &ref_se);
+    printf("Reference: bounce's tracer, %zu samples per pixel (%.0f s), %dx%d; median per-pixel relative standard "
+           "error of its L %.3f%%. Errors below are the median over pixels of |L - L_ref| / L_ref in luminance with the "
+           "reference's variance taken out (err^2 = (L - L_ref)^2 - var_ref); raw: without that.\n\n",
+           ref_spp, ref.seconds, w, w, 100 * ref_se);
+
+    /* the gather: settings */
+    {
+        static const size_t patches_q[] = {300, 1200}, patches_f[] = {300, 1200, 4800};
+        static const int light_f[] = {4, 16}, hemi_f[] = {16, 64, 256}, spp_f[] = {1, 4};
+        const size_t *P = quick ? patches_q : patches_f;
+        size_t nP = quick ? 2 : 3;
+        double best_t = INFINITY;
+        char best[160] = "none";
+        printf("| patches | light rays | gather rays | camera spp | solve s | gather s | total s | median error | raw |\n");
+        printf("|---|---|---|---|---|---|---|---|---|\n");
+        for (size_t ip = 0; ip < nP; ip++) {
+            bn_pipeline p;
+            double t0 = bn__now(), ts;
+            memset(&p, 0, sizeof p);
+            if (run_pipeline(path, P[ip], &p, &err) != BN_OK) {
+                fprintf(stderr, "gather_bench: %s\n", err.msg);
+                return 1;
+            }
+            ts = bn__now() - t0;
+            for (int il = 0; il < 2; il++)
+                for (int ih = 0; ih < 3; ih++)
+                    for (int is = 0; is < 2; is++) {
+                        bn_camera c = cam;
+                        bn_image img[6];
+                        bn_gather_opts go;
+                        const double *terms[4] = {p.res.terms[0], p.res.terms[1], p.res.terms[2], p.res.terms[3]};
+                        double tg, e, raw;
+                        if (quick && (il == 0 || is == 1))
+                            continue;
+                        c.spp = spp_f[is];
+                        for (int l = 0; l < 6; l++)
+                            bn_image_alloc(&img[l], w, w, &err);
+                        bn_gather_opts_default(&go);
+                        go.light_samples = light_f[il];
+                        go.hemi_samples = hemi_f[ih];
+                        go.quiet = 1;
+                        t0 = bn__now();
+                        if (bn_gather_render(p.rt, &c, terms, 3, p.rest, &go, img, NULL, &err) != BN_OK) {
+                            fprintf(stderr, "gather_bench: %s\n", err.msg);
+                            return 1;
+                        }
+                        tg = bn__now() - t0;
+                        e = median_err(&ref, img[5].rgb, &raw, NULL);
+                        printf("| %zu | %d | %d | %d | %.2f | %.2f | %.2f | %.2f%% | %.2f%% |\n", p.n, light_f[il],
+                               hemi_f[ih], spp_f[is], ts, tg, ts + tg, 100 * e, 100 * raw);
+                        fflush(stdout);
+                        if (e <= target && ts + tg < best_t) {
+                            best_t = ts + tg;
+                            snprintf(best, sizeof best, "%zu patches, %d light rays, %d gather rays, %d camera spp",
+                                     p.n, light_f[il], hemi_f[ih], spp_f[is]);
+                        }
+                        for (int l = 0; l < 6; l++)
+                            bn_image_free(&img[l]);
+                    }
+            bn_pipeline_free(&p);
+        }
+        printf("\nFastest gather to a median error of %.2g%%: %s, %.2f s.\n\n", 100 * target, best, best_t);
+
+        /* the tracer at a few sample counts, extrapolated to the target by err ~ 1/sqrt(spp) */
+        {
+            static const size_t spp_t[] = {16, 64, 256};
+            double rate_t = NAN;
+            printf("| tracer spp | seconds | median error | raw |\n|---|---|---|---|\n");
+            for (int k = 0; k < (quick ? 2 : 3); k++) {
+                float *L = NULL;
+                double sec, e, raw;
+                if (!trace_L(base.rt, &cam, spp_t[k], 4242, &L, NULL, &sec))
+                    return 1;
+                e = median_err(&ref, L, &raw, NULL);
+                printf("| %zu | %.2f | %.2f%% | %.2f%% |\n", spp_t[k], sec, 100 * e, 100 * raw);
+                rate_t = sec * (e / target) * (e / target);   /* seconds to the target at this point's constant */
+                free(L);
+            }
+            printf("\nThe tracer to %.2g%% (its last point's error x sqrt(spp) held): %.0f s; the gather's best is %.3g "
+                   "times faster.\n",
+                   100 * target, rate_t, rate_t / best_t);
+        }
+    }
+    bn_pipeline_free(&base);
+    free(ref.L);
+    free(ref.var);
+    return 0;
+}
