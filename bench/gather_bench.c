@@ -236,13 +236,13 @@ int main(int argc, char **argv)
     /* the gather: settings */
     {
         static const size_t patches_q[] = {300, 1200}, patches_f[] = {300, 1200, 4800};
-        static const int light_f[] = {4, 16}, hemi_f[] = {16, 64, 256}, spp_f[] = {1, 4};
+        static const int light_f[] = {4, 16}, hemi_f[] = {16, 64, 256}, spp_f[] = {1, 4}, filt_f[] = {0, 2, 4};
         const size_t *P = quick ? patches_q : patches_f;
         size_t nP = quick ? 2 : 3;
         double best_t = INFINITY;
         char best[160] = "none";
-        printf("| patches | light rays | gather rays | camera spp | solve s | gather s | total s | median error | raw |\n");
-        printf("|---|---|---|---|---|---|---|---|---|\n");
+        printf("| patches | light rays | gather rays | camera spp | filter px | solve s | gather s | total s | median error | raw |\n");
+        printf("|---|---|---|---|---|---|---|---|---|---|\n");
         for (size_t ip = 0; ip < nP; ip++) {
             bn_pipeline p;
             double t0 = bn__now(), ts;
@@ -254,7 +254,8 @@ int main(int argc, char **argv)
             ts = bn__now() - t0;
             for (int il = 0; il < 2; il++)
                 for (int ih = 0; ih < 3; ih++)
-                    for (int is = 0; is < 2; is++) {
+                    for (int is = 0; is < 2; is++)
+                    for (int iq = 0; iq < 3; iq++) {
                         bn_camera c = cam;
                         bn_image img[6];
                         bn_gather_opts go;
@@ -268,6 +269,7 @@ int main(int argc, char **argv)
                         bn_gather_opts_default(&go);
                         go.light_samples = light_f[il];
                         go.hemi_samples = hemi_f[ih];
+                        go.filter = filt_f[iq];
                         go.quiet = 1;
                         t0 = bn__now();
                         if (bn_gather_render(p.rt, &c, terms, 3, p.rest, &go, img, NULL, &err) != BN_OK) {
@@ -276,13 +278,13 @@ int main(int argc, char **argv)
                         }
                         tg = bn__now() - t0;
                         e = median_err(&ref, img[5].rgb, &raw, NULL);
-                        printf("| %zu | %d | %d | %d | %.2f | %.2f | %.2f | %.2f%% | %.2f%% |\n", p.n, light_f[il],
-                               hemi_f[ih], spp_f[is], ts, tg, ts + tg, 100 * e, 100 * raw);
+                        printf("| %zu | %d | %d | %d | %d | %.2f | %.2f | %.2f | %.2f%% | %.2f%% |\n", p.n, light_f[il],
+                               hemi_f[ih], spp_f[is], filt_f[iq], ts, tg, ts + tg, 100 * e, 100 * raw);
                         fflush(stdout);
                         if (e <= target && ts + tg < best_t) {
                             best_t = ts + tg;
-                            snprintf(best, sizeof best, "%zu patches, %d light rays, %d gather rays, %d camera spp",
-                                     p.n, light_f[il], hemi_f[ih], spp_f[is]);
+                            snprintf(best, sizeof best, "%zu patches, %d light rays, %d gather rays, %d camera spp, "
+                                     "filter %d px", p.n, light_f[il], hemi_f[ih], spp_f[is], filt_f[iq]);
                         }
                         for (int l = 0; l < 6; l++)
                             bn_image_free(&img[l]);

@@ -10,6 +10,8 @@
  *           hemisphere (stratified rays; the value at each hit read from its patch, or interpolated
  *           across patches with `smooth`);
  *   rest(x) rho(x) times the mean of K^n E + rest at the hits, and L(x) the sum of the layers.
+ * The gathered (indirect) means are smooth inside a face, so each pixel's is averaged with those of
+ * the pixels around it (filter radius) that see the same face, never across a face's edge.
  * So every layer stays one term of the Neumann series, and L(x) = E(x) + rho(x) (gathered L - E).
  * Results do not depend on the thread count (every stream keyed by pixel and sample) nor, under
  * mpirun, on the process count (rows split among ranks, each pixel computed by one). */
@@ -25,12 +27,15 @@ extern "C" {
 
 #define BN_GATHER_LIGHT_SAMPLES 16   /* shadow rays per emitting face per pixel sample */
 #define BN_GATHER_HEMI_SAMPLES 64    /* gather rays per pixel sample */
+#define BN_GATHER_FILTER 2           /* pixels */
 
 typedef struct bn_gather_opts {
     int light_samples;               /* >= 1; rounded up to a stratified grid */
     int hemi_samples;                /* >= 1; rounded up to a stratified grid */
     const struct bn_bake *smooth;    /* hit values interpolated across patches (NULL: the patch's) */
     uint64_t seed;
+    int filter;                      /* the gathered (indirect) terms averaged over the pixels within this
+                                        radius that see the same face (0: none; default BN_GATHER_FILTER) */
     int threads;                     /* 0: the caller's */
     int quiet;                       /* no progress bar */
 } bn_gather_opts;
@@ -43,7 +48,7 @@ typedef struct bn_gather_stats {
     double seconds;
 } bn_gather_stats;
 
-/* terms[0..n] = E, KE, ..., K^n E per patch (N*3 each, n >= 1) and rest (N*3), from one solve.
+/* terms[0..n] = E, KE, ..., K^n E per patch (N*3 each, 1 <= n <= 20) and rest (N*3), from one solve.
  * out: n + 3 images at the camera's size (E, KE, ..., K^n E, rest, L), allocated by the caller.
  * stats may be NULL. */
 bn_status bn_gather_render(const bn_rt *rt, const bn_camera *cam, const double *const *terms, int n,

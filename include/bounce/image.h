@@ -105,6 +105,7 @@ typedef struct bn_bounces_opts {
     int    gather;             /* 1: a final gather per pixel (bounce/gather.h; needs bounces >= 1); 0: patch values */
     int    light_samples;      /* gather: shadow rays per emitting face per pixel sample */
     int    gather_samples;     /* gather: hemisphere rays per pixel sample */
+    int    gather_filter;      /* gather: same-face filter radius of the gathered terms, pixels */
     int    quiet;              /* no progress bar */
     const bn_attr *attrs;      /* provenance for every file (borrowed); the first 4 go into PNG text */
     size_t nattrs;

@@ -61,7 +61,7 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
     bn_cli_camera co;
     const char *pos[1], *out = "bounces.exr", *patches_out = NULL;
     int n = 3, half = 0, smooth = 0, no_previews = 0, tile = 320, rc, gather = 0;
-    int light_samples = BN_GATHER_LIGHT_SAMPLES, gather_samples = BN_GATHER_HEMI_SAMPLES;
+    int light_samples = BN_GATHER_LIGHT_SAMPLES, gather_samples = BN_GATHER_HEMI_SAMPLES, gather_filter = BN_GATHER_FILTER;
     double ev = 0, crease = BN_BAKE_DEFAULT_CREASE;
     bn_error err;
     bn_pipeline p;
@@ -106,6 +106,9 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
                                  "(default 16)"});
     bn_optset_add(&set, (bn_opt){"gather-samples", 0, BN_OPT_INT, &gather_samples, NULL, 1, 1 << 20, "N",
                                  "gather: hemisphere rays per pixel sample, rounded up to a square (default 64)"});
+    bn_optset_add(&set, (bn_opt){"gather-filter", 0, BN_OPT_INT, &gather_filter, NULL, 0, 64, "PX",
+                                 "gather: each pixel's gathered (indirect) terms averaged with those of the pixels "
+                                 "within PX that see the same face, never across a face's edge (default 2; 0: none)"});
     bn_optset_add(&set, (bn_opt){"patches-out", 0, BN_OPT_STRING, &patches_out, NULL, 0, 0, "FILE.csv",
                                  "also write the per-patch CSV of `bounce solve -n K` (L and every term) from the "
                                  "same solution"});
@@ -147,6 +150,7 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
         bo.gather = gather == 0;
         bo.light_samples = light_samples;
         bo.gather_samples = gather_samples;
+        bo.gather_filter = gather_filter;
         bo.quiet = c->quiet;
         bo.log = (bn_log){bn_cli_stdout_log, c, c->quiet};
         st = bn__bounces_write(&p, &cam, n, &ff, &sol, c, &bo, &err);

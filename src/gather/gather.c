@@ -17,6 +17,7 @@ void bn_gather_opts_default(bn_gather_opts *o)
     memset(o, 0, sizeof *o);
     o->light_samples = BN_GATHER_LIGHT_SAMPLES;
     o->hemi_samples = BN_GATHER_HEMI_SAMPLES;
+    o->filter = BN_GATHER_FILTER;
     o->seed = 1;
 }
 
@@ -133,24 +134,28 @@ static void bn__basis(const double n[3], double s[3], double t[3])
     t[2] = -n[1];
 }
 
-/* One camera sample: layers (n + 3) x 3 added to acc. */
-static void bn__sample(const bn__gather *G, const double o[3], const double d[3], bn__rng *r, double *acc,
+/* One camera sample: E and KE (rho applied) added to acc[0..5]; hv (n + 1 layers x 3) receives the
+ * hemisphere means of K^1 E .. K^n E and rest at the hits (rho not applied). Returns the face seen,
+ * or -1 (a miss or a back face: black, surfaces are one-sided). */
+static long bn__sample(const bn__gather *G, const double o[3], const double d[3], bn__rng *r, double *acc,
                        double *hv, bn_gather_stats *st)
 {
     bn_hit h;
     const bn_patch *p;
     const double *rho;
-    double ke[3], s[3], t[3], xo[3];
-    int n = G->n, nl = n + 1;   /* gathered layers: K^1 E .. K^n E, rest */
+    double ke[3], s[3], t[3], xo[3], inv = 1.0 / ((double)G->gh * G->gh);
+    int nl = G->n + 1;   /* gathered layers: K^1 E .. K^n E, rest */
     st->camera_rays += 1;
+    memset(hv, 0, (size_t)nl * 3 * sizeof(double));
     if (!bn_rt_intersect(G->rt, o, d, 0, INFINITY, &h) || !h.front)
-        return;   /* misses and back faces are black: surfaces are one-sided */
+        return -1;
     p = &G->patch[h.patch];
     rho = G->mat[p->material].rho;
-    for (int c = 0; c < 3; c++)
-        acc[c] += G->terms[0][3 * h.patch + c];
     bn__direct(G, h.p, p->normal, p->face, r, ke, &st->shadow_rays);
-    memset(hv, 0, (size_t)nl * 3 * sizeof(double));
+    for (int c = 0; c < 3; c++) {
+        acc[c] += G->terms[0][3 * h.patch + c];
+        acc[3 + c] += rho[c] * ke[c];
+    }
     if (rho[0] > 0 || rho[1] > 0 || rho[2] > 0) {
         bn__basis(p->normal, s, t);
         for (int k = 0; k < 3; k++)
@@ -170,24 +175,64 @@ static void bn__sample(const bn__gather *G, const double o[3], const double d[3]
                     double v[3];
                     bn__hit_value(G, l, &q, v);
                     for (int c = 0; c < 3; c++)
-                        hv[3 * l + c] += v[c];
+                        hv[3 * l + c] += v[c] * inv;
                 }
             }
     }
-    {
-        double inv = 1.0 / ((double)G->gh * G->gh), tot[3] = {0, 0, 0};
-        for (int c = 0; c < 3; c++) {
-            double direct = rho[c] * ke[c];
-            acc[3 + c] += direct;   /* KE */
-            for (int k = 2; k <= n; k++) {   /* K^k E = rho x the gathered K^(k-1) E */
-                double v = rho[c] * hv[3 * (k - 2) + c] * inv;
-                acc[3 * k + c] += v;
+    return (long)p->face;
+}
+
+/* The gathered layers after the per-pixel pass: aux holds per pixel 1 + 3 (n + 1) doubles: the face
+ * seen by all its samples plus one (0: mixed, missed, or none), then the hemisphere means (rho not
+ * applied) for one face, or their rho-weighted sample mean (rho applied) for a mixed pixel. Each
+ * pixel's gathered means are averaged with those of the pixels within `radius` that see the same face
+ * (a box filter that never crosses a face's edge: the indirect terms are smooth inside a face), then
+ * the layers K^2 E .. K^n E, rest and L are composed. */
+static void bn__compose(const bn__gather *G, const bn_camera *cam, const double *aux, int radius, bn_image *out)
+{
+    int n = G->n, w = cam->width, h = cam->height;
+    size_t stride = 1 + 3 * ((size_t)n + 1);
+    const bn_face *faces;
+    size_t nf;
+    faces = bn_scene_faces(G->scene, &nf);
+#pragma omp parallel for schedule(dynamic, 4)
+    for (int y = 0; y < h; y++) {
+        double g[3 * 66];
+        for (int x = 0; x < w; x++) {
+            size_t pix = (size_t)y * (size_t)w + (size_t)x;
+            const double *a = aux + pix * stride;
+            double face = a[0];
+            const double *rho = NULL;
+            int nl = n + 1;
+            memcpy(g, a + 1, (size_t)nl * 3 * sizeof(double));
+            if (face > 0) {
+                double cnt = 1;
+                rho = G->mat[faces[(size_t)face - 1].material].rho;
+                for (int yy = y - radius; yy <= y + radius; yy++)
+                    for (int xx = x - radius; xx <= x + radius; xx++) {
+                        const double *b;
+                        if (yy < 0 || yy >= h || xx < 0 || xx >= w || (yy == y && xx == x))
+                            continue;
+                        b = aux + ((size_t)yy * (size_t)w + (size_t)xx) * stride;
+                        if (b[0] != face)
+                            continue;
+                        for (int k = 0; k < 3 * nl; k++)
+                            g[k] += b[1 + k];
+                        cnt += 1;
+                    }
+                for (int k = 0; k < 3 * nl; k++)
+                    g[k] = rho[k % 3] * g[k] / cnt;
             }
-            /* rest = rho x the gathered K^n E + rest */
-            acc[3 * (n + 1) + c] += rho[c] * (hv[3 * (n - 1) + c] + hv[3 * n + c]) * inv;
-            for (int l = 0; l < nl; l++)
-                tot[c] += hv[3 * l + c];
-            acc[3 * (n + 2) + c] += G->terms[0][3 * h.patch + c] + direct + rho[c] * tot[c] * inv;   /* L */
+            for (int c = 0; c < 3; c++) {
+                double tot = 0;
+                for (int k = 2; k <= n; k++)   /* K^k E = rho x the gathered K^(k-1) E */
+                    out[k].rgb[3 * pix + c] = (float)g[3 * (k - 2) + c];
+                out[n + 1].rgb[3 * pix + c] = (float)(g[3 * (n - 1) + c] + g[3 * n + c]);   /* rest: K^n E + rest gathered */
+                for (int l = 0; l < nl; l++)
+                    tot += g[3 * l + c];
+                out[n + 2].rgb[3 * pix + c] =
+                    (float)((double)out[0].rgb[3 * pix + c] + (double)out[1].rgb[3 * pix + c] + tot);   /* L */
+            }
         }
     }
 }
@@ -207,13 +252,17 @@ static bn_status bn__gather_body(const bn_rt *rt, const bn_camera *cam, const do
     volatile int stop = 0;
     double t0 = bn__now(), cr = 0, sr = 0, gr = 0;
     bn__progress prog;
-    size_t done = 0;
+    size_t done = 0, npix, stride;
+    double *aux = NULL;
 
     memset(&G, 0, sizeof G);
     if ((st = bn_camera_validate(cam, err)) != BN_OK)
         return st;
-    if (n < 1)
-        return bn_error_set(err, BN_EINPUT, "gather: %d bounce terms; the gather needs E and KE at least (-n 1)", n);
+    if (n < 1 || n > 20)
+        return bn_error_set(err, BN_EINPUT, "gather: %d bounce terms; the gather needs E and KE at least (-n 1), and "
+                            "keeps at most 20", n);
+    if (o->filter < 0 || o->filter > 64)
+        return bn_error_set(err, BN_EINPUT, "gather: filter radius %d pixels (0 .. 64)", o->filter);
     if (o->light_samples < 1 || o->light_samples > (1 << 16) || o->hemi_samples < 1 || o->hemi_samples > (1 << 20))
         return bn_error_set(err, BN_EINPUT, "gather: %d light and %d gather samples (1 .. 65536 and 1 .. 2^20)",
                             o->light_samples, o->hemi_samples);
@@ -272,19 +321,29 @@ static bn_status bn__gather_body(const bn_rt *rt, const bn_camera *cam, const do
         sx = a;
         sy = cam->spp / a;
     }
+    npix = (size_t)cam->width * (size_t)cam->height;
+    stride = 1 + 3 * ((size_t)n + 1);
+    if (!(aux = bn__malloc_array(npix, stride * sizeof(double)))) {
+        st = bn_error_set(err, BN_ENOMEM, "out of memory for the gather's %zu x %zu values", npix, stride);
+        goto done;
+    }
     bn__progress_begin(&prog, "gather", (size_t)cam->height, o->quiet);
 #pragma omp parallel reduction(+ : cr, sr, gr)
     {
-        double *acc = malloc(nimg * 3 * sizeof(double)), *hv = malloc(((size_t)n + 1) * 3 * sizeof(double));
+        size_t nl3 = 3 * ((size_t)n + 1);
+        double *acc = malloc(6 * sizeof(double)), *hv = malloc(nl3 * sizeof(double)),
+               *gp = malloc(nl3 * sizeof(double)), *gr_ = malloc(nl3 * sizeof(double));
 #pragma omp for schedule(dynamic, 1)
         for (int y = 0; y < cam->height; y++) {
             if (stop || !bn_dist_mine((size_t)y)) {
-                for (size_t l = 0; l < nimg; l++)   /* another rank's row: zero here (summed exactly below) */
+                /* another rank's row: zero here (summed exactly below) */
+                for (size_t l = 0; l < 2; l++)
                     memset(out[l].rgb + (size_t)3 * (size_t)y * (size_t)cam->width, 0,
                            (size_t)3 * (size_t)cam->width * sizeof(float));
+                memset(aux + (size_t)y * (size_t)cam->width * stride, 0, (size_t)cam->width * stride * sizeof(double));
                 continue;
             }
-            if (!acc || !hv) {
+            if (!acc || !hv || !gp || !gr_) {
                 stop = 2;
                 continue;
             }
@@ -295,10 +354,15 @@ static bn_status bn__gather_body(const bn_rt *rt, const bn_camera *cam, const do
             for (int x = 0; x < cam->width; x++) {
                 size_t pix = (size_t)y * (size_t)cam->width + (size_t)x;
                 bn_gather_stats ls = {0};
-                memset(acc, 0, nimg * 3 * sizeof(double));
+                long face = -2;   /* -2: no sample yet; -1: mixed or missed */
+                double *a = aux + pix * stride;
+                memset(acc, 0, 6 * sizeof(double));
+                memset(gp, 0, nl3 * sizeof(double));
+                memset(gr_, 0, nl3 * sizeof(double));
                 for (int s = 0; s < cam->spp; s++) {
                     double fx = 0.5, fy = 0.5, org[3], dir[3];
                     bn__rng r;
+                    long f;
                     if (cam->spp > 1) {
                         bn__rng j = bn__rng_make(o->seed, pix, (uint64_t)s);
                         fx = ((s % sx) + bn__rng_uniform(&j)) / sx;
@@ -306,19 +370,32 @@ static bn_status bn__gather_body(const bn_rt *rt, const bn_camera *cam, const do
                     }
                     r = bn__rng_make(o->seed ^ BN__GATHER_STREAM, pix, (uint64_t)s);
                     bn_camera_ray(cam, x + fx, y + fy, org, dir);
-                    bn__sample(&G, org, dir, &r, acc, hv, &ls);
+                    f = bn__sample(&G, org, dir, &r, acc, hv, &ls);
+                    face = face == -2 ? f : face == f ? face : -1;
+                    if (f >= 0) {
+                        const double *rho = G.mat[faces[f].material].rho;
+                        for (size_t k = 0; k < nl3; k++) {
+                            gp[k] += hv[k];
+                            gr_[k] += rho[k % 3] * hv[k];
+                        }
+                    }
                 }
                 cr += ls.camera_rays;
                 sr += ls.shadow_rays;
                 gr += ls.gather_rays;
-                for (size_t l = 0; l < nimg; l++)
+                for (int l = 0; l < 2; l++)
                     for (int c = 0; c < 3; c++)
                         out[l].rgb[3 * pix + c] = (float)(acc[3 * l + c] / cam->spp);
+                a[0] = face >= 0 ? (double)face + 1 : 0;
+                for (size_t k = 0; k < nl3; k++)
+                    a[1 + k] = (face >= 0 ? gp[k] : gr_[k]) / cam->spp;
             }
             bn__progress_step(&prog, &done, 1);
         }
         free(acc);
         free(hv);
+        free(gp);
+        free(gr_);
     }
     bn__progress_end(&prog);
     {   /* every rank's status, then its rows to every rank (each pixel nonzero on one rank: exact) */
@@ -329,11 +406,14 @@ static bn_status bn__gather_body(const bn_rt *rt, const bn_camera *cam, const do
                                   : bn_error_set(err, all, "gather interrupted");
             goto done;
         }
-        for (size_t l = 0; l < nimg && bn_dist_size() > 1; l++)
+        for (size_t l = 0; l < 2 && bn_dist_size() > 1; l++)
             if ((st = bn_dist_sum_float(out[l].rgb, (size_t)3 * (size_t)cam->width * (size_t)cam->height, err)) !=
                 BN_OK)
                 goto done;
+        if (bn_dist_size() > 1 && (st = bn_dist_sum(aux, npix * stride, err)) != BN_OK)
+            goto done;
     }
+    bn__compose(&G, cam, aux, o->filter, out);
     for (size_t l = 0; l < nimg; l++)
         for (size_t k = 0; k < (size_t)3 * (size_t)cam->width * (size_t)cam->height; k++)
             if (!isfinite(out[l].rgb[k])) {
@@ -357,6 +437,7 @@ done:
             free(G.vv[l]);
     free(G.vv);
     free(G.em);
+    free(aux);
     return st;
 }
 

@@ -19,6 +19,7 @@ void bn_bounces_opts_default(bn_bounces_opts *o)
     o->seed = 1;
     o->light_samples = BN_GATHER_LIGHT_SAMPLES;
     o->gather_samples = BN_GATHER_HEMI_SAMPLES;
+    o->gather_filter = BN_GATHER_FILTER;
 }
 
 /* "dir/out.exr" + ".KE.png" -> "dir/out.KE.png" (the extension of `path` replaced). */
@@ -52,6 +53,7 @@ static bn_status bn__bounces_render(const bn_scene *scene, const bn_rt *rt, cons
         bn_gather_opts_default(&go);
         go.light_samples = o->light_samples;
         go.hemi_samples = o->gather_samples;
+        go.filter = o->gather_filter;
         go.smooth = bake;
         go.seed = o->seed;
         go.threads = o->threads;
@@ -125,8 +127,8 @@ bn_status bn_bounces_write(const bn_scene *scene, const bn_rt *rt, const bn_came
         snprintf(evbuf, sizeof evbuf, "%.4f", ev);
         if (o->gather)
             snprintf(shading, sizeof shading, "final gather: %d shadow rays per emitting face, %d gather rays per "
-                     "pixel sample; hits read %s", o->light_samples, o->gather_samples,
-                     o->smooth ? "smooth (baked vertex values)" : "flat (patch values)");
+                     "pixel sample, same-face filter radius %d px; hits read %s", o->light_samples, o->gather_samples,
+                     o->gather_filter, o->smooth ? "smooth (baked vertex values)" : "flat (patch values)");
         else if (o->smooth)
             snprintf(shading, sizeof shading, "smooth (baked vertex values), crease %g degrees", o->crease);
         else
