@@ -235,10 +235,10 @@ int main(int argc, char **argv)
 
     /* the gather: settings */
     {
-        static const size_t patches_q[] = {300, 1200}, patches_f[] = {300, 1200, 4800};
+        static const size_t patches_q[] = {300, 1200}, patches_f[] = {300, 1200};
         static const int light_f[] = {4, 16}, hemi_f[] = {16, 64, 256}, spp_f[] = {1, 4}, filt_f[] = {0, 2, 4};
         const size_t *P = quick ? patches_q : patches_f;
-        size_t nP = quick ? 2 : 3;
+        size_t nP = 2;
         double best_t = INFINITY;
         char best[160] = "none";
         printf("| patches | light rays | gather rays | camera spp | filter px | solve s | gather s | total s | median error | raw |\n");

@@ -75,6 +75,8 @@ void bn_cli_pipeline_opts(const bn_cli_scene *so, const bn_cli_ff *ff, const bn_
     out->mesh.patch_size = so->patch_size;
     if (so->patches)
         out->mesh.target_patches = so->patches;
+    else if (so->default_patches)
+        out->mesh.target_patches = so->default_patches;
     out->mesh.no_subdivide = so->no_subdivide;
     out->mesh.no_contacts = so->no_contacts;
     out->mesh.contact_gap = so->contact_gap;

@@ -65,6 +65,7 @@ typedef struct bn_cli_scene {
     int    unit;          /* index into "m|cm|mm" */
     double patch_size;
     size_t patches;
+    size_t default_patches;   /* the command's own default for --patches (0: the library's, 1200) */
     int    no_subdivide;
     int    no_contacts;
     double contact_gap;

@@ -125,6 +125,8 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
         if (!bn_cli_parse_scene_command(&set, argc, argv, pos, &prc))
             return prc;
     }
+    if (gather == 0)
+        so.default_patches = BN_GATHER_PATCHES;   /* the gather's default mesh (bench/results.md) */
     if (gather == 0 && n < 1) {
         bn_error_set(&err, BN_EUSAGE, "--gather final needs -n 1 or more (KE is computed per pixel); or --gather none");
         return bn_cli_fail(&err);
