@@ -252,6 +252,22 @@ int main(int argc, char **argv)
                 return 1;
             }
             ts = bn__now() - t0;
+            {   /* --gather none: each pixel the value of the patch it sees */
+                bn_image fl;
+                const double *Lp = p.res.L;
+                double e, raw, tr;
+                bn_image_alloc(&fl, w, w, &err);
+                t0 = bn__now();
+                if (bn_image_render(p.rt, &cam, &Lp, 1, NULL, 1, 0, &fl, &err) != BN_OK) {
+                    fprintf(stderr, "gather_bench: %s\n", err.msg);
+                    return 1;
+                }
+                tr = bn__now() - t0;
+                e = median_err(&ref, fl.rgb, &raw, NULL);
+                printf("| %zu | patch values (--gather none) | | 1 | | %.2f | %.2f | %.2f | %.2f%% | %.2f%% |\n", p.n, ts,
+                       tr, ts + tr, 100 * e, 100 * raw);
+                bn_image_free(&fl);
+            }
             for (int il = 0; il < 2; il++)
                 for (int ih = 0; ih < 3; ih++)
                     for (int is = 0; is < 2; is++)
