@@ -14,8 +14,9 @@ SCENE=meshes/cornell-box.obj
 # Form factors through the cache (keyed by scene, meshing and options): the bake and the viewer share
 # one assembly (1200 patches); the images use the final gather's coarser default mesh (300 patches).
 COMMON=(--unit mm --cache "$OUT/cornell-box.F")
+IMAGES=(--unit mm --cache "$OUT/cornell-box-images.F")
 ./build/bounce info "$SCENE" --unit mm -q | sed -n '1,9p'
-./build/bounce bounces "$SCENE" "${COMMON[@]}" -n 4 -o "$OUT/cornell-box.exr"
+./build/bounce bounces "$SCENE" "${IMAGES[@]}" -n 4 -o "$OUT/cornell-box.exr"
 ./build/bounce bake "$SCENE" "${COMMON[@]}" -o "$OUT/cornell-box.ply"
 ./build/bounce view "$SCENE" "${COMMON[@]}" -o "$OUT/cornell-box.html"
 echo
