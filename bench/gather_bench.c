@@ -7,10 +7,12 @@
  * The reference's own noise is taken out: per pixel, err^2 = max(0, (x - ref)^2 - var_ref), so the
  * median measures the distance to the converged image, not to the reference's noise.
  *
- * usage: gather_bench [--size W] [--ref-spp N] [--ref-cache FILE] [--target E] [--quick] */
+ * usage: gather_bench [--size W] [--ref-spp N] [--ref-cache FILE] [--target E] [--quick] [--smooth]
+ * (--smooth: the gather's hits and the patch images read values interpolated across patches) */
 #include "bounce/gather.h"
 #include "bounce/pipeline.h"
 #include "bounce/trace.h"
+#include "bounce/bake.h"
 #include "base/internal.h"
 
 #include <math.h>
@@ -176,7 +178,7 @@ static void ref_save(const char *file, unsigned long long key, const ref_img *r)
 int main(int argc, char **argv)
 {
     const char *path = BN_SOURCE_DIR "/meshes/cornell-box.obj", *cache = NULL;
-    int w = 256, quick = 0;
+    int w = 256, quick = 0, smooth = 0;
     size_t ref_spp = 4096;
     double target = 0.01;
     bn_pipeline base;
@@ -195,8 +197,10 @@ int main(int argc, char **argv)
             target = atof(argv[++i]);
         else if (!strcmp(argv[i], "--quick"))
             quick = 1;
+        else if (!strcmp(argv[i], "--smooth"))
+            smooth = 1;
         else {
-            fprintf(stderr, "usage: gather_bench [--size W] [--ref-spp N] [--ref-cache FILE] [--target E] [--quick]\n");
+            fprintf(stderr, "usage: gather_bench [--size W] [--ref-spp N] [--ref-cache FILE] [--target E] [--quick] [--smooth]\n");
             return 2;
         }
     }
@@ -252,13 +256,18 @@ int main(int argc, char **argv)
                 return 1;
             }
             ts = bn__now() - t0;
+            bn_bake *bake = NULL;
+            if (smooth && bn_bake_create(p.scene, BN_BAKE_DEFAULT_CREASE, &bake, &err) != BN_OK) {
+                fprintf(stderr, "gather_bench: %s\n", err.msg);
+                return 1;
+            }
             {   /* --gather none: each pixel the value of the patch it sees */
                 bn_image fl;
                 const double *Lp = p.res.L;
                 double e, raw, tr;
                 bn_image_alloc(&fl, w, w, &err);
                 t0 = bn__now();
-                if (bn_image_render(p.rt, &cam, &Lp, 1, NULL, 1, 0, &fl, &err) != BN_OK) {
+                if (bn_image_render(p.rt, &cam, &Lp, 1, bake, 1, 0, &fl, &err) != BN_OK) {
                     fprintf(stderr, "gather_bench: %s\n", err.msg);
                     return 1;
                 }
@@ -286,6 +295,7 @@ int main(int argc, char **argv)
                         go.light_samples = light_f[il];
                         go.hemi_samples = hemi_f[ih];
                         go.filter = filt_f[iq];
+                        go.smooth = bake;
                         go.quiet = 1;
                         t0 = bn__now();
                         if (bn_gather_render(p.rt, &c, terms, 3, p.rest, &go, img, NULL, &err) != BN_OK) {
@@ -305,6 +315,7 @@ int main(int argc, char **argv)
                         for (int l = 0; l < 6; l++)
                             bn_image_free(&img[l]);
                     }
+            bn_bake_destroy(bake);
             bn_pipeline_free(&p);
         }
         printf("\nFastest gather to a median error of %.2g%%: %s, %.2f s.\n\n", 100 * target, best, best_t);

@@ -142,6 +142,36 @@ static int ply_prop(const ply_data *d, const char *name)
     return -1;
 }
 
+/* Does `pos` lie strictly inside an edge (within 1e-3 scene units, away from its ends) of a patch of
+ * `material` whose normal is within `cosc` of n, and is not that patch's corner? (a T-junction: the
+ * bake gives it the edge's value instead of the area mean; no_cracks_at_t_junctions checks that) */
+static int on_patch_edge(const bn_patch *p, size_t np, const double *pv, const float pos[3], unsigned material,
+                         const double n[3], double cosc)
+{
+    for (size_t q = 0; q < np; q++) {
+        if (p[q].material != material || p[q].normal[0] * n[0] + p[q].normal[1] * n[1] + p[q].normal[2] * n[2] < cosc)
+            continue;
+        for (unsigned c = 0; c < p[q].ncorners; c++) {
+            const double *a = pv + 3 * p[q].corner[c], *b = pv + 3 * p[q].corner[(c + 1) % p[q].ncorners];
+            double ab[3], ap[3], l2 = 0, t = 0, d2 = 0;
+            for (int k = 0; k < 3; k++) {
+                ab[k] = b[k] - a[k];
+                ap[k] = pos[k] - a[k];
+                l2 += ab[k] * ab[k];
+                t += ap[k] * ab[k];
+            }
+            if (!(l2 > 0))
+                continue;
+            t /= l2;
+            for (int k = 0; k < 3; k++)
+                d2 += (ap[k] - t * ab[k]) * (ap[k] - t * ab[k]);
+            if (d2 < 1e-6 && t * sqrt(l2) > 1e-3 && (1 - t) * sqrt(l2) > 1e-3)
+                return 1;
+        }
+    }
+    return 0;
+}
+
 BN_TEST(ply_colours_are_patch_averages)
 {
     bn_load_opts lo;
@@ -186,12 +216,17 @@ BN_TEST(ply_colours_are_patch_averages)
     for (size_t f = 0; f < d.nf; f++)
         for (unsigned c = 0; c < d.fn[f]; c++)
             owner[d.fi[4 * f + c]] = (unsigned)f;
+    size_t tjunctions = 0;
     for (size_t v = 0; v < d.nv; v++) {
         const float *row = d.v + v * d.nprops;
         const bn_patch *pf = &p[owner[v]];
         double sum[3] = {0, 0, 0}, area = 0;
         for (int k = 0; k < d.nprops; k++)
             BN_ASSERT(isfinite(row[k]));
+        if (on_patch_edge(p, np, pv, row + ix, pf->material, pf->normal, cos30)) {
+            tjunctions++;   /* the edge's value, not the mean (no_cracks_at_t_junctions) */
+            continue;
+        }
         for (size_t q = 0; q < np; q++) {
             int at = 0;
             for (unsigned c = 0; c < p[q].ncorners; c++) {
@@ -215,6 +250,8 @@ BN_TEST(ply_colours_are_patch_averages)
             BN_ASSERT_REL(row[ike + c], 2 * sum[c] / area, TOL_COLOUR);
         }
     }
+    fprintf(stderr, "%zu T-junctions (the bake found %zu)\n", tjunctions, bn_bake_tjunction_count(b));
+    BN_ASSERT_EQ(tjunctions, bn_bake_tjunction_count(b));
     free(owner);
     free(d.v);
     free(d.fn);
@@ -593,6 +630,8 @@ BN_TEST(ply_input_mesh)
             double sum[3] = {0, 0, 0}, area = 0;
             for (int e = 0; e < 3; e++)   /* the corner is the polygon's own vertex */
                 BN_ASSERT_LE(fabs(row[ix + e] - q[e]), 1e-3);
+            if (on_patch_edge(p, np, pv, row + ix, f[k].material, f[k].normal, cos30))
+                continue;   /* a T-junction: the edge's value (no_cracks_at_t_junctions) */
             for (size_t j = 0; j < np; j++) {
                 int at = 0;
                 for (unsigned e = 0; e < p[j].ncorners; e++) {
@@ -625,6 +664,87 @@ BN_TEST(ply_input_mesh)
     BN_ASSERT_EQ(nfl, nf);
     free(obj);
     free(x);
+    bn_bake_destroy(b);
+    bn_scene_destroy(s);
+}
+
+/* Two coplanar faces side by side meshed at one patch size but of different lengths along their
+ * common edge (3 patches against 2): the vertices of each lie inside the other's patch edges. Smooth
+ * values interpolated on either side of the common edge must agree (no crack), and a field that is
+ * linear over the plane is reproduced exactly wherever the vertex values are exact (away from the
+ * T-junctions too). Across a crease nothing is constrained. */
+BN_TEST(no_cracks_at_t_junctions)
+{
+    const double v[] = {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0,          /* face A: [0,1] x [0,1] */
+                        1, 0, 0, 1.2, 0, 0, 1.2, 0.8, 0, 1, 0.8, 0}; /* face B: [1,1.2] x [0,0.8] */
+    const unsigned polys[] = {4, 0, 1, 2, 3, 4, 4, 5, 6, 7};
+    const unsigned pm[] = {0, 0};
+    bn_load_opts lo;
+    bn_mesh_opts mo;
+    bn_error err;
+    bn_scene *s = NULL;
+    bn_bake *b;
+    size_t np, nt;
+    const bn_patch *P;
+    double *x, *vv, worst = 0;
+    int checked = 0;
+    bn_load_opts_default(&lo);
+    lo.log.quiet = 1;
+    if (bn_scene_from_arrays("tj", v, 8, polys, 2, pm, &white, 1, &lo, &s, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    bn_mesh_opts_default(&mo);
+    mo.patch_size = 0.4;   /* A: 3 x 3 patches (edges of 1/3), B: 1 x 2 (edges of 0.4) */
+    mo.no_contacts = 1;
+    if (bn_scene_mesh(s, &mo, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    P = bn_scene_patches(s, &np);
+    BN_ASSERT_STATUS(bn_bake_create(s, 30, &b, &err), BN_OK);
+    nt = bn_bake_tjunction_count(b);
+    fprintf(stderr, "%zu patches, %zu T-junctions\n", np, nt);
+    BN_ASSERT_EQ(nt, 4);   /* A's y = 1/3, 2/3 on B's edge; B's y = 0.4 and its corner y = 0.8 on A's */
+    x = calloc(3 * np, sizeof *x);
+    vv = calloc(3 * bn_bake_vertex_count(b), sizeof *vv);
+    BN_ASSERT(x && vv);
+    for (size_t i = 0; i < np; i++)   /* a patch-constant field with steps: only continuity can hold */
+        for (int c = 0; c < 3; c++)
+            x[3 * i + c] = 1 + P[i].centroid[0] * (2 + c) + 3 * P[i].centroid[1] * P[i].centroid[1] + (double)(i % 3);
+    bn_bake_vertex_values(b, x, vv);
+    for (int k = 1; k < 80; k++) {   /* along the common edge x = 1, y in (0, 0.8): A's side against B's */
+        double y = 0.8 * k / 80, pt[3] = {1, y, 0}, va[3] = {0}, vb[3] = {0};
+        int fa = 0, fb = 0;
+        for (size_t i = 0; i < np; i++) {
+            double xmin = 1e9, xmax = -1e9, ymin = 1e9, ymax = -1e9;
+            const double *pv = bn_scene_patch_vertices(s, NULL);
+            for (unsigned c = 0; c < P[i].ncorners; c++) {
+                const double *q = pv + 3 * P[i].corner[c];
+                xmin = fmin(xmin, q[0]);
+                xmax = fmax(xmax, q[0]);
+                ymin = fmin(ymin, q[1]);
+                ymax = fmax(ymax, q[1]);
+            }
+            if (y < ymin || y > ymax || 1 < xmin - 1e-12 || 1 > xmax + 1e-12)
+                continue;
+            if (P[i].face == 0 && !fa) {
+                bn_bake_interpolate(b, vv, i, pt, va);
+                fa = 1;
+            } else if (P[i].face == 1 && !fb) {
+                bn_bake_interpolate(b, vv, i, pt, vb);
+                fb = 1;
+            }
+        }
+        BN_ASSERT(fa && fb);
+        for (int c = 0; c < 3; c++)
+            worst = fmax(worst, fabs(va[c] - vb[c]));
+        checked++;
+    }
+    fprintf(stderr, "%d points on the common edge: largest jump across it %.3g\n", checked, worst);
+    BN_ASSERT_LT(worst, 1e-12);
+    free(x);
+    free(vv);
+    bn_bake_destroy(b);
+    /* a flat bake has no shared vertices and so no T-junctions */
+    BN_ASSERT_STATUS(bn_bake_create(s, BN_BAKE_FLAT, &b, &err), BN_OK);
+    BN_ASSERT_EQ(bn_bake_tjunction_count(b), 0);
     bn_bake_destroy(b);
     bn_scene_destroy(s);
 }

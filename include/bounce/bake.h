@@ -31,12 +31,19 @@ const double *bn_bake_vertex_positions(const bn_bake *b);   /* xyz per output ve
 size_t bn_bake_corner_vertex(const bn_bake *b, size_t patch, unsigned corner);
 
 /* Vertex value = area-weighted mean of the per-patch values (N*3) of its group's patches:
- * sum_p A_p x_p / sum_p A_p. vertex_values: bn_bake_vertex_count()*3, caller-allocated. */
+ * sum_p A_p x_p / sum_p A_p; except at a T-junction (a vertex inside an edge of a patch of its own
+ * smooth surface, where faces meshed at different sizes meet), which takes that edge's value, linear
+ * between its ends: the interpolated surface then has no crack there. vertex_values:
+ * bn_bake_vertex_count()*3, caller-allocated. */
 void bn_bake_vertex_values(const bn_bake *b, const double *patch_values, double *vertex_values);
+size_t bn_bake_tjunction_count(const bn_bake *b);   /* T-junctions found (0 for a flat bake) */
 /* The value at point p on patch `patch` interpolated from its corners' vertex values:
  * barycentric on triangles, inverse bilinear on quads. Unchecked per-sample call. */
 void bn_bake_interpolate(const bn_bake *b, const double *vertex_values, size_t patch, const double p[3],
                          double out[3]);
+/* The same interpolation as corner vertices and weights (for reading several value sets at one
+ * point): returns the corner count n (3 or 4); value = sum_k w[k] vertex_values[vert[k]]. */
+unsigned bn_bake_weights(const bn_bake *b, size_t patch, const double p[3], size_t vert[4], double w[4]);
 
 /* A named per-patch value set to write (name used for extra PLY properties: <name>_red...). */
 typedef struct bn_bake_layer {

@@ -8,6 +8,18 @@
 #include <math.h>
 #include <string.h>
 
+typedef struct bn__xkey {
+    double x;
+    size_t i;
+} bn__xkey;
+static int bn__cmp_x(const void *a, const void *b)
+{
+    const bn__xkey *p = a, *q = b;
+    if (p->x != q->x)
+        return p->x < q->x ? -1 : 1;
+    return p->i < q->i ? -1 : (p->i > q->i);
+}
+
 struct bn_bake {
     const bn_scene *scene;
     size_t  nverts;
@@ -15,7 +27,98 @@ struct bn_bake {
     size_t *corner_v;   /* npatches*4: output vertex of each corner (unused corners = SIZE_MAX) */
     size_t *vstart;     /* nverts+1: CSR of the patches of each vertex's group */
     size_t *vpatch;
+    size_t ntj;         /* T-junctions: vertex v lies inside the edge (a, b) of a patch on its smooth */
+    struct bn__tj {     /* surface, at a + t (b - a); in decreasing order of the edge's length */
+        size_t v, a, b;
+        double t, len;
+    } *tj;
 };
+
+static int bn__cmp_tj(const void *x, const void *y)
+{
+    const struct bn__tj *p = x, *q = y;
+    if (p->len != q->len)
+        return p->len > q->len ? -1 : 1;
+    if (p->v != q->v)
+        return p->v < q->v ? -1 : 1;
+    return (p->a > q->a) - (p->a < q->a);
+}
+
+/* T-junctions: an output vertex strictly inside an edge of a patch of its own smooth surface (same
+ * material, normals within the crease) that does not have it as a corner, where faces meshed at
+ * different sizes meet side by side. Its value is then taken from that edge (linear along it, as
+ * both interpolations are), so the surface has no crack there. Candidates by x-range in `order`
+ * (positions sorted by x). */
+static bn_status bn__find_tjunctions(bn_bake *b, const bn_patch *patches, size_t np, double eps, double cos_crease)
+{
+    size_t n = b->nverts, cap = 0;
+    bn__xkey *ox = bn__malloc_array(n ? n : 1, sizeof *ox);
+    if (!ox)
+        return BN_ENOMEM;
+    for (size_t v = 0; v < n; v++) {
+        ox[v].x = b->pos[3 * v];
+        ox[v].i = v;
+    }
+    qsort(ox, n, sizeof *ox, bn__cmp_x);
+    for (size_t q = 0; q < np; q++) {
+        const bn_patch *pq = &patches[q];
+        for (unsigned c = 0; c < pq->ncorners; c++) {
+            size_t va = b->corner_v[4 * q + c], vb = b->corner_v[4 * q + (c + 1) % pq->ncorners];
+            const double *A = b->pos + 3 * va, *B = b->pos + 3 * vb;
+            double ab[3], len2, xlo = fmin(A[0], B[0]) - eps, xhi = fmax(A[0], B[0]) + eps;
+            size_t lo = 0, hi = n;
+            bn_v3_sub(B, A, ab);
+            len2 = bn_v3_dot(ab, ab);
+            if (!(len2 > 4 * eps * eps))
+                continue;
+            while (lo < hi) {   /* the first vertex with x >= xlo */
+                size_t mid = lo + (hi - lo) / 2;
+                if (ox[mid].x < xlo)
+                    lo = mid + 1;
+                else
+                    hi = mid;
+            }
+            for (size_t k = lo; k < n && ox[k].x <= xhi; k++) {
+                size_t v = ox[k].i, ok = 0;
+                const double *P = b->pos + 3 * v;
+                double ap[3], t, d[3];
+                int corner = 0;
+                for (unsigned cc = 0; cc < pq->ncorners; cc++)
+                    corner |= b->corner_v[4 * q + cc] == v;
+                if (corner)
+                    continue;
+                bn_v3_sub(P, A, ap);
+                t = bn_v3_dot(ap, ab) / len2;
+                if (!(t > 0 && t < 1))
+                    continue;
+                bn_v3_madd(ap, -t, ab, d);
+                if (bn_v3_len(d) > eps || t * sqrt(len2) <= eps || (1 - t) * sqrt(len2) <= eps)
+                    continue;
+                for (size_t i = b->vstart[v]; i < b->vstart[v + 1] && !ok; i++) {
+                    const bn_patch *pp = &patches[b->vpatch[i]];
+                    ok = pp->material == pq->material && bn_v3_dot(pp->normal, pq->normal) >= cos_crease - 1e-12;
+                }
+                if (!ok)
+                    continue;
+                if (b->ntj == cap) {
+                    size_t nc = cap ? 2 * cap : 64;
+                    struct bn__tj *nt = bn__realloc_array(b->tj, nc, sizeof *nt);
+                    if (!nt) {
+                        free(ox);
+                        return BN_ENOMEM;
+                    }
+                    b->tj = nt;
+                    cap = nc;
+                }
+                b->tj[b->ntj++] = (struct bn__tj){v, va, vb, t, sqrt(len2)};
+            }
+        }
+    }
+    free(ox);
+    if (b->ntj)
+        qsort(b->tj, b->ntj, sizeof *b->tj, bn__cmp_tj);
+    return BN_OK;
+}
 
 static size_t bn__find(size_t *parent, size_t i)
 {
@@ -36,18 +139,6 @@ static void bn__union(size_t *parent, size_t a, size_t b)
         parent[b] = a;   /* the smaller index is the root: deterministic representatives */
     else
         parent[a] = b;
-}
-
-typedef struct bn__xkey {
-    double x;
-    size_t i;
-} bn__xkey;
-static int bn__cmp_x(const void *a, const void *b)
-{
-    const bn__xkey *p = a, *q = b;
-    if (p->x != q->x)
-        return p->x < q->x ? -1 : 1;
-    return p->i < q->i ? -1 : (p->i > q->i);
 }
 
 bn_status bn_bake_create(const bn_scene *scene, double crease_deg, bn_bake **out, bn_error *err)
@@ -160,6 +251,8 @@ bn_status bn_bake_create(const bn_scene *scene, double crease_deg, bn_bake **out
     for (size_t w = 0; w < npv; w++)
         for (size_t i = inc_start[w]; i < inc_start[w + 1]; i++)
             b->vpatch[fill[gid[i]]++] = inc[i] / 4;
+    if (!flat && bn__find_tjunctions(b, patches, np, eps, cos_crease) != BN_OK)
+        goto fail;
     st = BN_OK;
     *out = b;
     b = NULL;
@@ -185,6 +278,7 @@ void bn_bake_destroy(bn_bake *b)
     free(b->corner_v);
     free(b->vstart);
     free(b->vpatch);
+    free(b->tj);
     free(b);
 }
 
@@ -207,17 +301,37 @@ void bn_bake_vertex_values(const bn_bake *b, const double *x, double *out)
         for (int c = 0; c < 3; c++)
             out[3 * v + c] = a > 0 ? s[c] / a : 0;
     }
+    /* T-junctions take their edge's value, longest edges first (their ends may be T-junctions of
+     * longer edges). Two faces cut at different sizes along one line make each other's vertices
+     * T-junctions in a chain: the sweeps (Gauss-Seidel, each a convex combination) converge to the one
+     * consistent answer, linear along the chain between its shared ends */
+    for (int sweep = 0; sweep < 500 && b->ntj; sweep++) {
+        double change = 0, scale = 0;
+        for (size_t k = 0; k < b->ntj; k++) {
+            const struct bn__tj *j = &b->tj[k];
+            for (int c = 0; c < 3; c++) {
+                double nv = (1 - j->t) * out[3 * j->a + c] + j->t * out[3 * j->b + c];
+                change = fmax(change, fabs(nv - out[3 * j->v + c]));
+                scale = fmax(scale, fabs(nv));
+                out[3 * j->v + c] = nv;
+            }
+        }
+        if (change <= 1e-15 * scale)
+            break;
+    }
 }
 
-void bn_bake_interpolate(const bn_bake *b, const double *vv, size_t patch, const double p[3], double out[3])
+size_t bn_bake_tjunction_count(const bn_bake *b) { return b->ntj; }
+
+unsigned bn_bake_weights(const bn_bake *b, size_t patch, const double p[3], size_t vert[4], double w[4])
 {
     const bn_patch *pa = &bn_scene_patches(b->scene, NULL)[patch];
     const double *pv = bn_scene_patch_vertices(b->scene, NULL);
     const double *A = pv + 3 * pa->corner[0], *B = pv + 3 * pa->corner[1], *C = pv + 3 * pa->corner[2];
-    const double *val[4];
-    double w[4] = {0, 0, 0, 0};
+    for (unsigned c = 0; c < 4; c++)
+        w[c] = 0;
     for (unsigned c = 0; c < pa->ncorners; c++)
-        val[c] = vv + 3 * b->corner_v[4 * patch + c];
+        vert[c] = b->corner_v[4 * patch + c];
     if (pa->ncorners == 3) {
         /* Barycentric: sub-triangle areas along the normal. */
         double e1[3], e2[3], q1[3], q2[3], cr[3], tot;
@@ -264,10 +378,18 @@ void bn_bake_interpolate(const bn_bake *b, const double *vv, size_t patch, const
         w[2] = u * v;
         w[3] = (1 - u) * v;
     }
+    return pa->ncorners;
+}
+
+void bn_bake_interpolate(const bn_bake *b, const double *vv, size_t patch, const double p[3], double out[3])
+{
+    size_t vert[4];
+    double w[4];
+    unsigned n = bn_bake_weights(b, patch, p, vert, w);
     for (int c = 0; c < 3; c++) {
         out[c] = 0;
-        for (unsigned k = 0; k < pa->ncorners; k++)
-            out[c] += w[k] * val[k][c];
+        for (unsigned k = 0; k < n; k++)
+            out[c] += w[k] * vv[3 * vert[k] + c];
     }
 }
 

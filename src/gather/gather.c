@@ -54,17 +54,26 @@ static int bn__side(int samples)
     return g < 1 ? 1 : g;
 }
 
-/* The value of layer `l` (0 .. n - 1: K^(l+1) E; n: rest) at a hit. */
-static void bn__hit_value(const bn__gather *G, int l, const bn_hit *h, double v[3])
+/* The values of the gathered layers (0 .. n - 1: K^(l+1) E; n: rest) at a hit, added to hv x wt:
+ * the hit patch's own, or interpolated across patches (smooth: one set of weights for every layer). */
+static void bn__hit_values(const bn__gather *G, const bn_hit *h, double wt, double *hv)
 {
+    int nl = G->n + 1;
     if (G->vv) {
-        bn_bake_interpolate(G->smooth, G->vv[l], h->patch, h->p, v);
+        size_t vert[4];
+        double w[4];
+        unsigned m = bn_bake_weights(G->smooth, h->patch, h->p, vert, w);
+        for (int l = 0; l < nl; l++)
+            for (unsigned k = 0; k < m; k++)
+                for (int c = 0; c < 3; c++)
+                    hv[3 * l + c] += wt * w[k] * G->vv[l][3 * vert[k] + c];
         return;
     }
-    const double *a = l < G->n ? G->terms[l + 1] : G->rest;
-    v[0] = a[3 * h->patch];
-    v[1] = a[3 * h->patch + 1];
-    v[2] = a[3 * h->patch + 2];
+    for (int l = 0; l < nl; l++) {
+        const double *a = l < G->n ? G->terms[l + 1] : G->rest;
+        for (int c = 0; c < 3; c++)
+            hv[3 * l + c] += wt * a[3 * h->patch + c];
+    }
 }
 
 /* rho-free direct light at x (normal n, on face f): sum over emitters of Le F V. */
@@ -171,12 +180,7 @@ static long bn__sample(const bn__gather *G, const double o[3], const double d[3]
                 st->gather_rays += 1;
                 if (!bn_rt_intersect(G->rt, xo, dir, 0, INFINITY, &q) || !q.front)
                     continue;
-                for (int l = 0; l < nl; l++) {
-                    double v[3];
-                    bn__hit_value(G, l, &q, v);
-                    for (int c = 0; c < 3; c++)
-                        hv[3 * l + c] += v[c] * inv;
-                }
+                bn__hit_values(G, &q, inv, hv);
             }
     }
     return (long)p->face;
