@@ -80,7 +80,10 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
         "E, KE, K2E, ..., K{K}E (bounce k is K^k E), rest = L - (E + ... + K{K}E) and L as one multi-layer\n"
         "OpenEXR (channels KE.R, KE.G, KE.B, ...; radiance in W m^-2 sr^-1), an sRGB PNG per layer\n"
         "(out.<layer>.png) and a contact sheet (out.sheet.png): row 1 every layer at one exposure, row 2 each\n"
-        "normalised on its own. The camera comes from NAME.camera beside the scene if it exists; flags override.";
+        "normalised on its own. Each pixel by the final gather at the point it sees (KE in closed form with\n"
+        "shadow rays, higher terms gathered from the solution; default mesh 300 patches), or with --gather none\n"
+        "the value of the patch it sees. The camera comes from NAME.camera beside the scene if it exists; flags\n"
+        "override.";
     bn_optset_add(&set, (bn_opt){"bounces", 'n', BN_OPT_INT, &n, NULL, 0, 64, "K",
                                  "keep terms E .. K^K E as their own layers (default 3)"});
     bn_optset_add(&set, (bn_opt){"output", 'o', BN_OPT_STRING, &out, NULL, 0, 0, "FILE.exr",
@@ -91,7 +94,9 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
                                  "preview exposure: value * 2^EV before sRGB (default: auto, the 99th percentile "
                                  "of L at 0.9)"});
     bn_optset_add(&set, (bn_opt){"smooth", 0, BN_OPT_FLAG, &smooth, NULL, 0, 0, NULL,
-                                 "interpolate baked vertex values across patches (default flat: one value per patch)"});
+                                 "read the solution interpolated across patches (baked vertex values, crack-free at T-junctions) "
+                                 "instead of one value per patch: the pixels with --gather none, the gather's hits "
+                                 "with final"});
     bn_optset_add(&set, (bn_opt){"crease", 0, BN_OPT_DOUBLE, &crease, NULL, 0, 180, "DEG",
                                  "--smooth: faces whose normals differ by more are not blended (default 30)"});
     bn_optset_add(&set, (bn_opt){"no-previews", 0, BN_OPT_FLAG, &no_previews, NULL, 0, 0, NULL,
