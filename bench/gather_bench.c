@@ -261,6 +261,8 @@ int main(int argc, char **argv)
                 fprintf(stderr, "gather_bench: %s\n", err.msg);
                 return 1;
             }
+            if (bake)
+                fprintf(stderr, "gather_bench: %zu enclosed patches\n", bn_bake_exclude_enclosed(bake, p.rt));
             {   /* --gather none: each pixel the value of the patch it sees */
                 bn_image fl;
                 const double *Lp = p.res.L;

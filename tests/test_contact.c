@@ -7,6 +7,8 @@
  * share). */
 #include "bn_test.h"
 #include "bounce/pipeline.h"
+#include "bounce/bake.h"
+#include "bounce/rt.h"
 
 #ifndef M_PI
 #define M_PI 3.14159265358979323846
@@ -488,4 +490,81 @@ BN_TEST(random_blocks_keep_mesh_invariants)
         free(edges);
         bn_scene_destroy(s);
     }
+}
+
+/* The smooth bake next to the block: the floor under it is found enclosed (rays from it meet the
+ * block's inside) and left out of the vertex averages, so a vertex on the contact outline carries the
+ * area mean of the lit floor beside it alone, not the darkness under the block. */
+BN_TEST(smooth_bake_leaves_out_the_floor_under_the_block)
+{
+    double fp[4][2];
+    bn_pipeline p;
+    bn_rt *rt = NULL;
+    bn_bake *b = NULL;
+    bn_error err;
+    size_t np, nv, hidden = 0, enclosed, outline = 0;
+    const bn_patch *pt;
+    unsigned char *hid;
+    double *vv, *sum, *area;
+    int *has_hidden;
+    write_scene();
+    footprint(fp);
+    solve(0, &p);
+    pt = bn_scene_patches(p.scene, &np);
+    if (bn_rt_create(p.scene, 0, &rt, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    BN_ASSERT_STATUS(bn_bake_create(p.scene, 30, &b, &err), BN_OK);
+    enclosed = bn_bake_exclude_enclosed(b, rt);
+    hid = calloc(np, 1);
+    for (size_t i = 0; i < np; i++) {
+        int pos = 0, neg = 0;
+        if (pt[i].face != 0)
+            continue;
+        for (int k = 0; k < 4; k++) {   /* the test's own geometry: the centroid inside the footprint */
+            const double *a = fp[k], *q = fp[(k + 1) % 4];
+            double cr = (q[0] - a[0]) * (pt[i].centroid[2] - a[1]) - (q[1] - a[1]) * (pt[i].centroid[0] - a[0]);
+            pos += cr > 0;
+            neg += cr < 0;
+        }
+        hid[i] = pos == 4 || neg == 4;
+        hidden += hid[i];
+    }
+    fprintf(stderr, "%zu floor patches under the block, %zu patches found enclosed\n", hidden, enclosed);
+    BN_ASSERT_GT(hidden, 10);
+    BN_ASSERT_EQ(enclosed, hidden);
+    nv = bn_bake_vertex_count(b);
+    vv = calloc(3 * nv, sizeof *vv);
+    sum = calloc(nv, sizeof *sum);
+    area = calloc(nv, sizeof *area);
+    has_hidden = calloc(nv, sizeof *has_hidden);
+    bn_bake_vertex_values(b, p.res.terms[1], vv);   /* KE */
+    for (size_t i = 0; i < np; i++) {
+        if (pt[i].face != 0)
+            continue;
+        for (unsigned c = 0; c < pt[i].ncorners; c++) {
+            size_t v = bn_bake_corner_vertex(b, i, c);
+            if (hid[i]) {
+                has_hidden[v] = 1;
+                continue;
+            }
+            sum[v] += pt[i].area * p.res.terms[1][3 * i + 1];
+            area[v] += pt[i].area;
+        }
+    }
+    for (size_t v = 0; v < nv; v++)
+        if (has_hidden[v] && area[v] > 0) {   /* on the outline: lit floor on one side, hidden on the other */
+            outline++;
+            BN_ASSERT_GT(vv[3 * v + 1], 0);
+            BN_ASSERT_REL(vv[3 * v + 1], sum[v] / area[v], 1e-12);
+        }
+    fprintf(stderr, "%zu vertices on the contact outline checked\n", outline);
+    BN_ASSERT_GT(outline, 10);
+    free(hid);
+    free(vv);
+    free(sum);
+    free(area);
+    free(has_hidden);
+    bn_bake_destroy(b);
+    bn_rt_destroy(rt);
+    bn_pipeline_free(&p);
 }

@@ -4,6 +4,7 @@
 #include "bounce/bake.h"
 #include "base/internal.h"
 #include "base/vec.h"
+#include "bounce/rt.h"
 
 #include <math.h>
 #include <string.h>
@@ -27,6 +28,7 @@ struct bn_bake {
     size_t *corner_v;   /* npatches*4: output vertex of each corner (unused corners = SIZE_MAX) */
     size_t *vstart;     /* nverts+1: CSR of the patches of each vertex's group */
     size_t *vpatch;
+    unsigned char *enclosed;   /* per patch: inside a closed object (NULL: none known) */
     size_t ntj;         /* T-junctions: vertex v lies inside the edge (a, b) of a patch on its smooth */
     struct bn__tj {     /* surface, at a + t (b - a); in decreasing order of the edge's length */
         size_t v, a, b;
@@ -279,6 +281,7 @@ void bn_bake_destroy(bn_bake *b)
     free(b->vstart);
     free(b->vpatch);
     free(b->tj);
+    free(b->enclosed);
     free(b);
 }
 
@@ -287,13 +290,61 @@ size_t bn_bake_vertex_count(const bn_bake *b) { return b->nverts; }
 const double *bn_bake_vertex_positions(const bn_bake *b) { return b->pos; }
 size_t bn_bake_corner_vertex(const bn_bake *b, size_t patch, unsigned corner) { return b->corner_v[4 * patch + corner]; }
 
+/* Rays per patch for bn_bake_exclude_enclosed, and the share of them that must meet a back face. */
+#define BN__ENCLOSED_RAYS 16
+#define BN__ENCLOSED_SHARE 0.9
+
+size_t bn_bake_exclude_enclosed(bn_bake *b, const bn_rt *rt)
+{
+    size_t np, count = 0;
+    const bn_patch *patches = bn_scene_patches(b->scene, &np);
+    double eps = bn_rt_epsilon(rt);
+    long ln = (long)np;
+    free(b->enclosed);
+    if (!(b->enclosed = calloc(np ? np : 1, 1)))
+        return 0;
+#pragma omp parallel for schedule(dynamic, 256) reduction(+ : count)
+    for (long lp = 0; lp < ln; lp++) {
+        const bn_patch *p = &patches[lp];
+        double s[3], t[3], o[3], sign = copysign(1.0, p->normal[2]), a = -1.0 / (sign + p->normal[2]);
+        double bb = p->normal[0] * p->normal[1] * a;
+        int back = 0;
+        s[0] = 1 + sign * p->normal[0] * p->normal[0] * a;
+        s[1] = sign * bb;
+        s[2] = -sign * p->normal[0];
+        t[0] = bb;
+        t[1] = sign + p->normal[1] * p->normal[1] * a;
+        t[2] = -p->normal[1];
+        for (int k = 0; k < 3; k++)
+            o[k] = p->centroid[k] + eps * p->normal[k];
+        for (int r = 0; r < BN__ENCLOSED_RAYS; r++) {   /* a fixed spiral of directions: deterministic */
+            double u = (r + 0.5) / BN__ENCLOSED_RAYS, ph = 2.399963229728653 * r, rr = sqrt(u), d[3];
+            bn_hit h;
+            for (int k = 0; k < 3; k++)
+                d[k] = rr * cos(ph) * s[k] + rr * sin(ph) * t[k] + sqrt(1 - u) * p->normal[k];
+            back += bn_rt_intersect(rt, o, d, 0, INFINITY, &h) && !h.front;
+        }
+        if (back >= BN__ENCLOSED_SHARE * BN__ENCLOSED_RAYS) {
+            b->enclosed[lp] = 1;
+            count++;
+        }
+    }
+    return count;
+}
+
 void bn_bake_vertex_values(const bn_bake *b, const double *x, double *out)
 {
     const bn_patch *patches = bn_scene_patches(b->scene, NULL);
     for (size_t v = 0; v < b->nverts; v++) {
         double s[3] = {0, 0, 0}, a = 0;
+        int open = 0;   /* the vertex has a patch outside every closed object: only those count */
+        if (b->enclosed)
+            for (size_t i = b->vstart[v]; i < b->vstart[v + 1] && !open; i++)
+                open = !b->enclosed[b->vpatch[i]];
         for (size_t i = b->vstart[v]; i < b->vstart[v + 1]; i++) {
             size_t p = b->vpatch[i];
+            if (open && b->enclosed[p])
+                continue;
             a += patches[p].area;
             for (int c = 0; c < 3; c++)
                 s[c] += patches[p].area * x[3 * p + c];

@@ -117,6 +117,12 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
         rc = bn_cli_fail(&err);
         goto done;
     }
+    if (!flat && p.rt) {
+        size_t enc = bn_bake_exclude_enclosed(bake, p.rt);
+        if (enc && !c->quiet)
+            fprintf(stderr, "bounce: bake: %zu patches inside closed objects (under the blocks) left out of the "
+                            "vertex averages\n", enc);
+    }
     if ((ldr || is_gltf) && !bn_cli_given(&set, "exposure"))
         ev = bn_bake_auto_exposure(p.res.L, np);
     bn_cli_ff_opts(&ff, c, &fo);

@@ -44,8 +44,11 @@ static bn_status bn__bounces_render(const bn_scene *scene, const bn_rt *rt, cons
     bn_status st = BN_OK;
     for (size_t l = 0; l < nl && st == BN_OK; l++)
         st = bn_image_alloc(&imgs[l], cam->width, cam->height, err);
-    if (st == BN_OK && o->smooth)
+    if (st == BN_OK && o->smooth) {
         st = bn_bake_create(scene, o->crease, &bake, err);
+        if (st == BN_OK)
+            bn_bake_exclude_enclosed(bake, rt);   /* the floor under a block does not darken the floor around it */
+    }
     if (st == BN_OK && o->gather) {
         bn_gather_opts go;
         bn_gather_stats gs;

@@ -479,6 +479,8 @@ bn_status bn_flat_bake(const bn_flat *f, const char *out, int per_bounce, int in
     st = bn_bake_create(f->p.scene, crease_deg > 0 ? crease_deg : BN_BAKE_DEFAULT_CREASE, &b, &err);
     if (st != BN_OK)
         return bn__flat_fail(st, err.msg, msg, msglen);
+    if (f->p.rt)
+        bn_bake_exclude_enclosed(b, f->p.rt);   /* as `bounce bake` */
     snprintf(solver, sizeof solver, "%s: %s after %zu iterations, residual %.3g", bn_solve_method_name(f->p.method_used),
              bn_stop_reason_name(f->p.res.reason), f->p.res.iterations, f->p.res.residual_max);
     snprintf(patches, sizeof patches, "%zu", f->p.n);
