@@ -1,4 +1,4 @@
-#!/bin/sh
+#!/bin/bash
 # bench/run.sh: the one benchmark runner. Builds bounce (Release) and runs every benchmark in bench/
 # (form factors, K application and solves, path tracer, and the speed-accuracy study), then writes
 # one markdown report: the machine, each figure as a median of repeated runs with its spread, and
@@ -514,7 +514,11 @@ if command -v mpirun >/dev/null 2>&1 && grep -q "BOUNCE_MPI:BOOL=ON" "$build/CMa
         rbytes=$(sed -n 's/.*a process receives at most \([0-9]*\) bytes.*/\1/p' "$work/mpi$np.err" | tail -1)
         kmib=$(sed -n 's/.*K hierarchy (\([0-9.]*\) MiB).*/\1/p' "$work/mpi$np.err" | tail -1)
         same="-"
-        [ "$np" != 1 ] && { cmp -s <(grep -v '^#' "$work/mpi1.csv") <(grep -v '^#' "$work/mpi$np.csv") && same=yes || same=NO; }
+        if [ "$np" != 1 ]; then   # rows without the '#' provenance (POSIX sh: no process substitution)
+            grep -v '^#' "$work/mpi1.csv" >"$work/mpi1.rows"
+            grep -v '^#' "$work/mpi$np.csv" >"$work/mpi$np.rows"
+            if cmp -s "$work/mpi1.rows" "$work/mpi$np.rows"; then same=yes; else same=NO; fi
+        fi
         echo "| $np | $th | $(awk -v a="$t0" -v b="$t1" 'BEGIN { printf "%.2f", b - a }') | $links | $most | $(awk -v m="$most" -v l="$links" 'BEGIN { if (l > 0) printf "%.2f", m / l }') | $peak | $kmib | ${rbytes:-?} | $same |" >>"$report"
     done
     echo >>"$report"

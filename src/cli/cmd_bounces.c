@@ -132,8 +132,9 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
     }
     if (gather == 0)
         so.default_patches = BN_GATHER_PATCHES;   /* the gather's default mesh (bench/results.md) */
-    if (gather == 0 && n < 1) {
-        bn_error_set(&err, BN_EUSAGE, "--gather final needs -n 1 or more (KE is computed per pixel); or --gather none");
+    if (gather == 0 && (n < 1 || n > 20)) {
+        bn_error_set(&err, BN_EUSAGE, "--gather final needs -n between 1 (KE is computed per pixel) and 20, not %d; or "
+                     "--gather none", n);
         return bn_cli_fail(&err);
     }
     st = bn_cli_run_solution(pos[0], &so, &ff, &sol, c, n, &p, NULL, 0);
