@@ -52,16 +52,10 @@ static double raw_rate(const bn_rt *rt, const bn_scene *s, size_t nsamples)
         for (int q = 0; q < 3; q++)
             x[q] = (1 - u) * a[q] + u * (1 - v) * b[q] + u * v * c[q];
         bn_v3_madd(x, eps, n, o);
-        /* Cosine direction (basis as path.c). */
+        /* Cosine direction (the basis path.c uses). */
         {
-            double sign = copysign(1.0, n[2]), aa = -1.0 / (sign + n[2]), bb = n[0] * n[1] * aa;
             double lx = rad * cos(phi), ly = rad * sin(phi), lz = sqrt(fmax(0.0, 1 - r1));
-            t1[0] = 1 + sign * n[0] * n[0] * aa;
-            t1[1] = sign * bb;
-            t1[2] = -sign * n[0];
-            t2[0] = bb;
-            t2[1] = sign + n[1] * n[1] * aa;
-            t2[2] = -n[1];
+            bn_v3_basis(n, t1, t2);
             for (int q = 0; q < 3; q++)
                 d[q] = lx * t1[q] + ly * t2[q] + lz * n[q];
         }

@@ -306,15 +306,9 @@ size_t bn_bake_exclude_enclosed(bn_bake *b, const bn_rt *rt)
 #pragma omp parallel for schedule(dynamic, 256) reduction(+ : count)
     for (long lp = 0; lp < ln; lp++) {
         const bn_patch *p = &patches[lp];
-        double s[3], t[3], o[3], sign = copysign(1.0, p->normal[2]), a = -1.0 / (sign + p->normal[2]);
-        double bb = p->normal[0] * p->normal[1] * a;
+        double s[3], t[3], o[3];
         int back = 0;
-        s[0] = 1 + sign * p->normal[0] * p->normal[0] * a;
-        s[1] = sign * bb;
-        s[2] = -sign * p->normal[0];
-        t[0] = bb;
-        t[1] = sign + p->normal[1] * p->normal[1] * a;
-        t[2] = -p->normal[1];
+        bn_v3_basis(p->normal, s, t);
         for (int k = 0; k < 3; k++)
             o[k] = p->centroid[k] + eps * p->normal[k];
         for (int r = 0; r < BN__ENCLOSED_RAYS; r++) {   /* a fixed spiral of directions: deterministic */

@@ -39,6 +39,17 @@ static inline double bn_v3_normalize(double a[3])
     if (l > 0) { a[0] /= l; a[1] /= l; a[2] /= l; }
     return l;
 }
+/* s, t: an orthonormal basis of the plane normal to unit n (Duff et al. 2017, branchless) */
+static inline void bn_v3_basis(const double n[3], double s[3], double t[3])
+{
+    double sign = copysign(1.0, n[2]), a = -1.0 / (sign + n[2]), b = n[0] * n[1] * a;
+    s[0] = 1 + sign * n[0] * n[0] * a;
+    s[1] = sign * b;
+    s[2] = -sign * n[0];
+    t[0] = b;
+    t[1] = sign + n[1] * n[1] * a;
+    t[2] = -n[1];
+}
 static inline double bn_v3_dist(const double a[3], const double b[3])
 {
     double d[3];

@@ -131,18 +131,6 @@ static void bn__direct(const bn__gather *G, const double x0[3], const double n[3
     }
 }
 
-/* An orthonormal basis around unit n (Duff et al. 2017). */
-static void bn__basis(const double n[3], double s[3], double t[3])
-{
-    double sign = copysign(1.0, n[2]), a = -1.0 / (sign + n[2]), b = n[0] * n[1] * a;
-    s[0] = 1 + sign * n[0] * n[0] * a;
-    s[1] = sign * b;
-    s[2] = -sign * n[0];
-    t[0] = b;
-    t[1] = sign + n[1] * n[1] * a;
-    t[2] = -n[1];
-}
-
 /* One camera sample: E and KE (rho applied) added to acc[0..5]; hv (n + 1 layers x 3) receives the
  * hemisphere means of K^1 E .. K^n E and rest at the hits (rho not applied). Returns the face seen,
  * or -1 (a miss or a back face: black, surfaces are one-sided). */
@@ -166,7 +154,7 @@ static long bn__sample(const bn__gather *G, const double o[3], const double d[3]
         acc[3 + c] += rho[c] * ke[c];
     }
     if (rho[0] > 0 || rho[1] > 0 || rho[2] > 0) {
-        bn__basis(p->normal, s, t);
+        bn_v3_basis(p->normal, s, t);
         for (int k = 0; k < 3; k++)
             xo[k] = h.p[k] + G->eps * p->normal[k];
         for (int a = 0; a < G->gh; a++)

@@ -131,20 +131,6 @@ void bn__tracer_patch_point(const bn__tracer *t, size_t p, double u1, double u2,
         x[k] = wa * a[k] + wb * b[k] + wc * c[k];
 }
 
-/* Orthonormal basis around a unit n (Duff et al. 2017). */
-static void bn__onb(const double n[3], double t1[3], double t2[3])
-{
-    double sign = copysign(1.0, n[2]);
-    double a = -1.0 / (sign + n[2]);
-    double b = n[0] * n[1] * a;
-    t1[0] = 1 + sign * n[0] * n[0] * a;
-    t1[1] = sign * b;
-    t1[2] = -sign * n[0];
-    t2[0] = b;
-    t2[1] = sign + n[1] * n[1] * a;
-    t2[2] = -n[1];
-}
-
 static size_t bn__pick_emitter(const bn__tracer *t, double u)
 {
     size_t lo = 0, hi = t->nem - 1;
@@ -227,7 +213,7 @@ void bn__tracer_path(const bn__tracer *t, const double x0[3], size_t p0, bn__rng
             double rad = sqrt(u1), phi = 2 * BN_PI * u2;
             double lx = rad * cos(phi), ly = rad * sin(phi);
             cz = sqrt(fmax(0.0, 1 - u1));
-            bn__onb(n, t1, t2);
+            bn_v3_basis(n, t1, t2);
             for (int k = 0; k < 3; k++)
                 w[k] = lx * t1[k] + ly * t2[k] + cz * n[k];
         }
