@@ -10,6 +10,7 @@
 #include "bounce/formfactor.h"
 #include "bounce/solve.h"
 #include "bounce/image.h"
+#include "bounce/gather.h"
 #include "bounce/bake.h"
 #include "bounce/trace.h"
 #include "bounce/study.h"
