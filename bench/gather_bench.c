@@ -226,10 +226,6 @@ int main(int argc, char **argv)
         if (cache)
             ref_save(cache, key, &ref);
     }
-    {
-        float zero_var_dummy = 0;
-        (void)zero_var_dummy;
-    }
     double ref_se;
     (void)median_err(&ref, ref.L, NULL, &ref_se);
     printf("Reference: bounce's tracer, %zu samples per pixel (%.0f s), %dx%d; median per-pixel relative standard "

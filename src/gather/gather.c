@@ -33,7 +33,6 @@ typedef struct bn__gather {
     const bn_scene *scene;
     const bn_patch *patch;
     const bn_material *mat;
-    const bn_camera *cam;
     const double *const *terms;
     const double *rest;
     double **vv;             /* smooth: vertex values of K^1 E .. K^n E, rest (n + 1 layers) */
@@ -42,7 +41,6 @@ typedef struct bn__gather {
     bn__emitter *em;
     size_t nem;
     double eps;
-    uint64_t seed;
 } bn__gather;
 
 /* Streams: the camera's jitter, then the light and gather samples, keyed by pixel and sample. */
@@ -266,14 +264,12 @@ static bn_status bn__gather_body(const bn_rt *rt, const bn_camera *cam, const do
     G.scene = sc;
     G.patch = bn_scene_patches(sc, &np);
     G.mat = bn_scene_materials(sc, &nm);
-    G.cam = cam;
     G.terms = terms;
     G.rest = rest;
     G.n = n;
     G.gl = bn__side(o->light_samples);
     G.gh = bn__side(o->hemi_samples);
     G.eps = bn_rt_epsilon(rt);
-    G.seed = o->seed;
     G.smooth = o->smooth;
     G.em = bn__calloc(bn_scene_emitter_count(sc) + 1, sizeof *G.em);
     if (!G.em)
