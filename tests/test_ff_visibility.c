@@ -20,6 +20,13 @@
 #define BN_Z_BIAS 4.5
 #define BN_RATE_SLACK 1.5
 #define BN_NSEEDS 64
+/* - BN_EXACT_VIS_RTOL: the default path integrates the exactly visible part of B over A with a
+ *   degree-5 rule on 8+ triangles, refined until a degree-2 rule agrees within 10%; on these
+ *   smooth integrands (C stays inside every pyramid) that is good to about 1e-4 of F where the
+ *   kernel varies fastest (the near pair: 5e-5), against a few 1e-2 for 32 shadow rays.
+ * - BN_ROW_TOL: issue 15's bound for the rows of closed scenes with occluders at default settings. */
+#define BN_EXACT_VIS_RTOL 1e-4
+#define BN_ROW_TOL 1e-4
 
 typedef struct sb {
     double v[3 * 128];
@@ -90,7 +97,9 @@ static void log_drop(void *user, bn_log_level level, const char *msg)
     (void)msg;
 }
 
-static bn_transport *build(const bn_scene *scene, const bn_rt *rt, int samples, uint64_t seed)
+/* sampled: the shadow-ray estimator (--ff-sampled-visibility); else the default, the exact visible
+ * part (no rays, no seed). */
+static bn_transport *build_with(const bn_scene *scene, const bn_rt *rt, int samples, uint64_t seed, int sampled)
 {
     bn_formfactor_opts o;
     bn_transport *k = NULL;
@@ -100,6 +109,7 @@ static bn_transport *build(const bn_scene *scene, const bn_rt *rt, int samples, 
     o.method = BN_FF_ANALYTIC;
     o.samples = samples;
     o.seed = seed;
+    o.sampled_visibility = sampled;
     o.quiet = 1;
     o.log.quiet = 1;
     o.log.fn = log_drop;
@@ -107,6 +117,11 @@ static bn_transport *build(const bn_scene *scene, const bn_rt *rt, int samples, 
     if (bn_formfactor_build(scene, rt, &o, &k, &d, &err) != BN_OK)
         BN_FAIL("build (samples %d, seed %llu): %s", samples, (unsigned long long)seed, err.msg);
     return k;
+}
+
+static bn_transport *build(const bn_scene *scene, const bn_rt *rt, int samples, uint64_t seed)
+{
+    return build_with(scene, rt, samples, seed, 1);
 }
 
 /* Unoccluded F from quad a to quad b (corner lists), whichever way b's corners turn. */
@@ -189,6 +204,16 @@ static void check_exact_case(const char *name, const double A[12], const double 
     BN_ASSERT_LT(fabs(e256.mean), BN_Z_BIAS * e256.se);
     BN_ASSERT_LT(e256.rms, e16.rms * BN_RATE_SLACK / 4);
     BN_ASSERT_GT(e256.rms, 0);   /* the pair was sampled */
+    {
+        /* the default: the visible part of B from each point of A exactly, no rays and no seed */
+        bn_transport *K1 = build_with(scene, rt, 0, 1, 0), *K2 = build_with(scene, rt, 0, 2, 0);
+        double f = bn_test_F(K1, 0, 1);
+        fprintf(stderr, "%s: exact visible part %.12f, relative error %.2e\n", name, f, fabs(f - exact) / exact);
+        BN_ASSERT_NEAR(f, exact, BN_EXACT_VIS_RTOL * exact);
+        BN_ASSERT_EQ(f, bn_test_F(K2, 0, 1));   /* no seed in it */
+        bn_transport_destroy(K1);
+        bn_transport_destroy(K2);
+    }
     bn_rt_destroy(rt);
     bn_scene_destroy(scene);
 }
@@ -274,4 +299,77 @@ BN_TEST(closed_room_with_block_rows_unbiased)
     BN_ASSERT_LT(rms[1], rms[0] * BN_RATE_SLACK / 4);
     bn_rt_destroy(rt);
     bn_scene_destroy(scene);
+}
+
+/* Closed rooms with occluders at default settings. Every row of a patch that sees the room sums to
+ * 1; the patches under blocks standing on the floor (no bottom faces) see only the blocks' insides,
+ * which face away, and sum to 0. Returns the largest |row sum - 1| of the default (exact visible
+ * part) and of the shadow-ray path at the same settings (32 rays per pair). */
+static void closed_rows(const char *name, int standing, double *worst, double *worst_sampled)
+{
+    sb s;
+    bn_scene *scene;
+    bn_rt *rt = NULL;
+    bn_error err;
+    size_t n, lit = 0, hidden = 0;
+    bn_transport *K, *Ks;
+    *worst = *worst_sampled = 0;
+    memset(&s, 0, sizeof s);
+    sb_box(&s, (double[]){0, 0, 0}, (double[]){1, 1, 1}, 1);
+    if (standing) {
+        sb_box(&s, (double[]){0.15, 0, 0.55}, (double[]){0.45, 0.6, 0.85}, 0);
+        sb_box(&s, (double[]){0.55, 0, 0.15}, (double[]){0.85, 0.3, 0.45}, 0);
+    } else {
+        sb_box(&s, (double[]){0.3, 0.2, 0.3}, (double[]){0.7, 0.6, 0.6}, 0);
+    }
+    scene = sb_scene(&s, 0.125);
+    bn_scene_patches(scene, &n);
+    if (bn_rt_create(scene, 0, &rt, &err) != BN_OK)
+        BN_FAIL("rt: %s", err.msg);
+    K = build_with(scene, rt, 0, 1, 0);
+    Ks = build_with(scene, rt, 0, 1, 1);
+    for (size_t i = 0; i < n; i++) {
+        double r = 0, rs = 0;
+        for (size_t j = 0; j < n; j++) {
+            r += bn_test_F(K, i, j);
+            rs += bn_test_F(Ks, i, j);
+        }
+        if (r < 0.5) {
+            hidden++;
+            BN_ASSERT_LT(r, BN_ROW_TOL);
+            continue;
+        }
+        lit++;
+        *worst = fmax(*worst, fabs(r - 1));
+        *worst_sampled = fmax(*worst_sampled, fabs(rs - 1));
+    }
+    fprintf(stderr, "%s: %zu patches (%zu hidden): largest |row sum - 1| %.2e exact, %.2e with 32 shadow rays\n",
+            name, n, hidden, *worst, *worst_sampled);
+    BN_ASSERT_GT(lit, n / 2);
+    BN_ASSERT_EQ(hidden > 0, standing);
+    bn_transport_destroy(K);
+    bn_transport_destroy(Ks);
+    bn_rt_destroy(rt);
+    bn_scene_destroy(scene);
+}
+
+/* A block floating inside: issue 15's bound, which the shadow rays miss. */
+BN_TEST(closed_room_floating_block_rows_sum_to_one)
+{
+    double w, ws;
+    closed_rows("room, floating block", 0, &w, &ws);
+    BN_ASSERT_LT(w, BN_ROW_TOL);
+    BN_ASSERT_GT(ws, BN_ROW_TOL);
+}
+
+/* Two blocks standing on the floor: contact lines, shared block edges and floor patches between
+ * the blocks whose shadows crease the integrand sharply. Against the shadow-ray estimator: at
+ * least 20 times closer to 1 in the worst row (measured 1.3e-4 against 4.8e-3; issue 15's 1e-4 is
+ * not met here yet, see the README). */
+BN_TEST(closed_room_blocks_on_the_floor_rows)
+{
+    double w, ws;
+    BN_SKIP_IF_SLOW_RUN();
+    closed_rows("room, blocks on the floor", 1, &w, &ws);
+    BN_ASSERT_LT(w, ws / 20);
 }

@@ -44,6 +44,8 @@ typedef struct bn_formfactor_opts {
     int          quadrature_only;  /* analytic: every pair by the point kernel's quadrature (the path
                                       before the closed form; for comparisons and bench/) */
     int          threads;     /* 0 = the caller's (all cores by default); results do not depend on it */
+    int          sampled_visibility;  /* analytic: shadow rays for every partly blocked pair, also where
+                                         the exact visible part is computed by default (for comparisons) */
 } bn_formfactor_opts;
 void bn_formfactor_opts_default(bn_formfactor_opts *o);
 /* The samples a method uses when o->samples is 0. */
@@ -78,6 +80,7 @@ typedef struct bn_ff_diagnostics {
     double rays_per_second;       /* rays / seconds of the whole assembly */
     bn_ff_method method;
     int    samples;
+    size_t pairs_exact;           /* analytic: pairs whose visible part was computed exactly (no rays) */
 } bn_ff_diagnostics;
 
 /* Bytes the assembly of `scene` with `o` will need (checked against max_memory before any work). */

@@ -18,6 +18,17 @@
  * The polygon must lie in x's front half-space (clip it first). */
 double bn__ff_point_polygon(const double x[3], const double n[3], const double *v, size_t nv);
 
+/* The most occluders bn__ff_point_visible takes; a pair with more has its visibility sampled. */
+#define BN__VIS_OCC_MAX 32
+/* F from x (unit normal n) to the part of the convex polygon b (nb corners, counter-clockwise seen
+ * from its front, unit normal bn, wholly in front of x) that x sees past the occluders: nocc convex
+ * polygons of occ_n[q] <= 4 corners at occ + 12 q. Exact (Lambert's contour integral over the
+ * boundary of b minus the occluders' projections from x); tol: the scene's geometric tolerance.
+ * *shadowed: bit q set if occluder q's projection from x meets b (the value is below F(x -> b) only
+ * if some bit is set); where it changes over a patch, the integrand has a crease. */
+double bn__ff_point_visible(const double x[3], const double n[3], const double *b, size_t nb, const double bn[3],
+                            const double *occ, const unsigned *occ_n, size_t nocc, double tol, uint32_t *shadowed);
+
 /* Clips the convex polygon v (nv corners) to the half-space n.(y - p) >= 0; corners within
  * `tol` of the plane are snapped onto it. out needs room for nv + 1 corners. Returns the count
  * (0 if nothing is left). */
@@ -38,6 +49,12 @@ typedef struct bn__quad_stats {
  * rule agree within its share of tol = max(rtol * |I|, atol), and it is no larger than kappa
  * times its centroid's distance to pj (near pairs get small triangles; far ones one or two). */
 double bn__ff_polygon_integral(const double *pi, size_t ni, const double ni_n[3], const double *pj, size_t nj,
+                               double rtol, double atol, bn__quad_stats *st);
+
+/* The same integral of F(x -> the part of pj that x sees past the occluders) (bn__ff_point_visible):
+ * A_i F_ij with visibility, to max(rtol |I|, atol) by the same adaptive rules. */
+double bn__ff_visible_integral(const double *pi, size_t ni, const double ni_n[3], const double *pj, size_t nj,
+                               const double *occ, const unsigned *occ_n, size_t nocc, double gtol, int split,
                                double rtol, double atol, bn__quad_stats *st);
 
 /* The same integral, A_i F_ij, as a double contour integral whose inner integral is closed-form and

@@ -137,6 +137,14 @@ typedef struct bn__qctx {
     double ni_n[3];
     double tol_per_area;   /* tolerance per unit area of P_i */
     bn__quad_stats *st;
+    const double *occ;     /* occluders (bn__ff_point_visible), or none */
+    const unsigned *occ_n;
+    size_t nocc;
+    double gtol;
+    int split;             /* start from 4^split triangles per fan triangle */
+    uint32_t mask;         /* the current leaf: its first point's occluders in view; */
+    int npoints, mixed;    /* its points so far; whether one had none in view and another some */
+    int mixed_depth;       /* mixed leaves are split down to this depth */
 } bn__qctx;
 
 /* A triangle may be accepted only when its diameter is below KAPPA times the distance from its
@@ -153,6 +161,15 @@ static double bn__eval(bn__qctx *q, const double a[3], const double b[3], const 
     for (int k = 0; k < 3; k++)
         x[k] = l0 * a[k] + l1 * b[k] + l2 * c[k];
     q->st->evals++;
+    if (q->nocc) {
+        uint32_t mask;
+        double f = bn__ff_point_visible(x, q->ni_n, q->pj, q->nj, q->nj_n, q->occ, q->occ_n, q->nocc, q->gtol, &mask);
+        if (q->npoints++ == 0)
+            q->mask = mask;
+        else if ((mask != 0) != (q->mask != 0))
+            q->mixed = 1;
+        return f;
+    }
     return bn__ff_point_polygon(x, q->ni_n, q->pj, q->nj);
 }
 
@@ -258,6 +275,7 @@ static void bn__leaf_make(bn__qctx *q, bn__leaf *l, const double a[3], const dou
     memcpy(l->v[2], c, 3 * sizeof(double));
     l->area = area;
     l->depth = depth;
+    q->npoints = q->mixed = 0;
     bn__rules(q, a, b, c, area, &q2, &l->q5);
     l->err = fabs(l->q5 - q2);
     for (int k = 0; k < 3; k++)
@@ -275,6 +293,8 @@ static void bn__leaf_make(bn__qctx *q, bn__leaf *l, const double a[3], const dou
                 l->key = INFINITY;
         }
     }
+    if (q->mixed && depth < q->mixed_depth)
+        l->key = INFINITY;   /* a shadow's edge crosses it: the rules may agree by chance */
     if (depth >= BN__MAX_DEPTH)
         l->key = -1;   /* cannot be refined further */
 }
@@ -283,10 +303,9 @@ static void bn__leaf_make(bn__qctx *q, bn__leaf *l, const double a[3], const dou
  * evaluations per leaf) whatever the tolerance asks. */
 #define BN__MAX_LEAVES 20000
 
-double bn__ff_polygon_integral(const double *pi, size_t ni, const double ni_n[3], const double *pj, size_t nj,
-                               double rtol, double atol, bn__quad_stats *st)
+static double bn__integral(bn__qctx q, const double *pi, size_t ni, const double ni_n[3], const double *pj, size_t nj,
+                           double rtol, double atol, bn__quad_stats *st)
 {
-    bn__qctx q;
     bn__quad_stats local;
     bn__heap h;
     double sum = 0, err = 0;
@@ -304,16 +323,39 @@ double bn__ff_polygon_integral(const double *pi, size_t ni, const double ni_n[3]
     h.n = 0;
     h.cap = sizeof h.inline_ / sizeof h.inline_[0];
     for (size_t t = 0; t + 2 < ni; t++) {
-        bn__leaf l;
+        /* each fan triangle, cut into 4^split by its midpoints first */
+        double tri[3 * 3 * 64];
+        size_t ntri = 1, split = (size_t)q.split;
         double area = bn__tri_area(pi, pi + 3 * (t + 1), pi + 3 * (t + 2));
         if (!(area > 0))
             continue;
-        bn__leaf_make(&q, &l, pi, pi + 3 * (t + 1), pi + 3 * (t + 2), area, 0);
-        sum += l.q5;
-        err += l.err;
-        if (!bn__heap_push(&h, &l)) {
-            sum = NAN;
-            goto done;
+        memcpy(tri, pi, 3 * sizeof(double));
+        memcpy(tri + 3, pi + 3 * (t + 1), 3 * sizeof(double));
+        memcpy(tri + 6, pi + 3 * (t + 2), 3 * sizeof(double));
+        for (size_t lev = 0; lev < split && 4 * ntri <= 64; lev++) {
+            for (size_t k = ntri; k-- > 0;) {
+                /* the corner triangles and the middle one, over the corners v and midpoints m */
+                static const int kid[4][3] = {{0, 3, 5}, {3, 1, 4}, {5, 4, 2}, {3, 4, 5}};
+                double p[6][3];
+                memcpy(p, tri + 9 * k, 9 * sizeof(double));
+                for (int e = 0; e < 3; e++)
+                    for (int c = 0; c < 3; c++)
+                        p[3 + e][c] = 0.5 * (p[e][c] + p[(e + 1) % 3][c]);
+                for (int d = 0; d < 4; d++)
+                    for (int v = 0; v < 3; v++)
+                        memcpy(tri + 9 * (4 * k + (size_t)d) + 3 * v, p[kid[d][v]], 3 * sizeof(double));
+            }
+            ntri *= 4;
+        }
+        for (size_t k = 0; k < ntri; k++) {
+            bn__leaf l;
+            bn__leaf_make(&q, &l, tri + 9 * k, tri + 9 * k + 3, tri + 9 * k + 6, area / (double)ntri, (int)split);
+            sum += l.q5;
+            err += l.err;
+            if (!bn__heap_push(&h, &l)) {
+                sum = NAN;
+                goto done;
+            }
         }
     }
     /* Global adaptivity: split the worst triangle until the summed estimate meets the tolerance
@@ -364,6 +406,36 @@ done:
     if (h.a != h.inline_)
         free(h.a);
     return sum;
+}
+
+double bn__ff_polygon_integral(const double *pi, size_t ni, const double ni_n[3], const double *pj, size_t nj,
+                               double rtol, double atol, bn__quad_stats *st)
+{
+    bn__qctx q;
+    memset(&q, 0, sizeof q);
+    return bn__integral(q, pi, ni, ni_n, pj, nj, rtol, atol, st);
+}
+
+/* The visible part's integrand is continuous but has creases where a shadow's edge crosses the
+ * patch, which the two rules can miss together when none of their points falls beyond one: the
+ * caller starts each fan triangle as 4^split (formfactor.c), and a triangle whose points disagree
+ * about whether an occluder is in view is split down to depth BN__VIS_MIXED_DEPTH whatever its
+ * error estimate. */
+#define BN__VIS_MIXED_DEPTH 4
+
+double bn__ff_visible_integral(const double *pi, size_t ni, const double ni_n[3], const double *pj, size_t nj,
+                               const double *occ, const unsigned *occ_n, size_t nocc, double gtol, int split,
+                               double rtol, double atol, bn__quad_stats *st)
+{
+    bn__qctx q;
+    memset(&q, 0, sizeof q);
+    q.occ = occ;
+    q.occ_n = occ_n;
+    q.nocc = nocc;
+    q.gtol = gtol;
+    q.split = split;
+    q.mixed_depth = BN__VIS_MIXED_DEPTH;
+    return bn__integral(q, pi, ni, ni_n, pj, nj, rtol, atol, st);
 }
 
 void bn__poly_sample(const double *v, size_t nv, double u, double w, double out[3])

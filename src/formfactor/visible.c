@@ -1,0 +1,317 @@
+/* F from a point to the part of a convex polygon it sees past occluding polygons, exactly: the
+ * occluders are clipped to the pyramid from the point to the polygon, projected from the point
+ * onto the polygon's plane, and Lambert's contour integral is summed over the boundary of what is
+ * left (the polygon minus the union of the projections), found edge piece by edge piece without
+ * building that region. The method of Nishita & Nakamae, "Half-tone representation of 3-D objects
+ * illuminated by area sources or polyhedron sources" (1983), and Baum, Rushmeier & Winget,
+ * "Improving radiosity solutions through the use of analytically determined form-factors"
+ * (SIGGRAPH 1989). */
+#include "formfactor/ff_internal.h"
+#include "base/vec.h"
+
+#include <math.h>
+#include <string.h>
+
+/* An occluder quad clipped by the pyramid's sides (at most BN__FF_POLY_MAX) and three more planes. */
+#define BN__VIS_CORNERS (4 + BN__FF_POLY_MAX + 4)
+
+typedef struct bn__poly2 {
+    double p[2 * BN__VIS_CORNERS];   /* counter-clockwise in the frame of b's plane */
+    size_t n;
+    /* per edge k (p_k -> p_k+1): direction, length, unit left normal (inward); bounding box */
+    double d[2 * BN__VIS_CORNERS], len[BN__VIS_CORNERS], nl[2 * BN__VIS_CORNERS];
+    double lo[2], hi[2];
+} bn__poly2;
+
+static double bn__cross2(const double a[2], const double b[2]) { return a[0] * b[1] - a[1] * b[0]; }
+
+static double bn__area2(const double *p, size_t n)
+{
+    double s = 0;
+    for (size_t k = 0; k < n; k++) {
+        size_t k1 = k + 1 < n ? k + 1 : 0;
+        s += p[2 * k] * p[2 * k1 + 1] - p[2 * k1] * p[2 * k + 1];
+    }
+    return 0.5 * s;
+}
+
+static void bn__poly2_edges(bn__poly2 *q)
+{
+    q->lo[0] = q->lo[1] = INFINITY;
+    q->hi[0] = q->hi[1] = -INFINITY;
+    for (size_t k = 0; k < q->n; k++) {
+        const double *c0 = q->p + 2 * k, *c1 = q->p + 2 * (k + 1 < q->n ? k + 1 : 0);
+        double *d = q->d + 2 * k, len;
+        d[0] = c1[0] - c0[0];
+        d[1] = c1[1] - c0[1];
+        len = sqrt(d[0] * d[0] + d[1] * d[1]);
+        q->len[k] = len;
+        q->nl[2 * k] = len > 0 ? -d[1] / len : 0;
+        q->nl[2 * k + 1] = len > 0 ? d[0] / len : 0;
+        for (int c = 0; c < 2; c++) {
+            q->lo[c] = fmin(q->lo[c], c0[c]);
+            q->hi[c] = fmax(q->hi[c], c0[c]);
+        }
+    }
+}
+
+/* Is the point m moved by an infinitesimal step along dir inside the convex polygon q? On an
+ * edge's line (within tol) the step decides. */
+static int bn__inside_moved(const bn__poly2 *q, const double m[2], const double dir[2], double tol)
+{
+    if (m[0] < q->lo[0] - tol || m[0] > q->hi[0] + tol || m[1] < q->lo[1] - tol || m[1] > q->hi[1] + tol)
+        return 0;
+    for (size_t k = 0; k < q->n; k++) {
+        const double *c0 = q->p + 2 * k, *nl = q->nl + 2 * k;
+        double d;
+        if (!(q->len[k] > 0))
+            continue;
+        d = nl[0] * (m[0] - c0[0]) + nl[1] * (m[1] - c0[1]);   /* > 0: left of the edge, inside */
+        if (d < -tol)
+            return 0;
+        if (d <= tol && nl[0] * dir[0] + nl[1] * dir[1] < 0)
+            return 0;   /* on the edge's line, stepping out */
+    }
+    return 1;
+}
+
+/* Does polygon q have an edge on the line of (p0, p0 + d) whose extent holds m? */
+static int bn__collinear_edge(const bn__poly2 *q, const double p0[2], const double d[2], double dlen,
+                              const double m[2], double tol)
+{
+    if (m[0] < q->lo[0] - tol || m[0] > q->hi[0] + tol || m[1] < q->lo[1] - tol || m[1] > q->hi[1] + tol)
+        return 0;
+    for (size_t k = 0; k < q->n; k++) {
+        const double *c0 = q->p + 2 * k, *f = q->d + 2 * k;
+        double r0[2] = {c0[0] - p0[0], c0[1] - p0[1]}, r1[2] = {r0[0] + f[0], r0[1] + f[1]};
+        double rm[2] = {m[0] - c0[0], m[1] - c0[1]}, ff = q->len[k] * q->len[k], t;
+        if (!(ff > 0) || fabs(bn__cross2(d, r0)) > tol * dlen || fabs(bn__cross2(d, r1)) > tol * dlen)
+            continue;
+        t = (rm[0] * f[0] + rm[1] * f[1]) / ff;
+        if (t >= 0 && t <= 1)
+            return 1;
+    }
+    return 0;
+}
+
+typedef struct bn__vis_frame {
+    double o[3], e1[3], e2[3];
+} bn__vis_frame;
+
+static void bn__lift(const bn__vis_frame *fr, const double p[2], double out[3])
+{
+    for (int c = 0; c < 3; c++)
+        out[c] = fr->o[c] + p[0] * fr->e1[c] + p[1] * fr->e2[c];
+}
+
+/* Lambert's term of the edge (a, b) seen from x with normal n (the sum over a region's boundary,
+ * counter-clockwise seen from the front, times -1/2pi, is F). */
+static double bn__edge_term(const double x[3], const double n[3], const double a[3], const double b[3])
+{
+    double ra[3], rb[3], c[3], cl;
+    bn_v3_sub(a, x, ra);
+    bn_v3_sub(b, x, rb);
+    bn_v3_cross(ra, rb, c);
+    cl = bn_v3_len(c);
+    return cl > 0 ? atan2(cl, bn_v3_dot(ra, rb)) * bn_v3_dot(n, c) / cl : 0;
+}
+
+static void bn__sort(double *t, size_t n)
+{
+    for (size_t k = 1; k < n; k++) {
+        double v = t[k];
+        size_t m = k;
+        for (; m > 0 && t[m - 1] > v; m--)
+            t[m] = t[m - 1];
+        t[m] = v;
+    }
+}
+
+double bn__ff_point_visible(const double x[3], const double n[3], const double *b, size_t nb, const double bn[3],
+                            const double *occ, const unsigned *occ_n, size_t nocc, double tol, uint32_t *shadowed)
+{
+    bn__poly2 poly[1 + BN__VIS_OCC_MAX];
+    size_t np = 1;
+    bn__vis_frame fr;
+    double hx, r[3], c[3] = {0, 0, 0}, pl[BN__FF_POLY_MAX + 3][4], sum = 0, diam = 0;
+    size_t npl = 0;
+    *shadowed = 0;
+    if (nocc == 0)
+        return bn__ff_point_polygon(x, n, b, nb);
+    if (nb < 3 || nb > BN__FF_POLY_MAX || nocc > BN__VIS_OCC_MAX)
+        return 0;
+    memcpy(fr.o, b, sizeof fr.o);
+    bn_v3_sub(x, fr.o, r);
+    hx = bn_v3_dot(bn, r);
+    if (!(hx > 0))
+        return 0;
+    bn_v3_basis(bn, fr.e1, fr.e2);
+
+    /* b in the plane's frame, counter-clockwise (mirror the frame if it is not) */
+    poly[0].n = nb;
+    for (size_t k = 0; k < nb; k++) {
+        bn_v3_sub(b + 3 * k, fr.o, r);
+        poly[0].p[2 * k] = bn_v3_dot(fr.e1, r);
+        poly[0].p[2 * k + 1] = bn_v3_dot(fr.e2, r);
+        bn_v3_add(c, b + 3 * k, c);
+    }
+    if (bn__area2(poly[0].p, nb) < 0) {
+        bn_v3_scale(fr.e2, -1, fr.e2);
+        for (size_t k = 0; k < nb; k++)
+            poly[0].p[2 * k + 1] = -poly[0].p[2 * k + 1];
+    }
+    bn_v3_scale(c, 1.0 / (double)nb, c);
+    for (size_t k = 0; k < nb; k++)
+        for (size_t m = k + 1; m < nb; m++)
+            diam = fmax(diam, sqrt((poly[0].p[2 * k] - poly[0].p[2 * m]) * (poly[0].p[2 * k] - poly[0].p[2 * m]) +
+                                   (poly[0].p[2 * k + 1] - poly[0].p[2 * m + 1]) * (poly[0].p[2 * k + 1] - poly[0].p[2 * m + 1])));
+    bn__poly2_edges(&poly[0]);
+
+    /* the pyramid from x to b: a side plane through x and each edge, facing in; b's plane, shifted
+     * by tol so that faces lying in it do not block; a plane just short of x; x's tangent plane */
+    for (size_t k = 0; k < nb; k++) {
+        double ra[3], rb[3], nn[3], rc[3], len;
+        bn_v3_sub(b + 3 * k, x, ra);
+        bn_v3_sub(b + 3 * (k + 1 < nb ? k + 1 : 0), x, rb);
+        bn_v3_cross(ra, rb, nn);
+        len = bn_v3_len(nn);
+        if (!(len > 0))
+            continue;
+        bn_v3_sub(c, x, rc);
+        bn_v3_scale(nn, (bn_v3_dot(nn, rc) < 0 ? -1 : 1) / len, nn);
+        memcpy(pl[npl], nn, sizeof nn);
+        pl[npl++][3] = bn_v3_dot(nn, x);
+    }
+    memcpy(pl[npl], bn, 3 * sizeof(double));
+    pl[npl++][3] = bn_v3_dot(bn, fr.o) + tol;
+    pl[npl][0] = -bn[0];
+    pl[npl][1] = -bn[1];
+    pl[npl][2] = -bn[2];
+    pl[npl++][3] = -bn_v3_dot(bn, x) + 1e-9 * hx;
+    memcpy(pl[npl], n, 3 * sizeof(double));   /* nothing behind x's own plane can block */
+    pl[npl++][3] = bn_v3_dot(n, x) + tol;
+
+    /* occluders: clipped to the pyramid, projected from x onto b's plane */
+    for (size_t q = 0; q < nocc; q++) {
+        double buf[2][3 * BN__VIS_CORNERS];
+        size_t m = occ_n[q], cur = 0;
+        memcpy(buf[0], occ + 12 * q, 3 * m * sizeof(double));
+        for (size_t k = 0; k < npl && m; k++) {
+            double p[3];
+            bn_v3_scale(pl[k], pl[k][3], p);   /* a point of the plane (unit normal) */
+            m = m + 1 < BN__VIS_CORNERS ? bn__poly_clip(buf[cur], m, pl[k], p, tol, buf[1 - cur]) : 0;
+            cur = 1 - cur;
+        }
+        if (!m)
+            continue;
+        for (size_t k = 0; k < m; k++) {
+            double *y = buf[cur] + 3 * k, d[3], t, pp[3];
+            bn_v3_sub(y, x, d);
+            t = hx / -bn_v3_dot(bn, d);   /* y is between the planes: -bn.d in (0, hx) */
+            bn_v3_madd(x, t, d, pp);
+            bn_v3_sub(pp, fr.o, r);
+            poly[np].p[2 * k] = bn_v3_dot(fr.e1, r);
+            poly[np].p[2 * k + 1] = bn_v3_dot(fr.e2, r);
+        }
+        poly[np].n = m;
+        {
+            double a = bn__area2(poly[np].p, m);
+            if (!(fabs(a) > 1e-14 * diam * diam))
+                continue;
+            if (a < 0)
+                for (size_t k = 0; k < m / 2; k++)
+                    for (int cc = 0; cc < 2; cc++) {
+                        double t = poly[np].p[2 * k + cc];
+                        poly[np].p[2 * k + cc] = poly[np].p[2 * (m - 1 - k) + cc];
+                        poly[np].p[2 * (m - 1 - k) + cc] = t;
+                    }
+        }
+        bn__poly2_edges(&poly[np]);
+        if (poly[np].lo[0] > poly[0].hi[0] - tol || poly[np].hi[0] < poly[0].lo[0] + tol ||
+            poly[np].lo[1] > poly[0].hi[1] - tol || poly[np].hi[1] < poly[0].lo[1] + tol)
+            continue;   /* beside b (rounding past the pyramid's sides) */
+        *shadowed |= 1u << (q & 31);
+        np++;
+    }
+    if (np == 1)
+        return bn__ff_point_polygon(x, n, b, nb);
+
+    /* the boundary of b minus the union: every piece of every edge, cut where other edges cross
+     * it, that has the visible region on exactly one side. A piece lying on an edge of an earlier
+     * polygon is that polygon's to count. */
+    for (size_t q = 0; q < np; q++) {
+        for (size_t k = 0; k < poly[q].n; k++) {
+            const double *p0 = poly[q].p + 2 * k, *d = poly[q].d + 2 * k, *left = poly[q].nl + 2 * k;
+            double dlen = poly[q].len[k], right[2] = {-left[0], -left[1]}, ts[2 + 2 * 4 * BN__VIS_CORNERS];
+            double elo[2], ehi[2];
+            size_t nt = 0, cap = sizeof ts / sizeof ts[0];
+            if (!(dlen > tol))
+                continue;
+            for (int cc = 0; cc < 2; cc++) {
+                elo[cc] = fmin(p0[cc], p0[cc] + d[cc]) - tol;
+                ehi[cc] = fmax(p0[cc], p0[cc] + d[cc]) + tol;
+            }
+            ts[nt++] = 0;
+            ts[nt++] = 1;
+            for (size_t s = 0; s < np; s++) {
+                if (s == q || poly[s].lo[0] > ehi[0] || poly[s].hi[0] < elo[0] || poly[s].lo[1] > ehi[1] ||
+                    poly[s].hi[1] < elo[1])
+                    continue;
+                for (size_t e = 0; e < poly[s].n && nt + 2 <= cap; e++) {
+                    const double *c0 = poly[s].p + 2 * e, *f = poly[s].d + 2 * e;
+                    double w[2] = {c0[0] - p0[0], c0[1] - p0[1]};
+                    double den = bn__cross2(d, f);
+                    if (fabs(den) > 1e-12 * dlen * poly[s].len[e]) {
+                        double t = bn__cross2(w, f) / den, u = bn__cross2(w, d) / den;
+                        if (t > 0 && t < 1 && u >= -1e-9 && u <= 1 + 1e-9)
+                            ts[nt++] = t;
+                    } else if (fabs(bn__cross2(d, w)) <= tol * dlen) {
+                        /* collinear: the other edge's ends */
+                        double t0 = (w[0] * d[0] + w[1] * d[1]) / (dlen * dlen);
+                        double t1 = ((w[0] + f[0]) * d[0] + (w[1] + f[1]) * d[1]) / (dlen * dlen);
+                        if (t0 > 0 && t0 < 1)
+                            ts[nt++] = t0;
+                        if (t1 > 0 && t1 < 1)
+                            ts[nt++] = t1;
+                    }
+                }
+            }
+            bn__sort(ts, nt);
+            for (size_t a = 0; a + 1 < nt; a++) {
+                double m[2], A[3], B[3], pa[2], pb[2];
+                int dup = 0, in_l, in_r;
+                if (!((ts[a + 1] - ts[a]) * dlen > tol))
+                    continue;
+                m[0] = p0[0] + 0.5 * (ts[a] + ts[a + 1]) * d[0];
+                m[1] = p0[1] + 0.5 * (ts[a] + ts[a + 1]) * d[1];
+                for (size_t s = 0; s < q && !dup; s++)
+                    dup = bn__collinear_edge(&poly[s], p0, d, dlen, m, tol);
+                if (dup)
+                    continue;
+                /* b (q = 0) has itself on its left; an occluder has itself on its left and so never
+                 * the visible region there */
+                in_l = q == 0;
+                in_r = q != 0 && bn__inside_moved(&poly[0], m, right, tol);
+                for (size_t s = 1; s < np && (in_l || in_r); s++) {
+                    if (s == q)
+                        continue;
+                    if (in_l && bn__inside_moved(&poly[s], m, left, tol))
+                        in_l = 0;
+                    if (in_r && bn__inside_moved(&poly[s], m, right, tol))
+                        in_r = 0;
+                }
+                if (in_l == in_r)
+                    continue;
+                pa[0] = p0[0] + ts[a] * d[0];
+                pa[1] = p0[1] + ts[a] * d[1];
+                pb[0] = p0[0] + ts[a + 1] * d[0];
+                pb[1] = p0[1] + ts[a + 1] * d[1];
+                bn__lift(&fr, pa, A);
+                bn__lift(&fr, pb, B);
+                /* the visible region on the left: counter-clockwise */
+                sum += in_l ? bn__edge_term(x, n, A, B) : bn__edge_term(x, n, B, A);
+            }
+        }
+    }
+    return fmax(-sum / (2 * BN_PI), 0);
+}
