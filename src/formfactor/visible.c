@@ -262,9 +262,10 @@ double bn__ff_point_visible(const double x[3], const double n[3], const double *
                     double w[2] = {c0[0] - p0[0], c0[1] - p0[1]};
                     double den = bn__cross2(d, f);
                     if (fabs(den) > 1e-12 * dlen * poly[s].len[e]) {
-                        double t = bn__cross2(w, f) / den, u = bn__cross2(w, d) / den;
-                        if (t > 0 && t < 1 && u >= -1e-9 && u <= 1 + 1e-9)
-                            ts[nt++] = t;
+                        /* t = tn / den on this edge, u = un / den on the other: divide only a crossing */
+                        double sg = den > 0 ? 1 : -1, tn = sg * bn__cross2(w, f), un = sg * bn__cross2(w, d), ad = fabs(den);
+                        if (tn > 0 && tn < ad && un >= -1e-9 * ad && un <= (1 + 1e-9) * ad)
+                            ts[nt++] = tn / ad;
                     } else if (fabs(bn__cross2(d, w)) <= tol * dlen) {
                         /* collinear: the other edge's ends */
                         double t0 = (w[0] * d[0] + w[1] * d[1]) / (dlen * dlen);
