@@ -228,9 +228,9 @@ static void scale_case(const char *name, double rtol)
 }
 
 BN_TEST(scale_invariance_furnace) { scale_case("furnace-box", 1e-9); }
-/* With the blocks: the visible part is exact at each point, but the integration over the patches
- * refines where its rules disagree, and a rounding of another scale can flip a refinement, moving a
- * pair by its integration error (measured 2e-4 in a patch's radiance, at 1e-6 and 1e6). The shadow
- * rays (--ff-sampled-visibility) moved one red-wall patch by 2.7e-4 the same way (one ray of 32
- * beside a contact corner). 1e-3 bounds both. */
+/* With the blocks the shadow rays (the default) are the same points scaled, but the floor's pieces
+ * end on the blocks' contact lines, and a ray that ends beside that corner can go either way with the
+ * float rounding of another scale: one ray of 32 in one pair moved one red-wall patch by 2.7e-4 (at
+ * 1e-6). That is the visibility estimate's own noise, which bounds it. (--ff-exact-visibility moves
+ * by its integration error the same way, when a rounding flips a refinement: 2e-4 measured.) */
 BN_TEST(scale_invariance_cornell) { scale_case("cornell-box", 1e-3); }

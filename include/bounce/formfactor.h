@@ -44,8 +44,10 @@ typedef struct bn_formfactor_opts {
     int          quadrature_only;  /* analytic: every pair by the point kernel's quadrature (the path
                                       before the closed form; for comparisons and bench/) */
     int          threads;     /* 0 = the caller's (all cores by default); results do not depend on it */
-    int          sampled_visibility;  /* analytic: shadow rays for every partly blocked pair, also where
-                                         the exact visible part is computed by default (for comparisons) */
+    int          exact_visibility;  /* analytic: the exact visible part of each partly occluded pair with
+                                       at most 32 faces in its shaft, integrated over one patch, instead
+                                       of shadow rays (rows of closed scenes to about 1e-4 against a few
+                                       1e-3; about 5x the assembly's time on the Cornell box) */
 } bn_formfactor_opts;
 void bn_formfactor_opts_default(bn_formfactor_opts *o);
 /* The samples a method uses when o->samples is 0. */

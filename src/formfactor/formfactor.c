@@ -72,7 +72,7 @@ void bn_formfactor_opts_describe(const bn_formfactor_opts *o, char *buf, size_t 
              bn_precision_name(o->precision), o->storage ? o->storage : BN_STORAGE_DEFAULT, o->sparse_threshold,
              o->method == BN_FF_ANALYTIC ? (o->tolerance > 0 ? o->tolerance : BN_FF_TOLERANCE_DEFAULT) : 0.0,
              o->method == BN_FF_ANALYTIC && o->quadrature_only ? " quadrature_only=1" : "",
-             o->method != BN_FF_ANALYTIC ? "" : o->sampled_visibility ? " visibility=rays" : " visibility=exact");
+             o->method != BN_FF_ANALYTIC ? "" : o->exact_visibility ? " visibility=exact" : " visibility=rays");
 }
 
 /* ---- geometry shared by every pair ---- */
@@ -589,7 +589,7 @@ static double bn__pair_value(const bn_rt *rt, const bn__ffg *g, const bn_formfac
         return 0;
     cnt->pairs_nonzero++;
     if (cand)
-        nocc = o->method == BN_FF_ANALYTIC && !o->sampled_visibility
+        nocc = o->method == BN_FF_ANALYTIC && o->exact_visibility
                    ? bn__shaft_faces(g, cand, ncand, i, j, &p, occ, BN__VIS_OCC_MAX + 1)
                    : bn__shaft_faces(g, cand, ncand, i, j, &p, NULL, 1);
     maybe = nocc > 0;
@@ -602,7 +602,7 @@ static double bn__pair_value(const bn_rt *rt, const bn__ffg *g, const bn_formfac
                 ? bn__ff_polygon_integral(p.a, p.na, ni, p.b, p.nb, rtol, 1e-6 * rtol * fmin(p.Aa, p.Ab), &qs)
                 : bn__ff_unoccluded(p.a, p.na, ni, p.b, p.nb, rtol, 1e-6 * rtol * fmin(p.Aa, p.Ab), &qs);
         cnt->evals += qs.evals;
-        if (maybe && nocc <= BN__VIS_OCC_MAX && !o->sampled_visibility) {
+        if (maybe && nocc <= BN__VIS_OCC_MAX && o->exact_visibility) {
             cnt->pairs_tested++;
             cnt->pairs_exact++;
             vis = bn__exact_visibility(g, I, i, j, &p, occ, nocc, cnt);
@@ -895,7 +895,7 @@ static double bn__rowsum_tol(const bn_formfactor_opts *o)
     double round = fmax(16 * bn_precision_epsilon(o->precision), 1e-12);
     if (o->method == BN_FF_ANALYTIC)   /* quadrature, and the visible parts' integration (or sampling) */
         return 10 * (o->tolerance > 0 ? o->tolerance : BN_FF_TOLERANCE_DEFAULT) + round +
-               (o->sampled_visibility ? 0 : BN__VIS_ROW_ALLOWANCE);
+               (o->exact_visibility ? BN__VIS_ROW_ALLOWANCE : 0);
     if (o->method == BN_FF_HEMISPHERE)
         return round;
     return 3.0 / sqrt((double)bn__samples(o));   /* montecarlo: statistical */
@@ -1027,7 +1027,7 @@ static void bn__warn_rows(const bn_formfactor_opts *o, const bn_ff_diagnostics *
         bn_logf(&o->log, BN_LOG_WARN, "%zu rows of F sum to more than 1 + %.3g (largest %.9g; method %s)%s",
                 d->rows_above_one, d->row_sum_tol, d->row_sum_max, bn_ff_method_name(o->method),
                 o->method == BN_FF_HEMISPHERE ? ""
-                : o->method == BN_FF_ANALYTIC && d->pairs_exact == d->pairs_tested
+                : o->method == BN_FF_ANALYTIC && d->pairs_exact > 0 && d->pairs_exact == d->pairs_tested
                     ? ": the integration of the exactly visible parts over the patches (shadows crease it)"
                     : ": sampling noise of the visibility estimate; more --samples reduce it");
 }
