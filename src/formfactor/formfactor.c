@@ -564,7 +564,7 @@ static double bn__exact_visibility(const bn__ffg *g, double I, size_t i, size_t 
     bn__quad_stats qs;
     const double *ni = g->patch[i].normal, *nj = g->patch[j].normal;
     double na = bn__occ_nearness(g, p->a, p->na, ni, occ, nocc), nb = bn__occ_nearness(g, p->b, p->nb, nj, occ, nocc);
-    int from_b = nb > na, split = (from_b ? nb : na) < 1 ? (getenv("VS1") ? atoi(getenv("VS1")) : 2) : (getenv("VS0") ? atoi(getenv("VS0")) : 1);
+    int from_b = nb > na, split = (from_b ? nb : na) < 1 ? 2 : 1;
     for (size_t q = 0; q < nocc; q++) {
         on[q] = g->fnc[occ[q]];
         memcpy(ov + 12 * q, g->fv + 12 * occ[q], 3 * on[q] * sizeof(double));
