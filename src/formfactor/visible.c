@@ -242,9 +242,9 @@ double bn__ff_point_visible(const double x[3], const double n[3], const double *
     for (size_t q = 0; q < np; q++) {
         for (size_t k = 0; k < poly[q].n; k++) {
             const double *p0 = poly[q].p + 2 * k, *d = poly[q].d + 2 * k, *left = poly[q].nl + 2 * k;
-            double dlen = poly[q].len[k], right[2] = {-left[0], -left[1]}, ts[2 + 2 * 4 * BN__VIS_CORNERS];
+            double dlen = poly[q].len[k], right[2] = {-left[0], -left[1]}, ts[2 + 2 * (1 + BN__VIS_OCC_MAX) * BN__VIS_CORNERS];
             double elo[2], ehi[2];
-            size_t nt = 0, cap = sizeof ts / sizeof ts[0];
+            size_t nt = 0;   /* at most two per edge of every polygon: ts never fills */
             if (!(dlen > tol))
                 continue;
             for (int cc = 0; cc < 2; cc++) {
@@ -257,7 +257,7 @@ double bn__ff_point_visible(const double x[3], const double n[3], const double *
                 if (s == q || poly[s].lo[0] > ehi[0] || poly[s].hi[0] < elo[0] || poly[s].lo[1] > ehi[1] ||
                     poly[s].hi[1] < elo[1])
                     continue;
-                for (size_t e = 0; e < poly[s].n && nt + 2 <= cap; e++) {
+                for (size_t e = 0; e < poly[s].n; e++) {
                     const double *c0 = poly[s].p + 2 * e, *f = poly[s].d + 2 * e;
                     double w[2] = {c0[0] - p0[0], c0[1] - p0[1]};
                     double den = bn__cross2(d, f);
