@@ -515,7 +515,7 @@ typedef struct bn__counts {
 } bn__counts;
 
 /* The visible part's relative tolerance: its error estimate adds refinement beyond the fixed
- * splits (bn__exact_visibility), which decide the accuracy where shadows crease the integrand
+ * splits (bn__exact_visible), which decide the accuracy where shadows crease the integrand
  * (on the Cornell box 1e-1 and 1 give the same row sums). */
 #define BN__VIS_RTOL 1e-1
 
@@ -544,8 +544,8 @@ static double bn__occ_nearness(const bn__ffg *g, const double *v, size_t nv, con
 }
 
 /* A_i F_ij with visibility for a pair whose shaft holds at most BN__VIS_OCC_MAX faces: the integral
- * over one patch of what each of its points sees of the other exactly (bn__ff_point_visible), over
- * I, the unoccluded value. No shadow rays. The integrand is continuous but creased where shadow
+ * over one patch of what each of its points sees of the other exactly (bn__ff_point_visible), at
+ * most I, the unoccluded value. No shadow rays. The integrand is continuous but creased where shadow
  * edges cross the patch, over widths that scale with the patch's distance from the occluders (a
  * point by a block's corner sees a far wall appear within a few millimetres), so:
  * - the patch the occluders keep farther from, relative to its size, is integrated (what the
@@ -556,10 +556,10 @@ static double bn__occ_nearness(const bn__ffg *g, const double *v, size_t nv, con
  * - then the adaptive rule to BN__VIS_RTOL of its own error estimate.
  * Measured on the Cornell box (1,151 patches): the largest row sum above 1 is 2.9e-3 with 32
  * shadow rays, 8.7e-5 from 20 points per pair adaptively, 1.7e-5 with the splits. */
-static double bn__exact_visibility(const bn__ffg *g, double I, size_t i, size_t j, const bn__pair *p,
-                                   const size_t *occ, size_t nocc, bn__counts *cnt)
+static double bn__exact_visible(const bn__ffg *g, double I, size_t i, size_t j, const bn__pair *p,
+                                const size_t *occ, size_t nocc, bn__counts *cnt)
 {
-    double ov[12 * BN__VIS_OCC_MAX], V, rtol = BN__VIS_RTOL;
+    double ov[12 * BN__VIS_OCC_MAX], V;
     unsigned on[BN__VIS_OCC_MAX];
     bn__quad_stats qs;
     const double *ni = g->patch[i].normal, *nj = g->patch[j].normal;
@@ -569,10 +569,12 @@ static double bn__exact_visibility(const bn__ffg *g, double I, size_t i, size_t 
         on[q] = g->fnc[occ[q]];
         memcpy(ov + 12 * q, g->fv + 12 * occ[q], 3 * on[q] * sizeof(double));
     }
-    V = from_b ? bn__ff_visible_integral(p->b, p->nb, nj, p->a, p->na, ov, on, nocc, g->tol, split, rtol, 1e-3 * rtol * I, &qs)
-               : bn__ff_visible_integral(p->a, p->na, ni, p->b, p->nb, ov, on, nocc, g->tol, split, rtol, 1e-3 * rtol * I, &qs);
+    V = from_b ? bn__ff_visible_integral(p->b, p->nb, nj, p->a, p->na, ov, on, nocc, g->tol, split, BN__VIS_RTOL,
+                                         1e-3 * BN__VIS_RTOL * I, &qs)
+               : bn__ff_visible_integral(p->a, p->na, ni, p->b, p->nb, ov, on, nocc, g->tol, split, BN__VIS_RTOL,
+                                         1e-3 * BN__VIS_RTOL * I, &qs);
     cnt->evals += qs.evals;
-    return I > 0 ? bn_clamp(V / I, 0, 1) : 1;
+    return bn_clamp(V, 0, I);   /* the visible part of P is a part of P */
 }
 
 /* A_i F_ij = A_j F_ji of the pair i < j, with visibility; 0 when they cannot see each other.
@@ -603,11 +605,12 @@ static double bn__pair_value(const bn_rt *rt, const bn__ffg *g, const bn_formfac
                 : bn__ff_unoccluded(p.a, p.na, ni, p.b, p.nb, rtol, 1e-6 * rtol * fmin(p.Aa, p.Ab), &qs);
         cnt->evals += qs.evals;
         if (maybe && nocc <= BN__VIS_OCC_MAX && o->exact_visibility) {
+            double V = bn__exact_visible(g, I, i, j, &p, occ, nocc, cnt);
             cnt->pairs_tested++;
             cnt->pairs_exact++;
-            vis = bn__exact_visibility(g, I, i, j, &p, occ, nocc, cnt);
-            if (vis < 1)
+            if (V < I)
                 cnt->pairs_blocked++;
+            I = V;
         } else if (maybe) {
             bn__rng r = bn__rng_make(o->seed, i, j);
             double sw = 0, sv = 0;
