@@ -25,7 +25,8 @@ double bn__ff_point_polygon(const double x[3], const double n[3], const double *
  * polygons of occ_n[q] <= 4 corners at occ + 12 q. Exact (Lambert's contour integral over the
  * boundary of b minus the occluders' projections from x); tol: the scene's geometric tolerance.
  * *shadowed: bit q set if occluder q's projection from x meets b (the value is below F(x -> b) only
- * if some bit is set); where it changes over a patch, the integrand has a crease. */
+ * if some bit is set; once one projection covers b the later occluders are not looked at); where
+ * it changes over a patch, the integrand has a crease. */
 double bn__ff_point_visible(const double x[3], const double n[3], const double *b, size_t nb, const double bn[3],
                             const double *occ, const unsigned *occ_n, size_t nocc, double tol, uint32_t *shadowed);
 
@@ -51,9 +52,11 @@ typedef struct bn__quad_stats {
 double bn__ff_polygon_integral(const double *pi, size_t ni, const double ni_n[3], const double *pj, size_t nj,
                                double rtol, double atol, bn__quad_stats *st);
 
-/* The same integral of F(x -> the part of pj that x sees past the occluders) (bn__ff_point_visible):
- * A_i F_ij with visibility, to max(rtol |I|, atol) by the same adaptive rules. */
-double bn__ff_visible_integral(const double *pi, size_t ni, const double ni_n[3], const double *pj, size_t nj,
+/* The same integral of the part of F(x -> pj) that the occluders hide from x (F(x -> pj) minus
+ * bn__ff_point_visible): A_i F_ij unoccluded minus with visibility, to max(rtol |I|, atol) by the
+ * same adaptive rules. Zero wherever no occluder is in view, so the rules spend nothing there and
+ * the unoccluded kernel's own peaks (shared edges, near pairs) are left to the closed form. */
+double bn__ff_blocked_integral(const double *pi, size_t ni, const double ni_n[3], const double *pj, size_t nj,
                                const double *occ, const unsigned *occ_n, size_t nocc, double gtol, int split,
                                double rtol, double atol, bn__quad_stats *st);
 

@@ -168,7 +168,8 @@ static double bn__eval(bn__qctx *q, const double a[3], const double b[3], const 
             q->mask = mask;
         else if ((mask != 0) != (q->mask != 0))
             q->mixed = 1;
-        return f;
+        /* the blocked part, F(x -> b) minus what x sees of b: 0 wherever no occluder is in view */
+        return mask ? bn__ff_point_polygon(x, q->ni_n, q->pj, q->nj) - f : 0;
     }
     return bn__ff_point_polygon(x, q->ni_n, q->pj, q->nj);
 }
@@ -416,14 +417,14 @@ double bn__ff_polygon_integral(const double *pi, size_t ni, const double ni_n[3]
     return bn__integral(q, pi, ni, ni_n, pj, nj, rtol, atol, st);
 }
 
-/* The visible part's integrand is continuous but has creases where a shadow's edge crosses the
+/* The blocked part's integrand is continuous but has creases where a shadow's edge crosses the
  * patch, which the two rules can miss together when none of their points falls beyond one: the
  * caller starts each fan triangle as 4^split (formfactor.c), and a triangle whose points disagree
  * about whether an occluder is in view is split down to depth BN__VIS_MIXED_DEPTH whatever its
  * error estimate. */
 #define BN__VIS_MIXED_DEPTH 4
 
-double bn__ff_visible_integral(const double *pi, size_t ni, const double ni_n[3], const double *pj, size_t nj,
+double bn__ff_blocked_integral(const double *pi, size_t ni, const double ni_n[3], const double *pj, size_t nj,
                                const double *occ, const unsigned *occ_n, size_t nocc, double gtol, int split,
                                double rtol, double atol, bn__quad_stats *st)
 {

@@ -49,8 +49,8 @@ static void bn__poly2_edges(bn__poly2 *q)
         q->nl[2 * k] = len > 0 ? -d[1] / len : 0;
         q->nl[2 * k + 1] = len > 0 ? d[0] / len : 0;
         for (int c = 0; c < 2; c++) {
-            q->lo[c] = fmin(q->lo[c], c0[c]);
-            q->hi[c] = fmax(q->hi[c], c0[c]);
+            q->lo[c] = c0[c] < q->lo[c] ? c0[c] : q->lo[c];
+            q->hi[c] = c0[c] > q->hi[c] ? c0[c] : q->hi[c];
         }
     }
 }
@@ -75,19 +75,34 @@ static int bn__inside_moved(const bn__poly2 *q, const double m[2], const double 
     return 1;
 }
 
-/* Does polygon q have an edge on the line of (p0, p0 + d) whose extent holds m? */
-static int bn__collinear_edge(const bn__poly2 *q, const double p0[2], const double d[2], double dlen,
-                              const double m[2], double tol)
+/* Is the point m inside the convex polygon q or within tol of it? */
+static int bn__inside_tol(const bn__poly2 *q, const double m[2], double tol)
+{
+    for (size_t k = 0; k < q->n; k++) {
+        const double *c0 = q->p + 2 * k, *nl = q->nl + 2 * k;
+        if (q->len[k] > 0 && nl[0] * (m[0] - c0[0]) + nl[1] * (m[1] - c0[1]) < -tol)
+            return 0;
+    }
+    return 1;
+}
+
+/* Does the piece (pa, pb) with midpoint m lie along an edge of polygon q? The same test as
+ * bn__inside_moved's "on the edge's line": m within tol of the edge's line (and within the
+ * edge), so that a piece the inside tests treat as on q's boundary is q's to count, whichever
+ * way rounding has tilted it; and both ends within 2 tol of the line (along it, not across). */
+static int bn__collinear_edge(const bn__poly2 *q, const double pa[2], const double pb[2], const double m[2],
+                              double tol)
 {
     if (m[0] < q->lo[0] - tol || m[0] > q->hi[0] + tol || m[1] < q->lo[1] - tol || m[1] > q->hi[1] + tol)
         return 0;
     for (size_t k = 0; k < q->n; k++) {
-        const double *c0 = q->p + 2 * k, *f = q->d + 2 * k;
-        double r0[2] = {c0[0] - p0[0], c0[1] - p0[1]}, r1[2] = {r0[0] + f[0], r0[1] + f[1]};
-        double rm[2] = {m[0] - c0[0], m[1] - c0[1]}, ff = q->len[k] * q->len[k], t;
-        if (!(ff > 0) || fabs(bn__cross2(d, r0)) > tol * dlen || fabs(bn__cross2(d, r1)) > tol * dlen)
+        const double *c0 = q->p + 2 * k, *f = q->d + 2 * k, *nl = q->nl + 2 * k;
+        double len = q->len[k], t;
+        if (!(len > tol) || fabs(nl[0] * (m[0] - c0[0]) + nl[1] * (m[1] - c0[1])) > tol ||
+            fabs(nl[0] * (pa[0] - c0[0]) + nl[1] * (pa[1] - c0[1])) > 2 * tol ||
+            fabs(nl[0] * (pb[0] - c0[0]) + nl[1] * (pb[1] - c0[1])) > 2 * tol)
             continue;
-        t = (rm[0] * f[0] + rm[1] * f[1]) / ff;
+        t = ((m[0] - c0[0]) * f[0] + (m[1] - c0[1]) * f[1]) / (len * len);
         if (t >= 0 && t <= 1)
             return 1;
     }
@@ -188,8 +203,12 @@ double bn__ff_point_visible(const double x[3], const double n[3], const double *
     pl[npl][1] = -bn[1];
     pl[npl][2] = -bn[2];
     pl[npl++][3] = -bn_v3_dot(bn, x) + 1e-9 * hx;
-    memcpy(pl[npl], n, 3 * sizeof(double));   /* nothing behind x's own plane can block */
-    pl[npl++][3] = bn_v3_dot(n, x) + tol;
+    /* Nothing behind x's own plane can block. Exactly at the plane, not tol in front: where b
+     * touches that plane (a wall seen grazing from a block's top) the side plane through x and
+     * that edge is x's plane itself, and an offset would leave every occluder's cut edge a few
+     * tol from b's edge once projected, where the inside and collinear tests can disagree. */
+    memcpy(pl[npl], n, 3 * sizeof(double));
+    pl[npl++][3] = bn_v3_dot(n, x);
 
     /* occluders: clipped to the pyramid, projected from x onto b's plane */
     for (size_t q = 0; q < nocc; q++) {
@@ -231,6 +250,15 @@ double bn__ff_point_visible(const double x[3], const double n[3], const double *
             poly[np].lo[1] > poly[0].hi[1] - tol || poly[np].hi[1] < poly[0].lo[1] + tol)
             continue;   /* beside b (rounding past the pyramid's sides) */
         *shadowed |= 1u << (q & 31);
+        {
+            /* one projection (convex, clipped to b) covers b: nothing of it is seen */
+            size_t k = 0;
+            for (; k < nb; k++)
+                if (!bn__inside_tol(&poly[np], poly[0].p + 2 * k, tol))
+                    break;
+            if (k == nb)
+                return 0;
+        }
         np++;
     }
     if (np == 1)
@@ -259,8 +287,13 @@ double bn__ff_point_visible(const double x[3], const double n[3], const double *
                     continue;
                 for (size_t e = 0; e < poly[s].n; e++) {
                     const double *c0 = poly[s].p + 2 * e, *f = poly[s].d + 2 * e;
-                    double w[2] = {c0[0] - p0[0], c0[1] - p0[1]};
-                    double den = bn__cross2(d, f);
+                    double w[2], den;
+                    if ((c0[0] > ehi[0] && c0[0] + f[0] > ehi[0]) || (c0[0] < elo[0] && c0[0] + f[0] < elo[0]) ||
+                        (c0[1] > ehi[1] && c0[1] + f[1] > ehi[1]) || (c0[1] < elo[1] && c0[1] + f[1] < elo[1]))
+                        continue;   /* apart */
+                    w[0] = c0[0] - p0[0];
+                    w[1] = c0[1] - p0[1];
+                    den = bn__cross2(d, f);
                     if (fabs(den) > 1e-12 * dlen * poly[s].len[e]) {
                         /* t = tn / den on this edge, u = un / den on the other: divide only a crossing */
                         double sg = den > 0 ? 1 : -1, tn = sg * bn__cross2(w, f), un = sg * bn__cross2(w, d), ad = fabs(den);
@@ -285,8 +318,12 @@ double bn__ff_point_visible(const double x[3], const double n[3], const double *
                     continue;
                 m[0] = p0[0] + 0.5 * (ts[a] + ts[a + 1]) * d[0];
                 m[1] = p0[1] + 0.5 * (ts[a] + ts[a + 1]) * d[1];
+                pa[0] = p0[0] + ts[a] * d[0];
+                pa[1] = p0[1] + ts[a] * d[1];
+                pb[0] = p0[0] + ts[a + 1] * d[0];
+                pb[1] = p0[1] + ts[a + 1] * d[1];
                 for (size_t s = 0; s < q && !dup; s++)
-                    dup = bn__collinear_edge(&poly[s], p0, d, dlen, m, tol);
+                    dup = bn__collinear_edge(&poly[s], pa, pb, m, tol);
                 if (dup)
                     continue;
                 /* b (q = 0) has itself on its left; an occluder has itself on its left and so never
@@ -303,10 +340,6 @@ double bn__ff_point_visible(const double x[3], const double n[3], const double *
                 }
                 if (in_l == in_r)
                     continue;
-                pa[0] = p0[0] + ts[a] * d[0];
-                pa[1] = p0[1] + ts[a] * d[1];
-                pb[0] = p0[0] + ts[a + 1] * d[0];
-                pb[1] = p0[1] + ts[a + 1] * d[1];
                 bn__lift(&fr, pa, A);
                 bn__lift(&fr, pb, B);
                 /* the visible region on the left: counter-clockwise */
