@@ -21,7 +21,7 @@
 #define BN_Z_BIAS 4.5
 #define BN_RATE_SLACK 1.5
 #define BN_NSEEDS 64
-/* - BN_EXACT_VIS_RTOL: --ff-exact-visibility integrates the exactly visible part of B over A with a
+/* - BN_EXACT_VIS_RTOL: --ff-exact-visibility integrates the exactly blocked part of B over A with a
  *   degree-5 rule on 8+ triangles, refined until a degree-2 rule agrees within 10%; on these
  *   smooth integrands (C stays inside every pyramid) that is good to about 1e-4 of F where the
  *   kernel varies fastest (the near pair: 5e-5), against a few 1e-2 for 32 shadow rays.

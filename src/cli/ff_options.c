@@ -58,7 +58,7 @@ void bn_cli_add_ff(bn_optset *s, bn_cli_ff *o)
     bn_optset_add(s, (bn_opt){"ff-quadrature-only", 0, BN_OPT_FLAG, &o->quadrature_only, NULL, 0, 0, NULL,
                               "analytic: every pair by the point kernel's quadrature instead of the closed form (the path before it; for comparisons)"});
     bn_optset_add(s, (bn_opt){"ff-exact-visibility", 0, BN_OPT_FLAG, &o->exact_visibility, NULL, 0, 0, NULL,
-                              "analytic: the exact visible part of each partly occluded pair instead of shadow rays (rows of closed scenes to about 1e-4; about 5x the time)"});
+                              "analytic: the exact visible part of each partly occluded pair instead of shadow rays (rows of closed scenes within 1e-4; about 4x the time)"});
     bn_optset_add(s, (bn_opt){"cache", 0, BN_OPT_STRING, &o->cache, NULL, 0, 0, "FILE",
                               "reuse F from FILE when its key (scene, meshing, options) matches; else write it"});
 }
