@@ -43,6 +43,7 @@ typedef struct bn__quad_stats {
     size_t triangles;   /* triangles accepted */
     int    max_depth;
     int    capped;      /* the leaf limit stopped the refinement */
+    size_t seen;        /* bn__ff_blocked_integral: evaluations at which some of pj was visible */
 } bn__quad_stats;
 
 /* Integral over the convex polygon pi (normal ni) of F(x -> pj) dA(x): A_i F_ij for the parts

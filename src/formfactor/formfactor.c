@@ -641,7 +641,9 @@ static double bn__exact_visible(const bn__ffg *g, double I, size_t i, size_t j, 
                : bn__ff_blocked_integral(p->a, p->na, ni, p->b, p->nb, ov, on, nocc, g->tol, split, BN__VIS_RTOL,
                                          1e-3 * BN__VIS_RTOL * I, &qs);
     cnt->evals += qs.evals;
-    return bn_clamp(I - G, 0, I);   /* the visible part of P is a part of P */
+    /* the visible part of P is a part of P; where no point saw any of it, the rules' integral of
+     * it is 0 exactly (I - G would be the rules' error on the unoccluded kernel instead) */
+    return qs.seen ? bn_clamp(I - G, 0, I) : 0;
 }
 
 /* A_i F_ij = A_j F_ji of the pair i < j, with visibility; 0 when they cannot see each other.

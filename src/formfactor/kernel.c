@@ -164,6 +164,7 @@ static double bn__eval(bn__qctx *q, const double a[3], const double b[3], const 
     if (q->nocc) {
         uint32_t mask;
         double f = bn__ff_point_visible(x, q->ni_n, q->pj, q->nj, q->nj_n, q->occ, q->occ_n, q->nocc, q->gtol, &mask);
+        q->st->seen += f > 0;
         if (q->npoints++ == 0)
             q->mask = mask;
         else if ((mask != 0) != (q->mask != 0))

@@ -1004,6 +1004,7 @@ static void bn__ref_levels(const bn_study_opts *o, bn__ref_plan *P)
     } else if (o->param == BN_STUDY_EPS) {
         /* dense K on the same mesh, its visibility from many rays: what K_H approximates */
         fref.method = BN_FF_ANALYTIC;
+        fref.exact_visibility = 0;
         fref.samples = o->ref_samples ? o->ref_samples : 256;
         fref.seed = bn__hash64(o->ff.seed ^ 0x7265666572656e63ULL);
         mcoarse = mref;
@@ -1015,6 +1016,7 @@ static void bn__ref_levels(const bn_study_opts *o, bn__ref_plan *P)
         for (size_t v = 0; o->param == BN_STUDY_SAMPLES && v < o->nvalues; v++)
             top = (int)fmax(top, o->values[v]);
         fref.method = BN_FF_ANALYTIC;
+        fref.exact_visibility = 0;   /* sampled like the settings, so that its error is measured the same way */
         /* 32x the largest setting: 1/sqrt(32) ~ 1/5.7 of its error, so the reference is well below
          * what it measures even with the noise of its own estimate */
         fref.samples = o->ref_samples ? o->ref_samples : (32 * top > 1024 ? 32 * top : 1024);
@@ -1252,6 +1254,7 @@ static void bn__setting(const bn_study_opts *o, size_t v, bn_mesh_opts *mo, bn_f
         break;
     case BN_STUDY_SAMPLES:
         f.samples = (int)o->values[v];
+        f.exact_visibility = 0;   /* the samples are shadow rays (analytic), which the exact path has none of */
         snprintf(val, nval, "%d", f.samples);
         method = bn_ff_method_name(f.method);
         break;
