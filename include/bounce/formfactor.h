@@ -82,7 +82,8 @@ typedef struct bn_ff_diagnostics {
     double rays_per_second;       /* rays / seconds of the whole assembly */
     bn_ff_method method;
     int    samples;
-    size_t pairs_exact;           /* analytic: pairs whose visible part was computed exactly (no rays) */
+    size_t pairs_exact;           /* analytic: pairs whose visible part was computed exactly (no rays): by
+                                     the exact path, or hidden wholly by one face in their shaft */
 } bn_ff_diagnostics;
 
 /* Bytes the assembly of `scene` with `o` will need (checked against max_memory before any work). */
