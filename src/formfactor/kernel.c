@@ -142,7 +142,7 @@ typedef struct bn__qctx {
     size_t nocc;
     double gtol;
     int split;             /* start from 4^split triangles per fan triangle */
-    uint32_t mask;         /* the current leaf: its first point's occluders in view; */
+    int shadowed;          /* the current leaf: whether its first point had an occluder in view; */
     int npoints, mixed;    /* its points so far; whether one had none in view and another some */
     int mixed_depth;       /* mixed leaves are split down to this depth */
 } bn__qctx;
@@ -166,8 +166,8 @@ static double bn__eval(bn__qctx *q, const double a[3], const double b[3], const 
         double f = bn__ff_point_visible(x, q->ni_n, q->pj, q->nj, q->nj_n, q->occ, q->occ_n, q->nocc, q->gtol, &mask);
         q->st->seen += f > 0;
         if (q->npoints++ == 0)
-            q->mask = mask;
-        else if ((mask != 0) != (q->mask != 0))
+            q->shadowed = mask != 0;
+        else if ((mask != 0) != q->shadowed)
             q->mixed = 1;
         /* the blocked part, F(x -> b) minus what x sees of b: 0 wherever no occluder is in view */
         return mask ? bn__ff_point_polygon(x, q->ni_n, q->pj, q->nj) - f : 0;
