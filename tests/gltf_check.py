@@ -124,13 +124,19 @@ def read_mtl(obj):
     return mats
 
 
+# Form factors with shadow rays for partly occluded pairs: these checks are about the glTF; the exact
+# visible parts (the default) are tested in tests/test_ff_visibility.c and would triple the bakes' time.
+RAYS = ["--ff-visibility", "rays"]
+
+
 def close(a, b, rtol, atol=0.0):
     return abs(a - b) <= atol + rtol * max(abs(a), abs(b))
 
 
 def check_against_solve(bounce, scene, unit, outdir):
     csv, glb = os.path.join(outdir, "solve.csv"), os.path.join(outdir, "flat.glb")
-    common = [scene, "--unit", unit, "-q", "--patches", "400"]
+    # shadow rays (RAYS): the glTF is tested here, not the visible parts
+    common = [scene, "--unit", unit, "-q", "--patches", "400"] + RAYS
     for cmd in ([bounce, "solve"] + common + ["-n", "3", "-o", csv],
                 [bounce, "bake"] + common + ["--per-bounce", "--flat", "-o", glb]):
         r = subprocess.run(cmd, capture_output=True, text=True)
@@ -202,7 +208,7 @@ def main():
     scale_m = {"m": 1.0, "cm": 0.01, "mm": 0.001}[unit]
     os.makedirs(outdir, exist_ok=True)
     glb, ply, gltf = (os.path.join(outdir, n) for n in ("bake.glb", "bake.ply", "input.gltf"))
-    base = [bounce, "bake", scene, "--unit", unit, "-q", "--patches", "400"]
+    base = [bounce, "bake", scene, "--unit", unit, "-q", "--patches", "400"] + RAYS
     for extra in (["--per-bounce", "-o", glb], ["--per-bounce", "-o", ply],
                   ["--mesh", "input", "--ldr", "-o", gltf]):
         r = subprocess.run(base + extra, capture_output=True, text=True)

@@ -99,7 +99,7 @@ typedef struct bn_cli_ff {
     size_t max_memory;        /* bytes, 0 = 80% of physical memory */
     double tolerance;         /* 0 = default */
     int    quadrature_only;
-    int    exact_visibility;
+    int    visibility;        /* index into "exact|rays" (default exact) */
     const char *cache;        /* NULL: no cache */
     int    transport;         /* index into "auto|dense|sparse|hierarchical" (default auto) */
     double eps;               /* hierarchy: link tolerance (< 0: the default) */

@@ -58,6 +58,7 @@ void bn_formfactor_opts_default(bn_formfactor_opts *o)
     o->max_memory = 0;
     o->seed = 1;
     o->tolerance = BN_FF_TOLERANCE_DEFAULT;
+    o->exact_visibility = 1;
 }
 
 static int bn__samples(const bn_formfactor_opts *o)
