@@ -265,12 +265,12 @@ i=1
 while [ "$i" -le "$reps" ]; do
     for mode in c c5 q x; do
         case $mode in
-        # shadow rays for the partly occluded pairs in the first three (the default), x the exact
-        # visible part
-        c) extra="" ;;                                          # the default: contour, 1e-9
-        c5) extra="--ff-tolerance 1e-5" ;;                      # the contour at the old default tolerance
-        q) extra="--ff-quadrature-only --ff-tolerance 1e-5" ;;  # the path before
-        x) extra="--ff-exact-visibility" ;;                     # the exact visible part
+        # shadow rays for the partly occluded pairs in the first three (the unoccluded pairs'
+        # paths compared with the same visibility), x the default: the exact visible part
+        c) extra="--ff-visibility rays" ;;                                          # contour, 1e-9
+        c5) extra="--ff-visibility rays --ff-tolerance 1e-5" ;;                     # the contour at the old default tolerance
+        q) extra="--ff-visibility rays --ff-quadrature-only --ff-tolerance 1e-5" ;; # the path before
+        x) extra="" ;;                                                               # the default: exact visible part
         esac
         # the assembly's own time, as the command reports it ("seconds" in its diagnostics)
         # shellcheck disable=SC2086
@@ -287,7 +287,8 @@ done
     echo "## Form factors: the closed form for every pair"
     echo
     echo "\`bounce formfactors meshes/cornell-box.obj --unit mm\` (default mesh, analytic; the partly occluded pairs by 32 shadow rays"
-    echo "(the default) in the first three rows, by the exact visible part (\`--ff-exact-visibility\`) in the last; the assembly's"
+    echo "(\`--ff-visibility rays\`) in the first three rows, so that they compare the unoccluded pairs' paths alone, and by the"
+    echo "exact visible part (the default) in the last two; the assembly's"
     echo "own seconds as the command reports them, medians of $reps runs). Every unoccluded pair by the double contour"
     echo "integral at the default tolerance 1e-9, against the same at 1e-5 and against \`--ff-quadrature-only"
     echo "--ff-tolerance 1e-5\` (every pair by the point kernel's quadrature at its old default: the path before; at 1e-9 it"
@@ -298,10 +299,11 @@ done
     echo "| figure | median | spread (runs) | alternative or limit | ratio |"
     echo "|---|---|---|---|---|"
 } >>"$report"
-row "form factors, contour at 1e-9 (default)" s "$work/ffc" "quadrature alone at 1e-5 (before)" "$work/ffq"
-row "form factors, contour at 1e-9 (default)" s "$work/ffc" "contour at 1e-5" "$work/ffc5"
+row "form factors, contour at 1e-9 (default), rays" s "$work/ffc" "quadrature alone at 1e-5 (before), rays" "$work/ffq"
+row "form factors, contour at 1e-9 (default), rays" s "$work/ffc" "contour at 1e-5, rays" "$work/ffc5"
 row "evaluations: contour panel points at 1e-9" "" "$work/ffce" "point-kernel evaluations, quadrature at 1e-5" "$work/ffqe"
-row "form factors, exact visible part (--ff-exact-visibility)" s "$work/ffx" "shadow rays, 32 per pair (default)" "$work/ffc"
+row "form factors, exact visible part (default)" s "$work/ffx" "shadow rays, 32 per pair" "$work/ffc"
+row "form factors at the default settings (contour, exact visible part)" s "$work/ffx" "the defaults before issue 15 (quadrature at 1e-5, shadow rays)" "$work/ffq"
 {
     echo
     echo "Largest row sum (the box is open at the front; rows above 1 are error): exact visible part" \

@@ -101,6 +101,74 @@ BN_TEST(compare_detects_injected_error)
     bn_scene_destroy(s);
 }
 
+/* A tracer estimate of exactly 0 with a standard error of 0 (no sample hit: a patch that sees a
+ * sliver of the light) is judged by the zero-count bound: with samples 0 or a hit of size h, all
+ * spp are 0 with probability exp(-spp mu / h), so a radiosity value mu passes up to
+ * h ln(1/alpha_1) / spp and fails above, h = T + spp s^2 / T from the other patches of its face
+ * (here all set to T = 0.5, s = 0.01). Before the bound, se 0 made any nonzero value fail. */
+BN_TEST(zero_count_bound)
+{
+    bn_scene *s = load("meshes/furnace-box.obj", 0, 54);
+    bn_rt *rt = NULL;
+    bn_trace_opts o;
+    bn_trace_patches r;
+    bn_crosscheck_input in;
+    bn_crosscheck_result cr;
+    bn_error err;
+    const double exact[6] = {1, 0.5, 0.25, 0.125, 0.125, 2};
+    const bn_patch *pa;
+    double *rad, h, mu;
+    size_t n, m, np, k, z = 7;
+    if (bn_rt_create(s, 1, &rt, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    bn_trace_opts_default(&o);
+    o.spp = 256;
+    o.quiet = 1;
+    if (bn_trace_patches_run(rt, &o, &r, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    n = r.n;
+    m = (size_t)r.nlayers * n * 3;
+    pa = bn_scene_patches(s, &np);
+    rad = malloc(m * sizeof(double));
+    for (size_t i = 0; i < m; i++)
+        rad[i] = exact[i / (n * 3)];
+    for (size_t i = 0; i < n; i++)   /* KE, G: patch z's face all hit with T 0.5 +- 0.01, z never */
+        if (pa[i].face == pa[z].face) {
+            r.mean[(1 * n + i) * 3 + 1] = i == z ? 0 : 0.5;
+            r.se[(1 * n + i) * 3 + 1] = i == z ? 0 : 0.01;
+        }
+    h = 0.5 + 256 * 0.01 * 0.01 / 0.5;
+    bn_crosscheck_input_default(&in);
+    in.scene = s;
+    in.trace = &r;
+    in.rad = rad;
+    in.alpha = ALPHA;
+    k = (1 * n + z) * 3 + 1;
+    rad[k] = 0;   /* both 0: no evidence either way */
+    if (bn_crosscheck_compare(&in, &cr, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    BN_ASSERT(cr.pass);
+    mu = h * -log(cr.alpha_each) / 256;
+    bn_crosscheck_result_free(&cr);
+    rad[k] = 0.95 * mu;
+    if (bn_crosscheck_compare(&in, &cr, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    BN_ASSERT(cr.pass);
+    bn_crosscheck_result_free(&cr);
+    rad[k] = 1.05 * mu;
+    if (bn_crosscheck_compare(&in, &cr, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    BN_ASSERT(!cr.pass);
+    BN_ASSERT_EQ(cr.within, cr.family - 1);
+    BN_ASSERT_EQ(cr.worst[0].patch, z);
+    BN_ASSERT_NEAR(cr.worst[0].z_excess, 1.05 * cr.crit, 1e-9);
+    bn_crosscheck_result_free(&cr);
+    free(rad);
+    bn_trace_patches_free(&r);
+    bn_rt_destroy(rt);
+    bn_scene_destroy(s);
+}
+
 /* The tolerance from a second mesh level maps each patch to the other level's patch that holds
  * its centroid: with x of the centroid as the "solution", the difference is below one coarse
  * patch (0.5 m) and zero where the levels agree (the same mesh twice). */

@@ -21,7 +21,7 @@
 #define BN_Z_BIAS 4.5
 #define BN_RATE_SLACK 1.5
 #define BN_NSEEDS 64
-/* - BN_EXACT_VIS_RTOL: --ff-exact-visibility integrates the exactly blocked part of B over A with a
+/* - BN_EXACT_VIS_RTOL: the exact visible part (the default) integrates the exactly blocked part of B over A with a
  *   degree-5 rule on 8+ triangles, refined until a degree-2 rule agrees within 10%; on these
  *   smooth integrands (C stays inside every pyramid) that is good to about 1e-4 of F where the
  *   kernel varies fastest (the near pair: 5e-5), against a few 1e-2 for 32 shadow rays.
@@ -98,8 +98,8 @@ static void log_drop(void *user, bn_log_level level, const char *msg)
     (void)msg;
 }
 
-/* sampled: the shadow-ray estimator (the default); else the exact visible part
- * (--ff-exact-visibility: no rays, no seed). */
+/* sampled: the shadow-ray estimator (--ff-visibility rays); else the exact visible part (the
+ * default, left as bn_formfactor_opts_default sets it: no rays, no seed). */
 static bn_transport *build_with(const bn_scene *scene, const bn_rt *rt, int samples, uint64_t seed, int sampled)
 {
     bn_formfactor_opts o;
@@ -110,7 +110,9 @@ static bn_transport *build_with(const bn_scene *scene, const bn_rt *rt, int samp
     o.method = BN_FF_ANALYTIC;
     o.samples = samples;
     o.seed = seed;
-    o.exact_visibility = !sampled;
+    BN_ASSERT(o.exact_visibility);   /* the default */
+    if (sampled)
+        o.exact_visibility = 0;
     o.quiet = 1;
     o.log.quiet = 1;
     o.log.fn = log_drop;
@@ -206,7 +208,7 @@ static void check_exact_case(const char *name, const double A[12], const double 
     BN_ASSERT_LT(e256.rms, e16.rms * BN_RATE_SLACK / 4);
     BN_ASSERT_GT(e256.rms, 0);   /* the pair was sampled */
     {
-        /* --ff-exact-visibility: the visible part of B from each point of A exactly, no rays, no seed */
+        /* the exact visible part (the default): the visible part of B from each point of A exactly, no rays, no seed */
         bn_transport *K1 = build_with(scene, rt, 0, 1, 0), *K2 = build_with(scene, rt, 0, 2, 0);
         double f = bn_test_F(K1, 0, 1);
         fprintf(stderr, "%s: exact visible part %.12f, relative error %.2e\n", name, f, fabs(f - exact) / exact);
@@ -302,10 +304,10 @@ BN_TEST(closed_room_with_block_rows_unbiased)
     bn_scene_destroy(scene);
 }
 
-/* Closed rooms with occluders, default settings but --ff-exact-visibility. Every row of a patch that
+/* Closed rooms with occluders, default settings (the exact visible part). Every row of a patch that
  * sees the room sums to 1; the patches under blocks standing on the floor (no bottom faces) see only
  * the blocks' insides, which face away, and sum to 0. Returns the largest |row sum - 1| with the
- * exact visible part and with the default shadow rays (32 per pair). */
+ * exact visible part and with shadow rays (--ff-visibility rays, 32 per pair). */
 static void closed_rows(const char *name, int standing, double *worst, double *worst_sampled)
 {
     sb s;

@@ -228,9 +228,9 @@ static void scale_case(const char *name, double rtol)
 }
 
 BN_TEST(scale_invariance_furnace) { scale_case("furnace-box", 1e-9); }
-/* With the blocks the shadow rays (the default) are the same points scaled, but the floor's pieces
- * end on the blocks' contact lines, and a ray that ends beside that corner can go either way with the
- * float rounding of another scale: one ray of 32 in one pair moved one red-wall patch by 2.7e-4 (at
- * 1e-6). That is the visibility estimate's own noise, which bounds it. (--ff-exact-visibility moves
- * by its integration error the same way, when a rounding flips a refinement: 2e-4 measured.) */
+/* With the blocks the exact visible part (the default) moves by its integration error when a
+ * rounding of another scale flips a refinement (2e-4 measured). Shadow rays (--ff-visibility rays)
+ * are the same points scaled, but the floor's pieces end on the blocks' contact lines, and a ray
+ * that ends beside that corner can go either way: one ray of 32 in one pair moved one red-wall
+ * patch by 2.7e-4 (at 1e-6). That is the visibility estimate's own noise, which bounds it. */
 BN_TEST(scale_invariance_cornell) { scale_case("cornell-box", 1e-3); }

@@ -29,8 +29,9 @@ const char *bn_ff_method_name(bn_ff_method m);   /* "analytic", "montecarlo", "h
 typedef struct bn_formfactor_opts {
     bn_ff_method method;      /* default analytic */
     int          samples;     /* montecarlo: point pairs per patch pair (default 64); hemisphere: rays
-                                 per patch (default 4096); analytic: shadow rays per pair that an
-                                 occluder may block (default 32). 0 = the method's default */
+                                 per patch (default 4096); analytic without exact_visibility: shadow
+                                 rays per pair that an occluder may block (default 32). 0 = the
+                                 method's default */
     const char  *storage;     /* a storage name (bn_storage_names(): "dense", "sparse"); default dense */
     bn_precision precision;   /* default float */
     double       sparse_threshold;  /* storages that drop entries (sparse): drop F_ij below it (default 0:

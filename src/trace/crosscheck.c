@@ -203,16 +203,73 @@ static void bn__ztest(double R, double T, double se, double tol, double scale, d
     }
 }
 
+/* A tracer estimate of exactly 0 with a standard error of 0: none of its spp samples was nonzero (a
+ * patch that sees a sliver of the light in a corner, hit by 0.7 of 1,024 samples on average), and
+ * the sample variance says nothing. Samples that are 0 or a hit of size h: P(all 0) = (1 - mu/h)^spp
+ * <= exp(-spp mu / h), so a mean mu is rejected at alpha_1 when mu > h ln(1/alpha_1) / spp; with
+ * se0 = h ln(1/alpha_1) / (spp crit), z_excess <= crit says exactly that. h is estimated as
+ * E[X^2] / E[X] = T + spp s^2 / T (the hit size for hits of one size, a size-biased mean otherwise)
+ * by its median over the other items of the same input face (per patch) or of the layer (regions)
+ * with T > 0 in the same layer and channel; none: no bound (the floor). */
+typedef struct bn__hsz {
+    size_t g;
+    double h;
+} bn__hsz;
+
+static int bn__hsz_cmp(const void *a, const void *b)
+{
+    const bn__hsz *x = a, *y = b;
+    if (x->g != y->g)
+        return x->g < y->g ? -1 : 1;
+    return x->h < y->h ? -1 : x->h > y->h;
+}
+
+/* hg[g]: the median h of group g (NAN: none), and *hall: of every item; buf: n entries. */
+static void bn__hit_sizes(const bn_crosscheck_input *in, const bn_patch *pa, size_t ng, size_t l, int c,
+                          bn__hsz *buf, double *hg, double *hall)
+{
+    const bn_trace_patches *tr = in->trace;
+    size_t n = tr->n, m = 0;
+    for (size_t g = 0; g < ng; g++)
+        hg[g] = NAN;
+    *hall = NAN;
+    for (size_t i = 0; i < n; i++) {
+        size_t k = (l * n + i) * 3 + (size_t)c;
+        double T = tr->mean[k], se = tr->se[k];
+        if (T > 0 && isfinite(T) && isfinite(se)) {
+            buf[m].g = in->part ? 0 : pa[i].face;
+            buf[m++].h = T + (double)tr->spp * se * se / T;
+        }
+    }
+    qsort(buf, m, sizeof *buf, bn__hsz_cmp);
+    for (size_t a = 0; a < m;) {
+        size_t b = a;
+        while (b < m && buf[b].g == buf[a].g)
+            b++;
+        hg[buf[a].g] = buf[a + (b - a) / 2].h;
+        a = b;
+    }
+    for (size_t i = 0; i < m; i++)
+        buf[i].g = 0;
+    qsort(buf, m, sizeof *buf, bn__hsz_cmp);
+    if (m)
+        *hall = buf[m / 2].h;
+}
+
 bn_status bn_crosscheck_compare(const bn_crosscheck_input *in, bn_crosscheck_result *out, bn_error *err)
 {
     const bn_trace_patches *tr = in->trace;
-    size_t n = tr->n, nl = (size_t)tr->nlayers, np, nmat, m;
+    size_t n = tr->n, nl = (size_t)tr->nlayers, np, nmat, m, nf, ng;
     bn_crosscheck_entry *all;
-    double scale = in->tol_scale >= 0 ? in->tol_scale : 1;
+    bn__hsz *hsz;
+    double scale = in->tol_scale >= 0 ? in->tol_scale : 1, *hg;
+    const bn_patch *pa;
 
     memset(out, 0, sizeof *out);
     bn_scene_materials(in->scene, &nmat);
-    bn_scene_patches(in->scene, &np);
+    pa = bn_scene_patches(in->scene, &np);
+    bn_scene_faces(in->scene, &nf);
+    ng = in->part ? 1 : nf + 1;   /* hit-size groups: the faces, or one */
     if (in->part ? in->part->n != n || in->part->npatch != np : np != n)
         return bn_error_set(err, BN_EINPUT, "crosscheck: the tracer has %zu %s, the scene %zu", n,
                             in->part ? "regions" : "patches", in->part ? in->part->n : np);
@@ -220,6 +277,8 @@ bn_status bn_crosscheck_compare(const bn_crosscheck_input *in, bn_crosscheck_res
         return bn_error_set(err, BN_EUSAGE, "crosscheck: alpha %g is not in (0, 1)", in->alpha);
     m = n * nl * 3;
     all = bn__malloc_array(m ? m : 1, sizeof *all);
+    hsz = bn__malloc_array(n ? n : 1, sizeof *hsz);
+    hg = bn__malloc_array(3 * ng, sizeof *hg);
     out->nlayers = (int)nl;
     out->layer_within = bn__calloc(nl, sizeof(size_t));
     out->layer_worst_z = bn__calloc(nl, sizeof(double));
@@ -232,9 +291,11 @@ bn_status bn_crosscheck_compare(const bn_crosscheck_input *in, bn_crosscheck_res
     out->surf_rad = bn__calloc(nmat ? nmat * 3 : 1, sizeof(double));
     out->surf_pt = bn__calloc(nmat ? nmat * 3 : 1, sizeof(double));
     out->surf_se = bn__calloc(nmat ? nmat * 3 : 1, sizeof(double));
-    if (!all || !out->layer_within || !out->layer_worst_z || !out->power_rad || !out->power_pt || !out->power_se ||
-        !out->power_tol || !out->surf_area || !out->surf_rad || !out->surf_pt || !out->surf_se) {
+    if (!all || !hsz || !hg || !out->layer_within || !out->layer_worst_z || !out->power_rad || !out->power_pt ||
+        !out->power_se || !out->power_tol || !out->surf_area || !out->surf_rad || !out->surf_pt || !out->surf_se) {
         free(all);
+        free(hsz);
+        free(hg);
         bn_crosscheck_result_free(out);
         return bn_error_set(err, BN_ENOMEM, "crosscheck: out of memory for %zu comparisons", m);
     }
@@ -244,10 +305,12 @@ bn_status bn_crosscheck_compare(const bn_crosscheck_input *in, bn_crosscheck_res
     out->alpha_each = -expm1(log1p(-in->alpha) / (double)(m ? m : 1));
     out->crit = bn_student_t_quantile_upper(out->alpha_each / 2, tr->spp > 1 ? (double)(tr->spp - 1) : 1);
     for (size_t l = 0; l < nl; l++) {
-        double lscale = 0;
+        double lscale = 0, hall[3];
         for (size_t k = l * n * 3; k < (l + 1) * n * 3; k++)
             if (isfinite(in->rad[k]) && isfinite(tr->mean[k]))
                 lscale = fmax(lscale, fmax(fabs(in->rad[k]), fabs(tr->mean[k])));
+        for (int c = 0; c < 3; c++)
+            bn__hit_sizes(in, pa, ng, l, c, hsz, hg + (size_t)c * ng, &hall[c]);
         for (size_t i = 0; i < n; i++)
             for (int c = 0; c < 3; c++) {
                 size_t k = (l * n + i) * 3 + (size_t)c;
@@ -259,6 +322,12 @@ bn_status bn_crosscheck_compare(const bn_crosscheck_input *in, bn_crosscheck_res
                 e->radiosity = R;
                 e->trace = T;
                 e->se = tr->se[k];
+                if (T == 0 && e->se == 0 && tr->spp > 1 && out->crit > 0) {   /* no sample was nonzero */
+                    double h = hg[(size_t)c * ng + (in->part ? 0 : pa[i].face)];
+                    h = isfinite(h) ? h : hall[c];
+                    if (isfinite(h))
+                        e->se = h * -log(out->alpha_each) / ((double)tr->spp * out->crit);
+                }
                 e->tol = (in->tol ? scale * in->tol[k] : 0) + in->rtol * fabs(R);
                 bn__ztest(R, T, e->se, e->tol, lscale, &e->z, &e->z_excess);
                 if (!isfinite(R) || !isfinite(T)) {
@@ -275,6 +344,8 @@ bn_status bn_crosscheck_compare(const bn_crosscheck_input *in, bn_crosscheck_res
                 out->layer_worst_z[l] = fmax(out->layer_worst_z[l], e->z_excess);
             }
     }
+    free(hsz);
+    free(hg);
     qsort(all, m, sizeof *all, bn__entry_cmp);
     out->nworst = in->worst < 0 ? 0 : (in->worst > (int)m ? (int)m : in->worst);
     out->worst = bn__malloc_array(out->nworst ? (size_t)out->nworst : 1, sizeof *all);
