@@ -210,7 +210,8 @@ static void bn__ztest(double R, double T, double se, double tol, double scale, d
  * se0 = h ln(1/alpha_1) / (spp crit), z_excess <= crit says exactly that. h is estimated as
  * E[X^2] / E[X] = T + spp s^2 / T (the hit size for hits of one size, a size-biased mean otherwise)
  * by its median over the other items of the same input face (per patch) or of the layer (regions)
- * with T > 0 in the same layer and channel; none: no bound (the floor). */
+ * with T > 0 in the same layer and channel; none: no bound (the floor). Not for E, which the tracer
+ * does not sample (the emitted radiance itself in both). */
 typedef struct bn__hsz {
     size_t g;
     double h;
@@ -322,7 +323,8 @@ bn_status bn_crosscheck_compare(const bn_crosscheck_input *in, bn_crosscheck_res
                 e->radiosity = R;
                 e->trace = T;
                 e->se = tr->se[k];
-                if (T == 0 && e->se == 0 && tr->spp > 1 && out->crit > 0) {   /* no sample was nonzero */
+                if (l > 0 && T == 0 && e->se == 0 && tr->spp > 1 && out->crit > 0) {
+                    /* no sample was nonzero (E, layer 0, is not sampled: exact in both) */
                     double h = hg[(size_t)c * ng + (in->part ? 0 : pa[i].face)];
                     h = isfinite(h) ? h : hall[c];
                     if (isfinite(h))
