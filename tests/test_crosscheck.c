@@ -27,33 +27,42 @@ static bn_scene *load(const char *rel, double patch_size, size_t patches)
     return s;
 }
 
-/* The exact furnace answer passes; one patch's KE moved by 12 standard errors fails and is the
- * worst entry; a tolerance covering the move passes again, with the raw z still reported. */
-BN_TEST(compare_detects_injected_error)
+/* The furnace box at 54 patches traced at 256 spp, and radiosity's exact answer per layer (E, KE,
+ * K2E, K3E, rest, L: 1, 1/2, 1/4, 1/8, 1/8, 2) in rad (malloc'd, nlayers x n x 3). */
+static bn_scene *furnace_traced(bn_rt **rt, bn_trace_patches *r, double **rad)
 {
     bn_scene *s = load("meshes/furnace-box.obj", 0, 54);
-    bn_rt *rt = NULL;
     bn_trace_opts o;
-    bn_trace_patches r;
-    bn_crosscheck_input in;
-    bn_crosscheck_result cr;
     bn_error err;
     const double exact[6] = {1, 0.5, 0.25, 0.125, 0.125, 2};
-    double *rad, *tol;
-    size_t n, m, k;
-    if (bn_rt_create(s, 1, &rt, &err) != BN_OK)
+    size_t m;
+    if (bn_rt_create(s, 1, rt, &err) != BN_OK)
         BN_FAIL("%s", err.msg);
     bn_trace_opts_default(&o);
     o.spp = 256;
     o.quiet = 1;
-    if (bn_trace_patches_run(rt, &o, &r, &err) != BN_OK)
+    if (bn_trace_patches_run(*rt, &o, r, &err) != BN_OK)
         BN_FAIL("%s", err.msg);
-    n = r.n;
-    m = (size_t)r.nlayers * n * 3;
-    rad = malloc(m * sizeof(double));
-    tol = calloc(m, sizeof(double));
+    m = (size_t)r->nlayers * r->n * 3;
+    *rad = malloc(m * sizeof(double));
     for (size_t i = 0; i < m; i++)
-        rad[i] = exact[i / (n * 3)];
+        (*rad)[i] = exact[i / (r->n * 3)];
+    return s;
+}
+
+/* The exact furnace answer passes; one patch's KE moved by 12 standard errors fails and is the
+ * worst entry; a tolerance covering the move passes again, with the raw z still reported. */
+BN_TEST(compare_detects_injected_error)
+{
+    bn_rt *rt = NULL;
+    bn_trace_patches r;
+    bn_crosscheck_input in;
+    bn_crosscheck_result cr;
+    bn_error err;
+    double *rad, *tol;
+    bn_scene *s = furnace_traced(&rt, &r, &rad);
+    size_t n = r.n, m = (size_t)r.nlayers * n * 3, k;
+    tol = calloc(m, sizeof(double));
     bn_crosscheck_input_default(&in);
     in.scene = s;
     in.trace = &r;
@@ -108,30 +117,15 @@ BN_TEST(compare_detects_injected_error)
  * (here all set to T = 0.5, s = 0.01). Before the bound, se 0 made any nonzero value fail. */
 BN_TEST(zero_count_bound)
 {
-    bn_scene *s = load("meshes/furnace-box.obj", 0, 54);
     bn_rt *rt = NULL;
-    bn_trace_opts o;
     bn_trace_patches r;
     bn_crosscheck_input in;
     bn_crosscheck_result cr;
     bn_error err;
-    const double exact[6] = {1, 0.5, 0.25, 0.125, 0.125, 2};
-    const bn_patch *pa;
     double *rad, h, mu;
-    size_t n, m, np, k, z = 7;
-    if (bn_rt_create(s, 1, &rt, &err) != BN_OK)
-        BN_FAIL("%s", err.msg);
-    bn_trace_opts_default(&o);
-    o.spp = 256;
-    o.quiet = 1;
-    if (bn_trace_patches_run(rt, &o, &r, &err) != BN_OK)
-        BN_FAIL("%s", err.msg);
-    n = r.n;
-    m = (size_t)r.nlayers * n * 3;
-    pa = bn_scene_patches(s, &np);
-    rad = malloc(m * sizeof(double));
-    for (size_t i = 0; i < m; i++)
-        rad[i] = exact[i / (n * 3)];
+    bn_scene *s = furnace_traced(&rt, &r, &rad);
+    size_t n = r.n, np, k, z = 7;
+    const bn_patch *pa = bn_scene_patches(s, &np);
     for (size_t i = 0; i < n; i++)   /* KE, G: patch z's face all hit with T 0.5 +- 0.01, z never */
         if (pa[i].face == pa[z].face) {
             r.mean[(1 * n + i) * 3 + 1] = i == z ? 0 : 0.5;
