@@ -29,6 +29,9 @@ typedef struct bn_flat_opts {
                                  BN_EINTR) and the caller's handler is restored after; for
                                  interpreters whose own handler runs only between their steps
                                  (Python's). Default 0: signals are the caller's business */
+    const char *visibility;   /* partly occluded pairs' form factors: "exact" (default) or "rays" (as
+                                 `--ff-visibility`; the hierarchy's links above the patches always
+                                 take rays) */
 } bn_flat_opts;
 void bn_flat_opts_default(bn_flat_opts *o);
 

@@ -44,7 +44,7 @@ class _Opts(ctypes.Structure):
     _fields_ = [("unit", ctypes.c_char_p), ("method", ctypes.c_char_p), ("transport", ctypes.c_char_p),
                 ("bounces", ctypes.c_int), ("tol", ctypes.c_double), ("patches", ctypes.c_size_t),
                 ("patch_size", ctypes.c_double), ("eps", ctypes.c_double), ("threads", ctypes.c_int),
-                ("quiet", ctypes.c_int), ("sigint", ctypes.c_int)]
+                ("quiet", ctypes.c_int), ("sigint", ctypes.c_int), ("visibility", ctypes.c_char_p)]
 
 
 _lib = None
@@ -226,10 +226,11 @@ _DIAG = ("row_sum_min", "row_sum_max", "row_sum_rms_dev", "reciprocity_residual"
 
 
 def _opts(lib, unit="m", method="auto", transport="auto", bounces=3, tol=None, patches=None, patch_size=None,
-          eps=None, threads=0, progress=False):
+          eps=None, threads=0, progress=False, visibility="exact"):
     o = _Opts()
     lib.bn_flat_opts_default(ctypes.byref(o))
     o.unit, o.method, o.transport = unit.encode(), method.encode(), transport.encode()
+    o.visibility = visibility.encode()
     o.bounces = bounces
     o.tol = tol or 0.0
     o.patches = patches or 0
@@ -249,12 +250,12 @@ class Scene:
 
     @classmethod
     def load(cls, path, unit="m", patches=None, patch_size=None, transport="auto", eps=None, threads=0,
-             progress=False):
+             progress=False, visibility="exact"):
         lib = _load()
         self = cls()
         self.path = os.fspath(path)
         self.options = dict(unit=unit, patches=patches, patch_size=patch_size, transport=transport, eps=eps,
-                            threads=threads, progress=progress)
+                            threads=threads, progress=progress, visibility=visibility)
         o = _opts(lib, **self.options)
         h = ctypes.c_void_p()
         msg = ctypes.create_string_buffer(2048)
@@ -371,9 +372,10 @@ def _solve_operator(op, emission, method, bounces, tol, threads, progress):
 
 
 def solve(path, unit="m", method="auto", transport="auto", bounces=3, tol=None, patches=None, patch_size=None,
-          eps=None, threads=0, progress=False, emission=None):
+          eps=None, threads=0, progress=False, emission=None, visibility="exact"):
     """Loads, meshes, builds K and solves L = E + K L for the scene file at `path`, keeping the
-    terms K^0 E .. K^bounces E. Options are those of `bounce solve` (defaults alike). Raises
+    terms K^0 E .. K^bounces E. Options are those of `bounce solve` (defaults alike; visibility is
+    --ff-visibility: "exact" or "rays"). Raises
     BounceError with bounce's message on bad input; an unconverged solve raises too.
     With a bounce.Operator in place of the path, K is yours and `emission` (patches x 3) is E."""
     if isinstance(path, Operator):
@@ -384,10 +386,10 @@ def solve(path, unit="m", method="auto", transport="auto", bounces=3, tol=None, 
     if isinstance(path, Scene):   # its file and meshing options (K is built again for the solve)
         so = path.options
         o = _opts(lib, so["unit"], method, so["transport"], bounces, tol, so["patches"], so["patch_size"],
-                  so["eps"], threads or so["threads"], progress or so["progress"])
+                  so["eps"], threads or so["threads"], progress or so["progress"], so["visibility"])
         path = path.path
     else:
-        o = _opts(lib, unit, method, transport, bounces, tol, patches, patch_size, eps, threads, progress)
+        o = _opts(lib, unit, method, transport, bounces, tol, patches, patch_size, eps, threads, progress, visibility)
     h = ctypes.c_void_p()
     msg = ctypes.create_string_buffer(2048)
     st = lib.bn_flat_solve(os.fsencode(path), ctypes.byref(o), ctypes.byref(h), msg, len(msg))

@@ -109,11 +109,19 @@ static bn_status bn__flat_popts(const bn_flat_opts *o, bn_flat *f, char *msg, si
             ok |= strcmp(o->transport, names[i]) == 0;
         if (!ok) {
             char t[160];
-            snprintf(t, sizeof t, "transport '%s' is not one of auto, dense, sparse, hierarchical", o->transport);
+            snprintf(t, sizeof t, "transport '%.64s' is not one of auto, dense, sparse, hierarchical", o->transport);
             return bn__flat_fail(BN_EUSAGE, t, msg, msglen);
         }
         snprintf(f->transport_opt, sizeof f->transport_opt, "%s", o->transport);
         po->transport = f->transport_opt;
+    }
+    if (o->visibility) {
+        if (strcmp(o->visibility, "exact") != 0 && strcmp(o->visibility, "rays") != 0) {
+            char t[160];
+            snprintf(t, sizeof t, "visibility '%.64s' is not one of exact, rays", o->visibility);
+            return bn__flat_fail(BN_EUSAGE, t, msg, msglen);
+        }
+        po->ff.exact_visibility = strcmp(o->visibility, "exact") == 0;   /* the hierarchy's ff is copied from it */
     }
     po->solve.bounces = o->bounces < 0 ? 0 : o->bounces;
     if (o->tol > 0)

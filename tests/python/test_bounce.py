@@ -57,6 +57,27 @@ def test_cornell_equals_the_cli_csv(tmp_path):
     assert mismatch == 0
 
 
+def test_visibility_rays_equals_the_cli_and_exact_keeps_rows(tmp_path):
+    """visibility= is --ff-visibility: "rays" equals `bounce solve --ff-visibility rays` to every
+    printed digit; F by the exact visible parts (the default) keeps the Cornell box's rows within
+    1e-4 of 1 where 32 shadow rays per pair leave some above; a bad name raises with it."""
+    csv = tmp_path / "rays.csv"
+    subprocess.run([EXE, "solve", CORNELL, "--unit", "mm", "--patches", "300", "--ff-visibility", "rays", "-q",
+                    "-o", str(csv)], check=True, stderr=subprocess.DEVNULL)
+    rows = [ln.split(",") for ln in csv.read_text().splitlines() if ln and not ln.startswith("#")]
+    head, rows = rows[0], rows[1:]
+    cols = [head.index(c) for c in ("L_R", "L_G", "L_B")]
+    r = bounce.solve(CORNELL, unit="mm", patches=300, visibility="rays")
+    assert r.patches == len(rows)
+    assert all(row[j] == "%.9g" % r.L[i, c] for i, row in enumerate(rows) for c, j in enumerate(cols))
+    exact = bounce.Scene.load(CORNELL, unit="mm", patches=300).form_factors().sum(1).max()
+    rays = bounce.Scene.load(CORNELL, unit="mm", patches=300, visibility="rays").form_factors().sum(1).max()
+    assert exact <= 1 + 1e-4 < rays, (exact, rays)
+    with pytest.raises(bounce.BounceError) as e:
+        bounce.solve(CORNELL, unit="mm", patches=100, visibility="sometimes")
+    assert e.value.status == "EUSAGE" and "sometimes" in str(e.value)
+
+
 def test_errors_raise_with_bounces_message(tmp_path):
     with pytest.raises(bounce.BounceError) as e:
         bounce.solve(str(tmp_path / "missing.obj"))
