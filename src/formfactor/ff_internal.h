@@ -83,6 +83,22 @@ int bn__ff_near(const double *pi, size_t ni, const double *pj, size_t nj);
 double bn__ff_unoccluded(const double *pi, size_t ni, const double ni_n[3], const double *pj, size_t nj, double rtol,
                          double atol, bn__quad_stats *st);
 
+/* Convex solids among the scene's faces (solids.c): connected faces (by vertex index or equal
+ * coordinates) with every vertex inside every face's plane, closed but for at most one planar
+ * missing facet (a box standing on a floor without its bottom). fv, fnc, fn: per face its corners
+ * (12 doubles), corner count and unit normal; fidx + ffirst[f]: its vertex indices. */
+typedef struct bn__solids bn__solids;
+bn_status bn__solids_find(const double *fv, const unsigned *fnc, const double *fn, const size_t *fidx,
+                          const size_t *ffirst, size_t nf, double tol, bn__solids **out);
+void bn__solids_free(bn__solids *s);   /* NULL is a no-op */
+size_t bn__solids_count(const bn__solids *s);
+/* The solid face f belongs to, or SIZE_MAX. */
+size_t bn__solid_of(const bn__solids *s, size_t f);
+/* Does solid k hide every segment between the convex polygons a and b (neither a polygon of the
+ * solid)? Exact up to tol: every segment meets the solid's interior shrunk by tol. */
+int bn__solid_blocks_all(const bn__solids *s, size_t k, const double *a, size_t na, const double *b, size_t nb,
+                         double tol);
+
 /* Uniform point in a convex polygon from (u, v) in [0,1)^2 (fan triangles chosen by area). */
 void bn__poly_sample(const double *v, size_t nv, double u, double w, double out[3]);
 

@@ -87,6 +87,7 @@ typedef struct bn__ffg {
     double *fv;          /* nf * 4 corners */
     unsigned *fnc;
     double *fn, *flo, *fhi;
+    bn__solids *solids;  /* convex solids among the faces (solids.c) */
 } bn__ffg;
 
 static void bn__ffg_free(bn__ffg *g)
@@ -97,6 +98,7 @@ static void bn__ffg_free(bn__ffg *g)
     free(g->fn);
     free(g->flo);
     free(g->fhi);
+    bn__solids_free(g->solids);
 }
 
 static bn_status bn__ffg_init(bn__ffg *g, const bn_scene *s, double eps, bn_error *err)
@@ -141,6 +143,19 @@ static bn_status bn__ffg_init(bn__ffg *g, const bn_scene *s, double eps, bn_erro
     bn_scene_bounds(s, lo, hi);
     g->tol = 1e-9 * fmax(bn_v3_dist(lo, hi), 1e-300);
     g->eps = eps;
+    {
+        size_t *first = bn__malloc_array(g->nf ? g->nf : 1, sizeof *first);
+        bn_status st = first ? BN_OK : BN_ENOMEM;
+        for (size_t f = 0; first && f < g->nf; f++)
+            first[f] = faces[f].first;
+        if (st == BN_OK)
+            st = bn__solids_find(g->fv, g->fnc, g->fn, fidx, first, g->nf, g->tol, &g->solids);
+        free(first);
+        if (st != BN_OK) {
+            bn__ffg_free(g);
+            return bn_error_set(err, st, "out of memory for the solids among %zu faces", g->nf);
+        }
+    }
     return BN_OK;
 }
 
@@ -673,6 +688,18 @@ static double bn__pair_value(const bn_rt *rt, const bn__ffg *g, const bn_formfac
          * with rays, 29% of the rays; 87,000 with the exact visible part) */
         for (size_t q = 0; maybe && nocc != SIZE_MAX && q < nocc && !hidden; q++)
             hidden = bn__face_blocks_all(g, occ[q], &p);
+        /* or several faces of one convex solid together (a floor patch behind a block's edge, or
+         * under the block, seen from a wall): each solid in the list once, not one the pair is on */
+        for (size_t q = 0; maybe && nocc != SIZE_MAX && q < nocc && !hidden; q++) {
+            size_t k = bn__solid_of(g->solids, occ[q]), r = 0;
+            if (k == SIZE_MAX || k == bn__solid_of(g->solids, g->patch[i].face) ||
+                k == bn__solid_of(g->solids, g->patch[j].face))
+                continue;
+            while (r < q && bn__solid_of(g->solids, occ[r]) != k)
+                r++;
+            if (r == q)
+                hidden = bn__solid_blocks_all(g->solids, k, p.a, p.na, p.b, p.nb, g->tol);
+        }
         if (hidden) {
             vis = 0;
             cnt->pairs_tested++;
