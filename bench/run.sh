@@ -12,7 +12,8 @@
 #   --quick       smaller settings everywhere (a smoke run, ~2 minutes)
 #   --big         also the large scenes: the bunny in the Cornell box (69,460 polygons) and the same
 #                 with each bunny triangle cut into 16 (1,111,225 polygons, made by
-#                 ../shared/data/scenes/make-model-box.py), whole `bounce bounces` runs (~6 minutes)
+#                 ../shared/data/scenes/make-model-box.py), whole `bounce bounces` runs, and the MPI
+#                 identity checks on the bunny box (tests/mpi_check.sh with BN_TEST_BIG=1; ~9 minutes)
 #   --no-build    use the executables already in the build directory
 # Environment: BENCH_TIMEOUT (seconds per bench program, default 150), OMP_NUM_THREADS (default: all
 # cores). A bench that is missing, fails or times out is reported as such; the others still run.
@@ -487,6 +488,22 @@ if [ "$big" = 1 ]; then
             fi
         done
         echo >>"$report"
+        # the MPI identity checks on the bunny box (tests/mpi_check.sh with BN_TEST_BIG=1: out of the
+        # suite's budget, a big scene)
+        if command -v mpirun >/dev/null 2>&1 && grep -q "BOUNCE_MPI:BOOL=ON" "$build/CMakeCache.txt" 2>/dev/null; then
+            note "large scenes: MPI identity on the bunny box (tests/mpi_check.sh, BN_TEST_BIG=1)"
+            t0=$(date +%s.%N)
+            BN_TEST_BIG=1 bash "$root/tests/mpi_check.sh" "$bounce" "$root" "$work/mpi_check" >"$work/mpi_check.txt" 2>&1
+            rc=$?
+            t1=$(date +%s.%N)
+            {
+                echo "MPI on the bunny box (\`BN_TEST_BIG=1 tests/mpi_check.sh\`: under \`-np 2\` and \`4\` against \`-np 1\`, a trace,"
+                echo "the hierarchical \`bounces\` at eps 1 (every row and pixel) and \`crosscheck --regions 20\`): exit $rc,"
+                echo "$(grep -c '^ok' "$work/mpi_check.txt") checks ok, $(grep -c '^FAIL' "$work/mpi_check.txt") failed, $(awk -v a="$t0" -v b="$t1" 'BEGIN { printf "%.0f", b - a }') s."
+                grep '^FAIL' "$work/mpi_check.txt" | sed 's/^/- /'
+                echo
+            } >>"$report"
+        fi
     fi
 fi
 

@@ -6,7 +6,8 @@
 #   (non-'#' lines);
 # - the hierarchical solve (each rank refines and gathers its share of the receivers): every row of
 #   the solve CSV with every bounce term, and every pixel of every layer of `bounce bounces`' EXR;
-# - the bunny box (../shared, skipped visibly without it): a short trace under -np 2 and 4; the
+# - the bunny box (../shared, skipped visibly without it; only with BN_TEST_BIG=1, which
+#   bench/run.sh --big sets: a big scene): a short trace under -np 2 and 4; the
 #   hierarchical solve's rows (bounces --patches-out) and EXR, and the crosscheck's figures, under
 #   -np 2 and 4 against -np 1;
 # - a rank killed, and SIGINT to mpirun: every rank ends, with a message, and no output is left;
@@ -116,7 +117,11 @@ rc=$?
 [ "$rc" != 0 ] && grep -q "single-process" dense.err && [ ! -e dense.csv ]
 check $? "dense K under -np 2: refused (exit $rc: $(grep -m1 single-process dense.err | cut -c1-90)), no output"
 bb="$src/../shared/data/scenes/bunny-box.obj"
-if [ -f "$bb" ]; then
+if [ "${BN_TEST_BIG:-0}" != 1 ]; then
+    # a big scene (three minutes of the suite's budget): bench/run.sh --big runs this script with
+    # BN_TEST_BIG=1 and reports its verdict
+    echo "SKIP (part): the bunny box's rows are run by bench/run.sh --big (BN_TEST_BIG=1)"
+elif [ -f "$bb" ]; then
     bargs=(trace "$bb" --unit mm --spp 2 --size 32x32 -n 2 -q)
     run 0 "${bargs[@]}" -o b0.exr --patches-out b0.csv 2>/dev/null
     check $? "bunny box: trace, one process"

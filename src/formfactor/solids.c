@@ -232,7 +232,7 @@ bn_status bn__solids_find(const double *fv, const unsigned *fnc, const double *f
                           const size_t *ffirst, size_t nf, double tol, bn__solids **out)
 {
     bn__solids *s = calloc(1, sizeof *s);
-    size_t *parent = NULL, *order = NULL /* per face: its component's root */, nref = 0, *vowner = NULL, maxidx = 0;
+    size_t *parent = NULL, *root = NULL /* per face: its component's root */, nref = 0, *vowner = NULL, maxidx = 0;
     bn__vref *vr = NULL;
     *out = NULL;
     if (!s)
@@ -240,7 +240,7 @@ bn_status bn__solids_find(const double *fv, const unsigned *fnc, const double *f
     s->nf = nf;
     s->of = malloc((nf ? nf : 1) * sizeof *s->of);
     parent = malloc((nf ? nf : 1) * sizeof *parent);
-    order = malloc((nf ? nf : 1) * sizeof *order);
+    root = malloc((nf ? nf : 1) * sizeof *root);
     for (size_t f = 0; f < nf; f++)
         nref += fnc[f];
     vr = malloc((nref ? nref : 1) * sizeof *vr);
@@ -248,9 +248,9 @@ bn_status bn__solids_find(const double *fv, const unsigned *fnc, const double *f
         for (unsigned k = 0; k < fnc[f]; k++)
             maxidx = fidx[ffirst[f] + k] > maxidx ? fidx[ffirst[f] + k] : maxidx;
     vowner = malloc((maxidx + 1) * sizeof *vowner);
-    if (!s->of || !parent || !order || !vr || !vowner) {
+    if (!s->of || !parent || !root || !vr || !vowner) {
         free(parent);
-        free(order);
+        free(root);
         free(vr);
         free(vowner);
         bn__solids_free(s);
@@ -281,25 +281,25 @@ bn_status bn__solids_find(const double *fv, const unsigned *fnc, const double *f
     /* the components, each tested */
     for (size_t f = 0; f < nf; f++) {
         s->of[f] = SIZE_MAX;
-        order[f] = bn__uf_find(parent, f);   /* the root */
+        root[f] = bn__uf_find(parent, f);
     }
     {
         /* faces grouped by root: counting sort over roots */
-        size_t *start = calloc(nf + 1, sizeof *start), *members = malloc((nf ? nf : 1) * sizeof *members);
+        size_t *start = calloc(nf + 1, sizeof *start), *members = malloc((nf ? nf : 1) * sizeof *members), cap = 0;
         if (!start || !members) {
             free(start);
             free(members);
             free(parent);
-            free(order);
+            free(root);
             bn__solids_free(s);
             return BN_ENOMEM;
         }
         for (size_t f = 0; f < nf; f++)
-            start[order[f] + 1]++;
+            start[root[f] + 1]++;
         for (size_t r = 0; r < nf; r++)
             start[r + 1] += start[r];
         for (size_t f = 0; f < nf; f++)
-            members[start[order[f]]++] = f;
+            members[start[root[f]]++] = f;
         for (size_t r = nf; r > 0; r--)
             start[r] = start[r - 1];
         start[0] = 0;
@@ -311,20 +311,22 @@ bn_status bn__solids_find(const double *fv, const unsigned *fnc, const double *f
                 continue;
             if (!bn__solid_planes(fv, fnc, fn, members + start[r], m, tol, pl, &np, &missing))
                 continue;
-            {
-                double *npl = realloc(s->plane, (s->ns + 1) * 4 * BN__SOLID_PLANES_MAX * sizeof *npl);
+            if (s->ns == cap) {   /* doubling: scenes with many small solids */
+                size_t nc = cap ? 2 * cap : 16;
+                double *npl = realloc(s->plane, nc * 4 * BN__SOLID_PLANES_MAX * sizeof *npl);
                 int *nnp, *nmi;
                 if (!npl)
                     break;   /* no more solids: fewer shortcuts, the same answers */
                 s->plane = npl;
-                nnp = realloc(s->nplanes, (s->ns + 1) * sizeof *nnp);
+                nnp = realloc(s->nplanes, nc * sizeof *nnp);
                 if (!nnp)
                     break;
                 s->nplanes = nnp;
-                nmi = realloc(s->missing, (s->ns + 1) * sizeof *nmi);
+                nmi = realloc(s->missing, nc * sizeof *nmi);
                 if (!nmi)
                     break;
                 s->missing = nmi;
+                cap = nc;
             }
             memcpy(s->plane + s->ns * 4 * BN__SOLID_PLANES_MAX, pl, (size_t)np * 4 * sizeof(double));
             s->nplanes[s->ns] = np;
@@ -337,7 +339,7 @@ bn_status bn__solids_find(const double *fv, const unsigned *fnc, const double *f
         free(members);
     }
     free(parent);
-    free(order);
+    free(root);
     *out = s;
     return BN_OK;
 }
