@@ -122,27 +122,6 @@ static bn_status bn__find_tjunctions(bn_bake *b, const bn_patch *patches, size_t
     return BN_OK;
 }
 
-static size_t bn__find(size_t *parent, size_t i)
-{
-    while (parent[i] != i) {
-        parent[i] = parent[parent[i]];
-        i = parent[i];
-    }
-    return i;
-}
-
-static void bn__union(size_t *parent, size_t a, size_t b)
-{
-    a = bn__find(parent, a);
-    b = bn__find(parent, b);
-    if (a == b)
-        return;
-    if (a < b)
-        parent[b] = a;   /* the smaller index is the root: deterministic representatives */
-    else
-        parent[a] = b;
-}
-
 bn_status bn_bake_create(const bn_scene *scene, double crease_deg, bn_bake **out, bn_error *err)
 {
     size_t np, npv, ninc = 0, nout = 0;
@@ -184,9 +163,9 @@ bn_status bn_bake_create(const bn_scene *scene, double crease_deg, bn_bake **out
     for (size_t a = 0; a < npv; a++)
         for (size_t c = a + 1; c < npv && order[c].x - order[a].x <= eps; c++)
             if (bn_v3_dist(pv + 3 * order[a].i, pv + 3 * order[c].i) <= eps)
-                bn__union(weld, order[a].i, order[c].i);
+                bn__uf_union(weld, order[a].i, order[c].i);
     for (size_t i = 0; i < npv; i++)
-        weld[i] = bn__find(weld, i);
+        weld[i] = bn__uf_find(weld, i);
 
     /* 2. Incidences (patch, corner) per welded point, CSR keyed by the point's root. */
     for (size_t p = 0; p < np; p++)
@@ -221,10 +200,10 @@ bn_status bn_bake_create(const bn_scene *scene, double crease_deg, bn_bake **out
                 const bn_patch *pi = &patches[inc[i] / 4], *pj = &patches[inc[j] / 4];
                 if (!flat && pi->material == pj->material &&
                     bn_v3_dot(pi->normal, pj->normal) >= cos_crease - 1e-12)
-                    bn__union(local + s, i - s, j - s);
+                    bn__uf_union(local + s, i - s, j - s);
             }
         for (size_t i = s; i < e; i++) {
-            size_t r = bn__find(local + s, i - s);
+            size_t r = bn__uf_find(local + s, i - s);
             if (r == i - s)
                 gid[i] = nout++;
             else

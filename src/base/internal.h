@@ -39,6 +39,10 @@ extern "C" {
 void *bn__calloc(size_t n, size_t size);
 void *bn__malloc_array(size_t n, size_t size);
 void *bn__realloc_array(void *p, size_t n, size_t size);
+/* Union-find over indices (parent[i] = i at first): the root of i's set (halving the path on the
+ * way), and the union of two sets, the smaller index the root (deterministic representatives). */
+size_t bn__uf_find(size_t *parent, size_t i);
+void bn__uf_union(size_t *parent, size_t a, size_t b);
 char *bn__strdup(const char *s);
 /* Multiplies with overflow detection: returns 0 on overflow. */
 int bn__mul_size(size_t a, size_t b, size_t *out);

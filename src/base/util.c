@@ -43,6 +43,25 @@ void *bn__realloc_array(void *p, size_t n, size_t size)
     return realloc(p, total ? total : 1);
 }
 
+size_t bn__uf_find(size_t *parent, size_t i)
+{
+    while (parent[i] != i) {
+        parent[i] = parent[parent[i]];
+        i = parent[i];
+    }
+    return i;
+}
+
+void bn__uf_union(size_t *parent, size_t a, size_t b)
+{
+    a = bn__uf_find(parent, a);
+    b = bn__uf_find(parent, b);
+    if (a < b)
+        parent[b] = a;
+    else if (b < a)
+        parent[a] = b;
+}
+
 char *bn__strdup(const char *s)
 {
     size_t n = strlen(s) + 1;

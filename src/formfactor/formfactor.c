@@ -690,10 +690,10 @@ static double bn__pair_value(const bn_rt *rt, const bn__ffg *g, const bn_formfac
             hidden = bn__face_blocks_all(g, occ[q], &p);
         /* or several faces of one convex solid together (a floor patch behind a block's edge, or
          * under the block, seen from a wall): each solid in the list once, not one the pair is on */
-        for (size_t q = 0; maybe && nocc != SIZE_MAX && q < nocc && !hidden; q++) {
+        for (size_t q = 0, si = bn__solid_of(g->solids, g->patch[i].face), sj = bn__solid_of(g->solids, g->patch[j].face);
+             maybe && nocc != SIZE_MAX && q < nocc && !hidden; q++) {
             size_t k = bn__solid_of(g->solids, occ[q]), r = 0;
-            if (k == SIZE_MAX || k == bn__solid_of(g->solids, g->patch[i].face) ||
-                k == bn__solid_of(g->solids, g->patch[j].face))
+            if (k == SIZE_MAX || k == si || k == sj)
                 continue;
             while (r < q && bn__solid_of(g->solids, occ[r]) != k)
                 r++;

@@ -53,23 +53,6 @@ static int bn__vref_cmp(const void *a, const void *b)
     return bn__pt_cmp(((const bn__vref *)a)->x, ((const bn__vref *)b)->x);
 }
 
-static size_t bn__uf_find(size_t *parent, size_t a)
-{
-    while (parent[a] != a) {
-        parent[a] = parent[parent[a]];
-        a = parent[a];
-    }
-    return a;
-}
-
-static void bn__uf_union(size_t *parent, size_t a, size_t b)
-{
-    a = bn__uf_find(parent, a);
-    b = bn__uf_find(parent, b);
-    if (a != b)
-        parent[a > b ? a : b] = a > b ? b : a;
-}
-
 typedef struct bn__edge {
     double a[3], b[3];   /* endpoints, the smaller first */
 } bn__edge;
@@ -149,9 +132,9 @@ static int bn__solid_planes(const double *fv, const unsigned *fnc, const double 
     /* the edges used by one face only (an edge of three faces: not a solid's surface) */
     for (size_t q = 0; q < m; q++)
         ne += fnc[f[q]];
-    e = malloc(ne * sizeof *e);
-    be = malloc(ne * sizeof *be);
-    v = malloc(2 * ne * sizeof *v);
+    e = bn__malloc_array(ne, sizeof *e);
+    be = bn__malloc_array(ne, sizeof *be);
+    v = bn__malloc_array(2 * ne, sizeof *v);
     if (!e || !be || !v) {
         free(e);
         free(be);
@@ -231,23 +214,23 @@ static int bn__solid_planes(const double *fv, const unsigned *fnc, const double 
 bn_status bn__solids_find(const double *fv, const unsigned *fnc, const double *fn, const size_t *fidx,
                           const size_t *ffirst, size_t nf, double tol, bn__solids **out)
 {
-    bn__solids *s = calloc(1, sizeof *s);
+    bn__solids *s = bn__calloc(1, sizeof *s);
     size_t *parent = NULL, *root = NULL /* per face: its component's root */, nref = 0, *vowner = NULL, maxidx = 0;
     bn__vref *vr = NULL;
     *out = NULL;
     if (!s)
         return BN_ENOMEM;
     s->nf = nf;
-    s->of = malloc((nf ? nf : 1) * sizeof *s->of);
-    parent = malloc((nf ? nf : 1) * sizeof *parent);
-    root = malloc((nf ? nf : 1) * sizeof *root);
+    s->of = bn__malloc_array(nf, sizeof *s->of);
+    parent = bn__malloc_array(nf, sizeof *parent);
+    root = bn__malloc_array(nf, sizeof *root);
     for (size_t f = 0; f < nf; f++)
         nref += fnc[f];
-    vr = malloc((nref ? nref : 1) * sizeof *vr);
+    vr = bn__malloc_array(nref, sizeof *vr);
     for (size_t f = 0; f < nf; f++)
         for (unsigned k = 0; k < fnc[f]; k++)
             maxidx = fidx[ffirst[f] + k] > maxidx ? fidx[ffirst[f] + k] : maxidx;
-    vowner = malloc((maxidx + 1) * sizeof *vowner);
+    vowner = bn__malloc_array(maxidx + 1, sizeof *vowner);
     if (!s->of || !parent || !root || !vr || !vowner) {
         free(parent);
         free(root);
@@ -285,7 +268,7 @@ bn_status bn__solids_find(const double *fv, const unsigned *fnc, const double *f
     }
     {
         /* faces grouped by root: counting sort over roots */
-        size_t *start = calloc(nf + 1, sizeof *start), *members = malloc((nf ? nf : 1) * sizeof *members), cap = 0;
+        size_t *start = bn__calloc(nf + 1, sizeof *start), *members = bn__malloc_array(nf, sizeof *members), cap = 0;
         if (!start || !members) {
             free(start);
             free(members);
@@ -313,16 +296,16 @@ bn_status bn__solids_find(const double *fv, const unsigned *fnc, const double *f
                 continue;
             if (s->ns == cap) {   /* doubling: scenes with many small solids */
                 size_t nc = cap ? 2 * cap : 16;
-                double *npl = realloc(s->plane, nc * 4 * BN__SOLID_PLANES_MAX * sizeof *npl);
+                double *npl = bn__realloc_array(s->plane, nc * 4 * BN__SOLID_PLANES_MAX, sizeof *npl);
                 int *nnp, *nmi;
                 if (!npl)
                     break;   /* no more solids: fewer shortcuts, the same answers */
                 s->plane = npl;
-                nnp = realloc(s->nplanes, nc * sizeof *nnp);
+                nnp = bn__realloc_array(s->nplanes, nc, sizeof *nnp);
                 if (!nnp)
                     break;
                 s->nplanes = nnp;
-                nmi = realloc(s->missing, nc * sizeof *nmi);
+                nmi = bn__realloc_array(s->missing, nc, sizeof *nmi);
                 if (!nmi)
                     break;
                 s->missing = nmi;
