@@ -24,6 +24,9 @@ typedef struct sphere {
     int calls;          /* apply calls so far */
     int row_fail_at;    /* row call that fails (0: never) */
     int row_calls;
+    int nan_at;         /* apply number whose output holds a NaN (0: never) */
+    int row_nan_at;     /* row call whose output is NaN (0: never) */
+    int entry_nan;      /* 1: entry (n/2, n/2) is NaN */
     int destroyed;
 } sphere;
 
@@ -48,6 +51,8 @@ static bn_status sphere_apply(void *ctx, const double *x, double *y, bn_error *e
     for (size_t i = 0; i < s->n; i++)
         for (int c = 0; c < 3; c++)
             y[3 * i + c] = m[c];
+    if (s->calls == s->nan_at)
+        y[3 * (s->n / 2) + 1] = NAN;   /* one entry, in the middle, green */
     return BN_OK;
 }
 
@@ -58,15 +63,16 @@ static bn_status sphere_row(void *ctx, size_t i, const double *x, double out[3],
     if (++s->row_calls == s->row_fail_at)
         return bn_error_set(err, s->fail_with, "sphere operator: row %d failed on purpose", s->row_calls);
     area_mean(s, x, out);
+    if (s->row_calls == s->row_nan_at)
+        out[2] = NAN;
     return BN_OK;
 }
 
 static bn_status sphere_entry(void *ctx, size_t i, size_t j, double *v, bn_error *err)
 {
     sphere *s = ctx;
-    (void)i;
     (void)err;
-    *v = s->A[j] / s->total;
+    *v = s->entry_nan && i == s->n / 2 && j == i ? NAN : s->A[j] / s->total;
     return BN_OK;
 }
 
@@ -269,6 +275,98 @@ static void failing_case(bn_status with)
 }
 
 BN_TEST(failing_operator_stops_every_solver) { failing_case(BN_ENUMERIC); }
+
+/* An operator that returns success but a NaN at its c-th application, for every c a clean solve
+ * makes (the norm, the power steps, every iteration, the terms): every method stops with
+ * BN_ENUMERIC naming the call, the patch and the channel, and leaves no answer. Before, a NaN after
+ * the first call was dropped by the monitor's fmax and the solve said converged. */
+static void nan_case(const bn_transport_ops *ops, const bn_solve_method *methods, size_t nm)
+{
+    double E[3 * N_SPHERE];
+    char want[64];
+    for (size_t i = 0; i < 3 * N_SPHERE; i++)
+        E[i] = 1 + (double)(i % 5);
+    snprintf(want, sizeof want, "at patch %d, channel G", N_SPHERE / 2);
+    for (size_t q = 0; q < nm; q++) {
+        sphere s;
+        bn_transport *k;
+        bn_solve_opts o = solve_opts(methods[q], 0);
+        bn_solve_result res;
+        bn_error err;
+        int total;
+        o.tol = 1e-10;
+        sphere_init(&s, N_SPHERE);
+        k = sphere_k(&s, ops);
+        BN_ASSERT_STATUS(bn_solve(k, E, &o, &res, &err), BN_OK);
+        bn_solve_result_free(&res);
+        total = s.calls;
+        BN_ASSERT_GT(total, 4);
+        for (int c = 1; c <= total; c++) {
+            char call[48];
+            bn_transport_destroy(k);   /* a fresh operator: its calls are counted from 1 */
+            free(s.A);
+            sphere_init(&s, N_SPHERE);
+            k = sphere_k(&s, ops);
+            s.nan_at = c;
+            BN_ASSERT_STATUS(bn_solve(k, E, &o, &res, &err), BN_ENUMERIC);
+            snprintf(call, sizeof call, "apply (y = F x) call %d ", c);
+            if (!strstr(err.msg, call) || !strstr(err.msg, want))
+                BN_FAIL("%s, NaN at apply %d of %d: message '%s'", bn_solve_method_name(methods[q]), c, total, err.msg);
+            BN_ASSERT(res.L == NULL && res.terms == NULL && res.nterms == 0);
+        }
+        bn_transport_destroy(k);
+        free(s.A);
+    }
+}
+
+BN_TEST(nan_from_operator_at_every_application_stops_every_solver) { nan_case(&sphere_full, ALL, 4); }
+BN_TEST(nan_from_apply_only_operator_stops_jacobi_neumann)
+{
+    static const bn_solve_method m[] = {BN_SOLVE_JACOBI, BN_SOLVE_NEUMANN};
+    nan_case(&sphere_apply_only, m, 2);
+}
+
+/* NaN from Gauss-Seidel's rows, at every row call of its first sweeps; and an entry for the direct
+ * solve. */
+BN_TEST(nan_from_rows_and_entries_stops_gauss_seidel_and_direct)
+{
+    double E[3 * N_SPHERE];
+    bn_solve_result res;
+    bn_error err;
+    for (size_t i = 0; i < 3 * N_SPHERE; i++)
+        E[i] = 1;
+    for (int c = 1; c <= 3 * N_SPHERE; c++) {
+        sphere s;
+        bn_transport *k;
+        bn_solve_opts o = solve_opts(BN_SOLVE_GAUSS_SEIDEL, 0);
+        o.tol = 1e-12;
+        sphere_init(&s, N_SPHERE);
+        k = sphere_k(&s, &sphere_full);
+        s.row_nan_at = c;
+        BN_ASSERT_STATUS(bn_solve(k, E, &o, &res, &err), BN_ENUMERIC);
+        if (!strstr(err.msg, "row call") || !strstr(err.msg, "channel B"))
+            BN_FAIL("row NaN at call %d: '%s'", c, err.msg);
+        BN_ASSERT(res.L == NULL);
+        bn_transport_destroy(k);
+        free(s.A);
+    }
+    {
+        sphere s;
+        bn_transport *k;
+        bn_solve_opts o = solve_opts(BN_SOLVE_DIRECT, 0);
+        char want[64];
+        sphere_init(&s, N_SPHERE);
+        k = sphere_k(&s, &sphere_full);
+        s.entry_nan = 1;
+        BN_ASSERT_STATUS(bn_solve(k, E, &o, &res, &err), BN_ENUMERIC);
+        snprintf(want, sizeof want, "F(%d, %d) is not finite", N_SPHERE / 2, N_SPHERE / 2);
+        if (!strstr(err.msg, want))
+            BN_FAIL("entry NaN: '%s'", err.msg);
+        BN_ASSERT(res.L == NULL);
+        bn_transport_destroy(k);
+        free(s.A);
+    }
+}
 BN_TEST(interrupted_operator_stops_every_solver) { failing_case(BN_EINTR); }
 
 /* The table is checked when the operator is made; ctx is released even then. */

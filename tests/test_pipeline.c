@@ -234,3 +234,96 @@ BN_TEST(scale_invariance_furnace) { scale_case("furnace-box", 1e-9); }
  * that ends beside that corner can go either way: one ray of 32 in one pair moved one red-wall
  * patch by 2.7e-4 (at 1e-6). That is the visibility estimate's own noise, which bounds it. */
 BN_TEST(scale_invariance_cornell) { scale_case("cornell-box", 1e-3); }
+
+/* ---- NaN from a file scene's operator, at every application of every method ---- */
+
+/* The file scene's own K behind a forwarding operator that puts a NaN into its c-th output. */
+typedef struct nan_fwd {
+    const bn_transport *inner;
+    int calls, nan_at;
+} nan_fwd;
+
+static bn_status fwd_apply(void *ctx, const double *x, double *y, bn_error *err)
+{
+    nan_fwd *f = ctx;
+    bn_status st = bn_transport_apply_F(f->inner, x, y, err);
+    if (++f->calls == f->nan_at)
+        y[4] = NAN;   /* patch 1, channel G */
+    return st;
+}
+
+static bn_status fwd_row(void *ctx, size_t i, const double *x, double out[3], bn_error *err)
+{
+    nan_fwd *f = ctx;
+    const double *rho = bn_transport_rho(f->inner);
+    bn_status st = bn_transport_row(f->inner, i, x, out, err);   /* K row: back to F */
+    for (int c = 0; c < 3; c++)
+        out[c] /= rho[3 * i + (size_t)c];
+    return st;
+}
+
+static bn_status fwd_entry(void *ctx, size_t i, size_t j, double *v, bn_error *err)
+{
+    nan_fwd *f = ctx;
+    return bn_transport_entry(f->inner, i, j, v, err);
+}
+
+BN_TEST(nan_from_file_scene_operator_stops_every_method)
+{
+    static const bn_transport_ops ops = {"nan-forward", BN_OP_ROWS | BN_OP_ENTRIES, fwd_apply, fwd_row, fwd_entry,
+                                         NULL, NULL, NULL, NULL};
+    static const bn_solve_method methods[] = {BN_SOLVE_JACOBI, BN_SOLVE_GAUSS_SEIDEL, BN_SOLVE_NEUMANN,
+                                              BN_SOLVE_DIRECT};
+    bn_pipeline_opts o;
+    bn_pipeline p;
+    bn_error err;
+    memset(&p, 0, sizeof p);
+    quiet_opts(&o, 24, BN_SOLVE_JACOBI);
+    if (bn_pipeline_run(bn_test_path("meshes/furnace-box.obj"), &o, &p, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    for (size_t q = 0; q < 4; q++) {
+        bn_solve_opts so = o.solve;
+        bn_solve_result res;
+        int total;
+        nan_fwd f = {p.k, 0, 0};
+        bn_transport *k;
+        so.method = methods[q];
+        BN_ASSERT_STATUS(bn_transport_create(p.n, bn_transport_rho(p.k), &ops, &f, &k, &err), BN_OK);
+        BN_ASSERT_STATUS(bn_solve(k, p.E, &so, &res, &err), BN_OK);
+        BN_ASSERT_NEAR(res.L[0], 2.0, 1e-5);   /* the furnace: Le / (1 - rho) */
+        bn_solve_result_free(&res);
+        total = f.calls;
+        bn_transport_destroy(k);
+        for (int c = 1; c <= total; c++) {
+            char want[48];
+            f.calls = 0;
+            f.nan_at = c;
+            BN_ASSERT_STATUS(bn_transport_create(p.n, bn_transport_rho(p.k), &ops, &f, &k, &err), BN_OK);
+            BN_ASSERT_STATUS(bn_solve(k, p.E, &so, &res, &err), BN_ENUMERIC);
+            snprintf(want, sizeof want, "call %d gave a non-finite", c);
+            if (!strstr(err.msg, want) || !strstr(err.msg, "at patch 1, channel G"))
+                BN_FAIL("%s, NaN at application %d of %d: '%s'", bn_solve_method_name(methods[q]), c, total, err.msg);
+            BN_ASSERT(res.L == NULL && res.nterms == 0);
+            bn_transport_destroy(k);
+        }
+    }
+    bn_pipeline_free(&p);
+}
+
+/* A dense F that cannot fit is refused by the scene stage, from the faces' sizes, before the mesh
+ * is made (a million patches took 25 s of meshing before the refusal). */
+BN_TEST(dense_too_large_refused_before_meshing)
+{
+    bn_pipeline_opts o;
+    bn_pipeline p;
+    bn_error err;
+    quiet_opts(&o, 10000000, BN_SOLVE_JACOBI);
+    o.transport = "dense";
+    BN_ASSERT_STATUS(bn_pipeline_scene(bn_test_path("meshes/cornell-box.obj"), &o, &p, &err), BN_ENOMEM);
+    BN_ASSERT(p.scene == NULL && p.n == 0);
+    BN_ASSERT(strstr(err.msg, "dense F for") != NULL);
+    o.transport = "auto";   /* auto takes the hierarchy instead: no refusal */
+    o.mesh.target_patches = 2000;
+    BN_ASSERT_STATUS(bn_pipeline_scene(bn_test_path("meshes/cornell-box.obj"), &o, &p, &err), BN_OK);
+    bn_pipeline_free(&p);
+}

@@ -132,9 +132,9 @@ BN_TEST(exit_code_classes)
              bn_test_tmp("p.csv"));
     BN_ASSERT_EQ(bn_test_bounce(args, &out), 3);
     free(out);
-    /* 4: resource limit, before any work: 300,000 patches with dense F (313 GiB; refused on any
-     * machine below 390 GiB; a million took 12 s to mesh before the refusal) */
-    snprintf(args, sizeof args, "formfactors '%s' --unit mm --patches 300000 -q", cornell);
+    /* 4: resource limit, before any work: 10 million patches with dense F (364 TiB), refused from the
+     * faces' sizes before meshing (a million took 12 s to mesh before the refusal) */
+    snprintf(args, sizeof args, "formfactors '%s' --unit mm --patches 10000000 -q", cornell);
     BN_ASSERT_EQ(bn_test_bounce(args, &out), 4);
     BN_ASSERT(strstr(out, "patches") && strstr(out, "--storage sparse"));
     free(out);

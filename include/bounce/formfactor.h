@@ -89,6 +89,10 @@ typedef struct bn_ff_diagnostics {
 
 /* Bytes the assembly of `scene` with `o` will need (checked against max_memory before any work). */
 size_t bn_formfactor_bytes_needed(const bn_scene *scene, const bn_formfactor_opts *o);
+/* The same check before meshing, for a storage whose size follows from the patch count alone
+ * (dense): BN_ENOMEM with the numbers and remedies when `n_estimate` patches would not fit, else
+ * BN_OK (also for storages whose size is known only after meshing). */
+bn_status bn_formfactor_check_memory(double n_estimate, const bn_formfactor_opts *o, bn_error *err);
 
 /* Assembles F for the meshed `scene` (borrowed) using `rt` (borrowed) for visibility, and returns
  * K = diag(rho) F. diag may be NULL. Bit-identical for any thread count. Fails with BN_ENOMEM

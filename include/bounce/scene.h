@@ -95,6 +95,9 @@ void bn_mesh_opts_default(bn_mesh_opts *o);   /* target_patches = BN_DEFAULT_PAT
 #define BN_DEFAULT_PATCHES 1200
 #define BN_CONTACT_STRETCH 2.0
 bn_status bn_scene_mesh(bn_scene *s, const bn_mesh_opts *o, bn_error *err);
+/* The patch count bn_scene_mesh would make before contact cuts (which only add), from the faces'
+ * sizes alone, without meshing: for refusing a too-large mesh before any work. */
+bn_status bn_scene_mesh_estimate(const bn_scene *s, const bn_mesh_opts *o, double *patches, bn_error *err);
 
 /* Accessors. Returned arrays are borrowed: valid while the scene lives and is not re-meshed. */
 const char        *bn_scene_path(const bn_scene *s);

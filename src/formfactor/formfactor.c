@@ -895,6 +895,20 @@ static bn_status bn__memory_error(size_t n, size_t need, size_t limit, const bn_
                         smaller);
 }
 
+bn_status bn_formfactor_check_memory(double n_estimate, const bn_formfactor_opts *o, bn_error *err)
+{
+    size_t n, need, limit = bn__limit(o);
+    if (bn_storage_needs_pattern(o->storage))
+        return BN_OK;   /* its size depends on which pairs face each other: known only after meshing */
+    n = n_estimate >= 1e18 ? (size_t)1e18 : (size_t)n_estimate;
+    need = bn_storage_bytes(o->storage, n, 0, o->precision);
+    if (need != SIZE_MAX)
+        need = need + bn__work_bytes(o, n) < need ? SIZE_MAX : need + bn__work_bytes(o, n);
+    if (need == SIZE_MAX || need > limit)
+        return bn__memory_error(n, need, limit, o, err);
+    return BN_OK;
+}
+
 /* ---- diagnostics over the stored F (through the operator: any storage) ---- */
 
 /* The first entry outside [0, 1] (or not finite), with its patches and faces. */

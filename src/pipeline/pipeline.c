@@ -34,6 +34,29 @@ static bn_precision bn__precision_by_need(const bn_pipeline_opts *o, const bn_sc
     return *amplified > o->solve.tol ? BN_PRECISION_DOUBLE : o->ff.precision;
 }
 
+/* A transport given as "dense" (or "sparse"), not "auto" or "hierarchical": its storage is fixed. */
+static const char *bn__fixed_storage(const bn_pipeline_opts *o)
+{
+    if (!o->transport)
+        return o->ff.storage;
+    if (!strcmp(o->transport, "auto") || !strcmp(o->transport, "hierarchical"))
+        return NULL;
+    return o->transport;
+}
+
+/* A mesh whose F cannot fit is refused from the faces' sizes, before meshing (which takes seconds
+ * for a million patches). */
+static bn_status bn__check_size_early(const bn_pipeline_opts *o, const bn_scene *s, bn_error *err)
+{
+    bn_formfactor_opts fo = o->ff;
+    double n;
+    bn_status st;
+    if (o->mesh_auto || !(fo.storage = bn__fixed_storage(o)) || bn_dist_size() > 1)
+        return BN_OK;
+    st = bn_scene_mesh_estimate(s, &o->mesh, &n, err);
+    return st == BN_OK ? bn_formfactor_check_memory(n, &fo, err) : st;
+}
+
 bn_status bn_pipeline_scene(const char *path, const bn_pipeline_opts *o, bn_pipeline *p, bn_error *err)
 {
     double t0 = bn__now();
@@ -42,6 +65,8 @@ bn_status bn_pipeline_scene(const char *path, const bn_pipeline_opts *o, bn_pipe
     st = bn_scene_load(path, &o->load, &p->scene, err);
     p->seconds_load = bn__now() - t0;
     t0 = bn__now();
+    if (st == BN_OK)
+        st = bn__check_size_early(o, p->scene, err);
     if (st == BN_OK) {
         /* a default mesh may be redone for the hierarchy: the first one then only counts, without
          * the contact cuts (seconds on a million polygons) */

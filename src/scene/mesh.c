@@ -192,6 +192,60 @@ static bn_status bn__grid(bn_scene *s, double size, int contacts, double gap, bn
     return BN_OK;
 }
 
+/* The patch edge the options ask for: given, or the finest whose grid count does not exceed the
+ * target (bisection on log(size): the count falls as the size grows); 0 for one patch a face. */
+static bn_status bn__mesh_size(const bn_scene *s, const bn_mesh_opts *o, double *size, bn_error *err)
+{
+    if (o->no_subdivide) {
+        *size = 0;
+    } else if (o->patch_size > 0) {
+        if (!isfinite(o->patch_size))
+            return bn_error_set(err, BN_EINPUT, "patch size %g is not a finite positive length", o->patch_size);
+        *size = o->patch_size;
+    } else if (o->target_patches > 0) {
+        double d[3], hi_s, lo_s;
+        bn_v3_sub(s->hi, s->lo, d);
+        hi_s = 2 * bn_v3_len(d) + 1e-300;
+        lo_s = hi_s * 1e-7;
+        if (bn__count(s, hi_s) < (double)o->target_patches)
+            for (int it = 0; it < 60; it++) {
+                double mid = sqrt(lo_s * hi_s);
+                if (bn__count(s, mid) > (double)o->target_patches)
+                    lo_s = mid;
+                else
+                    hi_s = mid;
+            }
+        *size = hi_s;
+    } else {
+        return bn_error_set(err, BN_EUSAGE, "meshing needs a patch size, a target patch count or no-subdivide");
+    }
+    if (!(o->contact_gap >= 0 && isfinite(o->contact_gap)))
+        return bn_error_set(err, BN_EINPUT, "contact gap %g is not a finite length >= 0", o->contact_gap);
+    {
+        /* a gap near the scene's size would make every face touch every other (and cost N^2) */
+        double d[3];
+        bn_v3_sub(s->hi, s->lo, d);
+        if (o->contact_gap > 0.01 * bn_v3_len(d))
+            return bn_error_set(err, BN_EINPUT, "contact gap %g is more than 1%% of the scene's diameter %g",
+                                o->contact_gap, bn_v3_len(d));
+    }
+    return BN_OK;
+}
+
+bn_status bn_scene_mesh_estimate(const bn_scene *s, const bn_mesh_opts *o, double *patches, bn_error *err)
+{
+    double size;
+    bn_mesh_opts defo;
+    bn_status st;
+    if (!o) {
+        bn_mesh_opts_default(&defo);
+        o = &defo;
+    }
+    st = bn__mesh_size(s, o, &size, err);
+    *patches = st == BN_OK ? bn__count(s, size) : 0;
+    return st;
+}
+
 bn_status bn_scene_mesh(bn_scene *s, const bn_mesh_opts *o, bn_error *err)
 {
     bn_mesh_opts defo;
@@ -200,48 +254,14 @@ bn_status bn_scene_mesh(bn_scene *s, const bn_mesh_opts *o, bn_error *err)
     size_t np = 0, nv = 0;
     bn_patch *patches = NULL;
     double *pv = NULL;
+    bn_status st;
 
     if (!o) {
         bn_mesh_opts_default(&defo);
         o = &defo;
     }
-    if (o->no_subdivide) {
-        size = 0;
-    } else if (o->patch_size > 0) {
-        if (!isfinite(o->patch_size))
-            return bn_error_set(err, BN_EINPUT, "--patch-size %g is not a finite positive length", o->patch_size);
-        size = o->patch_size;
-    } else if (o->target_patches > 0) {
-        /* Bisection on log(size): the count falls as the size grows. */
-        double d[3], hi_s, lo_s;
-        bn_v3_sub(s->hi, s->lo, d);
-        hi_s = 2 * bn_v3_len(d) + 1e-300;
-        lo_s = hi_s * 1e-7;
-        if (bn__count(s, hi_s) >= (double)o->target_patches) {
-            size = hi_s;
-        } else {
-            for (int it = 0; it < 60; it++) {
-                double mid = sqrt(lo_s * hi_s);
-                if (bn__count(s, mid) > (double)o->target_patches)
-                    lo_s = mid;
-                else
-                    hi_s = mid;
-            }
-            size = hi_s;   /* the finest size whose count does not exceed the target */
-        }
-    } else {
-        return bn_error_set(err, BN_EUSAGE, "meshing needs a patch size, a target patch count or no-subdivide");
-    }
-    if (!(o->contact_gap >= 0 && isfinite(o->contact_gap)))
-        return bn_error_set(err, BN_EINPUT, "--contact-gap %g is not a finite length >= 0", o->contact_gap);
-    {
-        /* a gap near the scene's size would make every face touch every other (and cost N^2) */
-        double d[3];
-        bn_v3_sub(s->hi, s->lo, d);
-        if (o->contact_gap > 0.01 * bn_v3_len(d))
-            return bn_error_set(err, BN_EINPUT, "--contact-gap %g is more than 1%% of the scene's diameter %g",
-                                o->contact_gap, bn_v3_len(d));
-    }
+    if ((st = bn__mesh_size(s, o, &size, err)) != BN_OK)
+        return st;
     count_d = bn__count(s, size);
     if (count_d > 1e9)
         return bn_error_set(err, BN_ENOMEM, "patch size %g would make %.3g patches (more than 1e9)", size, count_d);
@@ -249,7 +269,7 @@ bn_status bn_scene_mesh(bn_scene *s, const bn_mesh_opts *o, bn_error *err)
         int contacts = !o->no_subdivide && !o->no_contacts,
             by_target = !o->no_subdivide && !(o->patch_size > 0) && o->target_patches > 0;
         for (int attempt = 0;; attempt++) {
-            bn_status st = bn__grid(s, size, contacts, o->contact_gap, &patches, &np, &pv, &nv, err);
+            st = bn__grid(s, size, contacts, o->contact_gap, &patches, &np, &pv, &nv, err);
             if (st != BN_OK)
                 return st;
             /* contact cuts add patches: a target count holds for the mesh with its cuts (where the

@@ -196,6 +196,8 @@ static void bn__residual_norms(const double *r, size_t n, bn_solve_row *row)
         }
     row->residual_max = fmax(row->residual_ch[0], fmax(row->residual_ch[1], row->residual_ch[2]));
     row->residual_rms = n ? sqrt(s2 / (3.0 * (double)n)) : 0;
+    if (!isfinite(s2))   /* fmax drops NaN: the sum of squares keeps it, so a NaN residual is never 0 */
+        row->residual_max = row->residual_rms = NAN;
 }
 
 /* First non-finite entry of x (N*3), or SIZE_MAX. */

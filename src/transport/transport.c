@@ -4,6 +4,7 @@
 #include "base/internal.h"
 
 #include <math.h>
+#include <stdatomic.h>
 #include <string.h>
 
 struct bn_transport {
@@ -11,6 +12,7 @@ struct bn_transport {
     double *rho;
     const bn_transport_ops *ops;
     void *ctx;
+    _Atomic size_t *calls;   /* applications and row calls so far (named in a non-finite failure) */
 };
 
 static void bn__ctx_destroy(const bn_transport_ops *ops, void *ctx)
@@ -50,9 +52,15 @@ bn_status bn_transport_create(size_t n, const double *rho, const bn_transport_op
             return bn_error_set(err, BN_EINPUT, "patch %zu: reflectance %g is outside [0, 1]", i / 3, rho[i]);
         }
     k = calloc(1, sizeof *k);
-    if (k)
+    if (k) {
         k->rho = bn__malloc_array(n ? 3 * n : 1, sizeof(double));
-    if (!k || !k->rho) {
+        k->calls = calloc(2, sizeof *k->calls);
+    }
+    if (!k || !k->rho || !k->calls) {
+        if (k) {
+            free(k->rho);
+            free((void *)k->calls);
+        }
         free(k);
         bn__ctx_destroy(ops, ctx);
         return bn_error_set(err, BN_ENOMEM, "out of memory");
@@ -71,6 +79,7 @@ void bn_transport_destroy(bn_transport *k)
         return;
     bn__ctx_destroy(k->ops, k->ctx);
     free(k->rho);
+    free((void *)k->calls);
     free(k);
 }
 
@@ -121,15 +130,40 @@ bn_status bn_transport_require(const bn_transport *k, unsigned need, const char 
         (void)err_;                                                                                \
     } while (0)
 
+/* Every value an operator hands out is checked: a non-finite one stops the caller with
+ * BN_ENUMERIC naming the operator, the call (counted from the transport's creation), the patch and
+ * the channel, so no NaN reaches a solver's monitor (whose fmax would drop it) or an answer. */
+static bn_status bn__nonfinite(const bn_transport *k, const char *what, size_t call, const double *y, size_t m,
+                               size_t patch0, bn_error *err)
+{
+    size_t q = 0;
+    while (q < m && isfinite(y[q]))
+        q++;
+    return bn_error_set(err, BN_ENUMERIC, "%s operator: %s call %zu gave a non-finite value (%g) at patch %zu, channel %c",
+                        bn_transport_name(k), what, call, q < m ? y[q] : NAN, patch0 + q / 3, "RGB"[q % 3]);
+}
+
+/* 0 * y is 0 for every finite y and NaN otherwise: one vectorisable pass, no branch per entry. */
+static int bn__all_finite(const double *y, size_t m)
+{
+    double z = 0;
+    for (size_t i = 0; i < m; i++)
+        z += 0.0 * y[i];
+    return z == 0;
+}
+
 bn_status bn_transport_apply_F(const bn_transport *k, const double *x, double *y, bn_error *err)
 {
+    size_t call = atomic_fetch_add_explicit(&k->calls[0], 1, memory_order_relaxed) + 1;
     BN__OP_CALL(k, err, "apply", k->ops->apply(k->ctx, x, y, err_));
+    if (!bn__all_finite(y, 3 * k->n))
+        return bn__nonfinite(k, "apply (y = F x)", call, y, 3 * k->n, 0, err);
     return BN_OK;
 }
 
 bn_status bn_transport_apply(const bn_transport *k, const double *x, double *y, bn_error *err)
 {
-    /* y <- F x, then y <- diag(rho) y */
+    /* y <- F x (checked finite), then y <- diag(rho) y (rho in [0, 1]: stays finite) */
     bn_status st = bn_transport_apply_F(k, x, y, err);
     if (st != BN_OK)
         return st;
@@ -140,9 +174,13 @@ bn_status bn_transport_apply(const bn_transport *k, const double *x, double *y, 
 
 bn_status bn_transport_row(const bn_transport *k, size_t i, const double *x, double out[3], bn_error *err)
 {
+    size_t call;
     if (!(k->ops->caps & BN_OP_ROWS))
         return bn_transport_require(k, BN_OP_ROWS, "row access", err);
+    call = atomic_fetch_add_explicit(&k->calls[1], 1, memory_order_relaxed) + 1;
     BN__OP_CALL(k, err, "row", k->ops->row(k->ctx, i, x, out, err_));
+    if (!bn__all_finite(out, 3))
+        return bn__nonfinite(k, "row", call, out, 3, i, err);
     for (int c = 0; c < 3; c++)
         out[c] *= k->rho[3 * i + (size_t)c];
     return BN_OK;
@@ -153,6 +191,9 @@ bn_status bn_transport_entry(const bn_transport *k, size_t i, size_t j, double *
     if (!(k->ops->caps & BN_OP_ENTRIES))
         return bn_transport_require(k, BN_OP_ENTRIES, "entry access", err);
     BN__OP_CALL(k, err, "entry", k->ops->entry(k->ctx, i, j, v, err_));
+    if (!isfinite(*v))
+        return bn_error_set(err, BN_ENUMERIC, "%s operator: entry F(%zu, %zu) is not finite (%g)", bn_transport_name(k),
+                            i, j, *v);
     return BN_OK;
 }
 
@@ -163,12 +204,18 @@ bn_status bn_transport_row_entries(const bn_transport *k, size_t i, size_t *cols
         return bn_transport_require(k, BN_OP_ENTRIES, "entry access", err);
     if (k->ops->row_entries) {
         BN__OP_CALL(k, err, "row_entries", k->ops->row_entries(k->ctx, i, cols, vals, count, err_));
+        for (size_t q = 0; q < *count; q++)
+            if (!isfinite(vals[q]))
+                return bn_error_set(err, BN_ENUMERIC, "%s operator: entry F(%zu, %zu) is not finite (%g)",
+                                    bn_transport_name(k), i, cols[q], vals[q]);
         return BN_OK;
     }
     *count = 0;
     for (size_t j = 0; j < k->n; j++) {
         double v;
-        BN__OP_CALL(k, err, "entry", k->ops->entry(k->ctx, i, j, &v, err_));
+        bn_status st = bn_transport_entry(k, i, j, &v, err);
+        if (st != BN_OK)
+            return st;
         if (v != 0) {
             cols[*count] = j;
             vals[(*count)++] = v;
@@ -181,12 +228,19 @@ bn_status bn_transport_diag(const bn_transport *k, double *d, bn_error *err)
 {
     if (k->ops->caps & BN_OP_DIAG) {
         BN__OP_CALL(k, err, "diag", k->ops->diag(k->ctx, d, err_));
+        for (size_t i = 0; i < k->n; i++)
+            if (!isfinite(d[i]))
+                return bn_error_set(err, BN_ENUMERIC, "%s operator: diagonal F(%zu, %zu) is not finite (%g)",
+                                    bn_transport_name(k), i, i, d[i]);
         return BN_OK;
     }
     if (!(k->ops->caps & BN_OP_ENTRIES))
         return bn_transport_require(k, BN_OP_DIAG, "the diagonal", err);
-    for (size_t i = 0; i < k->n; i++)
-        BN__OP_CALL(k, err, "entry", k->ops->entry(k->ctx, i, i, &d[i], err_));
+    for (size_t i = 0; i < k->n; i++) {
+        bn_status st = bn_transport_entry(k, i, i, &d[i], err);
+        if (st != BN_OK)
+            return st;
+    }
     return BN_OK;
 }
 
