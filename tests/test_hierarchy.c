@@ -180,7 +180,10 @@ BN_TEST(error_falls_with_eps)
         BN_ASSERT(rep.settled);
         BN_ASSERT_LT(d, prev);
         BN_ASSERT_GT(rep.links, prev_links);
+        /* the frozen links' own arrays (source, F, direction): 10 B each, within the operator's bytes */
         BN_ASSERT_LE(rep.bytes_per_link, 16);
+        BN_ASSERT_GE(rep.bytes_per_link, 4);
+        BN_ASSERT_LE(rep.bytes_per_link * (double)rep.links, (double)rep.bytes);
         prev = d;
         prev_links = rep.links;
         free(L);

@@ -505,3 +505,32 @@ BN_TEST(units_scale_power)
     bn_scene_destroy(m);
     bn_scene_destroy(mm);
 }
+
+/* -q leaves warnings only, and the Cornell box's 3 mm bend (0.001 of its wall) is a note, not a
+ * warning: a quiet run on the default scene prints nothing. A quad bent by 4% of its size still
+ * warns, quiet or not. */
+BN_TEST(quiet_cornell_prints_nothing_and_large_bends_warn)
+{
+    char args[1024], *out = NULL;
+    const char *exe = bn_test_bounce_exe();
+    FILE *fp;
+    /* stderr alone (stdout's summary names the split too) */
+    snprintf(args, sizeof args, "'%s' info '%s' --unit mm -q 2>&1 >/dev/null | cat", exe,
+             bn_test_path("meshes/cornell-box.obj"));
+    BN_ASSERT_EQ(bn_test_run(args, &out), 0);
+    if (out && out[0])
+        BN_FAIL("quiet run printed: %s", out);
+    free(out);
+    snprintf(args, sizeof args, "'%s' info '%s' --unit mm 2>&1 >/dev/null | cat", exe,
+             bn_test_path("meshes/cornell-box.obj"));
+    BN_ASSERT_EQ(bn_test_run(args, &out), 0);
+    BN_ASSERT(strstr(out, "non-planar") && !strstr(out, "warning"));   /* said as a note */
+    free(out);
+    fp = fopen(bn_test_tmp("bent.obj"), "w");
+    fprintf(fp, "v 0 0 0\nv 1 0 0\nv 1 1 0.2\nv 0 1 0\nv 0 0 -1\nf 1 2 3 4\nf 1 4 5\n");
+    fclose(fp);
+    snprintf(args, sizeof args, "'%s' info '%s' -q 2>&1 >/dev/null | cat", exe, bn_test_tmp("bent.obj"));
+    BN_ASSERT_EQ(bn_test_run(args, &out), 0);
+    BN_ASSERT(strstr(out, "warning:") && strstr(out, "bent.obj:6: quad is non-planar"));
+    free(out);
+}

@@ -39,7 +39,8 @@ bn_status bn_dist_allgather(double *x, const size_t *bound, size_t width, bn_err
  * none). One process: a copy of its own block. */
 bn_status bn_dist_exchange(const void *send, const size_t *count, size_t item, void **recv, size_t *nrecv,
                            bn_error *err);
-/* Any rank's failure ends them all: the largest status over ranks (BN_OK only when all are OK). */
+/* Any rank's failure ends them all: every rank returns the status of the lowest-numbered rank that
+ * failed (BN_OK only when all are OK). A collective: every rank must call it. */
 bn_status bn_dist_agree(bn_status st);
 /* Ends every rank (MPI_Abort) with exit code `code`; a plain exit without MPI. */
 void bn_dist_abort(int code);

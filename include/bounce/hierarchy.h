@@ -14,6 +14,10 @@
  * Neumann series and every bounce term K_H^k E run on it as on dense K. Gauss-Seidel needs rows,
  * which a hierarchy does not keep.
  *
+ * Under mpirun with more than one process each rank holds a share of the links, so every apply of
+ * K_H is a collective (an all-reduce of y): every rank must apply it the same number of times, in
+ * the same order, as the solvers do; a caller applying K_H on one rank alone waits forever.
+ *
  * Polygons that share an edge and lie in one plane (within 1e-3 rad) form one planar subtree, so a
  * surface cut finer (a scan subdivided 16 times) gets the same clusters above its planes, and with
  * min_area the same smallest elements, as the coarse cut: its link count follows the light, not the

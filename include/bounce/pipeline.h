@@ -51,6 +51,12 @@ typedef struct bn_pipeline_opts {
                                   accuracy) */
 } bn_pipeline_opts;
 void bn_pipeline_opts_default(bn_pipeline_opts *o);
+/* Every option in range, before any work: threads, patch size and count, eps, transport and the
+ * solver's (bn_solve_opts_check). BN_EUSAGE naming the option by its field name and its value.
+ * bn_pipeline_scene calls it first; the patch count's memory (terms, dense F) is checked once the
+ * faces are known, before meshing or K. */
+bn_status bn_pipeline_opts_check(const bn_pipeline_opts *o, bn_error *err);
+#define BN_PIPELINE_MAX_PATCHES 1000000000   /* the mesher refuses more (1e9) */
 #define BN_AUTO_HIERARCHY_PATCHES 6000
 /* The transport names, "|"-separated, for help texts: "auto|dense|sparse|hierarchical". */
 const char *bn_pipeline_transports(void);

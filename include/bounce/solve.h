@@ -64,7 +64,8 @@ typedef struct bn_solve_opts {
     double atol;              /* absolute (default 0) */
     size_t max_iter;          /* default 100000 */
     int    symmetric;         /* Gauss-Seidel: forward then backward sweep */
-    int    bounces;           /* keep K^0 E .. K^bounces E separately (default 3); -1: none */
+    int    bounces;           /* keep K^0 E .. K^bounces E separately (default 3; at most
+                                 BN_SOLVE_MAX_BOUNCES); < 0: none */
     FILE  *log;               /* convergence table (CSV), NULL for none */
     const char *log_header;   /* `# key=value` lines written before the table (provenance) */
     int    quiet;
@@ -84,6 +85,13 @@ typedef struct bn_solve_opts {
     int    threads;           /* for K's applications; 0 = the caller's; results do not depend on it */
 } bn_solve_opts;
 void bn_solve_opts_default(bn_solve_opts *o);
+/* Each term is a whole N x 3 vector (and an image layer, a bake attribute): past this many, the
+ * series' tail belongs in `rest`, which L - sum of the terms gives at no cost. */
+#define BN_SOLVE_MAX_BOUNCES 1000
+/* Every option in range (tol and atol finite and >= 0 (both 0: run to max_iter); max_iter >= 1; bounces at most
+ * BN_SOLVE_MAX_BOUNCES; threads >= 0; thresholds in range): BN_EUSAGE naming the option by its field
+ * name and its value, else BN_OK. bn_solve calls it first; front ends may call it before any work. */
+bn_status bn_solve_opts_check(const bn_solve_opts *o, bn_error *err);
 
 typedef struct bn_solve_result {
     size_t n;                 /* patches */

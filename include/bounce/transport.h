@@ -36,7 +36,10 @@ enum {
 typedef struct bn_transport_ops {
     const char *name;   /* "dense-float", "csr-double", "sphere-test", ... (for logs and headers) */
     unsigned caps;      /* BN_OP_* bits of the optional functions below that are set */
-    /* Required. y[3i+c] = sum_j F_ij x[3j+c] for every i and c; y does not alias x. */
+    /* Required. y[3i+c] = sum_j F_ij x[3j+c] for every i and c; y does not alias x. Every value
+     * must be finite: a non-finite one stops the caller with BN_ENUMERIC naming the call, patch and
+     * channel. An operator spread over MPI ranks (the hierarchy's) may make apply a collective:
+     * then every rank calls it alike (bounce's solvers do). */
     bn_status (*apply)(void *ctx, const double *x, double *y, bn_error *err);
     /* BN_OP_ROWS. out[c] = sum_j F_ij x[3j+c]. Called from one thread at a time per operator. */
     bn_status (*row)(void *ctx, size_t i, const double *x, double out[3], bn_error *err);
@@ -70,6 +73,9 @@ const double *bn_transport_rho(const bn_transport *k);    /* borrowed, N*3 */
 const char   *bn_transport_name(const bn_transport *k);
 unsigned      bn_transport_caps(const bn_transport *k);   /* BN_OP_* bits */
 size_t        bn_transport_bytes(const bn_transport *k);  /* operator + rho */
+/* The patch of the last non-finite value the operator handed out (the row of an entry), or
+ * SIZE_MAX when it never did. */
+size_t        bn_transport_nonfinite_patch(const bn_transport *k);
 
 /* Asks for capabilities `need` on behalf of `who` (a solver's name): BN_OK, or BN_ENOTSUP with a
  * message naming what is missing and what would serve instead. */

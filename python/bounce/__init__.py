@@ -225,18 +225,51 @@ _DIAG = ("row_sum_min", "row_sum_max", "row_sum_rms_dev", "reciprocity_residual"
          "occluded_fraction", "rays", "nonzeros", "bytes", "seconds", "rows_above_one", "row_sum_tol")
 
 
+def _name(option, v):
+    """A name option as C wants it; None or a non-string raises, naming the option."""
+    if not isinstance(v, str):
+        raise BounceError("EUSAGE", "%s must be a string, not %r" % (option, v))
+    return v.encode()
+
+
+def _int(option, v, unsigned=False, bits=64):
+    """An integer option for a C int (bits=32) or size_t (unsigned): bool and float refused, and a
+    value the C type cannot hold raises here, before ctypes would wrap it. Ranges within the type
+    are the library's to check."""
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+        raise BounceError("EUSAGE", "%s must be an integer, not %r" % (option, v))
+    if unsigned and v < 0:
+        raise BounceError("EUSAGE", "%s %d is negative" % (option, v))
+    lo, hi = (0, 2**bits) if unsigned else (-2**(bits - 1), 2**(bits - 1))
+    if not lo <= v < hi:
+        raise BounceError("EUSAGE", "%s %d is out of range" % (option, v))
+    return int(v)
+
+
+def _float(option, v):
+    if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+        raise BounceError("EUSAGE", "%s must be a number, not %r" % (option, v))
+    return float(v)
+
+
 def _opts(lib, unit="m", method="auto", transport="auto", bounces=3, tol=None, patches=None, patch_size=None,
           eps=None, threads=0, progress=False, visibility="exact"):
+    """The flat options: the library's defaults, then what was given (None: the default). Values are
+    checked by the library, once for every front end; here only their Python types."""
     o = _Opts()
     lib.bn_flat_opts_default(ctypes.byref(o))
-    o.unit, o.method, o.transport = unit.encode(), method.encode(), transport.encode()
-    o.visibility = visibility.encode()
-    o.bounces = bounces
-    o.tol = tol or 0.0
-    o.patches = patches or 0
-    o.patch_size = patch_size or 0.0
-    o.eps = eps or 0.0
-    o.threads = threads
+    o.unit, o.method = _name("unit", unit), _name("method", method)
+    o.transport, o.visibility = _name("transport", transport), _name("visibility", visibility)
+    o.bounces = _int("bounces", bounces, bits=32)
+    if tol is not None:
+        o.tol = _float("tol", tol)
+    if patches is not None:
+        o.patches = _int("patches", patches, unsigned=True)
+    if patch_size is not None:
+        o.patch_size = _float("patch_size", patch_size)
+    if eps is not None:
+        o.eps = _float("eps", eps)
+    o.threads = _int("threads", threads, bits=32)
     o.quiet = 0 if progress else 1
     o.sigint = 1 if _main_thread() else 0   # Ctrl-C stops the C loops, then raises KeyboardInterrupt
     return o
@@ -313,9 +346,21 @@ class Operator:
     it to bounce.solve with the emission E (patches x 3)."""
 
     def __init__(self, patches, apply, row=None):
-        self.patches = int(patches)
+        self.patches = _int("patches", patches, unsigned=True)
+        if not callable(apply) or (row is not None and not callable(row)):
+            raise BounceError("EUSAGE", "apply (and row, if given) must be callable")
         self.apply = apply
         self.row = row
+
+
+def _operator_output(what, v, shape):
+    """An operator's return value as a float array of `shape`, or BounceError naming what it was."""
+    if v is None:
+        raise BounceError("EINPUT", "the operator's %s returned None, not an array of shape %s" % (what, shape))
+    a = np.asarray(v, dtype=np.float64)
+    if a.shape != shape:
+        raise BounceError("EINPUT", "the operator's %s returned shape %s, not %s" % (what, a.shape, shape))
+    return a
 
 
 def _solve_operator(op, emission, method, bounces, tol, threads, progress):
@@ -330,7 +375,7 @@ def _solve_operator(op, emission, method, bounces, tol, threads, progress):
         try:
             xa = np.ctypeslib.as_array(x, shape=(n, 3))
             ya = np.ctypeslib.as_array(y, shape=(n, 3))
-            ya[...] = op.apply(xa)
+            ya[...] = _operator_output("apply", op.apply(xa), (n, 3))
             return 0
         except BaseException as e:   # raised again below, after the C loop has stopped
             caught.append(e)
@@ -340,7 +385,7 @@ def _solve_operator(op, emission, method, bounces, tol, threads, progress):
         try:
             xa = np.ctypeslib.as_array(x, shape=(n, 3))
             oa = np.ctypeslib.as_array(out, shape=(3,))
-            oa[...] = op.row(i, xa)
+            oa[...] = _operator_output("row", op.row(i, xa), (3,))
             return 0
         except BaseException as e:
             caught.append(e)
@@ -348,14 +393,7 @@ def _solve_operator(op, emission, method, bounces, tol, threads, progress):
 
     cb = _APPLY(tramp)
     rb = _ROW(rtramp) if op.row is not None else _ROW()
-    o = _Opts()
-    lib.bn_flat_opts_default(ctypes.byref(o))
-    o.method = method.encode()
-    o.bounces = bounces
-    o.tol = tol or 0.0
-    o.threads = threads
-    o.quiet = 0 if progress else 1
-    o.sigint = 1 if _main_thread() else 0   # Ctrl-C stops the C loops, then raises KeyboardInterrupt
+    o = _opts(lib, method=method, bounces=bounces, tol=tol, threads=threads, progress=progress)
     h = ctypes.c_void_p()
     msg = ctypes.create_string_buffer(2048)
     st = lib.bn_flat_solve_operator(n, E.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), cb, rb, None, ctypes.byref(o),

@@ -219,8 +219,14 @@ bn_status bn_dist_agree(bn_status st)
 {
 #ifdef BN_HAVE_MPI
     if (bn__size > 1) {
-        int mine = (int)st, all = mine;
-        if (MPI_Allreduce(&mine, &all, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD) != MPI_SUCCESS)
+        /* the lowest failing rank, then its status from it: which failure wins depends on the
+         * ranks, never on where a status stands in the status table */
+        int mine = st != BN_OK ? bn__rank : bn__size, first = mine, all = (int)st;
+        if (MPI_Allreduce(&mine, &first, 1, MPI_INT, MPI_MIN, MPI_COMM_WORLD) != MPI_SUCCESS)
+            return BN_EINTERNAL;
+        if (first == bn__size)
+            return BN_OK;
+        if (MPI_Bcast(&all, 1, MPI_INT, first, MPI_COMM_WORLD) != MPI_SUCCESS)
             return BN_EINTERNAL;
         return (bn_status)all;
     }

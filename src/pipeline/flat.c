@@ -57,8 +57,14 @@ static void bn__flat_sig_end(bn__flat_sig *s)
 
 void bn_flat_opts_default(bn_flat_opts *o)
 {
+    bn_solve_opts so;
+    bn_hierarchy_opts ho;
+    bn_solve_opts_default(&so);
+    bn_hierarchy_opts_default(&ho);
     memset(o, 0, sizeof *o);
-    o->bounces = 3;
+    o->bounces = so.bounces;
+    o->tol = so.tol;
+    o->eps = ho.eps;
     o->quiet = 1;
 }
 
@@ -67,6 +73,21 @@ static bn_status bn__flat_fail(bn_status st, const char *text, char *msg, size_t
     if (msg && msglen)
         snprintf(msg, msglen, "%s", text);
     return st;
+}
+
+/* The flat options' own ranges (those with no counterpart in the library's structs); the rest is
+ * checked by bn_pipeline_opts_check / bn_solve_opts_check, once for every front end. */
+static bn_status bn__flat_ranges(const bn_flat_opts *o, char *msg, size_t msglen)
+{
+    char t[160];
+    if (!(o->tol > 0 && isfinite(o->tol)))
+        snprintf(t, sizeof t, "tol %g is not a finite tolerance > 0 (the solve stops at tol x the brightest emission)",
+                 o->tol);
+    else if (!(o->patch_size >= 0 && isfinite(o->patch_size)))
+        snprintf(t, sizeof t, "patch_size %g is not a finite length >= 0 (0: from patches)", o->patch_size);
+    else
+        return BN_OK;
+    return bn__flat_fail(BN_EUSAGE, t, msg, msglen);
 }
 
 /* A solver by its name (as on the command line). */
@@ -123,16 +144,16 @@ static bn_status bn__flat_popts(const bn_flat_opts *o, bn_flat *f, char *msg, si
         }
         po->ff.exact_visibility = strcmp(o->visibility, "exact") == 0;   /* the hierarchy's ff is copied from it */
     }
-    po->solve.bounces = o->bounces < 0 ? 0 : o->bounces;
-    if (o->tol > 0)
-        po->solve.tol = o->tol;
+    if (bn__flat_ranges(o, msg, msglen) != BN_OK)
+        return BN_EUSAGE;
+    po->solve.bounces = o->bounces < 0 ? -1 : o->bounces;
+    po->solve.tol = o->tol;
     if (o->patch_size > 0)
         po->mesh.patch_size = o->patch_size;
     else if (o->patches)
         po->mesh.target_patches = o->patches;
     po->mesh_auto = !(o->patch_size > 0) && !o->patches;
-    if (o->eps > 0)
-        po->hier.eps = o->eps;
+    po->hier.eps = o->eps;
     po->threads = o->threads;
     po->keep_rt = 1;   /* images (bn_flat_images) */
     po->ff.quiet = po->hier.quiet = po->solve.quiet = o->quiet;
@@ -389,22 +410,33 @@ bn_status bn_flat_solve_operator(size_t n, const double *E, bn_flat_apply_fn app
         *out = NULL;
     if (msg && msglen)
         msg[0] = '\0';
-    if (!out || !E || !apply || n == 0)
-        return bn__flat_fail(BN_EUSAGE, "bn_flat_solve_operator: n, E, apply and out are required", msg, msglen);
+    bn_error_clear(&err);
+    if (!out || !E || !apply)
+        return bn__flat_fail(BN_EUSAGE, "an operator solve needs E, apply and a result pointer", msg, msglen);
+    if (n == 0)
+        return bn__flat_fail(BN_EUSAGE, "patches 0: an operator needs at least one patch", msg, msglen);
     if (!o) {
         bn_flat_opts_default(&d);
         o = &d;
     }
+    if (bn__flat_ranges(o, msg, msglen) != BN_OK)
+        return BN_EUSAGE;
     bn_solve_opts_default(&so);
     so.method = row ? BN_SOLVE_GAUSS_SEIDEL : BN_SOLVE_JACOBI;
     if (o->method && strcmp(o->method, "auto") != 0 && (st = bn__flat_method(o->method, &so.method, msg, msglen)) != BN_OK)
         return st;
     so.bounces = o->bounces < 0 ? -1 : o->bounces;
-    if (o->tol > 0)
-        so.tol = o->tol;
+    so.tol = o->tol;
     so.quiet = o->quiet;
     so.log_sink.quiet = 1;
     so.threads = o->threads;
+    if (n > BN_PIPELINE_MAX_PATCHES)
+        bn_error_set(&err, BN_EUSAGE, "patches %zu is above %.0e (a negative number converted?)", n,
+                     (double)BN_PIPELINE_MAX_PATCHES);
+    else if (bn_solve_opts_check(&so, &err) == BN_OK)
+        err.status = BN_OK;
+    if (err.status != BN_OK)
+        return bn__flat_fail(err.status, err.msg, msg, msglen);
     f = bn__calloc(1, sizeof *f);
     op = bn__malloc_array(1, sizeof *op);
     ones = bn__malloc_array(3 * n, sizeof(double));

@@ -34,6 +34,40 @@ static bn_precision bn__precision_by_need(const bn_pipeline_opts *o, const bn_sc
     return *amplified > o->solve.tol ? BN_PRECISION_DOUBLE : o->ff.precision;
 }
 
+bn_status bn_pipeline_opts_check(const bn_pipeline_opts *o, bn_error *err)
+{
+    const bn_mesh_opts *m = &o->mesh;
+    if (o->threads < 0 || o->ff.threads < 0 || o->hier.threads < 0)
+        return bn_error_set(err, BN_EUSAGE, "threads %d is negative (0: all cores)",
+                            o->threads < 0 ? o->threads : o->ff.threads < 0 ? o->ff.threads : o->hier.threads);
+    if (!(m->patch_size >= 0 && isfinite(m->patch_size)))
+        return bn_error_set(err, BN_EUSAGE, "patch_size %g is not a finite length >= 0 (0: from patches)", m->patch_size);
+    if (m->target_patches > BN_PIPELINE_MAX_PATCHES)
+        return bn_error_set(err, BN_EUSAGE, "patches %zu is above %.0e: not a patch count bounce can mesh (a negative "
+                            "number converted to an unsigned one?)", m->target_patches, (double)BN_PIPELINE_MAX_PATCHES);
+    if (!(o->hier.eps >= 0 && isfinite(o->hier.eps)))
+        return bn_error_set(err, BN_EUSAGE, "eps %g is not a finite tolerance >= 0", o->hier.eps);
+    if (o->ff.storage && !bn_storage_exists(o->ff.storage))
+        return bn_error_set(err, BN_EUSAGE, "unknown storage '%s' (one of %s)", o->ff.storage, bn_storage_names());
+    if (o->transport && strcmp(o->transport, "auto") && strcmp(o->transport, "hierarchical") &&
+        !bn_storage_exists(o->transport))
+        return bn_error_set(err, BN_EUSAGE, "transport '%s' is not one of %s", o->transport, bn_pipeline_transports());
+    return bn_solve_opts_check(&o->solve, err);
+}
+
+/* The per-bounce terms, L, rest and E: (bounces + 4) vectors of N x 3 doubles, refused above the
+ * memory limit once the patch count is known, before K is built. */
+static bn_status bn__check_terms_memory(const bn_pipeline_opts *o, size_t n, bn_error *err)
+{
+    size_t limit = o->ff.max_memory ? o->ff.max_memory : bn_memory_limit_default(), vec, need;
+    size_t nvec = (size_t)(o->solve.bounces < 0 ? 0 : o->solve.bounces) + 4;
+    if (!bn__mul_size(n, 3 * sizeof(double), &vec) || !bn__mul_size(vec, nvec, &need) || need > limit)
+        return bn_error_set(err, BN_ENOMEM, "%zu bounce terms of %zu patches need %.3g GiB, above the limit of %.3g "
+                            "GiB (max_memory): keep fewer bounces (the rest is summed in rest) or fewer patches",
+                            nvec - 3, n, (double)nvec * (double)n * 24 / (1 << 30), (double)limit / (1 << 30));
+    return BN_OK;
+}
+
 /* A transport given as "dense" (or "sparse"), not "auto" or "hierarchical": its storage is fixed. */
 static const char *bn__fixed_storage(const bn_pipeline_opts *o)
 {
@@ -51,7 +85,7 @@ static bn_status bn__check_size_early(const bn_pipeline_opts *o, const bn_scene 
     bn_formfactor_opts fo = o->ff;
     double n;
     bn_status st;
-    if (o->mesh_auto || !(fo.storage = bn__fixed_storage(o)) || bn_dist_size() > 1)
+    if (!(fo.storage = bn__fixed_storage(o)) || bn_dist_size() > 1)
         return BN_OK;
     st = bn_scene_mesh_estimate(s, &o->mesh, &n, err);
     return st == BN_OK ? bn_formfactor_check_memory(n, &fo, err) : st;
@@ -62,6 +96,8 @@ bn_status bn_pipeline_scene(const char *path, const bn_pipeline_opts *o, bn_pipe
     double t0 = bn__now();
     bn_status st;
     memset(p, 0, sizeof *p);
+    if ((st = bn_pipeline_opts_check(o, err)) != BN_OK)
+        return st;
     st = bn_scene_load(path, &o->load, &p->scene, err);
     p->seconds_load = bn__now() - t0;
     t0 = bn__now();
@@ -89,6 +125,11 @@ bn_status bn_pipeline_scene(const char *path, const bn_pipeline_opts *o, bn_pipe
         }
     }
     p->seconds_mesh = bn__now() - t0;
+    if (st == BN_OK) {
+        size_t n;
+        bn_scene_patches(p->scene, &n);
+        st = bn__check_terms_memory(o, n, err);
+    }
     if (st == BN_OK) {
         bn_scene_stats ss = bn_scene_stats_get(p->scene);
         if (ss.contact_faces > 0)

@@ -8,6 +8,9 @@
 #include <string.h>
 #include <strings.h>
 
+/* Non-planarity, relative to a polygon's size, above which its split is a warning, not a note. */
+#define BN_NONPLANAR_WARN 1e-2
+
 const char *bn_unit_name(bn_unit u) { return u == BN_UNIT_MM ? "mm" : u == BN_UNIT_CM ? "cm" : "m"; }
 double bn_unit_to_metres(bn_unit u) { return u == BN_UNIT_MM ? 1e-3 : u == BN_UNIT_CM ? 1e-2 : 1.0; }
 int bn_unit_parse(const char *s, bn_unit *out)
@@ -534,10 +537,13 @@ static bn_status bn__build_polygon(bn__builder *b, const bn__soup *s, bn__polys 
     if (n == 3)
         return bn__emit_triangle(b, s, v[0], v[1], v[2], mat, p, line, P->area_eps, &P->degenerate);
     if (pl.dev > P->o->planar_tol * pl.diam) {
+        /* A split is exact geometry, not a loss: a note, and a warning only where the bend is large
+         * enough (1% of the polygon) that the choice of diagonal shows in the light. */
+        bn_log_level lv = pl.dev > BN_NONPLANAR_WARN * pl.diam ? BN_LOG_WARN : BN_LOG_INFO;
         b->sc->stats.nonplanar_split++;
         if (n == 4) {
             bn_status st;
-            bn_logf(&P->o->log, BN_LOG_WARN,
+            bn_logf(&P->o->log, lv,
                     "%s:%u: quad is non-planar (a vertex is %.3g off its mean plane, %.2g of its size); split into two "
                     "triangles along the diagonal from its 1st to its 3rd vertex",
                     P->path, line, pl.dev, pl.dev / pl.diam);
@@ -545,7 +551,7 @@ static bn_status bn__build_polygon(bn__builder *b, const bn__soup *s, bn__polys 
             return st == BN_OK ? bn__emit_triangle(b, s, v[0], v[2], v[3], mat, p, line, P->area_eps, &P->degenerate)
                                : st;
         }
-        bn_logf(&P->o->log, BN_LOG_WARN, "%s:%u: polygon of %u vertices is non-planar by %.3g; triangulated", P->path,
+        bn_logf(&P->o->log, lv, "%s:%u: polygon of %u vertices is non-planar by %.3g; triangulated", P->path,
                 line, n, pl.dev);
     } else if (n == 4 && bn__quad_convex(s, v, &pl)) {
         return bn__emit_face(b, s, v, 4, mat, p, line, pl.nrm, pl.area);

@@ -186,17 +186,18 @@ static void bn__log_row(FILE *fp, const bn_solve_row *r)
 /* Norms of r: max over all, RMS over all N*3 entries, max per channel. Serial. */
 static void bn__residual_norms(const double *r, size_t n, bn_solve_row *row)
 {
-    double s2 = 0;
+    double s2 = 0, nan = 0;
     row->residual_ch[0] = row->residual_ch[1] = row->residual_ch[2] = 0;
     for (size_t i = 0; i < n; i++)
         for (int c = 0; c < 3; c++) {
             double a = fabs(r[3 * i + (size_t)c]);
             row->residual_ch[c] = fmax(row->residual_ch[c], a);
             s2 += a * a;
+            nan += a - a;   /* 0, or NaN for a NaN or infinite entry */
         }
     row->residual_max = fmax(row->residual_ch[0], fmax(row->residual_ch[1], row->residual_ch[2]));
     row->residual_rms = n ? sqrt(s2 / (3.0 * (double)n)) : 0;
-    if (!isfinite(s2))   /* fmax drops NaN: the sum of squares keeps it, so a NaN residual is never 0 */
+    if (nan != 0)   /* fmax drops NaN: a NaN or infinite residual is never reported as small */
         row->residual_max = row->residual_rms = NAN;
 }
 
@@ -309,18 +310,39 @@ static void bn__solve_nonfinite(bn__solve *S, size_t bad)
     S->res->reason = BN_STOP_DIVERGED_NAN;
 }
 
+bn_status bn_solve_opts_check(const bn_solve_opts *o, bn_error *err)
+{
+    if (!(o->tol >= 0 && isfinite(o->tol)))
+        return bn_error_set(err, BN_EUSAGE, "tol %g is not a finite tolerance >= 0", o->tol);
+    if (!(o->atol >= 0 && isfinite(o->atol)))
+        return bn_error_set(err, BN_EUSAGE, "atol %g is not a finite tolerance >= 0", o->atol);
+    if (o->max_iter < 1)
+        return bn_error_set(err, BN_EUSAGE, "max_iter %zu: at least 1 iteration is needed", o->max_iter);
+    if (o->bounces > BN_SOLVE_MAX_BOUNCES)
+        return bn_error_set(err, BN_EUSAGE, "bounces %d is above %d: each term is a whole vector, image layer and "
+                            "bake attribute; the tail of the series is kept as rest", o->bounces, BN_SOLVE_MAX_BOUNCES);
+    if (o->threads < 0)
+        return bn_error_set(err, BN_EUSAGE, "threads %d is negative (0: all cores)", o->threads);
+    if (!(o->singular_threshold >= 0 && o->singular_threshold < 1))
+        return bn_error_set(err, BN_EUSAGE, "singular_threshold %g is outside [0, 1)", o->singular_threshold);
+    if (!(o->divergence >= 0) || isnan(o->divergence))
+        return bn_error_set(err, BN_EUSAGE, "divergence %g is not >= 0 (0: no growth test)", o->divergence);
+    if ((unsigned)o->method > BN_SOLVE_DIRECT)
+        return bn_error_set(err, BN_EUSAGE, "unknown solve method %d", (int)o->method);
+    if ((unsigned)o->stop > BN_SOLVE_STOP_PATCH)
+        return bn_error_set(err, BN_EUSAGE, "unknown stop test %d", (int)o->stop);
+    return BN_OK;
+}
+
 /* Options, the method, what it needs of K, and E (finite, nonnegative). */
 static bn_status bn__solve_check(bn__solve *S)
 {
     const bn_solve_opts *o = S->o;
     bn_solve_result *res = S->res;
     size_t bad;
-    if (!S->type)
-        return bn_error_set(S->err, BN_EUSAGE, "unknown solve method %d", (int)o->method);
-    if (!(o->tol >= 0) || !(o->atol >= 0) || !isfinite(o->tol) || !isfinite(o->atol))
-        return bn_error_set(S->err, BN_EUSAGE, "tolerances must be finite and >= 0 (tol %g, atol %g)", o->tol, o->atol);
-    if (!(o->singular_threshold >= 0 && o->singular_threshold < 1))
-        return bn_error_set(S->err, BN_EUSAGE, "singular threshold %g is outside [0, 1)", o->singular_threshold);
+    bn_status st = bn_solve_opts_check(o, S->err);
+    if (st != BN_OK)
+        return st;
     if (bn_transport_require(S->k, S->type->needs, S->type->name, S->err) != BN_OK)
         return S->err ? S->err->status : BN_ENOTSUP;
     S->stop = o->stop;
@@ -710,6 +732,10 @@ static bn_status bn__solve_body(const bn_transport *k, const double *E, const bn
             st = run;
     }
     res->seconds = bn__now() - S.t0;
+    if (st == BN_ENUMERIC && res->bad_patch == SIZE_MAX && bn_transport_nonfinite_patch(k) != SIZE_MAX) {
+        res->bad_patch = bn_transport_nonfinite_patch(k);
+        res->reason = BN_STOP_DIVERGED_NAN;
+    }
     free(S.diag);
     free(S.r);
     free(S.y);

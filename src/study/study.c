@@ -211,7 +211,13 @@ static bn_status bn__solve(const bn_transport *K, const double *E, const bn_solv
     o.log_sink.fn = bn__drop_log;
     if ((o.method == BN_SOLVE_DIRECT && !(bn_transport_caps(K) & BN_OP_ENTRIES)) ||
         (o.method == BN_SOLVE_GAUSS_SEIDEL && !(bn_transport_caps(K) & BN_OP_ROWS))) {
-        o.method = BN_SOLVE_JACOBI;   /* K_H: apply only; converged far below any error measured */
+        /* K_H: apply only; converged far below any error measured. Said, never silent. */
+        bn_logf(&so->log_sink, BN_LOG_WARN,
+                "%s needs %s of K, which the %s operator does not offer: jacobi to tol %g ran in its place, and "
+                "its rows are labelled %s", bn_solve_method_name(o.method),
+                o.method == BN_SOLVE_DIRECT ? "entries" : "rows", bn_transport_name(K), fmin(o.tol, 1e-10),
+                bn_solve_method_name(o.method));
+        o.method = BN_SOLVE_JACOBI;
         o.tol = fmin(o.tol, 1e-10);
     }
     st = bn_solve(K, E, &o, &res, err);

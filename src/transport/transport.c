@@ -12,7 +12,8 @@ struct bn_transport {
     double *rho;
     const bn_transport_ops *ops;
     void *ctx;
-    _Atomic size_t *calls;   /* applications and row calls so far (named in a non-finite failure) */
+    _Atomic size_t *calls;   /* applications and row calls so far (named in a non-finite failure), and
+                                the patch of the last non-finite value (SIZE_MAX: none) */
 };
 
 static void bn__ctx_destroy(const bn_transport_ops *ops, void *ctx)
@@ -54,7 +55,9 @@ bn_status bn_transport_create(size_t n, const double *rho, const bn_transport_op
     k = calloc(1, sizeof *k);
     if (k) {
         k->rho = bn__malloc_array(n ? 3 * n : 1, sizeof(double));
-        k->calls = calloc(2, sizeof *k->calls);
+        k->calls = calloc(3, sizeof *k->calls);
+        if (k->calls)
+            atomic_store(&k->calls[2], SIZE_MAX);
     }
     if (!k || !k->rho || !k->calls) {
         if (k) {
@@ -84,6 +87,7 @@ void bn_transport_destroy(bn_transport *k)
 }
 
 size_t bn_transport_size(const bn_transport *k) { return k->n; }
+size_t bn_transport_nonfinite_patch(const bn_transport *k) { return atomic_load(&k->calls[2]); }
 const double *bn_transport_rho(const bn_transport *k) { return k->rho; }
 const char *bn_transport_name(const bn_transport *k) { return k->ops->name ? k->ops->name : "user"; }
 unsigned bn_transport_caps(const bn_transport *k) { return k->ops->caps; }
@@ -139,6 +143,7 @@ static bn_status bn__nonfinite(const bn_transport *k, const char *what, size_t c
     size_t q = 0;
     while (q < m && isfinite(y[q]))
         q++;
+    atomic_store(&k->calls[2], patch0 + q / 3);
     return bn_error_set(err, BN_ENUMERIC, "%s operator: %s call %zu gave a non-finite value (%g) at patch %zu, channel %c",
                         bn_transport_name(k), what, call, q < m ? y[q] : NAN, patch0 + q / 3, "RGB"[q % 3]);
 }
@@ -191,9 +196,11 @@ bn_status bn_transport_entry(const bn_transport *k, size_t i, size_t j, double *
     if (!(k->ops->caps & BN_OP_ENTRIES))
         return bn_transport_require(k, BN_OP_ENTRIES, "entry access", err);
     BN__OP_CALL(k, err, "entry", k->ops->entry(k->ctx, i, j, v, err_));
-    if (!isfinite(*v))
+    if (!isfinite(*v)) {
+        atomic_store(&k->calls[2], i);
         return bn_error_set(err, BN_ENUMERIC, "%s operator: entry F(%zu, %zu) is not finite (%g)", bn_transport_name(k),
                             i, j, *v);
+    }
     return BN_OK;
 }
 
@@ -205,9 +212,11 @@ bn_status bn_transport_row_entries(const bn_transport *k, size_t i, size_t *cols
     if (k->ops->row_entries) {
         BN__OP_CALL(k, err, "row_entries", k->ops->row_entries(k->ctx, i, cols, vals, count, err_));
         for (size_t q = 0; q < *count; q++)
-            if (!isfinite(vals[q]))
+            if (!isfinite(vals[q])) {
+                atomic_store(&k->calls[2], i);
                 return bn_error_set(err, BN_ENUMERIC, "%s operator: entry F(%zu, %zu) is not finite (%g)",
                                     bn_transport_name(k), i, cols[q], vals[q]);
+            }
         return BN_OK;
     }
     *count = 0;
@@ -229,9 +238,11 @@ bn_status bn_transport_diag(const bn_transport *k, double *d, bn_error *err)
     if (k->ops->caps & BN_OP_DIAG) {
         BN__OP_CALL(k, err, "diag", k->ops->diag(k->ctx, d, err_));
         for (size_t i = 0; i < k->n; i++)
-            if (!isfinite(d[i]))
+            if (!isfinite(d[i])) {
+                atomic_store(&k->calls[2], i);
                 return bn_error_set(err, BN_ENUMERIC, "%s operator: diagonal F(%zu, %zu) is not finite (%g)",
                                     bn_transport_name(k), i, i, d[i]);
+            }
         return BN_OK;
     }
     if (!(k->ops->caps & BN_OP_ENTRIES))

@@ -263,3 +263,84 @@ def test_monitor_history(tmp_path):
     q = h["residual_max"][2:12] / h["residual_max"][1:11]
     assert np.abs(q - rho).max() <= 1e-3, q
     assert (h["error_bound"][1:] >= 0).all()
+
+
+# ---- no silent wrong answers (issue: every failure loud, every option checked) ----
+
+def _nan_operator(K, at):
+    """y = K x with a NaN in its at-th output (patch 1, channel G); counts its calls."""
+    calls = [0]
+
+    def apply(x):
+        calls[0] += 1
+        y = K @ x
+        if calls[0] == at:
+            y[1, 1] = np.nan
+        return y
+    return apply, calls
+
+
+def _nan_every_application(K, E):
+    for method in ("jacobi", "neumann", "gauss-seidel"):
+        rows = (lambda i, x: K[i] @ x) if method == "gauss-seidel" else None
+        clean, calls = _nan_operator(K, 0)
+        r = bounce.solve(bounce.Operator(K.shape[0], clean, rows), emission=E, method=method, tol=1e-10)
+        assert np.isfinite(r.L).all()
+        total = calls[0]
+        assert total > 4
+        for at in range(1, total + 1):
+            bad, _ = _nan_operator(K, at)
+            with pytest.raises(bounce.BounceError) as e:
+                bounce.solve(bounce.Operator(K.shape[0], bad, rows), emission=E, method=method, tol=1e-10)
+            assert e.value.status == "ENUMERIC", (method, at, str(e.value))
+            assert ("call %d gave a non-finite" % at) in str(e.value) and "patch 1, channel G" in str(e.value)
+
+
+def test_nan_from_a_user_operator_at_every_application():
+    """A NaN at any application stops every method (before: dropped by the monitor, 'converged')."""
+    rng = np.random.default_rng(7)
+    F = rng.random((6, 6))
+    F /= F.sum(axis=1, keepdims=True)
+    _nan_every_application(0.6 * F, np.ones((6, 3)))
+
+
+def test_nan_from_a_file_scenes_operator_at_every_application(tmp_path):
+    s = bounce.Scene.load(furnace(tmp_path, 0.5), patches=24, visibility="rays")
+    K = 0.5 * s.form_factors()
+    _nan_every_application(K, np.array(s.emission))
+
+
+@pytest.mark.parametrize("kw, needle", [
+    (dict(tol=0), "tol 0"), (dict(tol=-1), "tol -1"), (dict(tol=float("nan")), "tol nan"),
+    (dict(threads=-1), "threads -1"), (dict(patches=-5), "patches -5"), (dict(unit=None), "unit must be a string"),
+    (dict(bounces=10**6), "bounces 1000000"), (dict(eps=-1), "eps -1"), (dict(patch_size=-2), "patch_size -2"),
+    (dict(unit="furlong"), "unit 'furlong'"), (dict(method="cholesky"), "method 'cholesky'"),
+    (dict(patches=2**63), "patches 9223372036854775808 is above")])
+def test_bad_options_raise_naming_the_value(kw, needle):
+    """Each bad value is refused before any work (a bounces of 10**6 used to run for minutes)."""
+    with pytest.raises(bounce.BounceError) as e:
+        bounce.solve(CORNELL, **kw)
+    assert needle in str(e.value), str(e.value)
+    assert e.value.status == "EUSAGE"
+
+
+def test_bad_operators_raise_naming_what_they_are():
+    E = np.ones((4, 3))
+    with pytest.raises(bounce.BounceError, match="patches 0: an operator needs at least one patch"):
+        bounce.solve(bounce.Operator(0, lambda x: x), emission=np.ones((0, 3)))
+    with pytest.raises(bounce.BounceError, match="returned None"):
+        bounce.solve(bounce.Operator(4, lambda x: None), emission=E)
+    with pytest.raises(bounce.BounceError, match=r"returned shape \(4,\), not \(4, 3\)"):
+        bounce.solve(bounce.Operator(4, lambda x: x[:, 0]), emission=E)
+    with pytest.raises(bounce.BounceError, match="tol -1"):
+        bounce.solve(bounce.Operator(4, lambda x: 0.5 * x), emission=E, tol=-1)
+    with pytest.raises(bounce.BounceError, match="threads -1"):
+        bounce.solve(bounce.Operator(4, lambda x: 0.5 * x), emission=E, threads=-1)
+
+
+def test_negative_bounces_keep_no_terms_for_files_and_operators(tmp_path):
+    """bounces < 0 means no terms in both paths (the file path used to keep E)."""
+    r = bounce.solve(furnace(tmp_path, 0.5), patches=24, bounces=-1, visibility="rays")
+    assert r.terms == [] and r.rest is None and abs(r.L[0, 0] - 2) < 1e-5
+    m = bounce.solve(bounce.Operator(4, lambda x: 0.5 * x), emission=np.ones((4, 3)), bounces=-1)
+    assert m.terms == [] and abs(m.L[0, 0] - 2) < 1e-5

@@ -89,6 +89,7 @@ typedef struct bn__hop {
 
 /* Takes links (sorted by r then s; F > 0 only) and the tree's topology (copied); bound: P + 1, every
  * rank's first leaf in leaf order, then npatch (copied). */
+size_t bn__hop_link_bytes(const bn__hop *h);
 bn_status bn__hop_make(const bn__tree *t, const bn__link *links, size_t nlinks, const size_t *bound, bn__hop **out,
                        bn_error *err);
 bn_status bn__hop_apply(void *ctx, const double *x, double *y, bn_error *err);

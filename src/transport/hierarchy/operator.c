@@ -60,11 +60,17 @@ void bn__hop_destroy(void *ctx)
     free(h);
 }
 
+/* The bytes of the arrays with one element per link (src, F, dir), as they are allocated. */
+size_t bn__hop_link_bytes(const bn__hop *h)
+{
+    return h->nlinks * (sizeof *h->src + sizeof *h->F + sizeof *h->dir);
+}
+
 size_t bn__hop_bytes(const void *ctx)
 {
     const bn__hop *h = ctx;
     return h->n * (4 * sizeof(uint32_t) + sizeof(double) + 3 * sizeof(float) + sizeof(size_t) + 6 * sizeof(double)) +
-           h->nclusters * 9 * sizeof(double) + h->nlinks * (sizeof(uint32_t) + sizeof(float) + sizeof(uint16_t)) +
+           h->nclusters * 9 * sizeof(double) + bn__hop_link_bytes(h) +
            (h->distributed ? h->npatch * (sizeof(uint32_t) + 3 * sizeof(double)) : 0);
 }
 
@@ -87,9 +93,9 @@ bn_status bn__hop_make(const bn__tree *t, const bn__link *links, size_t nlinks, 
     h->area = bn__malloc_array(n, sizeof(double));
     h->normal = bn__malloc_array(3 * n, sizeof(float));
     h->start = bn__calloc(n + 1, sizeof(size_t));
-    h->src = bn__malloc_array(nlinks ? nlinks : 1, sizeof(uint32_t));
-    h->F = bn__malloc_array(nlinks ? nlinks : 1, sizeof(float));
-    h->dir = bn__calloc(nlinks ? nlinks : 1, sizeof(uint16_t));
+    h->src = bn__malloc_array(nlinks ? nlinks : 1, sizeof *h->src);
+    h->F = bn__malloc_array(nlinks ? nlinks : 1, sizeof *h->F);
+    h->dir = bn__calloc(nlinks ? nlinks : 1, sizeof *h->dir);
     h->Bn = bn__malloc_array(3 * n, sizeof(double));
     h->distributed = bn_dist_size() > 1;
     if (h->distributed) {

@@ -868,7 +868,7 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
         rep->planar_nodes += t.plane[v] >= 0 && t.child[v] != BN__NONE;
     }
     rep->bytes = bn__hop_bytes(h);
-    rep->bytes_per_link = work.n ? (double)(sizeof(uint32_t) + sizeof(float) + 1) : 0;
+    rep->bytes_per_link = h->nlinks ? (double)bn__hop_link_bytes(h) / (double)h->nlinks : 0;
     rep->seconds_refine = bn__now() - t0;
     st = bn_transport_create(np, rho, &bn__hop_ops, h, out, err);
     h = NULL;   /* owned by *out now, or destroyed */
