@@ -229,12 +229,18 @@ bn_status bn__outfile_open(bn__outfile *f, const char *path, const char *mode, b
 bn_status bn__outfile_commit(bn__outfile *f, bn_error *err)
 {
     bn_status st = BN_OK;
-    int bad = ferror(f->fp);
+    int bad = ferror(f->fp), e;
+    errno = 0;
+    if (fflush(f->fp) != 0)   /* the buffer's last bytes: a full disk or a size limit says why here */
+        bad = 1;
+    e = errno;
     if (fclose(f->fp) != 0)
         bad = 1;
+    e = e ? e : errno;
     f->fp = NULL;
     if (bad) {
-        st = bn_error_set(err, BN_EIO, "%s: write failed (disk full?)", f->path);
+        st = bn_error_set(err, BN_EIO, "%s: write failed: %s", f->path,
+                          e ? strerror(e) : "an earlier write failed (disk full, or a file size limit?)");
         bn__tmpname_abort(f->tmp);
     } else {
         st = bn__tmpname_commit(f->path, f->tmp, err);

@@ -83,6 +83,9 @@ int main(int argc, char **argv)
     sigemptyset(&sa.sa_mask);
     sigaction(SIGINT, &sa, NULL);
     sigaction(SIGTERM, &sa, NULL);
+    /* Past a file-size limit (ulimit -f) a write fails with EFBIG, which every writer reports and
+     * cleans up after, instead of the default SIGXFSZ killing the process mid-file. */
+    signal(SIGXFSZ, SIG_IGN);
 
     if (argc < 2) {
         bn__usage(stderr);

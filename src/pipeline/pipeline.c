@@ -68,11 +68,12 @@ static bn_status bn__check_terms_memory(const bn_pipeline_opts *o, size_t n, bn_
     return BN_OK;
 }
 
-/* A transport given as "dense" (or "sparse"), not "auto" or "hierarchical": its storage is fixed. */
+/* A transport given as "dense" (or "sparse"), not "auto", "hierarchical" or unset (a caller that only
+ * meshes, as `bounce info`, or builds K itself later): its storage is fixed. */
 static const char *bn__fixed_storage(const bn_pipeline_opts *o)
 {
     if (!o->transport)
-        return o->ff.storage;
+        return NULL;
     if (!strcmp(o->transport, "auto") || !strcmp(o->transport, "hierarchical"))
         return NULL;
     return o->transport;

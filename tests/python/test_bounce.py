@@ -246,7 +246,12 @@ def test_scene_arrays_form_factors_and_solve(tmp_path):
     assert (s.reflectance == 0.9).all() and (s.emission == 1).all()
     F = s.form_factors()
     assert np.abs(F.sum(axis=1) - 1).max() <= 1e-6 and s.diagnostics["row_sum_max"] <= 1 + 1e-6
-    assert s.diagnostics["rays"] >= 0 and s.diagnostics["k_norm_inf"] == pytest.approx(0.9, abs=1e-6)
+    # an empty convex room: no pair is occluded, so no shadow ray is cast
+    assert s.diagnostics["rays"] == 0 and s.diagnostics["occluded_fraction"] == 0
+    assert s.diagnostics["k_norm_inf"] == pytest.approx(0.9, abs=1e-6)
+    c = bounce.Scene.load(CORNELL, unit="mm", patches=150, visibility="rays")
+    c.form_factors()   # the blocks hide pairs: rays are cast, and counted
+    assert c.diagnostics["rays"] > 0 and 0 < c.diagnostics["occluded_fraction"] < 1
     r = bounce.solve(s, bounces=2)
     assert r.patches == s.patches and np.abs(r.L - 10).max() <= 1e-5
 
