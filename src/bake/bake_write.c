@@ -359,8 +359,11 @@ bn_status bn_bake_write(const bn_bake *b, const char *path, const bn_bake_layer 
         } else {
             st = bn__tmpname_reserve(path, &tmp, err);
         }
-        if (st == BN_OK)
-            st = bn__openmesh_write(tmp, &m, &dup, err);
+        if (st == BN_OK && (st = bn__openmesh_write(tmp, &m, &dup, err)) != BN_OK && err) {
+            char inner[BN_ERROR_MSG_MAX];   /* the message names the output, not the temporary */
+            snprintf(inner, sizeof inner, "%s", err->msg);
+            bn_error_set(err, st, "%s: %s", path, inner);
+        }
         for (size_t e = 0; e < nextra; e++)
             free(extra[e]);
         free(extra);
