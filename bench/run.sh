@@ -14,6 +14,8 @@
 #                 with each bunny triangle cut into 16 (1,111,225 polygons, made by
 #                 ../shared/data/scenes/make-model-box.py), whole `bounce bounces` runs, and the MPI
 #                 identity checks on the bunny box (tests/mpi_check.sh with BN_TEST_BIG=1; ~9 minutes)
+#   --rates [N]   also the crosscheck's false-alarm rate at alpha 0.05 and 0.1 over N seeds (default 400)
+#                 on the furnace and the Cornell box (bench/crosscheck_rate.sh; ~15 + ~80 minutes at 400)
 #   --no-build    use the executables already in the build directory
 # Environment: BENCH_TIMEOUT (seconds per bench program, default 150), OMP_NUM_THREADS (default: all
 # cores). A bench that is missing, fails or times out is reported as such; the others still run.
@@ -25,6 +27,7 @@ build="$root/build-bench"
 reps=3
 quick=0
 big=0
+rates=0
 dobuild=1
 while [ $# -gt 0 ]; do
     case "$1" in
@@ -33,8 +36,9 @@ while [ $# -gt 0 ]; do
     -r) reps=$2; shift 2 ;;
     --quick) quick=1; shift ;;
     --big) big=1; shift ;;
+    --rates) rates=400; shift; case "${1:-}" in [0-9]*) rates=$1; shift ;; esac ;;
     --no-build) dobuild=0; shift ;;
-    -h|--help) sed -n '2,19p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,21p' "$0"; exit 0 ;;
     *) echo "bench/run.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
     esac
 done
@@ -591,6 +595,27 @@ $work/view-bunny.html#lod=0:69469:off:all (#lod=0)"
     done <<<"$pages"
     echo >>"$report"
     if [ -f "$report.val" ]; then cat "$report.val" >>"$report"; echo >>"$report"; rm -f "$report.val"; fi
+fi
+
+# ---- the crosscheck's false-alarm rate (--rates N) ----
+if [ "$rates" -gt 0 ]; then
+    {
+        echo "## The crosscheck's false-alarm rate"
+        echo
+        echo "\`bench/crosscheck_rate.sh\`: \`bounce crosscheck\` at the default \`--spp 1024\` over $rates seeds each, F cached; a seed"
+        echo "fails at alpha when either family's worst z (per entry, per-layer power) is above that alpha's critical"
+        echo "value. The observed rate's exact binomial 95% interval must contain alpha or lie below it."
+        echo
+        echo "| scene | alpha | seeds | failures | rate | binomial 95% interval | holds |"
+        echo "|---|---|---|---|---|---|---|"
+        for sc in "furnace-box.obj m" "cornell-box.obj mm"; do
+            set -- $sc
+            note "crosscheck rate: $1 over $rates seeds"
+            bash "$root/bench/crosscheck_rate.sh" "$bounce" "$root/meshes/$1" "$2" "$rates" "$work/rate-$1" "$1" 2>&1 |
+                grep '^| ' | grep -v '^| scene' || echo "| $1 | crosscheck_rate.sh failed | | | | | |"
+        done
+        echo
+    } >>"$report"
 fi
 
 end=$(date +%s)
