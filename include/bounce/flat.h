@@ -13,16 +13,18 @@ extern "C" {
 
 typedef struct bn_flat bn_flat;   /* a solved scene: patches, K's report, L, the terms, rest */
 
-/* Options by name, as on the command line; NULL or 0 for the default of each. */
+/* Options by name, as on the command line. Start from bn_flat_opts_default (the library's defaults);
+ * NULL names and 0 counts (patches, patch_size, threads) mean the default. Every value is checked
+ * before any work: out of range is BN_EUSAGE naming the option and the value. */
 typedef struct bn_flat_opts {
     const char *unit;         /* "m" (default), "cm", "mm" */
     const char *method;       /* "auto" (default), "jacobi", "gauss-seidel", "neumann", "direct" */
     const char *transport;    /* "auto" (default), "dense", "sparse", "hierarchical" */
-    int bounces;              /* terms kept: K^0 E .. K^bounces E (default 3; < 0: none) */
-    double tol;               /* solver tolerance, relative (default 1e-6) */
+    int bounces;              /* terms kept: K^0 E .. K^bounces E (default 3; at most 1000; < 0: none) */
+    double tol;               /* solver tolerance, relative, > 0 (default 1e-6) */
     size_t patches;           /* target patch count (default: as `bounce solve`) */
     double patch_size;        /* largest patch edge, scene units (overrides patches) */
-    double eps;               /* hierarchy eps (default 1e-3) */
+    double eps;               /* hierarchy eps, >= 0 (default 1e-3) */
     int threads;              /* 0: all cores */
     int quiet;                /* no progress bars (default 1 here: 0 shows them on stderr) */
     int sigint;               /* 1: while the call runs, SIGINT stops bounce's loops (the call returns
