@@ -1,6 +1,11 @@
 # bounce under mpirun (BOUNCE_MPI): one process's bits from 1, 2 and 4 processes (tests/mpi_check.sh).
+# Under the sanitizers (BOUNCE_SANITIZE) the same checks at -np 2 on small settings
+# (BN_TEST_SANITIZED=1), with OpenMPI's own allocations suppressed for LeakSanitizer (tests/lsan.supp).
 if(BOUNCE_MPI)
   add_test(NAME mpi.identical_to_one_process COMMAND ${CMAKE_CURRENT_LIST_DIR}/mpi_check.sh $<TARGET_FILE:bounce_cli>
     ${PROJECT_SOURCE_DIR} ${CMAKE_CURRENT_BINARY_DIR}/tmp/mpi_check)
   set_tests_properties(mpi.identical_to_one_process PROPERTIES LABELS mpi TIMEOUT 900 SKIP_RETURN_CODE 77 RUN_SERIAL TRUE)
+  if(BOUNCE_SANITIZE)
+    set_tests_properties(mpi.identical_to_one_process PROPERTIES ENVIRONMENT "BN_TEST_SANITIZED=1")
+  endif()
 endif()

@@ -27,4 +27,8 @@ typedef struct bn__bake_out {
 bn_status bn__write_gltf(const char *path, int binary, const bn__bake_out *m, const bn_scene *scene,
                          const bn_bake_write_opts *o, bn_error *err);
 
+/* A .glb's header and first chunk against its length (bounce view's only parse of the file):
+ * BN_EINPUT naming path and what is wrong. */
+bn_status bn__glb_check(const unsigned char *glb, size_t len, const char *path, bn_error *err);
+
 #endif

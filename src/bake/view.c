@@ -3,6 +3,7 @@
  * library at build time (cmake/embed.cmake). No network at view time. */
 #include "bounce/bake.h"
 #include "base/internal.h"
+#include "bake/bake_internal.h"
 
 #include <stdio.h>
 #include <stdlib.h>
@@ -44,6 +45,29 @@ static unsigned long bn__le32(const unsigned char *p)
     return (unsigned long)p[0] | (unsigned long)p[1] << 8 | (unsigned long)p[2] << 16 | (unsigned long)p[3] << 24;
 }
 
+bn_status bn__glb_check(const unsigned char *glb, size_t len, const char *path, bn_error *err)
+{
+    unsigned long version, total, jlen;
+    const char *why = NULL;
+    if (len < 12 || memcmp(glb, "glTF", 4) != 0)
+        return bn_error_set(err, BN_EINPUT, "%s: not a glTF binary (.glb): bounce view takes a scene or a .glb bake",
+                            path);
+    /* the header's version and length words, and the JSON chunk's, against the file */
+    version = bn__le32(glb + 4);
+    total = bn__le32(glb + 8);
+    jlen = len >= 20 ? bn__le32(glb + 12) : 0;
+    if (version != 2)
+        why = "is not glTF 2.0";
+    else if (total != (unsigned long)len)
+        why = "is truncated or has trailing bytes (its header's length differs from the file's size)";
+    else if (len < 20 || memcmp(glb + 16, "JSON", 4) != 0 || jlen > (unsigned long)len - 20)
+        why = "has no whole JSON chunk first";
+    if (why)
+        return bn_error_set(err, BN_EINPUT, "%s: a .glb that %s: %zu bytes, header says version %lu and %lu bytes",
+                            path, why, len, version, total);
+    return BN_OK;
+}
+
 bn_status bn_view_write(const char *glb_path, const char *title, const char *out, bn_error *err)
 {
     FILE *in;
@@ -72,27 +96,9 @@ bn_status bn_view_write(const char *glb_path, const char *title, const char *out
         return bn_error_set(err, BN_EIO, "%s: short read", glb_path);
     }
     fclose(in);
-    if (len < 12 || memcmp(glb, "glTF", 4) != 0) {
+    if ((st = bn__glb_check(glb, (size_t)len, glb_path, err)) != BN_OK) {
         free(glb);
-        return bn_error_set(err, BN_EINPUT, "%s: not a glTF binary (.glb): bounce view takes a scene or a .glb bake",
-                            glb_path);
-    }
-    {   /* the header's version and length words, and the JSON chunk's, against the file */
-        unsigned long version = bn__le32(glb + 4), total = bn__le32(glb + 8);
-        unsigned long jlen = len >= 20 ? bn__le32(glb + 12) : 0;
-        const char *why = NULL;
-        if (version != 2)
-            why = "is not glTF 2.0";
-        else if (total != (unsigned long)len)
-            why = "is truncated or has trailing bytes (its header's length differs from the file's size)";
-        else if (len < 20 || memcmp(glb + 16, "JSON", 4) != 0 || jlen > (unsigned long)len - 20)
-            why = "has no whole JSON chunk first";
-        if (why) {
-            bn_error_set(err, BN_EINPUT, "%s: a .glb that %s: %lu bytes, header says version %lu and %lu bytes",
-                         glb_path, why, (unsigned long)len, version, total);
-            free(glb);
-            return BN_EINPUT;
-        }
+        return st;
     }
     st = bn__outfile_open(&f, out, "wb", err);
     if (st != BN_OK) {

@@ -2,6 +2,7 @@
 #include "bounce/image.h"
 #include "base/internal.h"
 #include "base/vec.h"
+#include "image/image_internal.h"
 
 #include <ctype.h>
 #include <errno.h>
@@ -90,15 +91,84 @@ static int bn__parse_vec3(const char *v, double out[3])
     return *v == '\0';
 }
 
+/* One sidecar line (comments and blanks already stripped): KEY VALUE into *c. */
+static bn_status bn__camera_line(char *p, const char *path, unsigned ln, bn_camera *c, bn_error *err)
+{
+    char *key = p, *val, *end;
+    while (*p && !isspace((unsigned char)*p))
+        p++;
+    if (*p)
+        *p++ = '\0';
+    while (isspace((unsigned char)*p))
+        p++;
+    val = p;
+    if (strcmp(key, "eye") == 0 || strcmp(key, "look") == 0 || strcmp(key, "up") == 0) {
+        double *d = key[0] == 'e' ? c->eye : key[0] == 'l' ? c->look : c->up;
+        if (!bn__parse_vec3(val, d))
+            return bn_error_set(err, BN_EINPUT, "%s:%u: %s '%s' is not three finite numbers X,Y,Z", path, ln, key, val);
+    } else if (strcmp(key, "fov") == 0) {
+        c->fov_deg = strtod(val, &end);
+        if (end == val || *end || !(c->fov_deg > 0 && c->fov_deg < 180))
+            return bn_error_set(err, BN_EINPUT, "%s:%u: fov '%s' is not an angle in (0, 180) degrees", path, ln, val);
+    } else if (strcmp(key, "size") == 0) {
+        long w = strtol(val, &end, 10), h = 0;
+        if (end != val && *end == 'x') {
+            char *b = end + 1;
+            h = strtol(b, &end, 10);
+            if (end == b)
+                h = 0;
+        }
+        if (*end || w < 1 || h < 1 || w > 32768 || h > 32768)
+            return bn_error_set(err, BN_EINPUT, "%s:%u: size '%s' is not WIDTHxHEIGHT within 1..32768", path, ln, val);
+        c->width = (int)w;
+        c->height = (int)h;
+    } else if (strcmp(key, "spp") == 0) {
+        long n = strtol(val, &end, 10);
+        if (end == val || *end || n < 1 || n > 65536)
+            return bn_error_set(err, BN_EINPUT, "%s:%u: spp '%s' is not a whole number within 1..65536", path, ln, val);
+        c->spp = (int)n;
+    } else {
+        return bn_error_set(err, BN_EINPUT, "%s:%u: unknown key '%s' (keys: eye, look, up, fov, size, spp)", path, ln,
+                            key);
+    }
+    return BN_OK;
+}
+
+bn_status bn__camera_parse(FILE *fp, const char *path, bn_camera *cam, bn_error *err)
+{
+    char line[1024];
+    unsigned ln = 0;
+    bn_camera c = *cam;
+    bn_status st = BN_OK;
+    while (st == BN_OK && fgets(line, sizeof line, fp)) {
+        char *p = line, *e;
+        ln++;
+        if (!strchr(line, '\n') && !feof(fp))
+            return bn_error_set(err, BN_EINPUT, "%s:%u: line too long", path, ln);
+        if ((e = strchr(p, '#')))
+            *e = '\0';
+        while (isspace((unsigned char)*p))
+            p++;
+        e = p + strlen(p);
+        while (e > p && isspace((unsigned char)e[-1]))
+            *--e = '\0';
+        if (*p)
+            st = bn__camera_line(p, path, ln, &c, err);
+    }
+    if (st == BN_OK && ferror(fp))
+        st = bn_error_set(err, BN_EIO, "%s: read error", path);
+    if (st == BN_OK)
+        *cam = c;
+    return st;
+}
+
 bn_status bn_camera_load_sidecar(const char *scene_path, bn_camera *cam, int *found, bn_error *err)
 {
     const char *slash = strrchr(scene_path, '/'), *dot = strrchr(scene_path, '.');
     size_t stem = (dot && (!slash || dot > slash)) ? (size_t)(dot - scene_path) : strlen(scene_path);
-    char *path = malloc(stem + 8), line[1024];
+    char *path = malloc(stem + 8);
     FILE *fp;
-    unsigned ln = 0;
-    bn_camera c = *cam;
-    bn_status st = BN_OK;
+    bn_status st;
     if (found)
         *found = 0;
     if (!path)
@@ -108,86 +178,14 @@ bn_status bn_camera_load_sidecar(const char *scene_path, bn_camera *cam, int *fo
     fp = fopen(path, "r");
     if (!fp) {
         int e = errno;
-        if (e == ENOENT) {
-            free(path);
-            return BN_OK;
-        }
-        st = bn_error_set(err, BN_EIO, "%s: cannot read: %s", path, strerror(e));
+        st = e == ENOENT ? BN_OK : bn_error_set(err, BN_EIO, "%s: cannot read: %s", path, strerror(e));
         free(path);
         return st;
     }
-    while (st == BN_OK && fgets(line, sizeof line, fp)) {
-        char *p = line, *key, *val, *e;
-        ln++;
-        if (!strchr(line, '\n') && !feof(fp)) {
-            st = bn_error_set(err, BN_EINPUT, "%s:%u: line too long", path, ln);
-            break;
-        }
-        if ((e = strchr(p, '#')))
-            *e = '\0';
-        while (isspace((unsigned char)*p))
-            p++;
-        e = p + strlen(p);
-        while (e > p && isspace((unsigned char)e[-1]))
-            *--e = '\0';
-        if (!*p)
-            continue;
-        key = p;
-        while (*p && !isspace((unsigned char)*p))
-            p++;
-        if (*p)
-            *p++ = '\0';
-        while (isspace((unsigned char)*p))
-            p++;
-        val = p;
-        if (strcmp(key, "eye") == 0 || strcmp(key, "look") == 0 || strcmp(key, "up") == 0) {
-            double *d = key[0] == 'e' ? c.eye : key[0] == 'l' ? c.look : c.up;
-            if (!bn__parse_vec3(val, d))
-                st = bn_error_set(err, BN_EINPUT, "%s:%u: %s '%s' is not three finite numbers X,Y,Z", path, ln, key,
-                                  val);
-        } else if (strcmp(key, "fov") == 0) {
-            char *end;
-            c.fov_deg = strtod(val, &end);
-            if (end == val || *end || !(c.fov_deg > 0 && c.fov_deg < 180))
-                st = bn_error_set(err, BN_EINPUT, "%s:%u: fov '%s' is not an angle in (0, 180) degrees", path, ln,
-                                  val);
-        } else if (strcmp(key, "size") == 0) {
-            char *end;
-            long w = strtol(val, &end, 10), h = 0;
-            if (end != val && *end == 'x') {
-                char *b = end + 1;
-                h = strtol(b, &end, 10);
-                if (end == b)
-                    h = 0;
-            }
-            if (*end || w < 1 || h < 1 || w > 32768 || h > 32768)
-                st = bn_error_set(err, BN_EINPUT, "%s:%u: size '%s' is not WIDTHxHEIGHT within 1..32768", path, ln,
-                                  val);
-            else {
-                c.width = (int)w;
-                c.height = (int)h;
-            }
-        } else if (strcmp(key, "spp") == 0) {
-            char *end;
-            long n = strtol(val, &end, 10);
-            if (end == val || *end || n < 1 || n > 65536)
-                st = bn_error_set(err, BN_EINPUT, "%s:%u: spp '%s' is not a whole number within 1..65536", path, ln,
-                                  val);
-            else
-                c.spp = (int)n;
-        } else {
-            st = bn_error_set(err, BN_EINPUT, "%s:%u: unknown key '%s' (keys: eye, look, up, fov, size, spp)", path,
-                              ln, key);
-        }
-    }
-    if (st == BN_OK && ferror(fp))
-        st = bn_error_set(err, BN_EIO, "%s: read error", path);
+    st = bn__camera_parse(fp, path, cam, err);
     fclose(fp);
-    if (st == BN_OK) {
-        *cam = c;
-        if (found)
-            *found = 1;
-    }
+    if (st == BN_OK && found)
+        *found = 1;
     free(path);
     return st;
 }
