@@ -34,6 +34,7 @@ for s in $(seq 1 "$seeds"); do
       fails[$a]=$((fails[$a] + 1))
     fi
   done
+  [ $((s % 25)) = 0 ] && echo "crosscheck_rate: $s seeds, failures at 0.05: ${fails[0.05]}, at 0.1: ${fails[0.1]}" >&2
 done
 secs=$(( $(date +%s) - t0 ))
 echo "| scene | alpha | seeds | failures | rate | binomial 95% interval | holds |"

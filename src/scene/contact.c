@@ -773,9 +773,12 @@ static int bn__cut_face(bn__cx *c, size_t f, bn_patch *src, size_t p0, size_t p1
             tl = a;
             cap = mcap;
         }
-        for (size_t k = 0; k < count; k++)
+        for (size_t k = 0; k < count; k++) {
+            if ((k & 1023) == 0 && bn_interrupted() != BN_OK)   /* pieces x fresh vertices: seconds on a big face */
+                goto done;
             if (!bn__mend(c, k, tl, cap))
                 goto done;
+        }
     }
     before = c->np;
     for (size_t k = 0; k < c->npieces; k++) {

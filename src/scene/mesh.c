@@ -112,6 +112,11 @@ static bn_status bn__grid(bn_scene *s, double size, int contacts, double gap, bn
         const bn_face *f = &s->faces[fi];
         unsigned nu, nvv;
         size_t base = iv;
+        if (bn_interrupted() != BN_OK) {   /* a face may hold a million patches: stop between faces */
+            free(patches);
+            free(pv);
+            return bn_error_set(err, bn_interrupted(), "meshing interrupted");
+        }
         bn__face_grid(s, f, size, &nu, &nvv);
         if (f->nverts == 4) {
             const double *a = bn__fv(s, f, 0), *b = bn__fv(s, f, 1), *c = bn__fv(s, f, 2), *d = bn__fv(s, f, 3);
