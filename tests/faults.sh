@@ -65,7 +65,7 @@ if [ -z "$asan" ]; then
   vm() { bash -c 'ulimit -v 2000000 && exec "$@"' sh "$@"; }
   expect "$work/vm" 4 "out of memory for" "ulimit -v: meshing 3e7 patches" -- vm "$exe" info "$cornell" --unit mm --patches 30000000 -q
   expect "$work/vm" 4 "cannot allocate dense F" "ulimit -v: dense F of 20000 patches" -- vm "$exe" solve "$cornell" --unit mm --patches 20000 --transport dense --ff-visibility rays -o x.csv -q
-  expect "$work/vm" 4 "12000x12000 image" "ulimit -v: gather images" -- vm "$exe" bounces "$cornell" $small --size 12000x12000 -o g.exr
+  expect "$work/vm" 4 "6000x6000 image" "ulimit -v: gather images" -- vm "$exe" bounces "$cornell" $small --size 6000x6000 -o g.exr
 else
   skip "ulimit -v: not under AddressSanitizer (it reserves terabytes of address space)"
 fi

@@ -138,6 +138,11 @@ BN_TEST(exit_code_classes)
     BN_ASSERT_EQ(bn_test_bounce(args, &out), 4);
     BN_ASSERT(strstr(out, "patches") && strstr(out, "--storage sparse"));
     free(out);
+    /* the images' memory, refused before the scene is even read (32768^2 x 6 layers: 216 GiB) */
+    snprintf(args, sizeof args, "bounces '%s' --unit mm --size 32768x32768 -o '%s' -q", cornell, bn_test_tmp("big.exr"));
+    BN_ASSERT_EQ(bn_test_bounce(args, &out), 4);
+    BN_ASSERT(strstr(out, "images of 32768x32768 pixels in 6 layers") != NULL);
+    free(out);
     snprintf(args, sizeof args, "formfactors '%s' --unit mm --patches 400 --max-memory 1000 -q", cornell);
     BN_ASSERT_EQ(bn_test_bounce(args, &out), 4);
     free(out);

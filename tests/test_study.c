@@ -323,6 +323,9 @@ BN_TEST(study_eps_against_the_tracer)
              bn_test_path("meshes/cornell-box.obj"), bn_test_tmp("eps.csv"));
     if (bn_test_bounce(args, &out) != 0)
         BN_FAIL("bounce study failed:\n%s", out ? out : "");
+    /* direct needs entries, which K_H does not offer: the study says what ran in its place */
+    if (!strstr(out, "direct needs entries of K") || !strstr(out, "jacobi to tol"))
+        BN_FAIL("no word of jacobi standing in for direct on the hierarchy:\n%s", out);
     c = csv_read(bn_test_tmp("eps.csv"));
     BN_ASSERT(strstr(c->meta, "# reference=path tracer") != NULL);
     for (int r = 0; r < c->nrow; r++) {

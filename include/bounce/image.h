@@ -117,6 +117,10 @@ void bn_bounces_opts_default(bn_bounces_opts *o);
  * bn_layers_stack orders them: the terms, rest, L) through `cam` and writes the multi-layer EXR,
  * with the shading and the preview exposure added to `attrs`, then the previews and the contact
  * sheet. *ev_used (may be NULL) receives the preview exposure. Atomic per file. */
+/* The images' memory of bn_bounces_write for a width x height camera and `bounces` terms (every
+ * layer in float RGB), checked before any work: BN_ENOMEM naming the size, the layers and the limit
+ * (max_memory; 0: 80% of physical memory) when above it, or when the product overflows. */
+bn_status bn_bounces_check_memory(int width, int height, int bounces, size_t max_memory, bn_error *err);
 bn_status bn_bounces_write(const bn_scene *scene, const bn_rt *rt, const bn_camera *cam, const double *const *layers,
                            int bounces, const bn_bounces_opts *o, double *ev_used, bn_error *err);
 

@@ -137,6 +137,17 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
                      "--gather none", n);
         return bn_cli_fail(&err);
     }
+    {   /* the images' memory before any work: the size from --size, else the sidecar's, else the default */
+        bn_camera pre = {{0, 0, 0}, {0, 0, 1}, {0, 1, 0}, 40, 512, 512, 1};
+        if (bn_cli_given(&set, "size")) {
+            pre.width = co.size[0];
+            pre.height = co.size[1];
+        } else if (bn_camera_load_sidecar(pos[0], &pre, NULL, &err) != BN_OK) {
+            return bn_cli_fail(&err);
+        }
+        if (bn_bounces_check_memory(pre.width, pre.height, n, ff.max_memory, &err) != BN_OK)
+            return bn_cli_fail(&err);
+    }
     st = bn_cli_run_solution(pos[0], &so, &ff, &sol, c, n, &p, NULL, 0);
     if (st == BN_OK)
         st = bn_cli_make_camera(&set, &co, pos[0], p.scene, &cam, &err);

@@ -104,6 +104,20 @@ static bn_status bn__bounces_previews(const bn_layer *named, size_t nl, double e
     return st;
 }
 
+bn_status bn_bounces_check_memory(int width, int height, int bounces, size_t max_memory, bn_error *err)
+{
+    size_t limit = max_memory ? max_memory : bn_memory_limit_default(), px, need;
+    int nl = bn_layer_count(bounces);
+    /* every layer, and the gather's per-pixel sums beside them (as many again, in double) */
+    if (width < 1 || height < 1 || nl < 1 || !bn__mul_size((size_t)width, (size_t)height, &px) ||
+        !bn__mul_size(px, (size_t)nl * 3 * (sizeof(float) + sizeof(double)), &need) || need > limit)
+        return bn_error_set(err, BN_ENOMEM, "images of %dx%d pixels in %d layers need %.3g GiB, above the limit of "
+                            "%.3g GiB (max_memory): a smaller size or fewer bounces", width, height, nl,
+                            (double)width * height * nl * 3 * (sizeof(float) + sizeof(double)) / (1 << 30),
+                            (double)limit / (1 << 30));
+    return BN_OK;
+}
+
 bn_status bn_bounces_write(const bn_scene *scene, const bn_rt *rt, const bn_camera *cam, const double *const *layers,
                            int bounces, const bn_bounces_opts *o, double *ev_used, bn_error *err)
 {

@@ -573,7 +573,8 @@ bn_status bn_flat_images(const bn_flat *f, const char *out, int width, int heigh
         cam.height = height;
     if (spp > 0)
         cam.spp = spp;
-    if ((st = bn_camera_validate(&cam, &err)) != BN_OK)
+    if ((st = bn_camera_validate(&cam, &err)) != BN_OK ||
+        (st = bn_bounces_check_memory(cam.width, cam.height, nb, f->po.ff.max_memory, &err)) != BN_OK)
         return bn__flat_fail(st, err.msg, msg, msglen);
     for (int l = 0; l < bn_layer_count(nb); l++)
         layers[l] = l <= nb ? f->p.res.terms[l] : l == nb + 1 ? f->p.rest : f->p.res.L;
