@@ -597,26 +597,34 @@ $work/view-bunny.html#lod=0:69469:off:all (#lod=0)"
     if [ -f "$report.val" ]; then cat "$report.val" >>"$report"; echo >>"$report"; rm -f "$report.val"; fi
 fi
 
-# ---- the crosscheck's false-alarm rate (--rates N) ----
+# ---- the crosscheck's false-alarm rate (--rates N): written to bench/rates.md, kept between runs ----
 if [ "$rates" -gt 0 ]; then
     {
         echo "## The crosscheck's false-alarm rate"
         echo
-        echo "\`bench/crosscheck_rate.sh\`: \`bounce crosscheck\` at the default \`--spp 1024\` over $rates seeds each, F cached; a seed"
-        echo "fails at alpha when either family's worst z (per entry, per-layer power) is above that alpha's critical"
-        echo "value. The observed rate's exact binomial 95% interval must contain alpha or lie below it."
+        echo "\`bench/run.sh --rates $rates\` ($(date -u +%Y-%m-%d), $(git -C "$root" rev-parse --short HEAD 2>/dev/null)):"
+        echo "\`bench/crosscheck_rate.sh\` runs \`bounce crosscheck\` at the default \`--spp 1024\` over $rates seeds each,"
+        echo "F cached; a seed fails at alpha when either family's worst z (per entry, per-layer power) is above"
+        echo "that alpha's critical value. The observed rate's exact binomial 95% interval must contain alpha or"
+        echo "lie below it."
         echo
         echo "| scene | alpha | seeds | failures | rate | binomial 95% interval | holds |"
         echo "|---|---|---|---|---|---|---|"
         for sc in "furnace-box.obj m" "cornell-box.obj mm"; do
             set -- $sc
             note "crosscheck rate: $1 over $rates seeds"
-            bash "$root/bench/crosscheck_rate.sh" "$bounce" "$root/meshes/$1" "$2" "$rates" "$work/rate-$1" "$1" 2>&1 |
+            bash "$root/bench/crosscheck_rate.sh" "$bounce" "$root/meshes/$1" "$2" "$rates" "$work/rate-$1" "$1" 2>/dev/null |
                 grep '^| ' | grep -v '^| scene' || echo "| $1 | crosscheck_rate.sh failed | | | | | |"
         done
         echo
-    } >>"$report"
+    } >"$work/rates.md"
+    cp "$work/rates.md" "$root/bench/rates.md.tmp.$$" && mv "$root/bench/rates.md.tmp.$$" "$root/bench/rates.md"
 fi
+# figures measured by longer runs than this one, kept in their own files: the crosscheck's rate
+# (--rates) and the fuzzers' depth run (FUZZ_RUNS=10000000 scripts/fuzz.sh 3600)
+for f in rates.md fuzz.md; do
+    [ -f "$root/bench/$f" ] && { cat "$root/bench/$f"; echo; } >>"$report"
+done
 
 end=$(date +%s)
 echo >>"$report"

