@@ -36,6 +36,9 @@ typedef struct bn_flat_opts {
                                  take rays) */
 } bn_flat_opts;
 void bn_flat_opts_default(bn_flat_opts *o);
+/* sizeof(bn_flat_opts) in this library: a binding that lays the struct out itself (Python's ctypes)
+ * compares it with its own before the first call, so a field added on one side fails loudly. */
+size_t bn_flat_opts_size(void);
 
 /* Loads, meshes, builds K and solves `path`. On failure *out is NULL, the status is returned and
  * msg (msglen bytes) holds bounce's message. BN_ENOTCONV keeps the unconverged answer in *out. */

@@ -16,7 +16,7 @@ import os
 
 import numpy as np
 
-__all__ = ["Scene", "solve", "Result", "Operator", "BounceError", "library_path"]
+__all__ = ["Scene", "solve", "Result", "Operator", "BounceError", "library_path", "library_version"]
 
 
 class BounceError(RuntimeError):
@@ -53,12 +53,33 @@ _ROW = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_size_t, ctypes.P
                         ctypes.POINTER(ctypes.c_double))
 
 
+def _check_layout(lib, path):
+    """The options struct as this package lays it out against the library's own size: a field added
+    on one side only would shift every field after it, so a mismatch refuses to go on."""
+    lib.bn_version.restype = ctypes.c_char_p
+    version = lib.bn_version().decode()
+    if not hasattr(lib, "bn_flat_opts_size"):
+        raise BounceError("EUSAGE", "%s (bounce %s) is older than this package: rebuild bounce" % (path, version))
+    lib.bn_flat_opts_size.restype = ctypes.c_size_t
+    theirs, ours = lib.bn_flat_opts_size(), ctypes.sizeof(_Opts)
+    if theirs != ours:
+        raise BounceError("EUSAGE", "%s (bounce %s) lays bn_flat_opts out in %d bytes, this package in %d: the "
+                          "package and the library are from different versions" % (path, version, theirs, ours))
+
+
+def library_version():
+    """The version of the libbounce.so in use."""
+    return _load().bn_version().decode()
+
+
 def _load():
     global _lib
     if _lib is not None:
         return _lib
-    lib = ctypes.CDLL(library_path())
+    path = library_path()
+    lib = ctypes.CDLL(path)
     P, D, S, I = ctypes.c_void_p, ctypes.POINTER(ctypes.c_double), ctypes.c_size_t, ctypes.c_int
+    _check_layout(lib, path)
     lib.bn_flat_opts_default.argtypes = [ctypes.POINTER(_Opts)]
     lib.bn_flat_solve.argtypes = [ctypes.c_char_p, ctypes.POINTER(_Opts), ctypes.POINTER(P), ctypes.c_char_p, S]
     lib.bn_flat_solve.restype = I

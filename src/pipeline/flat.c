@@ -55,6 +55,8 @@ static void bn__flat_sig_end(bn__flat_sig *s)
     bn_interrupt_raise(BN_OK);
 }
 
+size_t bn_flat_opts_size(void) { return sizeof(bn_flat_opts); }
+
 void bn_flat_opts_default(bn_flat_opts *o)
 {
     bn_solve_opts so;

@@ -349,3 +349,15 @@ def test_negative_bounces_keep_no_terms_for_files_and_operators(tmp_path):
     assert r.terms == [] and r.rest is None and abs(r.L[0, 0] - 2) < 1e-5
     m = bounce.solve(bounce.Operator(4, lambda x: 0.5 * x), emission=np.ones((4, 3)), bounces=-1)
     assert m.terms == [] and abs(m.L[0, 0] - 2) < 1e-5
+
+
+def test_the_options_layout_is_checked_against_the_library(monkeypatch):
+    """A struct that differs from the library's by one field is refused before any call."""
+    assert bounce.library_version().count(".") == 2
+    assert bounce._lib.bn_flat_opts_size() == ctypes.sizeof(bounce._Opts)
+
+    class Longer(ctypes.Structure):
+        _fields_ = bounce._Opts._fields_ + [("extra", ctypes.c_int)]
+    monkeypatch.setattr(bounce, "_Opts", Longer)
+    with pytest.raises(bounce.BounceError, match="lays bn_flat_opts out in .* bytes, this package in"):
+        bounce._check_layout(bounce._lib, "libbounce.so")
