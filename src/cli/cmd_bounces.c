@@ -52,6 +52,21 @@ static bn_status bn__bounces_write(const bn_pipeline *p, const bn_camera *cam, i
     return st;
 }
 
+/* The images' memory before any work: the size from --size, else the sidecar's, else the default. */
+static bn_status bn__bounces_precheck(const bn_optset *set, const bn_cli_camera *co, const char *scene, int n,
+                                      size_t max_memory, bn_error *err)
+{
+    bn_camera pre = {{0, 0, 0}, {0, 0, 1}, {0, 1, 0}, 40, 512, 512, 1};
+    bn_status st = BN_OK;
+    if (bn_cli_given(set, "size")) {
+        pre.width = co->size[0];
+        pre.height = co->size[1];
+    } else {
+        st = bn_camera_load_sidecar(scene, &pre, NULL, err);
+    }
+    return st == BN_OK ? bn_bounces_check_memory(pre.width, pre.height, n, max_memory, err) : st;
+}
+
 int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
 {
     bn_optset set;
@@ -137,17 +152,8 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
                      "--gather none", n);
         return bn_cli_fail(&err);
     }
-    {   /* the images' memory before any work: the size from --size, else the sidecar's, else the default */
-        bn_camera pre = {{0, 0, 0}, {0, 0, 1}, {0, 1, 0}, 40, 512, 512, 1};
-        if (bn_cli_given(&set, "size")) {
-            pre.width = co.size[0];
-            pre.height = co.size[1];
-        } else if (bn_camera_load_sidecar(pos[0], &pre, NULL, &err) != BN_OK) {
-            return bn_cli_fail(&err);
-        }
-        if (bn_bounces_check_memory(pre.width, pre.height, n, ff.max_memory, &err) != BN_OK)
-            return bn_cli_fail(&err);
-    }
+    if (bn__bounces_precheck(&set, &co, pos[0], n, ff.max_memory, &err) != BN_OK)
+        return bn_cli_fail(&err);
     st = bn_cli_run_solution(pos[0], &so, &ff, &sol, c, n, &p, NULL, 0);
     if (st == BN_OK)
         st = bn_cli_make_camera(&set, &co, pos[0], p.scene, &cam, &err);

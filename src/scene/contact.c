@@ -724,6 +724,24 @@ done:
 }
 
 /* Cuts face f's patches along its contact segments (c->segs); appends the result. */
+/* The patches p0 .. p1 - 1 with a changed piece, each counted once, in one pass over the pieces (the
+ * search per patch this replaced was quadratic: 20 s on a floor of 200,000 patches); SIZE_MAX when
+ * out of memory. */
+static size_t bn__count_split(const bn__cx *c, size_t p0, size_t p1)
+{
+    unsigned char *hit = bn__calloc(p1 - p0 + 1, 1);
+    size_t changed = 0;
+    if (!hit)
+        return SIZE_MAX;
+    for (size_t k = 0; k < c->npieces; k++)
+        if (c->pieces[k].changed && !hit[c->pieces[k].orig - p0]) {
+            hit[c->pieces[k].orig - p0] = 1;
+            changed++;
+        }
+    free(hit);
+    return changed;
+}
+
 static int bn__cut_face(bn__cx *c, size_t f, bn_patch *src, size_t p0, size_t p1, const double (*poly)[2],
                         bn_scene_stats *st)
 {
@@ -793,19 +811,8 @@ static int bn__cut_face(bn__cx *c, size_t f, bn_patch *src, size_t p0, size_t p1
         if (!bn__emit_piece(c, f, o, c->pool + pc->off, pc->n))
             goto done;
     }
-    {
-        /* the patches with a changed piece, each counted once (one pass over the pieces: the
-         * search per patch this replaces was quadratic, 20 s on a floor of 200,000 patches) */
-        unsigned char *hit = bn__calloc(p1 - p0 + 1, 1);
-        if (!hit)
-            goto done;
-        for (size_t k = 0; k < c->npieces; k++)
-            if (c->pieces[k].changed && !hit[c->pieces[k].orig - p0]) {
-                hit[c->pieces[k].orig - p0] = 1;
-                changed++;
-            }
-        free(hit);
-    }
+    if ((changed = bn__count_split(c, p0, p1)) == SIZE_MAX)
+        goto done;
     st->contact_patches_split += changed;
     st->contact_patches_made += (c->np - before) - ((p1 - p0) - changed);
     ok = 1;
