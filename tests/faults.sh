@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Faults from outside: a file-size limit (ulimit -f), a full and a read-only directory (small
 # tmpfs mounts, as root; skipped visibly otherwise), too little address space (ulimit -v) at
-# meshing, form factors and the gather, and SIGTERM during meshing, refinement and the gather.
+# meshing, form factors and the gather, and SIGTERM during meshing, form factors, refinement and the
+# gather. Refinement and the bake under too little address space, and the bake and a commit
+# interrupted, are in test_faults.c (in-process: no command-line limit singles those stages out).
 # Each must end with a clear message, the right exit code and no file left behind (no output, no
 # temporary). ulimit -v runs only in the normal build: ASan reserves terabytes of address space.
 # usage: faults.sh BOUNCE SOURCE_DIR WORK_DIR [asan]
@@ -96,6 +98,7 @@ term() {   # DELAY LABEL CMD...
 slow=1
 [ -n "$asan" ] && slow=3
 term $((slow)) "SIGTERM while meshing (2e6 patches, contact cuts)" "$exe" info "$cornell" --unit mm --patches 2000000 -q
+term $((2 * slow)) "SIGTERM in the form factors (dense, exact visibility)" "$exe" solve "$cornell" --unit mm --patches 4000 --transport dense -o f.csv -q
 term $((2 * slow)) "SIGTERM while refining the hierarchy" "$exe" bounces "$cornell" --unit mm --transport hierarchical --eps 1e-6 --ff-visibility rays --size 64x64 -o h.exr -q
 term $((2 * slow)) "SIGTERM in the gather" "$exe" bounces "$cornell" $small --size 1024x1024 --spp 16 -o g.exr
 

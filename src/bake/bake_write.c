@@ -163,242 +163,313 @@ static bn_status bn__input_faces(const bn_bake *b, unsigned *face_n, size_t *fac
     return st;
 }
 
-bn_status bn_bake_write(const bn_bake *b, const char *path, const bn_bake_layer *layers, size_t nlayers,
-                        const bn_bake_write_opts *o, bn_error *err)
-{
-    const char *ext = bn__ext(path);
-    size_t nv = bn_bake_vertex_count(b), np, nf, nbad = 0, nout = nv;
-    const bn_patch *patches = bn_scene_patches(bn_bake_scene(b), &np);
-    const double *opos = bn_bake_vertex_positions(b);
-    double *cpos = NULL;
-    size_t *remap = NULL;
-    double *vv = NULL;
-    float **vals = NULL;
-    unsigned char *c8 = NULL;
-    unsigned *face_n = NULL;
-    size_t *face_idx = NULL;
-    char **names = NULL;
-    char *tmp = NULL, *prov = NULL;
-    bn_status st = BN_OK;
-    int is_ply = strcasecmp(ext, "ply") == 0, is_om = strcasecmp(ext, "om") == 0, is_obj = strcasecmp(ext, "obj") == 0;
-    int is_glb = strcasecmp(ext, "glb") == 0, is_gltf = strcasecmp(ext, "gltf") == 0;
+/* What bn_bake_write builds before a writer runs: the faces, the kept vertices and each layer's
+ * vertex values (owned). */
+typedef struct bn__bake_job {
+    size_t nv, nf, nlayers;
+    float **vals;          /* nlayers arrays of nv x 3 */
+    unsigned *face_n;
+    size_t *face_idx;      /* 4 per face, numbering the kept vertices */
+    const double *pos;     /* cpos, or the bake's own positions */
+    double *cpos;          /* --mesh input: the kept vertices' positions */
+    unsigned char *c8;     /* --ldr: 8-bit sRGB (3 per vertex) */
+} bn__bake_job;
 
-    if (!is_ply && !is_om && !is_obj && !is_glb && !is_gltf)
-        return bn_error_set(err, BN_EUSAGE, "%s: unknown mesh format '.%s' (bake writes .ply, .om, .obj, .glb and .gltf)",
-                            path, ext);
-    if (nlayers == 0)
-        return bn_error_set(err, BN_EINTERNAL, "%s: nothing to bake", path);
-    if (is_obj && nlayers > 1)
-        return bn_error_set(err, BN_EUSAGE, "%s: per-bounce colour sets need .ply or .om (OBJ has one colour per vertex)",
-                            path);
-    vv = bn__malloc_array(nv, 3 * sizeof(double));
-    vals = bn__calloc(nlayers, sizeof *vals);
-    names = bn__calloc(3 * nlayers, sizeof *names);
-    bn_scene_faces(bn_bake_scene(b), &nf);
-    if (!o->input_mesh)
-        nf = np;
-    face_n = bn__malloc_array(nf + 1, sizeof *face_n);
-    face_idx = bn__malloc_array(nf + 1, 4 * sizeof *face_idx);
-    if (!vv || !vals || !names || !face_n || !face_idx)
-        goto oom;
-    for (size_t l = 0; l < nlayers; l++) {
-        vals[l] = bn__malloc_array(nv, 3 * sizeof(float));
-        if (!vals[l])
-            goto oom;
+static void bn__job_free(bn__bake_job *j)
+{
+    for (size_t l = 0; j->vals && l < j->nlayers; l++)
+        free(j->vals[l]);
+    free(j->vals);
+    free(j->face_n);
+    free(j->face_idx);
+    free(j->cpos);
+    free(j->c8);
+}
+
+static bn_status bn__bake_oom(size_t nv, bn_error *err)
+{
+    return bn_error_set(err, BN_ENOMEM, "out of memory baking %zu vertices", nv);
+}
+
+/* Stops before a writer commits anything once SIGINT/SIGTERM has been raised. */
+static bn_status bn__bake_poll(const char *path, bn_error *err)
+{
+    bn_status s = bn_interrupted();
+    return s == BN_OK ? BN_OK : bn_error_set(err, s, "%s: interrupted; nothing was written", path);
+}
+
+/* Each layer's vertex values as float; BN_ENUMERIC, naming the count, when any is not finite. */
+static bn_status bn__job_values(const bn_bake *b, const char *path, const bn_bake_layer *layers, bn__bake_job *j,
+                                bn_error *err)
+{
+    size_t nbad = 0, nv = j->nv;
+    double *vv = bn__malloc_array(nv, 3 * sizeof(double));
+    j->vals = bn__calloc(j->nlayers, sizeof *j->vals);
+    for (size_t l = 0; vv && j->vals && l < j->nlayers; l++) {
+        if (!(j->vals[l] = bn__malloc_array(nv, 3 * sizeof(float))))
+            break;
         bn_bake_vertex_values(b, layers[l].patch_values, vv);
         for (size_t i = 0; i < 3 * nv; i++) {
-            vals[l][i] = (float)vv[i];
-            nbad += !isfinite(vals[l][i]);
+            j->vals[l][i] = (float)vv[i];
+            nbad += !isfinite(j->vals[l][i]);
         }
     }
-    if (nbad) {
-        st = bn_error_set(err, BN_ENUMERIC, "%s: %zu baked values are not finite; nothing was written", path, nbad);
-        goto done;
+    int whole = vv && j->vals && j->vals[j->nlayers - 1];
+    free(vv);
+    if (!whole)
+        return bn__bake_oom(nv, err);
+    if (nbad)
+        return bn_error_set(err, BN_ENUMERIC, "%s: %zu baked values are not finite; nothing was written", path, nbad);
+    return BN_OK;
+}
+
+/* --mesh input: keeps only the vertices the polygons' corners use, renumbered in corner order. */
+static bn_status bn__job_renumber(const bn_bake *b, bn__bake_job *j, bn_error *err)
+{
+    size_t nv = j->nv, nout = 0;
+    size_t *remap = bn__malloc_array(nv + 1, sizeof *remap);
+    const double *opos = bn_bake_vertex_positions(b);
+    j->cpos = bn__malloc_array(nv + 1, 3 * sizeof(double));
+    if (!remap || !j->cpos) {
+        free(remap);
+        return bn__bake_oom(nv, err);
     }
-    if (o->input_mesh) {   /* the input polygons: keep only the vertices their corners use, renumbered */
-        st = bn__input_faces(b, face_n, face_idx, err);
-        if (st != BN_OK)
-            goto done;
-        remap = bn__malloc_array(nv + 1, sizeof *remap);
-        cpos = bn__malloc_array(nv + 1, 3 * sizeof(double));
-        if (!remap || !cpos)
-            goto oom;
+    for (size_t i = 0; i < nv; i++)
+        remap[i] = SIZE_MAX;
+    for (size_t k = 0; k < j->nf; k++)
+        for (unsigned c = 0; c < j->face_n[k]; c++) {
+            size_t i = j->face_idx[4 * k + c];
+            if (remap[i] == SIZE_MAX) {
+                remap[i] = nout;
+                memcpy(j->cpos + 3 * nout, opos + 3 * i, 3 * sizeof(double));
+                nout++;
+            }
+            j->face_idx[4 * k + c] = remap[i];
+        }
+    for (size_t l = 0; l < j->nlayers; l++) {   /* values in the new order (a copy: the orders differ) */
+        float *c = bn__malloc_array(nout + 1, 3 * sizeof(float));
+        if (!c) {
+            free(remap);
+            return bn__bake_oom(nv, err);
+        }
         for (size_t i = 0; i < nv; i++)
-            remap[i] = SIZE_MAX;
-        nout = 0;
-        for (size_t k = 0; k < nf; k++)
-            for (unsigned c = 0; c < face_n[k]; c++) {
-                size_t i = face_idx[4 * k + c];
-                if (remap[i] == SIZE_MAX) {
-                    remap[i] = nout;
-                    memcpy(cpos + 3 * nout, opos + 3 * i, 3 * sizeof(double));
-                    nout++;
-                }
-                face_idx[4 * k + c] = remap[i];
-            }
-        for (size_t l = 0; l < nlayers; l++) {   /* values in the new order (a copy: the orders differ) */
-            float *c = bn__malloc_array(nout + 1, 3 * sizeof(float));
-            if (!c)
-                goto oom;
-            for (size_t i = 0; i < nv; i++)
-                if (remap[i] != SIZE_MAX)
-                    memcpy(c + 3 * remap[i], vals[l] + 3 * i, 3 * sizeof(float));
-            free(vals[l]);
-            vals[l] = c;
-        }
-        opos = cpos;
-    } else {
-        for (size_t p = 0; p < np; p++) {
-            face_n[p] = patches[p].ncorners;
-            for (unsigned c = 0; c < 4; c++)
-                face_idx[4 * p + c] = c < patches[p].ncorners ? bn_bake_corner_vertex(b, p, c) : 0;
-        }
+            if (remap[i] != SIZE_MAX)
+                memcpy(c + 3 * remap[i], j->vals[l] + 3 * i, 3 * sizeof(float));
+        free(j->vals[l]);
+        j->vals[l] = c;
     }
-    nv = nout;
-    if (o->ldr) {
-        c8 = bn__malloc_array(nv, 3);
-        if (!c8)
-            goto oom;
-        for (size_t i = 0; i < 3 * nv; i++)
-            c8[i] = bn_tonemap_srgb8(vals[0][i], o->exposure_ev);
+    free(remap);
+    j->pos = j->cpos;
+    j->nv = nout;
+    return BN_OK;
+}
+
+/* The faces written: every patch (the element mesh), or the input polygons. */
+static bn_status bn__job_faces(const bn_bake *b, int input_mesh, bn__bake_job *j, bn_error *err)
+{
+    size_t np;
+    const bn_patch *patches = bn_scene_patches(bn_bake_scene(b), &np);
+    bn_scene_faces(bn_bake_scene(b), &j->nf);
+    if (!input_mesh)
+        j->nf = np;
+    j->pos = bn_bake_vertex_positions(b);
+    j->face_n = bn__malloc_array(j->nf + 1, sizeof *j->face_n);
+    j->face_idx = bn__malloc_array(j->nf + 1, 4 * sizeof *j->face_idx);
+    if (!j->face_n || !j->face_idx)
+        return bn__bake_oom(j->nv, err);
+    if (input_mesh) {
+        bn_status st = bn__input_faces(b, j->face_n, j->face_idx, err);
+        return st == BN_OK ? bn__job_renumber(b, j, err) : st;
     }
-    if (is_obj) {
-        st = bn__write_obj(path, nv, opos, nf, face_n, face_idx, vals[0], c8, o, err);
-        goto done;
+    for (size_t p = 0; p < np; p++) {
+        j->face_n[p] = patches[p].ncorners;
+        for (unsigned c = 0; c < 4; c++)
+            j->face_idx[4 * p + c] = c < patches[p].ncorners ? bn_bake_corner_vertex(b, p, c) : 0;
     }
-    if (is_glb || is_gltf) {
-        const bn_face *faces = bn_scene_faces(bn_bake_scene(b), &(size_t){0});
-        unsigned *fm = bn__malloc_array(nf + 1, sizeof *fm);
-        const char **lnames = bn__malloc_array(nlayers, sizeof *lnames);
-        bn__bake_out g;
-        if (!fm || !lnames) {
-            free(fm);
-            free(lnames);
-            goto oom;
-        }
-        for (size_t k = 0; k < nf; k++)
-            fm[k] = o->input_mesh ? faces[k].material : patches[k].material;
-        double *power = bn__calloc(3 * nlayers, sizeof(double)),
-               m2 = bn_unit_to_metres(bn_scene_unit(bn_bake_scene(b)));
-        if (!power) {
-            free(fm);
-            free(lnames);
-            goto oom;
-        }
-        for (size_t l = 0; l < nlayers; l++) {
-            lnames[l] = layers[l].name;
-            for (size_t p = 0; p < np; p++)
-                for (int c = 0; c < 3; c++)
-                    power[3 * l + (size_t)c] += BN_PI * patches[p].area * m2 * m2 * layers[l].patch_values[3 * p + (size_t)c];
-        }
-        g = (bn__bake_out){nv, opos, nf, face_n, face_idx, fm, nlayers, (const float *const *)vals, lnames, c8,
-                           o->exposure_ev, power};
-        st = bn__write_gltf(path, is_glb, &g, bn_bake_scene(b), o, err);
-        free(fm);
-        free(lnames);
-        free(power);
-        goto done;
+    return BN_OK;
+}
+
+static bn_status bn__job_ldr(bn__bake_job *j, double exposure_ev, bn_error *err)
+{
+    if (!(j->c8 = bn__malloc_array(j->nv, 3)))
+        return bn__bake_oom(j->nv, err);
+    for (size_t i = 0; i < 3 * j->nv; i++)
+        j->c8[i] = bn_tonemap_srgb8(j->vals[0][i], exposure_ev);
+    return BN_OK;
+}
+
+/* glTF: each face's material, the layers' names and each layer's power pi sum_p A_p x_p (W). */
+static bn_status bn__bake_gltf(const bn_bake *b, const char *path, int is_glb, const bn_bake_layer *layers,
+                               const bn_bake_write_opts *o, const bn__bake_job *j, bn_error *err)
+{
+    const bn_scene *s = bn_bake_scene(b);
+    size_t np, nl = j->nlayers;
+    const bn_patch *patches = bn_scene_patches(s, &np);
+    const bn_face *faces = bn_scene_faces(s, &(size_t){0});
+    unsigned *fm = bn__malloc_array(j->nf + 1, sizeof *fm);
+    const char **lnames = bn__malloc_array(nl, sizeof *lnames);
+    double *power = bn__calloc(3 * nl, sizeof(double)), m2 = bn_unit_to_metres(bn_scene_unit(s));
+    bn_status st = fm && lnames && power ? BN_OK : bn__bake_oom(j->nv, err);
+    for (size_t k = 0; st == BN_OK && k < j->nf; k++)
+        fm[k] = o->input_mesh ? faces[k].material : patches[k].material;
+    for (size_t l = 0; st == BN_OK && l < nl; l++) {
+        lnames[l] = layers[l].name;
+        for (size_t p = 0; p < np; p++)
+            for (int c = 0; c < 3; c++)
+                power[3 * l + (size_t)c] += BN_PI * patches[p].area * m2 * m2 * layers[l].patch_values[3 * p + (size_t)c];
     }
-    {
-        const char *suffix[3] = {"red", "green", "blue"};
-        float **extra = bn__calloc(3 * nlayers, sizeof *extra);
-        size_t nextra = 0, dup = 0, plen = 64;
-        bn__bake_mesh m;
-        if (!extra)
-            goto oom;
-        for (size_t l = 1; l < nlayers; l++)
-            for (int c = 0; c < 3; c++) {
-                size_t len = strlen(layers[l].name) + 8;
-                names[nextra] = malloc(len);
-                extra[nextra] = bn__malloc_array(nv, sizeof(float));
-                if (!names[nextra] || !extra[nextra]) {
-                    free(names[nextra]);
-                    free(extra[nextra]);
-                    names[nextra] = NULL;
-                    for (size_t e = 0; e < nextra; e++)
-                        free(extra[e]);
-                    free(extra);
-                    goto oom;
-                }
-                snprintf(names[nextra], len, "%s_%s", layers[l].name, suffix[c]);
-                for (size_t v = 0; v < nv; v++)
-                    extra[nextra][v] = vals[l][3 * v + c];
-                nextra++;
-            }
-        for (size_t a = 0; a < o->nattrs; a++)
-            plen += strlen(o->attrs[a].key) + strlen(o->attrs[a].value) + 4;
-        prov = malloc(plen);
-        if (prov) {
-            size_t k = (size_t)snprintf(prov, plen, "bounce %s\n", bn_version());
-            for (size_t a = 0; a < o->nattrs && k < plen; a++)
-                k += (size_t)snprintf(prov + k, plen - k, "%s: %s\n", o->attrs[a].key, o->attrs[a].value);
+    if (st == BN_OK) {
+        bn__bake_out g = {j->nv,  j->pos, j->nf,          j->face_n, j->face_idx, fm,
+                          nl,     (const float *const *)j->vals, lnames, j->c8, o->exposure_ev, power};
+        st = bn__write_gltf(path, is_glb, &g, s, o, err);
+    }
+    free(fm);
+    free(lnames);
+    free(power);
+    return st;
+}
+
+/* Layers 1.. as float vertex properties NAME_red, NAME_green, NAME_blue: 3 (nlayers - 1) names and
+ * arrays, allocated in (*names)[] and (*extra)[] (3 nlayers slots, freed by bn__extra_free). */
+static bn_status bn__extra_props(const bn_bake_layer *layers, const bn__bake_job *j, char ***names, float ***extra,
+                                 bn_error *err)
+{
+    static const char *suffix[3] = {"red", "green", "blue"};
+    size_t n = 0;
+    *names = bn__calloc(3 * j->nlayers, sizeof **names);
+    *extra = bn__calloc(3 * j->nlayers, sizeof **extra);
+    if (!*names || !*extra)
+        return bn__bake_oom(j->nv, err);
+    for (size_t l = 1; l < j->nlayers; l++)
+        for (size_t c = 0; c < 3; c++, n++) {
+            size_t len = strlen(layers[l].name) + 8;
+            (*names)[n] = malloc(len);
+            (*extra)[n] = bn__malloc_array(j->nv + 1, sizeof(float));
+            if (!(*names)[n] || !(*extra)[n])
+                return bn__bake_oom(j->nv, err);
+            snprintf((*names)[n], len, "%s_%s", layers[l].name, suffix[c]);
+            for (size_t v = 0; v < j->nv; v++)
+                (*extra)[n][v] = j->vals[l][3 * v + c];
         }
-        memset(&m, 0, sizeof m);
-        m.nverts = nv;
-        m.pos = opos;
-        m.nfaces = nf;
-        m.face_n = face_n;
-        m.face_idx = face_idx;
-        m.colour = c8 ? NULL : vals[0];
-        m.colour8 = c8;
-        m.nextra = nextra;
-        m.extra_name = (const char *const *)names;
-        m.extra = (const float *const *)extra;
-        m.provenance = is_om ? prov : NULL;
-        /* PLY: OpenMesh writes a first temporary, which is copied with comments into the second
-         * (bn__outfile); both temporaries need distinct names, so the first is named after
-         * "<stem>.openmesh.ply". */
-        if (is_ply) {
-            size_t len = strlen(path) + 16;
-            char *alt = malloc(len);
-            if (!alt)
-                goto oom;
-            snprintf(alt, len, "%.*s.openmesh.ply", (int)(strlen(path) - 4), path);
-            st = bn__tmpname_reserve(alt, &tmp, err);
-            free(alt);
-        } else {
-            st = bn__tmpname_reserve(path, &tmp, err);
-        }
-        if (st == BN_OK && (st = bn__openmesh_write(tmp, &m, &dup, err)) != BN_OK && err) {
+    return BN_OK;
+}
+
+static void bn__extra_free(char **names, float **extra, size_t n)
+{
+    for (size_t i = 0; i < n; i++) {
+        free(names ? names[i] : NULL);
+        free(extra ? extra[i] : NULL);
+    }
+    free(names);
+    free(extra);
+}
+
+/* "bounce VERSION" and each attribute as `key: value` lines (the OM mesh property); NULL without memory. */
+static char *bn__provenance_text(const bn_bake_write_opts *o)
+{
+    size_t plen = 64, k;
+    for (size_t a = 0; a < o->nattrs; a++)
+        plen += strlen(o->attrs[a].key) + strlen(o->attrs[a].value) + 4;
+    char *prov = malloc(plen);
+    if (!prov)
+        return NULL;
+    k = (size_t)snprintf(prov, plen, "bounce %s\n", bn_version());
+    for (size_t a = 0; a < o->nattrs && k < plen; a++)
+        k += (size_t)snprintf(prov + k, plen - k, "%s: %s\n", o->attrs[a].key, o->attrs[a].value);
+    return prov;
+}
+
+/* PLY: OpenMesh writes a first temporary, which is copied with comments into the second
+ * (bn__outfile); the two need distinct names, so the first is named after "<stem>.openmesh.ply". */
+static bn_status bn__openmesh_tmp(const char *path, int is_ply, char **tmp, bn_error *err)
+{
+    if (!is_ply)
+        return bn__tmpname_reserve(path, tmp, err);
+    size_t len = strlen(path) + 16;
+    char *alt = malloc(len);
+    if (!alt)
+        return bn_error_set(err, BN_ENOMEM, "%s: out of memory", path);
+    snprintf(alt, len, "%.*s.openmesh.ply", (int)(strlen(path) - 4), path);
+    bn_status st = bn__tmpname_reserve(alt, tmp, err);
+    free(alt);
+    return st;
+}
+
+/* .ply and .om through OpenMesh, layers 1.. as extra float vertex properties. */
+static bn_status bn__bake_openmesh(const char *path, int is_ply, const bn_bake_layer *layers,
+                                   const bn_bake_write_opts *o, const bn__bake_job *j, bn_error *err)
+{
+    char **names = NULL, *tmp = NULL, *prov = is_ply ? NULL : bn__provenance_text(o);
+    float **extra = NULL;
+    size_t dup = 0;
+    bn_status st = bn__extra_props(layers, j, &names, &extra, err);
+    if (st == BN_OK)
+        st = bn__openmesh_tmp(path, is_ply, &tmp, err);
+    if (st == BN_OK) {
+        bn__bake_mesh m = {j->nv, j->pos, j->nf, j->face_n, j->face_idx, j->c8 ? NULL : j->vals[0], j->c8,
+                           3 * (j->nlayers - 1), (const char *const *)names, (const float *const *)extra, prov};
+        if ((st = bn__openmesh_write(tmp, &m, &dup, err)) != BN_OK && err) {
             char inner[BN_ERROR_MSG_MAX];   /* the message names the output, not the temporary */
             snprintf(inner, sizeof inner, "%s", err->msg);
             bn_error_set(err, st, "%s: %s", path, inner);
         }
-        for (size_t e = 0; e < nextra; e++)
-            free(extra[e]);
-        free(extra);
-        if (st == BN_OK && dup)
-            bn_logf(o->log, BN_LOG_WARN,
-                    "%s: %zu vertices were duplicated for faces OpenMesh's half-edge mesh cannot share (non-manifold)",
-                    path, dup);
-        if (st == BN_OK && is_ply) {
-            st = bn__ply_add_comments(tmp, path, o, err);
-            bn__tmpname_abort(tmp);
-        } else if (st == BN_OK) {
-            st = bn__tmpname_commit(path, tmp, err);
-        } else {
-            bn__tmpname_abort(tmp);
-        }
-        tmp = NULL;
     }
-    goto done;
-oom:
-    st = bn_error_set(err, BN_ENOMEM, "out of memory baking %zu vertices", nv);
-done:
-    if (vals)
-        for (size_t l = 0; l < nlayers; l++)
-            free(vals[l]);
-    if (names)
-        for (size_t i = 0; i < 3 * nlayers; i++)
-            free(names[i]);
-    free(vals);
-    free(names);
-    free(vv);
-    free(c8);
-    free(face_n);
-    free(face_idx);
+    bn__extra_free(names, extra, 3 * j->nlayers);
     free(prov);
-    free(remap);
-    free(cpos);
+    if (st == BN_OK && dup)
+        bn_logf(o->log, BN_LOG_WARN,
+                "%s: %zu vertices were duplicated for faces OpenMesh's half-edge mesh cannot share (non-manifold)",
+                path, dup);
+    if (st == BN_OK && (st = bn__bake_poll(path, err)) == BN_OK && is_ply)
+        st = bn__ply_add_comments(tmp, path, o, err);
+    else if (st == BN_OK)
+        return bn__tmpname_commit(path, tmp, err);
+    bn__tmpname_abort(tmp);
+    return st;
+}
+
+enum { BN__BAKE_PLY, BN__BAKE_OM, BN__BAKE_OBJ, BN__BAKE_GLB, BN__BAKE_GLTF };
+
+/* The format from the extension, and what it can carry. */
+static bn_status bn__bake_format(const char *path, size_t nlayers, int *fmt, bn_error *err)
+{
+    static const char *ext[] = {"ply", "om", "obj", "glb", "gltf"};
+    const char *e = bn__ext(path);
+    *fmt = -1;
+    for (int i = 0; i < 5; i++)
+        if (strcasecmp(e, ext[i]) == 0)
+            *fmt = i;
+    if (*fmt < 0)
+        return bn_error_set(err, BN_EUSAGE, "%s: unknown mesh format '.%s' (bake writes .ply, .om, .obj, .glb and .gltf)",
+                            path, e);
+    if (nlayers == 0)
+        return bn_error_set(err, BN_EINTERNAL, "%s: nothing to bake", path);
+    if (*fmt == BN__BAKE_OBJ && nlayers > 1)
+        return bn_error_set(err, BN_EUSAGE, "%s: per-bounce colour sets need .ply or .om (OBJ has one colour per vertex)",
+                            path);
+    return BN_OK;
+}
+
+bn_status bn_bake_write(const bn_bake *b, const char *path, const bn_bake_layer *layers, size_t nlayers,
+                        const bn_bake_write_opts *o, bn_error *err)
+{
+    bn__bake_job j = {.nv = bn_bake_vertex_count(b), .nlayers = nlayers};
+    int fmt;
+    bn_status st = bn__bake_format(path, nlayers, &fmt, err);
+    if (st == BN_OK)
+        st = bn__job_values(b, path, layers, &j, err);
+    if (st == BN_OK)
+        st = bn__job_faces(b, o->input_mesh, &j, err);
+    if (st == BN_OK && o->ldr)
+        st = bn__job_ldr(&j, o->exposure_ev, err);
+    if (st == BN_OK)
+        st = bn__bake_poll(path, err);
+    if (st == BN_OK && fmt == BN__BAKE_OBJ)
+        st = bn__write_obj(path, j.nv, j.pos, j.nf, j.face_n, j.face_idx, j.vals[0], j.c8, o, err);
+    else if (st == BN_OK && (fmt == BN__BAKE_GLB || fmt == BN__BAKE_GLTF))
+        st = bn__bake_gltf(b, path, fmt == BN__BAKE_GLB, layers, o, &j, err);
+    else if (st == BN_OK)
+        st = bn__bake_openmesh(path, fmt == BN__BAKE_PLY, layers, o, &j, err);
+    bn__job_free(&j);
     return st;
 }

@@ -67,7 +67,9 @@ uint64_t bn__rng_u64(bn__rng *r);
 double bn__rng_uniform(bn__rng *r);   /* [0, 1) with 53 bits */
 
 /* Atomic output files: written to a temporary name beside the target and renamed when
- * complete. Every temporary name is registered so an interrupt can remove it. */
+ * complete. Every temporary name is registered so an interrupt can remove it; once SIGINT or
+ * SIGTERM has been raised (bn_interrupted), a commit removes the temporary instead and fails with
+ * that status: an interrupted run leaves no output. */
 typedef struct bn__outfile {
     FILE *fp;
     char *path;

@@ -184,7 +184,10 @@ bn_status bn__tmpname_commit(const char *path, char *tmp, bn_error *err)
         bn__tmpname_abort(tmp);
         return BN_OK;
     }
-    if (rename(tmp, path) != 0) {
+    if (bn_interrupted() != BN_OK) {   /* an interrupted run commits nothing, whatever it had finished */
+        st = bn_error_set(err, bn_interrupted(), "%s: interrupted; not written", path);
+        unlink(tmp);
+    } else if (rename(tmp, path) != 0) {
         st = bn_error_set(err, BN_EIO, "%s: cannot rename %s into place: %s", path, tmp, strerror(errno));
         unlink(tmp);
     }
