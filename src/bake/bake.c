@@ -122,39 +122,18 @@ static bn_status bn__find_tjunctions(bn_bake *b, const bn_patch *patches, size_t
     return BN_OK;
 }
 
-bn_status bn_bake_create(const bn_scene *scene, double crease_deg, bn_bake **out, bn_error *err)
+/* The create's working tables: each patch vertex's welded root, and the (patch, corner)
+ * incidences per root (CSR) with each incidence's output vertex. */
+typedef struct bn__bake_tmp {
+    size_t *weld, *inc_start, *inc, *gid, ninc;
+} bn__bake_tmp;
+
+/* 1. Weld: sort by x, sweep a window of width eps, union points within eps; weld[i] = i's root. */
+static bn_status bn__weld(const double *pv, size_t npv, double eps, size_t *weld)
 {
-    size_t np, npv, ninc = 0, nout = 0;
-    const bn_patch *patches = bn_scene_patches(scene, &np);
-    const double *pv = bn_scene_patch_vertices(scene, &npv);
-    double lo[3], hi[3], d[3], eps, cos_crease;
-    bn__xkey *order = NULL;
-    size_t *weld = NULL, *inc_start = NULL, *inc = NULL, *fill = NULL, *local = NULL, *gid = NULL;
-    bn_bake *b = NULL;
-    bn_status st = BN_ENOMEM;
-
-    *out = NULL;
-    int flat = crease_deg == BN_BAKE_FLAT;
-    if (!flat && !(crease_deg >= 0 && crease_deg <= 180))
-        return bn_error_set(err, BN_EINPUT, "crease angle %g is not within [0, 180] degrees", crease_deg);
-    if (np == 0)
-        return bn_error_set(err, BN_EINPUT, "%s: the scene has no patches to bake", bn_scene_path(scene));
-    cos_crease = cos(crease_deg * BN_PI / 180.0);
-    bn_scene_bounds(scene, lo, hi);
-    bn_v3_sub(hi, lo, d);
-    /* Points computed from two faces' grids agree to rounding (~1e-16 relative); genuinely distinct
-     * points are a patch edge apart. 1e-9 of the scene's diameter sits safely between. */
-    eps = 1e-9 * bn_v3_len(d);
-
-    b = calloc(1, sizeof *b);
-    order = bn__malloc_array(npv, sizeof *order);
-    weld = bn__malloc_array(npv, sizeof *weld);
-    inc_start = bn__calloc(npv + 1, sizeof *inc_start);
-    if (!b || !order || !weld || !inc_start)
-        goto fail;
-    b->scene = scene;
-
-    /* 1. Weld: sort by x, sweep a window of width eps, union points within eps. */
+    bn__xkey *order = bn__malloc_array(npv, sizeof *order);
+    if (!order)
+        return BN_ENOMEM;
     for (size_t i = 0; i < npv; i++) {
         order[i].x = pv[3 * i];
         order[i].i = weld[i] = i;
@@ -166,38 +145,49 @@ bn_status bn_bake_create(const bn_scene *scene, double crease_deg, bn_bake **out
                 bn__uf_union(weld, order[a].i, order[c].i);
     for (size_t i = 0; i < npv; i++)
         weld[i] = bn__uf_find(weld, i);
+    free(order);
+    return BN_OK;
+}
 
-    /* 2. Incidences (patch, corner) per welded point, CSR keyed by the point's root. */
+/* 2. Incidences (4 patch + corner) per welded point, CSR keyed by the point's root. */
+static bn_status bn__incidences(const bn_patch *patches, size_t np, size_t npv, bn__bake_tmp *t)
+{
+    size_t *fill;
     for (size_t p = 0; p < np; p++)
         for (unsigned c = 0; c < patches[p].ncorners; c++) {
-            inc_start[weld[patches[p].corner[c]] + 1]++;
-            ninc++;
+            t->inc_start[t->weld[patches[p].corner[c]] + 1]++;
+            t->ninc++;
         }
     for (size_t i = 0; i < npv; i++)
-        inc_start[i + 1] += inc_start[i];
-    inc = bn__malloc_array(ninc, sizeof *inc);
+        t->inc_start[i + 1] += t->inc_start[i];
+    t->inc = bn__malloc_array(t->ninc, sizeof *t->inc);
+    t->gid = bn__malloc_array(t->ninc, sizeof *t->gid);
     fill = bn__malloc_array(npv, sizeof *fill);
-    local = bn__malloc_array(ninc, sizeof *local);
-    gid = bn__malloc_array(ninc, sizeof *gid);
-    b->corner_v = bn__malloc_array(np * 4, sizeof(size_t));
-    if (!inc || !fill || !local || !gid || !b->corner_v)
-        goto fail;
-    memcpy(fill, inc_start, npv * sizeof *fill);
-    for (size_t p = 0; p < np; p++) {
-        for (unsigned c = 0; c < 4; c++)
-            b->corner_v[4 * p + c] = SIZE_MAX;
-        for (unsigned c = 0; c < patches[p].ncorners; c++)
-            inc[fill[weld[patches[p].corner[c]]]++] = 4 * p + c;
+    if (!t->inc || !t->gid || !fill) {
+        free(fill);
+        return BN_ENOMEM;
     }
+    memcpy(fill, t->inc_start, npv * sizeof *fill);
+    for (size_t p = 0; p < np; p++)
+        for (unsigned c = 0; c < patches[p].ncorners; c++)
+            t->inc[fill[t->weld[patches[p].corner[c]]]++] = 4 * p + c;
+    free(fill);
+    return BN_OK;
+}
 
-    /* 3. Groups per point: union incident patches of one material with normals within the crease. */
+/* 3. Groups per point: incident patches of one material with normals within the crease (none when
+ * flat) share an output vertex; gid[] numbers them in point order. Returns the output vertices. */
+static size_t bn__group_points(const bn_patch *patches, size_t npv, int flat, double cos_crease, bn__bake_tmp *t,
+                               size_t *local)
+{
+    size_t nout = 0;
     for (size_t w = 0; w < npv; w++) {
-        size_t s = inc_start[w], e = inc_start[w + 1];
+        size_t s = t->inc_start[w], e = t->inc_start[w + 1];
         for (size_t i = s; i < e; i++)
             local[i] = i - s;
         for (size_t i = s; i < e; i++)
             for (size_t j = i + 1; j < e; j++) {
-                const bn_patch *pi = &patches[inc[i] / 4], *pj = &patches[inc[j] / 4];
+                const bn_patch *pi = &patches[t->inc[i] / 4], *pj = &patches[t->inc[j] / 4];
                 if (!flat && pi->material == pj->material &&
                     bn_v3_dot(pi->normal, pj->normal) >= cos_crease - 1e-12)
                     bn__uf_union(local + s, i - s, j - s);
@@ -205,49 +195,89 @@ bn_status bn_bake_create(const bn_scene *scene, double crease_deg, bn_bake **out
         for (size_t i = s; i < e; i++) {
             size_t r = bn__uf_find(local + s, i - s);
             if (r == i - s)
-                gid[i] = nout++;
+                t->gid[i] = nout++;
             else
-                gid[i] = gid[s + r];   /* the root comes first: already numbered */
+                t->gid[i] = t->gid[s + r];   /* the root comes first: already numbered */
         }
     }
-    b->nverts = nout;
+    return nout;
+}
+
+/* 4. The output vertices: positions, each corner's vertex, each vertex's patches (CSR). */
+static bn_status bn__vertex_lists(bn_bake *b, const double *pv, size_t np, size_t npv, const bn__bake_tmp *t)
+{
+    size_t nout = b->nverts, *fill;
+    b->corner_v = bn__malloc_array(np * 4, sizeof(size_t));
     b->pos = bn__malloc_array(nout, 3 * sizeof(double));
     b->vstart = bn__calloc(nout + 1, sizeof(size_t));
-    b->vpatch = bn__malloc_array(ninc, sizeof(size_t));
-    if (!b->pos || !b->vstart || !b->vpatch)
-        goto fail;
+    b->vpatch = bn__malloc_array(t->ninc, sizeof(size_t));
+    fill = bn__malloc_array(nout, sizeof *fill);
+    if (!b->corner_v || !b->pos || !b->vstart || !b->vpatch || !fill) {
+        free(fill);
+        return BN_ENOMEM;
+    }
+    for (size_t i = 0; i < np * 4; i++)
+        b->corner_v[i] = SIZE_MAX;
     for (size_t w = 0; w < npv; w++)
-        for (size_t i = inc_start[w]; i < inc_start[w + 1]; i++) {
-            memcpy(b->pos + 3 * gid[i], pv + 3 * w, 3 * sizeof(double));
-            b->corner_v[inc[i]] = gid[i];
-            b->vstart[gid[i] + 1]++;
+        for (size_t i = t->inc_start[w]; i < t->inc_start[w + 1]; i++) {
+            memcpy(b->pos + 3 * t->gid[i], pv + 3 * w, 3 * sizeof(double));
+            b->corner_v[t->inc[i]] = t->gid[i];
+            b->vstart[t->gid[i] + 1]++;
         }
     for (size_t v = 0; v < nout; v++)
         b->vstart[v + 1] += b->vstart[v];
-    free(fill);
-    fill = bn__malloc_array(nout, sizeof *fill);
-    if (!fill)
-        goto fail;
     memcpy(fill, b->vstart, nout * sizeof *fill);
     for (size_t w = 0; w < npv; w++)
-        for (size_t i = inc_start[w]; i < inc_start[w + 1]; i++)
-            b->vpatch[fill[gid[i]]++] = inc[i] / 4;
-    if (!flat && bn__find_tjunctions(b, patches, np, eps, cos_crease) != BN_OK)
-        goto fail;
-    st = BN_OK;
-    *out = b;
-    b = NULL;
-fail:
-    if (st != BN_OK)
-        bn_error_set(err, st, "out of memory baking %zu patches", np);
-    bn_bake_destroy(b);
-    free(order);
-    free(weld);
-    free(inc_start);
-    free(inc);
+        for (size_t i = t->inc_start[w]; i < t->inc_start[w + 1]; i++)
+            b->vpatch[fill[t->gid[i]]++] = t->inc[i] / 4;
     free(fill);
+    return BN_OK;
+}
+
+bn_status bn_bake_create(const bn_scene *scene, double crease_deg, bn_bake **out, bn_error *err)
+{
+    size_t np, npv, *local = NULL;
+    const bn_patch *patches = bn_scene_patches(scene, &np);
+    const double *pv = bn_scene_patch_vertices(scene, &npv);
+    double lo[3], hi[3], d[3], eps, cos_crease = cos(crease_deg * BN_PI / 180.0);
+    int flat = crease_deg == BN_BAKE_FLAT;
+    bn__bake_tmp t = {0};
+    bn_bake *b;
+    bn_status st = BN_ENOMEM;
+
+    *out = NULL;
+    if (!flat && !(crease_deg >= 0 && crease_deg <= 180))
+        return bn_error_set(err, BN_EINPUT, "crease angle %g is not within [0, 180] degrees", crease_deg);
+    if (np == 0)
+        return bn_error_set(err, BN_EINPUT, "%s: the scene has no patches to bake", bn_scene_path(scene));
+    bn_scene_bounds(scene, lo, hi);
+    bn_v3_sub(hi, lo, d);
+    /* Points computed from two faces' grids agree to rounding (~1e-16 relative); genuinely distinct
+     * points are a patch edge apart. 1e-9 of the scene's diameter sits safely between. */
+    eps = 1e-9 * bn_v3_len(d);
+    b = calloc(1, sizeof *b);
+    t.weld = bn__malloc_array(npv, sizeof *t.weld);
+    t.inc_start = bn__calloc(npv + 1, sizeof *t.inc_start);
+    if (b && t.weld && t.inc_start && bn__weld(pv, npv, eps, t.weld) == BN_OK &&
+        bn__incidences(patches, np, npv, &t) == BN_OK && (local = bn__malloc_array(t.ninc, sizeof *local))) {
+        b->scene = scene;
+        b->nverts = bn__group_points(patches, npv, flat, cos_crease, &t, local);
+        if (bn__vertex_lists(b, pv, np, npv, &t) == BN_OK &&
+            (flat || bn__find_tjunctions(b, patches, np, eps, cos_crease) == BN_OK))
+            st = BN_OK;
+    }
+    if (st == BN_OK) {
+        *out = b;
+        b = NULL;
+    } else {
+        bn_error_set(err, st, "out of memory baking %zu patches", np);
+    }
+    bn_bake_destroy(b);
+    free(t.weld);
+    free(t.inc_start);
+    free(t.inc);
+    free(t.gid);
     free(local);
-    free(gid);
     return st;
 }
 
