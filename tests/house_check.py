@@ -1,0 +1,210 @@
+#!/usr/bin/env python3
+"""The house's rules, checked on the source tree (issue 39): every function under src/ at most
+LIMIT lines, no circle between src/'s files or directories (who calls whom, from the object
+files), nothing under src/transport calling into src/formfactor, and no library message (a string outside
+src/cli) naming a command-line flag ("--name").
+
+Functions and messages not yet brought under the rules are listed in KNOWN with their size when
+listed: the check fails when a new one appears or a listed one grows, and says so when a listed one
+has been fixed (so the list only shrinks). usage: house_check.py SOURCE_DIR OBJECT_DIR (the bounce library's, CMakeFiles/bounce.dir)"""
+import glob
+import os
+import re
+import subprocess
+import sys
+
+LIMIT = 100
+
+# function -> its length when listed (to be split: issue 39)
+KNOWN_LONG = {
+    "bn__hierarchy_body": 250, "bn__ff_point_visible": 207, "bn_cmd_study": 206, "bn__gather_body": 201,
+    "bn_cmd_bake": 177, "bn_partition_regions": 165, "bn__panels": 157, "bn_exr_write": 156,
+    "bn_cmd_trace": 150, "bn_crosscheck_compare": 148, "bn__read_obj_stream": 143, "bn__draw": 139,
+    "bn_cmd_bounces": 128, "bn__trace_items_run_body": 127, "bn_cmd_crosscheck": 126, "bn__methods": 123,
+    "bn__study_compare": 121, "bn__solid_planes": 121, "bn__trace_image_run_body": 117,
+    "bn__solids_find": 115, "bn_cmd_info": 113, "bn__ply_record": 112, "bn__grid": 112,
+    "bn__mesh_contacts": 112, "bn__pair_value": 107, "bn__tree_build": 104, "bn__integral": 104,
+    "bn__rebalance": 101,
+}
+
+# circles between files (and between src/ directories, "dir NAME") not yet removed, from what each
+# object file calls (nm); and calls from src/transport up into src/formfactor
+KNOWN_CIRCLES = {
+    ("base/util.c", "dist/dist.c"),
+    ("adapters/openmesh_io.cpp", "scene/obj.c", "scene/off.c", "scene/ply.c", "scene/scene.c"),
+    ("bake/bake.c", "image/preview.c", "image/render.c"),
+    ("scene/contact.c", "scene/mesh.c"),
+    ("formfactor/kernel.c", "formfactor/visible.c"),
+    ("dir base", "dir dist"),
+    ("dir adapters", "dir scene"),
+    ("dir formfactor", "dir transport"),
+    ("dir bake", "dir gather", "dir image"),
+}
+KNOWN_UPHILL = {("transport/hierarchy/refine.c", "formfactor/formfactor.c")}
+
+# library files whose strings still name command-line flags, and how many
+KNOWN_FLAGS = {
+    "formfactor/formfactor.c": 5, "pipeline/crosscheck.c": 2, "pipeline/pipeline.c": 3, "solve/direct.c": 1,
+    "solve/solve.c": 2, "study/study.c": 2, "trace/camera.c": 1, "transport/builder.c": 2,
+    "transport/hierarchy/refine.c": 2,
+}
+
+
+def functions(path):
+    """(name, first line, length) of each top-level function: a line '{' at column 0 after its
+    head, to the next '}' at column 0."""
+    lines = open(path, errors="replace").read().split("\n")
+    i = 0
+    while i < len(lines):
+        if lines[i] == "{" and i > 0:
+            j = i - 1
+            while j > 0 and lines[j][:1] in (" ", "\t"):
+                j -= 1
+            names = re.findall(r"(\w+)\s*\(", lines[j])
+            k = i + 1
+            while k < len(lines) and not lines[k].startswith("}"):
+                k += 1
+            if names:
+                yield names[0], j + 1, k - j + 1
+            i = k
+        i += 1
+
+
+def check_functions(src, report):
+    seen = set()
+    for d, _, fs in os.walk(src):
+        for f in sorted(fs):
+            if not f.endswith((".c", ".cpp", ".h")):
+                continue
+            p = os.path.join(d, f)
+            for name, line, n in functions(p):
+                if n <= LIMIT:
+                    continue
+                seen.add(name)
+                where = "%s:%d %s is %d lines" % (os.path.relpath(p, src), line, name, n)
+                if name not in KNOWN_LONG:
+                    report(False, where + " (at most %d)" % LIMIT)
+                elif n > KNOWN_LONG[name]:
+                    report(False, where + ", longer than the %d listed" % KNOWN_LONG[name])
+    for name in sorted(set(KNOWN_LONG) - seen):
+        print("note: %s is now at most %d lines: remove it from KNOWN_LONG" % (name, LIMIT))
+    print("functions over %d lines: %d (listed: %d)" % (LIMIT, len(seen), len(KNOWN_LONG)))
+
+
+def link_graph(objdir):
+    """file -> the files whose functions it calls, from the library's object files (nm): the true
+    dependency between files, whatever header declares what."""
+    defs, undef = {}, {}
+    objs = sorted(glob.glob(os.path.join(objdir, "src", "**", "*.o"), recursive=True))
+    base = os.path.join(objdir, "src")
+    if not objs:
+        return {}
+    for flag, defined in (("--defined-only", True), ("--undefined-only", False)):
+        nm = subprocess.run(["nm", "-A", "-g", flag] + objs, capture_output=True, text=True).stdout
+        for line in nm.splitlines():   # "path.o:[address] TYPE symbol"
+            m = re.match(r"^(.*?\.o):\s*(?:[0-9a-f]+\s+)?[A-Za-z]\s+(\S+)$", line)
+            if not m:
+                continue
+            name = os.path.relpath(m.group(1), base)[:-2]
+            undef.setdefault(name, set())
+            if defined:
+                defs[m.group(2)] = name
+            else:
+                undef[name].add(m.group(2))
+    graph = {f: {defs[u] for u in us if u in defs and defs[u] != f} for f, us in undef.items()}
+    return graph
+
+
+def circles(graph):
+    """The strongly connected components of more than one node (Tarjan), each sorted."""
+    index, low, stack, on, out = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in sorted(graph.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(tuple(sorted(comp)))
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def check_links(objdir, report):
+    graph = link_graph(objdir)
+    if not graph:
+        report(False, "no object files under %s/src" % objdir)
+        return
+    dirs = {}
+    for f, ts in graph.items():
+        for t in ts:
+            if f.split("/")[0] != t.split("/")[0]:
+                dirs.setdefault(f.split("/")[0], set()).add(t.split("/")[0])
+    found = circles(graph) + [tuple(["dir " + d for d in c]) for c in circles(dirs)]
+    for c in found:
+        if c not in KNOWN_CIRCLES:
+            report(False, "a circle between files: " + " <-> ".join(c))
+    for c in sorted(KNOWN_CIRCLES - set(found)):
+        print("note: the circle %s is gone: remove it from KNOWN_CIRCLES" % " <-> ".join(c))
+    for f in sorted(graph):
+        for t in sorted(graph[f]):
+            if f.startswith("transport/") and t.startswith("formfactor/") and (f, t) not in KNOWN_UPHILL:
+                report(False, "%s calls into %s: src/transport sits below src/formfactor" % (f, t))
+    print("circles between files and directories: %d (listed: %d)" % (len(found), len(KNOWN_CIRCLES)))
+
+
+def check_messages(src, report):
+    """String literals outside src/cli that name a flag: '--' followed by a letter."""
+    count = {}
+    for d, _, fs in os.walk(src):
+        if os.path.relpath(d, src).split(os.sep)[0] == "cli":
+            continue
+        for f in sorted(fs):
+            if not f.endswith((".c", ".cpp", ".h")):
+                continue
+            p = os.path.join(d, f)
+            rel = os.path.relpath(p, src)
+            for ln, line in enumerate(open(p, errors="replace"), 1):
+                code = re.sub(r"/\*.*?\*/|//.*$", "", line)
+                for lit in re.findall(r'"((?:[^"\\]|\\.)*)"', code):
+                    if re.search(r"--[a-z]", lit):
+                        count[rel] = count.get(rel, 0) + 1
+                        if count[rel] > KNOWN_FLAGS.get(rel, 0):
+                            report(False, "%s:%d: a library message names a command-line flag: \"%s\"" % (rel, ln, lit[:60]))
+    for rel in sorted(KNOWN_FLAGS):
+        if count.get(rel, 0) < KNOWN_FLAGS[rel]:
+            print("note: %s names fewer flags (%d) than listed: lower KNOWN_FLAGS" % (rel, count.get(rel, 0)))
+    print("library strings naming a flag: %d (listed: %d)" % (sum(count.values()), sum(KNOWN_FLAGS.values())))
+
+
+def main():
+    src = os.path.join(sys.argv[1], "src")
+    failures = []
+
+    def report(ok, msg):
+        if not ok:
+            failures.append(msg)
+            print("FAIL " + msg)
+    check_functions(src, report)
+    check_links(sys.argv[2], report)
+    check_messages(src, report)
+    sys.exit(1 if failures else 0)
+
+
+if __name__ == "__main__":
+    main()
