@@ -111,8 +111,15 @@ for how in $hows; do
     rm -f k.exr k.csv k.err
     mpirun --oversubscribe -np 2 "$bounce" "${long[@]}" >/dev/null 2>k.err &
     mpid=$!
-    sleep 4
-    ranks=$(pgrep -P "$mpid" -f "bounce trace" | tr '\n' ' ')
+    # until both ranks are at work (a second of CPU each: past start-up and the signal handlers), not
+    # a fixed sleep: under load the ranks may take seconds to start
+    for _ in $(seq 120); do
+        ranks=$(pgrep -P "$mpid" -f "bounce trace" | tr '\n' ' ')
+        busy=0
+        for p in $ranks; do [ "$(ps -o times= -p "$p" 2>/dev/null | tr -d ' ')" -ge 1 ] 2>/dev/null && busy=$((busy + 1)); done
+        [ "$busy" -ge 2 ] && break
+        sleep 0.5
+    done
     if [ "$how" = kill ]; then
         kill -9 "$(echo "$ranks" | awk '{ print $NF }')" 2>/dev/null   # one rank dies
     else

@@ -1,7 +1,7 @@
 /* The node tree over the patches: median splits along the longest axis, first of the planes
  * (volume clusters), then of each plane's patches (planar nodes). A plane is an input polygon or a
  * connected group of coplanar ones (hierarchy_internal.h). */
-#include "transport/hierarchy/hierarchy_internal.h"
+#include "hierarchy/hierarchy_internal.h"
 #include "base/vec.h"
 
 #include <math.h>
@@ -436,4 +436,20 @@ void bn__tree_sphere(const bn__tree *t, uint32_t v, double c[3], double *rad)
         h[k] = 0.5 * (b[3 + k] - b[k]);
     }
     *rad = bn_v3_len(h);
+}
+
+/* The unit direction between the bounding spheres' centres of r and s. */
+static void bn__tree_dir(const void *ctx, uint32_t r, uint32_t s, double u[3])
+{
+    double cr[3], cs[3], rad;
+    bn__tree_sphere(ctx, r, cr, &rad);
+    bn__tree_sphere(ctx, s, cs, &rad);
+    bn_v3_sub(cs, cr, u);
+    bn_v3_normalize(u);
+}
+
+bn__hop_shape bn__tree_shape(const bn__tree *t)
+{
+    return (bn__hop_shape){t->n,     t->npatch, t->child, t->parent, t->lo,        t->order,
+                           t->plane, t->area,   t->normal, bn__tree_dir, (const void *)t};
 }

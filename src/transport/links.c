@@ -1,7 +1,8 @@
 /* The frozen hierarchical operator: y = F_H x = push(gather(pull(x))). Planar receivers gather
  * one value per channel; (nearly flat) clusters one vector per channel, which each polygon below
- * dots with its normal (hierarchy_internal.h). */
-#include "transport/hierarchy/hierarchy_internal.h"
+ * dots with its normal (src/hierarchy/hierarchy_internal.h says when a cluster may). */
+#include "transport/links.h"
+#include "base/internal.h"
 #include "bounce/dist.h"
 #include "base/vec.h"
 
@@ -75,7 +76,7 @@ size_t bn__hop_bytes(const void *ctx)
 }
 
 
-bn_status bn__hop_make(const bn__tree *t, const bn__link *links, size_t nlinks, const size_t *bound, bn__hop **out,
+bn_status bn__hop_make(const bn__hop_shape *t, const bn__link *links, size_t nlinks, const size_t *bound, bn__hop **out,
                        bn_error *err)
 {
     bn__hop *h = bn__calloc(1, sizeof *h);
@@ -132,12 +133,9 @@ bn_status bn__hop_make(const bn__tree *t, const bn__link *links, size_t nlinks, 
         h->src[l] = links[l].s;
         h->F[l] = links[l].F;
         if (h->cl[r] != BN__NONE) {
-            double cr[3], cs[3], u[3], rad;
-            bn__tree_sphere(t, r, cr, &rad);
-            bn__tree_sphere(t, links[l].s, cs, &rad);
-            bn_v3_sub(cs, cr, u);
-            bn_v3_normalize(u);
-            h->dir[l] = bn__oct_encode(u);   /* F is per unit cosine (refine.c) */
+            double u[3];
+            t->dir(t->dir_ctx, r, links[l].s, u);
+            h->dir[l] = bn__oct_encode(u);   /* F is per unit cosine (src/hierarchy/refine.c) */
         }
     }
     for (size_t v = 0; v < n; v++)

@@ -1,12 +1,12 @@
-/* The hierarchy's internals: the node tree (tree.c), the links and their refinement (refine.c)
- * and the frozen operator (operator.c). Not installed. */
+/* The hierarchy's construction: the node tree (tree.c), the links and their refinement
+ * (refine.c), above form factors; what it freezes is the storage of src/transport/links.c
+ * (transport/links.h). Not installed. */
 #ifndef BN_HIERARCHY_INTERNAL_H
 #define BN_HIERARCHY_INTERNAL_H
 
 #include "bounce/hierarchy.h"
 #include "base/internal.h"
-
-#define BN__NONE UINT32_MAX
+#include "transport/links.h"
 
 /* Nodes in flat arrays (structure of arrays), a binary tree: node 0 is the root, children are
  * allocated in pairs after their parent (so a reverse sweep sees children before parents, a
@@ -48,53 +48,13 @@ static inline uint32_t bn__tree_patch(const bn__tree *t, uint32_t v) { return t-
 size_t bn__tree_bytes(const bn__tree *t);
 /* The bounding sphere of node v: its box's centre and half diagonal. */
 void bn__tree_sphere(const bn__tree *t, uint32_t v, double c[3], double *rad);
-
-/* A link: receiver r gathers F x (the area mean of the values below s). */
-typedef struct bn__link {
-    uint32_t r, s;
-    float F;                  /* < 0: not computed yet */
-    uint8_t partial;          /* its shadow rays found partial visibility */
-} bn__link;
+/* What the frozen operator keeps of the tree (borrowed; directions between bounding spheres' centres). */
+bn__hop_shape bn__tree_shape(const bn__tree *t);
 
 /* A cluster receives only when it is nearly flat (its normals within BN__FLAT of their axis) and
  * every surface below faces the source (see refine.c): then each polygon p gets K max(0, n_p . u) =
  * K n_p . u exactly, with K the link's F per unit cosine and u the unit direction to the source, and
  * the cluster can gather one vector per channel, sum K B u, that each polygon dots with its normal.
- * u is kept per link in 16 bits (octahedral encoding, ~1 degree). */
+ * u is kept per link in 16 bits (bn__oct_encode, ~1 degree). */
 #define BN__FLAT 0.5236   /* 30 degrees */
-uint16_t bn__oct_encode(const double u[3]);
-void bn__oct_decode(uint16_t e, double u[3]);
-
-/* The frozen operator: the tree's topology and areas, links by receiver. Owns its arrays. */
-typedef struct bn__hop {
-    size_t n, npatch, nlinks, nclusters;
-    uint32_t *child, *parent, *leaf_patch;   /* leaf_patch: BN__NONE for inner nodes */
-    uint32_t *cl;             /* per node: its index among the clusters, BN__NONE for planar nodes */
-    double *area;
-    float *normal;            /* 3 per node: planar nodes' unit normal */
-    size_t *start;            /* n + 1 */
-    uint32_t *src;
-    float *F;                 /* cluster receivers: F per unit cosine */
-    uint16_t *dir;            /* per link: the direction to the source (cluster receivers) */
-    double *Bn, *G;           /* 3n each: scratch of apply */
-    double *Gv;               /* 9 per cluster: what it gathers, per channel as a vector */
-    /* under mpirun (P > 1): rank q's leaves are [bound[q], bound[q + 1]) in the tree's leaf order; a rank
-     * holds the links of every receiver whose leaves meet its own, so its leaves' values are exact, and
-     * apply all-gathers every rank's leaves in leaf order (values copied: one process's bits) */
-    int distributed;
-    size_t plo, phi, *bound;
-    uint32_t *order;          /* npatch: patches in leaf order (P > 1) */
-    double *xchg;             /* 3 npatch: the leaves' values in leaf order (P > 1) */
-} bn__hop;
-
-/* Takes links (sorted by r then s; F > 0 only) and the tree's topology (copied); bound: P + 1, every
- * rank's first leaf in leaf order, then npatch (copied). */
-size_t bn__hop_link_bytes(const bn__hop *h);
-bn_status bn__hop_make(const bn__tree *t, const bn__link *links, size_t nlinks, const size_t *bound, bn__hop **out,
-                       bn_error *err);
-bn_status bn__hop_apply(void *ctx, const double *x, double *y, bn_error *err);
-void bn__hop_destroy(void *ctx);
-size_t bn__hop_bytes(const void *ctx);
-extern const bn_transport_ops bn__hop_ops;
-
 #endif

@@ -1,0 +1,450 @@
+/* Refinement: a link's error bound and form factor (the oracle), the recursive visit, one pass over
+ * every link, and the brightness estimate the next pass weighs links by (refine.h). */
+#include "hierarchy/refine.h"
+#include "bounce/dist.h"
+#include "formfactor/ff_internal.h"
+#include "formfactor/ff_pair.h"
+#include "base/vec.h"
+
+#include <math.h>
+#include <omp.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Levels a work item is refined in one go before the rest is queued for the next round (so one
+ * root self-link becomes enough independent items to share among threads). */
+#define BN__DEPTH_PER_ROUND 6
+/* Quadrature tolerance of a leaf link's unoccluded form factor (a link's error is eps-level
+ * anyway; the dense assembly's 1e-5 costs ten times the time near contact). */
+#define BN__LEAF_RTOL 1e-3
+/* Shadow rays of a leaf link (x4 when partly visible). */
+#define BN__LEAF_RAYS 16
+/* Partly visible links are split down to this fraction of eps. */
+#define BN__PARTIAL 0.125
+
+void bn__vec_push(bn__vec *v, uint32_t r, uint32_t s, float F, int partial)
+{
+    if (v->n == v->cap) {
+        size_t cap = v->cap ? 2 * v->cap : 256;
+        bn__link *a = bn__realloc_array(v->a, cap, sizeof *a);
+        if (!a) {
+            v->oom = 1;
+            return;
+        }
+        v->a = a;
+        v->cap = cap;
+    }
+    v->a[v->n].r = r;
+    v->a[v->n].s = s;
+    v->a[v->n].partial = (uint8_t)partial;
+    v->a[v->n++].F = F;
+}
+
+/* ---- geometry of nodes ---- */
+
+/* 1 if the box of node v lies on or behind the plane (n, p). */
+static int bn__box_behind(const bn__tree *t, uint32_t v, const double n[3], const double p[3], double tol)
+{
+    const double *b = t->box + 6 * (size_t)v;
+    double m = 0;
+    for (int k = 0; k < 3; k++)
+        m += n[k] * ((n[k] > 0 ? b[3 + k] : b[k]) - p[k]);
+    return m <= tol;
+}
+
+/* Can r and s exchange light at all? Same plane, or one wholly behind the other's plane (by more
+ * than that plane's polygons stray from it): no. */
+static int bn__culled(const bn__ref *R, uint32_t r, uint32_t s)
+{
+    const bn__tree *t = R->t;
+    int32_t fr = t->plane[r], fs = t->plane[s];
+    if (fr >= 0 && fr == fs)
+        return 1;
+    if (fr >= 0 && bn__box_behind(t, s, t->pn + 3 * fr, t->pp + 3 * fr, R->tol - t->pthick[fr]))
+        return 1;
+    if (fs >= 0 && bn__box_behind(t, r, t->pn + 3 * fs, t->pp + 3 * fs, R->tol - t->pthick[fs]))
+        return 1;
+    return 0;
+}
+
+/* A bound of the form factor between r and s: A / (pi d_min^2) between their bounding spheres,
+ * never above 1, with A the larger of the two areas (A_s bounds the area-averaged F from r to s;
+ * A_r how much that F varies across a large receiver, whose patches all get the mean). */
+static double bn__F_bound(const bn__tree *t, uint32_t r, uint32_t s)
+{
+    double cr[3], cs[3], rr, rs, d;
+    bn__tree_sphere(t, r, cr, &rr);
+    bn__tree_sphere(t, s, cs, &rs);
+    d = bn_v3_dist(cr, cs) - rr - rs;
+    if (!(d > 0))
+        return 1;
+    return fmin(1.0, fmax(t->area[s], t->area[r]) / (BN_PI * d * d));
+}
+
+/* Sources may be clusters: a link carries their area-mean radiance, the sampled F weighing each
+ * source patch by its own orientation. Receivers are polygons' nodes, or nearly flat clusters facing
+ * the source, which hand each polygon its own cosine's share (operator.c). */
+
+/* Are the bounding spheres of r and s apart? Only then is a link above the patches estimated by
+ * point pairs: closer nodes are split whatever their brightness, as near the kernel's 1/r^2 a few
+ * samples can make a row of F sum far above 1. */
+static int bn__separated(const bn__tree *t, uint32_t r, uint32_t s)
+{
+    double cr[3], cs[3], rr, rs;
+    bn__tree_sphere(t, r, cr, &rr);
+    bn__tree_sphere(t, s, cs, &rs);
+    return bn_v3_dist(cr, cs) > rr + rs;
+}
+
+/* May r receive from s as one node? A polygon's nodes may; a cluster only with flat_clusters, when
+ * nearly flat and every surface below faces the direction to s (hierarchy_internal.h). */
+static int bn__can_receive(const bn__ref *R, uint32_t r, uint32_t s)
+{
+    const bn__tree *t = R->t;
+    double cr[3], cs[3], rr, rs, u[3], d;
+    if (t->plane[r] >= 0)
+        return 1;
+    if (!R->o->flat_clusters || t->spread[r] > BN__FLAT)
+        return 0;
+    bn__tree_sphere(t, r, cr, &rr);
+    bn__tree_sphere(t, s, cs, &rs);
+    bn_v3_sub(cs, cr, u);
+    if (!(bn_v3_normalize(u) > 0))
+        return 0;
+    d = fmax(-1.0, fmin(1.0, bn_v3_dot(u, t->normal + 3 * (size_t)r)));
+    return acos(d) + t->spread[r] < 0.5 * BN_PI;
+}
+
+/* May refinement split node v? Clusters always; planar nodes down to min_area; patches never. */
+static int bn__splittable(const bn__ref *R, uint32_t v)
+{
+    const bn__tree *t = R->t;
+    return !bn__tree_is_leaf(t, v) && (t->plane[v] < 0 || R->force || t->area[v] >= R->min_area);
+}
+
+/* The oracle: the most a link could carry to the receiver's radiance, rho_r B_s F_bound. */
+static double bn__link_error(const bn__ref *R, uint32_t r, uint32_t s)
+{
+    const float *rho = R->t->rho_max + 3 * (size_t)r;
+    const double *B = R->Bmax + 3 * (size_t)s;
+    double m = 0;
+    for (int c = 0; c < 3; c++)
+        m = fmax(m, (double)rho[c] * B[c]);
+    return m > 0 ? m * bn__F_bound(R->t, r, s) : 0;
+}
+
+/* A point of node v, uniform in area, from (u1, u2, u3) in [0,1)^3; its patch's normal. */
+static void bn__node_point(const bn__ref *R, uint32_t v, double u1, double u2, double u3, double x[3], const double **n)
+{
+    const bn__tree *t = R->t;
+    size_t lo = t->lo[v], hi = t->hi[v];
+    double a = t->cum_area[lo] + u1 * (t->cum_area[hi] - t->cum_area[lo]);
+    while (hi - lo > 1) {   /* the last k with cum_area[k] <= a */
+        size_t mid = lo + (hi - lo) / 2;
+        if (t->cum_area[mid] <= a)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    size_t i = t->order[lo];
+    const bn_patch *p = &R->patch[i];
+    const double *pa = R->pverts + 3 * p->corner[0], *pb = R->pverts + 3 * p->corner[1];
+    const double *pc = R->pverts + 3 * p->corner[2];
+    double f = R->fan0[i], s, b0, b1, b2;
+    if (p->ncorners == 4) {   /* the fan triangle by area, as bn__poly_sample chooses it, its share precomputed */
+        if (u2 < f)
+            u2 = f > 0 ? u2 / f : 0.5;
+        else {
+            pb = pc;
+            pc = R->pverts + 3 * p->corner[3];
+            u2 = f < 1 ? (u2 - f) / (1 - f) : 0.5;
+        }
+        u2 = bn_clamp(u2, 0, 1);
+    }
+    s = sqrt(u2);   /* square to triangle (Shirley) */
+    b0 = 1 - s;
+    b1 = s * (1 - u3);
+    b2 = s * u3;
+    for (int k = 0; k < 3; k++)
+        x[k] = b0 * pa[k] + b1 * pb[k] + b2 * pc[k];
+    *n = p->normal;
+}
+
+/* Area-averaged F from r to s (per unit cosine when r is a cluster) by S stratified point pairs with
+ * one shadow ray each; S x 4 when the first S find partial visibility, and for nodes whose bounding
+ * spheres overlap (then Wallace's disk regulariser keeps every term bounded). */
+static double bn__F_sampled(const bn__ref *R, uint32_t r, uint32_t s, bn__worker *w, int *partial)
+{
+    int sep = bn__separated(R->t, r, s), S = (R->o->samples > 0 ? R->o->samples : 8) * (sep ? 1 : 4);
+    for (int round = 0; round < 2; round++) {
+        bn__rng g = bn__rng_make(R->o->ff.seed ^ 0x6869657261726368ull, ((uint64_t)r << 32) | s, (uint64_t)round);
+        double a = R->t->area[s] / S, sum = 0, inv = 1.0 / S, cos_sum = 0;
+        int seen = 0, blocked = 0;
+        for (int k = 0; k < S; k++) {
+            double x[3], y[3], d[3], o[3], e[3], r2, len, cr, cs;
+            const double *nx, *ny;
+            bn__node_point(R, r, (k + bn__rng_uniform(&g)) * inv, bn__rng_uniform(&g), bn__rng_uniform(&g), x, &nx);
+            bn__node_point(R, s, (((k * 7 + 3) % S) + bn__rng_uniform(&g)) * inv, bn__rng_uniform(&g),
+                           bn__rng_uniform(&g), y, &ny);
+            bn_v3_sub(y, x, d);
+            r2 = bn_v3_dot(d, d);
+            len = sqrt(r2);
+            if (!(len > 0))
+                continue;
+            cr = bn_v3_dot(nx, d) / len;
+            cs = -bn_v3_dot(ny, d) / len;
+            if (cr > 0)
+                cos_sum += cr;
+            if (!(cr > 0 && cs > 0))
+                continue;
+            bn_v3_madd(x, R->ray_eps, nx, o);
+            bn_v3_madd(y, R->ray_eps, ny, e);
+            bn_v3_sub(e, o, d);
+            len = bn_v3_len(d);
+            seen++;
+            w->rays++;
+            if (len > 4 * R->ray_eps && bn_rt_occluded(R->rt, o, d, 0, 1.0 - R->ray_eps / len)) {
+                blocked++;
+                continue;
+            }
+            /* separated nodes: the kernel itself (bounded by their distance); overlapping ones (below
+             * min_area): Wallace's disk, which bounds each term but biases F low by ~a / (pi r^2) */
+            sum += cr * cs * a / (BN_PI * r2 + (sep ? 0 : a));
+        }
+        *partial = blocked > 0 && blocked < seen;
+        if (round == 1 || !*partial)
+            /* a cluster receiver: F per unit of cosine, K = F / (the receiver's mean cosine toward s,
+             * from the same points), handed to each polygon as K max(0, n . u) (operator.c) */
+            return R->t->plane[r] < 0 ? (cos_sum > 0 ? sum / (cos_sum * inv) : 0) : sum;
+        S *= 4;
+    }
+    return 0;
+}
+
+static float bn__link_F(const bn__ref *R, uint32_t r, uint32_t s, bn__worker *w, int *partial)
+{
+    const bn__tree *t = R->t;
+    double F;
+    *partial = 0;
+    if (bn__tree_is_leaf(t, r) && bn__tree_is_leaf(t, s)) {
+        uint32_t i = bn__tree_patch(t, r), j = bn__tree_patch(t, s);
+        if (R->o->exact_leaf_links || R->force) {
+            F = bn__ff_pair(R->pairs, w->ff, i, j, R->o->cull_leaf_rays) / R->patch[i].area;
+        } else {
+            double sigma;
+            F = bn__ff_pair_quick(R->pairs, w->ff, i, j, BN__LEAF_RAYS, BN__LEAF_RTOL, &sigma);
+        }
+    } else {
+        F = bn__F_sampled(R, r, s, w, partial);
+    }
+    return (float)fmin(fmax(F, 0.0), 1.0);
+}
+
+/* Refines the pair (r, s) (F: its coefficient when it is an existing link, else < 0; partial: its
+ * rays found partial visibility) up to `depth` more levels: accepted links go to w->links, deeper
+ * work to w->pending. Partly visible links are held to BN__PARTIAL x eps: a shadow's edge crosses
+ * them, and only smaller receivers resolve it. */
+static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int partial, int depth, bn__worker *w)
+{
+    const bn__tree *t = R->t;
+    int lr = bn__tree_is_leaf(t, r), sr = bn__splittable(R, r), ss = bn__splittable(R, s), split;
+    if (!bn__receiver_here(R, r))
+        return;   /* another rank's receiver */
+    if (r == s) {
+        if (lr || t->plane[r] >= 0)
+            return;   /* a plane does not see itself */
+        if (depth == 0) {
+            bn__vec_push(&w->pending, r, s, -1, 0);
+            return;
+        }
+        for (uint32_t a = t->child[r]; a < t->child[r] + 2; a++)
+            for (uint32_t b = t->child[r]; b < t->child[r] + 2; b++)
+                bn__visit(R, a, b, -1, 0, depth - 1, w);
+        return;
+    }
+    if (F < 0 && bn__culled(R, r, s))
+        return;
+    split = 0;
+    if (sr || ss) {
+        double e = R->force || !bn__separated(t, r, s) || !bn__can_receive(R, r, s) ? INFINITY
+                                                                                    : bn__link_error(R, r, s);
+        split = e > (F >= 0 && partial ? BN__PARTIAL : 1.0) * R->eps_abs;
+        if (!split && F < 0) {   /* accepted as it stands: its F, and a second look if partly visible */
+            F = bn__link_F(R, r, s, w, &partial);
+            split = partial && e > BN__PARTIAL * R->eps_abs;
+            if (split)
+                F = -1;   /* computed, but split: not an existing link */
+        }
+    }
+    if (split) {
+        double cr[3], cs[3], rr, rs;
+        if (depth == 0) {
+            bn__vec_push(&w->pending, r, s, -1, 0);
+            return;
+        }
+        if (F >= 0)
+            w->splits += (size_t)bn__receiver_counted(R, r);
+        bn__tree_sphere(t, r, cr, &rr);
+        bn__tree_sphere(t, s, cs, &rs);
+        if (sr && (!ss || rr >= rs || !bn__can_receive(R, r, s))) {
+            bn__visit(R, t->child[r], s, -1, 0, depth - 1, w);
+            bn__visit(R, t->child[r] + 1, s, -1, 0, depth - 1, w);
+        } else {
+            bn__visit(R, r, t->child[s], -1, 0, depth - 1, w);
+            bn__visit(R, r, t->child[s] + 1, -1, 0, depth - 1, w);
+        }
+        return;
+    }
+    if (F < 0)
+        F = bn__link_F(R, r, s, w, &partial);
+    bn__vec_push(&w->links, r, s, F, partial);
+}
+
+int bn__link_cmp(const void *a, const void *b)
+{
+    const bn__link *x = a, *y = b;
+    if (x->r != y->r)
+        return x->r < y->r ? -1 : 1;
+    return x->s < y->s ? -1 : x->s > y->s;
+}
+
+/* One pass: every item of *work refined (rounds of BN__DEPTH_PER_ROUND levels); the accepted
+ * links replace *work, sorted. *splits: existing links that were split. */
+bn_status bn__pass(const bn__ref *R, bn__worker *W, int nt, bn__vec *work, size_t *splits, size_t *rays,
+                          const char *label, bn_error *err)
+{
+    bn__vec out = {0};
+    bn__progress prog;
+    size_t done = 0, round = 0;
+    *splits = 0;
+    while (work->n) {
+        volatile int oom = 0;
+        long ln = (long)work->n;
+        done = 0;
+        bn__progress_begin(&prog, label, work->n, R->o->quiet || round > 0);
+#pragma omp parallel num_threads(nt)
+        {
+            bn__worker *w = &W[omp_get_thread_num()];
+            size_t mine = 0;   /* items since this thread's last progress step (one atomic per 4096) */
+#pragma omp for schedule(dynamic, 64)
+            for (long l = 0; l < ln; l++) {
+                if (oom || bn_interrupted() != BN_OK)
+                    continue;
+                bn__link it = work->a[l];
+                bn__visit(R, it.r, it.s, it.F, it.partial, BN__DEPTH_PER_ROUND, w);
+                if (w->links.oom || w->pending.oom)
+                    oom = 1;
+                if (++mine == 4096) {
+                    bn__progress_step(&prog, &done, mine);
+                    mine = 0;
+                }
+            }
+            bn__progress_step(&prog, &done, mine);
+        }
+        bn__progress_end(&prog);
+        if (bn_interrupted() != BN_OK) {
+            free(out.a);
+            return bn_error_set(err, bn_interrupted(), "hierarchy refinement interrupted");
+        }
+        work->n = 0;
+        for (int k = 0; k < nt && !oom; k++) {
+            bn__vec *v[2] = {&W[k].links, &W[k].pending};
+            bn__vec *dst[2] = {&out, work};
+            for (int q = 0; q < 2; q++) {
+                if (dst[q]->n + v[q]->n > dst[q]->cap) {
+                    size_t cap = (dst[q]->n + v[q]->n) * 3 / 2 + 256;
+                    bn__link *a = bn__realloc_array(dst[q]->a, cap, sizeof *a);
+                    if (!a) {
+                        oom = 1;
+                        break;
+                    }
+                    dst[q]->a = a;
+                    dst[q]->cap = cap;
+                }
+                if (v[q]->n)
+                    memcpy(dst[q]->a + dst[q]->n, v[q]->a, v[q]->n * sizeof *v[q]->a);
+                dst[q]->n += v[q]->n;
+                v[q]->n = 0;
+            }
+            *splits += W[k].splits;
+            W[k].splits = 0;
+        }
+        if (oom) {
+            free(out.a);
+            return bn_error_set(err, BN_ENOMEM, "out of memory for the hierarchy's links (%zu so far): raise eps",
+                                out.n);
+        }
+        round++;
+    }
+    for (int k = 0; k < nt; k++) {
+        *rays += W[k].rays + bn__ff_worker_rays(W[k].ff);
+        W[k].rays = 0;
+    }
+    qsort(out.a, out.n, sizeof *out.a, bn__link_cmp);
+    free(work->a);
+    *work = out;
+    return BN_OK;
+}
+
+/* Bmax from per-patch radiances L (N*3): the largest below each node. */
+void bn__bmax(const bn__tree *t, const double *L, double *Bmax)
+{
+    for (size_t v = t->n; v-- > 0;) {
+        uint32_t c = t->child[v];
+        if (c == BN__NONE)
+            memcpy(Bmax + 3 * v, L + 3 * (size_t)bn__tree_patch(t, (uint32_t)v), 3 * sizeof(double));
+        else
+            for (int k = 0; k < 3; k++)
+                Bmax[3 * v + k] = fmax(Bmax[3 * (size_t)c + k], Bmax[3 * ((size_t)c + 1) + k]);
+    }
+}
+
+/* Links with F > 0, in place. */
+size_t bn__compact(bn__vec *v)
+{
+    size_t m = 0;
+    for (size_t l = 0; l < v->n; l++)
+        if (v->a[l].F > 0)
+            v->a[m++] = v->a[l];
+    return m;
+}
+
+/* L ~ E + K_H L by a few Jacobi sweeps over the current links: the brightness the next pass's
+ * oracle weighs links by. L comes in as the previous pass's estimate (E before the first): the links
+ * change little after the second pass, so a few sweeps settle it again. */
+bn_status bn__estimate(const bn__tree *t, bn__vec *links, const size_t *bound, const double *E,
+                              const double *rho, double eps_abs, double *L, bn_error *err)
+{
+    bn__vec live = *links;
+    bn__hop *h = NULL;
+    size_t n3 = 3 * t->npatch;
+    bn__link *copy = bn__malloc_array(links->n ? links->n : 1, sizeof *copy);
+    double *y = bn__malloc_array(n3, sizeof(double));
+    bn_status st = BN_OK;
+    if (!copy || !y) {
+        free(copy);
+        free(y);
+        return bn_error_set(err, BN_ENOMEM, "out of memory for the hierarchy's gather");
+    }
+    if (links->n)
+        memcpy(copy, links->a, links->n * sizeof *copy);
+    live.a = copy;
+    live.n = bn__compact(&live);
+    bn__hop_shape shape = bn__tree_shape(t);
+    st = bn__hop_make(&shape, live.a, live.n, bound, &h, err);
+    for (int it = 0; st == BN_OK && it < 200; it++) {
+        double change = 0;
+        st = bn__hop_apply(h, L, y, err);
+        for (size_t k = 0; st == BN_OK && k < n3; k++) {
+            double v = E[k] + rho[k] * y[k];
+            change = fmax(change, fabs(v - L[k]));
+            L[k] = v;
+        }
+        if (change < 0.1 * eps_abs)
+            break;
+    }
+    bn__hop_destroy(h);
+    free(copy);
+    free(y);
+    return st;
+}

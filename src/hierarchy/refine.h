@@ -1,0 +1,80 @@
+/* Refinement's shared state (src/hierarchy): what a pass reads (bn__ref), the growing link arrays,
+ * the per-thread workers; refine.c refines, balance.c splits the leaves among MPI processes,
+ * build.c runs the passes and freezes the links. Not installed. */
+#ifndef BN_HIERARCHY_REFINE_H
+#define BN_HIERARCHY_REFINE_H
+
+#include "hierarchy/hierarchy_internal.h"
+#include "formfactor/ff_pair.h"
+
+typedef struct bn__ref {
+    const bn__tree *t;
+    const bn_scene *scene;
+    const bn_rt *rt;
+    const bn_hierarchy_opts *o;
+    const bn_patch *patch;
+    const double *pverts;
+    double *fan0;             /* per patch: the share of a quad's area in its first fan triangle (0, 1, 2) */
+    double *Bmax;             /* 3 per node: the largest radiance estimate below (oracle) */
+    double eps_abs;
+    double min_area;          /* planar nodes below this area are not split */
+    int force;                /* eps == 0: refine every link to the patches */
+    double tol, ray_eps;
+    bn__ff_pairs *pairs;
+    size_t plo, phi;          /* this rank's leaves (all of them with one process): bound[rank .. rank + 1] */
+    size_t *bound;            /* P + 1: every rank's first leaf, then npatch */
+} bn__ref;
+
+/* Under mpirun a rank refines only receivers whose leaves meet its own (the others' links are theirs):
+ * each receiver's links are then exactly one process's. A receiver is counted (links, splits, rays) by
+ * the rank that holds its first leaf, so the counts summed over ranks are one process's. */
+static inline int bn__receiver_here(const bn__ref *R, uint32_t r)
+{
+    return R->t->lo[r] < R->phi && R->t->hi[r] > R->plo;
+}
+static inline int bn__receiver_counted(const bn__ref *R, uint32_t r)
+{
+    return R->t->lo[r] >= R->plo && R->t->lo[r] < R->phi;
+}
+
+typedef struct bn__vec {
+    bn__link *a;
+    size_t n, cap;
+    int oom;
+} bn__vec;
+
+void bn__vec_push(bn__vec *v, uint32_t r, uint32_t s, float F, int partial);
+
+typedef struct bn__worker {
+    bn__vec links, pending;
+    bn__ff_worker *ff;
+    size_t rays, splits;
+} bn__worker;
+
+/* Links ordered by receiver, then source (qsort). */
+int bn__link_cmp(const void *a, const void *b);
+/* One pass: every item of *work refined (rounds of a few levels); the accepted links replace *work,
+ * sorted. *splits: existing links that were split; *rays: shadow rays added. */
+bn_status bn__pass(const bn__ref *R, bn__worker *W, int nt, bn__vec *work, size_t *splits, size_t *rays,
+                   const char *label, bn_error *err);
+/* Bmax from per-patch radiances L (N*3): the largest below each node. */
+void bn__bmax(const bn__tree *t, const double *L, double *Bmax);
+/* Keeps the links with F > 0, in place; returns their count. */
+size_t bn__compact(bn__vec *v);
+/* L ~ E + K_H L by a few Jacobi sweeps over the current links (the oracle's brightness). */
+bn_status bn__estimate(const bn__tree *t, bn__vec *links, const size_t *bound, const double *E, const double *rho,
+                       double eps_abs, double *L, bn_error *err);
+
+/* balance.c: the first split of the leaves among processes (rank k's equal share) */
+void bn__dist_leaves_of(size_t npatch, size_t k, size_t *lo, size_t *hi);
+/* A split is redone when the most loaded process holds more than this times the mean. */
+#define BN__IMBALANCE 1.05
+/* Under mpirun, after a pass: the leaves split again by link cost and the links moved to their new
+ * ranks (*imbalance: the old split's most loaded / mean; *moved: links this rank received). */
+bn_status bn__rebalance(bn__ref *R, bn__vec *work, double *imbalance, size_t *moved, bn_error *err);
+/* The final counts over all processes (links, leaf links, cluster links) into rep, and the log line of
+ * what each process stores. */
+bn_status bn__count_links(const bn__ref *R, const bn__vec *work, bn_hierarchy_report *rep, const bn_log *log,
+                          bn_error *err);
+
+#endif
