@@ -534,3 +534,35 @@ BN_TEST(quiet_cornell_prints_nothing_and_large_bends_warn)
     BN_ASSERT(strstr(out, "warning:") && strstr(out, "bent.obj:6: quad is non-planar"));
     free(out);
 }
+
+/* A plain binary OFF ("OFF BINARY", int32 counts, float positions, int32 faces) reads through
+ * OpenMesh after bounce has walked its layout: a 2 x 3 quad and a triangle of base 2 and height 1,
+ * areas 6 and 1. */
+BN_TEST(binary_off_reads)
+{
+    const char *path = bn_test_tmp("quad.off");
+    FILE *fp = fopen(path, "wb");
+    int32_t cnt[3] = {5, 2, 0}, quad[5] = {4, 0, 1, 2, 3}, tri[4] = {3, 0, 4, 1};
+    float v[15] = {0, 0, 0, 2, 0, 0, 2, 3, 0, 0, 3, 0, 1, -1, 0};
+    BN_ASSERT(fp);
+    fputs("OFF BINARY\n", fp);
+    fwrite(cnt, sizeof cnt, 1, fp);
+    fwrite(v, sizeof v, 1, fp);
+    fwrite(quad, sizeof quad, 1, fp);
+    fwrite(tri, sizeof tri, 1, fp);
+    BN_ASSERT(fclose(fp) == 0);
+    bn_load_opts lo;
+    bn_scene *s;
+    bn_error err;
+    size_t nf;
+    bn_load_opts_default(&lo);
+    lo.log.quiet = 1;
+    BN_ASSERT_STATUS(bn_scene_load(path, &lo, &s, &err), BN_OK);
+    const bn_face *f = bn_scene_faces(s, &nf);
+    BN_ASSERT_EQ(nf, 2);
+    double total = 0;
+    for (size_t i = 0; i < nf; i++)
+        total += f[i].area;
+    BN_ASSERT_NEAR(total, 7.0, 1e-12);
+    bn_scene_destroy(s);
+}

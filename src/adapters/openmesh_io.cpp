@@ -159,29 +159,49 @@ extern "C" bn_status bn__openmesh_write(const char *path, const bn__bake_mesh *m
 
 namespace {
 
-// The counts follow the keyword line as int32s in the host's byte order (OpenMesh reads them so):
-// refuse a header whose counts the file cannot hold (a vertex is 3 floats, a face at least a count
-// and 3 indices), since OpenMesh reserves whatever it announces. Reads the first bytes only.
+// The plain layout OpenMesh reads without bounds checks, walked here first: the keyword line
+// "OFF BINARY", then int32 counts (vertices, faces, edges) in the host's byte order (OpenMesh reads
+// them so), 3 floats per vertex, and per face an int32 corner count n in [3, 2^16] and n int32
+// indices. A count the file cannot hold is refused before OpenMesh reserves or loops on it (a corner
+// count read from garbage once ran it for minutes). Other binary variants (COFF, NOFF, ...) are
+// refused by name.
 static bn_status off_check_binary(const char *path, bn_error *err)
 {
     std::ifstream in(path, std::ios::binary);
     if (!in)
         return bn_error_set(err, BN_EIO, "%s: cannot open: %s", path, std::strerror(errno));
     in.seekg(0, std::ios::end);
-    unsigned long long size = (unsigned long long)in.tellg();
+    unsigned long long size = (unsigned long long)in.tellg(), pos;
     in.seekg(0);
-    std::string head(256, '\0');
-    in.read(&head[0], (std::streamsize)head.size());
-    head.resize((size_t)in.gcount());
-    size_t p0 = head.find('\n');
-    if (size < 16 || p0 == std::string::npos || p0 + 9 > head.size())
+    std::string key;
+    std::getline(in, key);
+    while (!key.empty() && (key.back() == '\r' || key.back() == ' '))
+        key.pop_back();
+    for (char &ch : key)   // the message shows what was there, printable
+        if ((unsigned char)ch < 0x20 || (unsigned char)ch >= 0x7f)
+            ch = '?';
+    if (key != "OFF BINARY")
+        return bn_error_set(err, BN_EINPUT, "%s: binary OFF keyword line '%.40s': only the plain 'OFF BINARY' "
+                                            "(positions and faces) is read", path, key.c_str());
+    int32_t cnt[3];
+    if (!in.read((char *)cnt, sizeof cnt))
         return bn_error_set(err, BN_EINPUT, "%s: truncated binary OFF header", path);
-    int32_t nv, nf;
-    std::memcpy(&nv, head.data() + p0 + 1, 4);
-    std::memcpy(&nf, head.data() + p0 + 5, 4);
-    if (nv < 0 || nf < 0 || (unsigned long long)nv > size / 12 || (unsigned long long)nf > size / 16)
+    pos = (unsigned long long)in.tellg();
+    if (cnt[0] < 0 || cnt[1] < 0 || (unsigned long long)cnt[0] > (size - pos) / 12 ||
+        (unsigned long long)cnt[1] > (size - pos) / 16)
         return bn_error_set(err, BN_EINPUT, "%s: the binary OFF header announces %d vertices and %d faces, more than "
-                                            "a file of %llu bytes can hold", path, (int)nv, (int)nf, size);
+                                            "a file of %llu bytes can hold", path, (int)cnt[0], (int)cnt[1], size);
+    pos += 12ull * (unsigned long long)cnt[0];
+    for (int32_t f = 0; f < cnt[1]; f++) {
+        int32_t n = 0;
+        in.seekg((std::streamoff)pos);
+        if (pos + 4 > size || !in.read((char *)&n, 4) || n < 3 || n > (1 << 16) ||
+            pos + 4 + 4ull * (unsigned long long)n > size)
+            return bn_error_set(err, BN_EINPUT, "%s: binary OFF face %d (byte %llu): %s", path, (int)f, pos,
+                                pos + 4 > size ? "past the end of the file"
+                                               : "its corner count is not in [3, 65536] or runs past the end");
+        pos += 4 + 4ull * (unsigned long long)n;
+    }
     return BN_OK;
 }
 
