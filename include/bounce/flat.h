@@ -19,7 +19,7 @@ typedef struct bn_flat bn_flat;   /* a solved scene: patches, K's report, L, the
 typedef struct bn_flat_opts {
     const char *unit;         /* "m" (default), "cm", "mm" */
     const char *method;       /* "auto" (default), "jacobi", "gauss-seidel", "neumann", "direct" */
-    const char *transport;    /* "auto" (default), "dense", "sparse", "hierarchical" */
+    const char *transport;    /* one of bn_pipeline_transports(): "auto" (default), "dense", "sparse", "hierarchical" */
     int bounces;              /* terms kept: K^0 E .. K^bounces E (default 3; at most 1000; < 0: none) */
     double tol;               /* solver tolerance, relative, > 0 (default 1e-6) */
     size_t patches;           /* target patch count (default: as `bounce solve`) */
@@ -59,7 +59,7 @@ const char *bn_flat_stop_reason(const bn_flat *f);         /* "converged-rtol", 
 const char *bn_flat_method(const bn_flat *f);              /* the solver that ran */
 size_t bn_flat_iterations(const bn_flat *f);
 double bn_flat_residual(const bn_flat *f);                  /* final max residual */
-const char *bn_flat_transport(const bn_flat *f);           /* "dense", "sparse" or "hierarchy" */
+const char *bn_flat_transport(const bn_flat *f);           /* "dense", "sparse" or "hierarchical" */
 /* The solver's monitor, one row per iteration (row 0: the initial guess E), BN_FLAT_HISTORY values
  * each: iteration, residual_max, residual_rms, change, bound, error_bound, seconds. *rows (may be
  * NULL) gets the array, owned by f; returns the row count. */

@@ -19,6 +19,8 @@ typedef enum bn_ff_method {
     BN_FF_HEMISPHERE   /* cosine-weighted rays from each patch, counting hits */
 } bn_ff_method;
 const char *bn_ff_method_name(bn_ff_method m);   /* "analytic", "montecarlo", "hemisphere" */
+const char *bn_ff_method_names(void);            /* "analytic|montecarlo|hemisphere" */
+int bn_ff_method_parse(const char *name, bn_ff_method *m);   /* 0, or -1 for no such method */
 
 /* The analytic method's relative tolerance per pair by default. Every unoccluded pair goes by the
  * double contour integral, whose Gauss-Kronrod panels converge geometrically: 1e-9 costs the

@@ -60,6 +60,8 @@ bn_status bn_pipeline_opts_check(const bn_pipeline_opts *o, bn_error *err);
 #define BN_AUTO_HIERARCHY_PATCHES 6000
 /* The transport names, "|"-separated, for help texts: "auto|dense|sparse|hierarchical". */
 const char *bn_pipeline_transports(void);
+/* 1 if name is one of them. */
+int bn_pipeline_transport_exists(const char *name);
 /* Would `transport` (may be NULL or "auto") be the hierarchy for a scene of n patches, given the
  * form-factor options? why (may be NULL) receives the reason. */
 int bn_pipeline_use_hierarchy(const bn_pipeline_opts *o, size_t n, char *why, size_t why_size);

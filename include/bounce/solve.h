@@ -13,6 +13,8 @@ extern "C" {
 
 typedef enum bn_solve_method { BN_SOLVE_JACOBI, BN_SOLVE_GAUSS_SEIDEL, BN_SOLVE_NEUMANN, BN_SOLVE_DIRECT } bn_solve_method;
 const char *bn_solve_method_name(bn_solve_method m);   /* "jacobi", "gauss-seidel", "neumann", "direct" */
+const char *bn_solve_method_names(void);               /* "jacobi|gauss-seidel|neumann|direct" */
+int bn_solve_method_parse(const char *name, bn_solve_method *m);   /* 0, or -1 for no such method */
 
 /* Why a solve stopped. Stopping is a reason, not an error (PETSc's KSPConvergedReason). */
 typedef enum bn_stop_reason {

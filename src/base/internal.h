@@ -111,4 +111,13 @@ uint64_t bn__fnv1a(uint64_t h, const void *data, size_t n);
 #ifdef __cplusplus
 }
 #endif
+/* Vocabularies: each enum's names kept once, as an X-list beside the enum's functions, e.g.
+ *   #define BN__METHODS(X) X("jacobi") X("gauss-seidel")
+ *   static const char *const names[] = {BN__METHODS(BN__NAME_ITEM)};      the table, by value
+ *   static const char list[] = BN__METHODS(BN__NAME_BAR);                 "|jacobi|gauss-seidel"
+ * and parsed by bn__name_find (the index, or -1). */
+#define BN__NAME_ITEM(s) s,
+#define BN__NAME_BAR(s) "|" s
+int bn__name_find(const char *const *names, size_t n, const char *s);
+
 #endif

@@ -338,3 +338,11 @@ bn_status bn__read_file(const char *path, char **text, size_t *size, bn_error *e
     *size = (size_t)n;
     return BN_OK;
 }
+
+int bn__name_find(const char *const *names, size_t n, const char *s)
+{
+    for (size_t i = 0; s && i < n; i++)
+        if (strcmp(names[i], s) == 0)
+            return (int)i;
+    return -1;
+}

@@ -53,8 +53,8 @@ void bn_cli_camera_describe(const bn_camera *c, char *buf, size_t n)
 
 void bn_cli_add_solution(bn_optset *s, bn_cli_solution *o)
 {
-    o->method = 0;
-    bn_optset_add(s, (bn_opt){"method", 'm', BN_OPT_CHOICE, &o->method, "auto|jacobi|gauss-seidel|neumann|direct", 0,
+    o->method = NULL;
+    bn_optset_add(s, (bn_opt){"method", 'm', BN_OPT_NAME, &o->method, bn_cli_auto_or(bn_solve_method_names()), 0,
                               0, "METHOD",
                               "jacobi, gauss-seidel, neumann or direct; auto (default): gauss-seidel, or jacobi where K "
                               "has no rows (the hierarchy)"});
@@ -84,17 +84,12 @@ void bn_cli_pipeline_opts(const bn_cli_scene *so, const bn_cli_ff *ff, const bn_
     if (ff) {
         bn_cli_ff_opts(ff, c, &out->ff);
         out->auto_precision = ff->precision == 0;
-        {
-            static const char *names[] = {"auto", "dense", "sparse", "hierarchical"};
-            out->transport = ff->transport == 0 && ff->storage ? ff->storage : names[ff->transport];
-        }
+        out->transport = !ff->transport && ff->storage ? ff->storage : ff->transport ? ff->transport : "auto";
         bn_cli_hier_opts(ff, &out->hier);
     }
     out->method_auto = 1;   /* no solver options given: the default method, chosen by K's capabilities */
     if (sol) {
-        out->method_auto = sol->method == 0;
-        if (sol->method > 0)
-            out->solve.method = (bn_solve_method)(sol->method - 1);
+        bn_cli_method(sol->method, &out->solve.method, &out->method_auto);
         if (sol->tol > 0)
             out->solve.tol = sol->tol;
         if (sol->max_iter > 0)

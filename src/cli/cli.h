@@ -6,6 +6,7 @@
 #include <stdint.h>
 #include <stdio.h>
 #include "bounce/scene.h"
+#include "bounce/solve.h"
 
 typedef enum bn_opt_type {
     BN_OPT_FLAG,     /* int, set to 1 */
@@ -15,6 +16,7 @@ typedef enum bn_opt_type {
     BN_OPT_DOUBLE,   /* finite double within [min, max] */
     BN_OPT_STRING,   /* const char * */
     BN_OPT_CHOICE,   /* int: index of the value in `choices` ("a|b|c") */
+    BN_OPT_NAME,     /* const char *: one of `choices` ("a|b|c", a library's vocabulary), kept as given */
     BN_OPT_VEC3,     /* double[3] from "x,y,z" */
     BN_OPT_WXH       /* int[2] from "WxH" */
 } bn_opt_type;
@@ -24,7 +26,7 @@ typedef struct bn_opt {
     char        short_name;
     bn_opt_type type;
     void       *dest;
-    const char *choices;   /* BN_OPT_CHOICE */
+    const char *choices;   /* BN_OPT_CHOICE, BN_OPT_NAME */
     double      min, max;  /* numeric range (inclusive) */
     const char *metavar;
     const char *help;      /* with the default, e.g. "(default 1e-6)" */
@@ -85,13 +87,18 @@ int bn_cli_fail(const bn_error *err);
 /* Returns the exit code for an interrupted run if one happened, else 0. */
 int bn_cli_interrupted(void);
 
+/* "auto|" and a vocabulary's names (for BN_OPT_NAME choices); the CLI's own static buffer. */
+const char *bn_cli_auto_or(const char *names);
+/* A solver method option: NULL or "auto" leave *method_auto 1; else the method. */
+void bn_cli_method(const char *name, bn_solve_method *m, int *method_auto);
+
 /* The exit-code table, for --help. */
 extern const char bn_cli_exit_codes[];
 
 /* Form-factor options (src/cli/ff_options.c), shared by formfactors, solve, bounces, study. */
 #include "bounce/formfactor.h"
 typedef struct bn_cli_ff {
-    int    method;            /* index into "analytic|montecarlo|hemisphere" */
+    const char *method;       /* one of bn_ff_method_names(); NULL = analytic */
     int    samples;           /* 0 = the method's default */
     int    precision;         /* index into "auto|float|double" */
     const char *storage;      /* a storage name (bn_storage_names()); NULL = the default */
@@ -101,7 +108,7 @@ typedef struct bn_cli_ff {
     int    quadrature_only;
     int    visibility;        /* index into "exact|rays" (default exact) */
     const char *cache;        /* NULL: no cache */
-    int    transport;         /* index into "auto|dense|sparse|hierarchical" (default auto) */
+    const char *transport;    /* one of bn_pipeline_transports(); NULL = auto */
     double eps;               /* hierarchy: link tolerance (< 0: the default) */
     int    no_clusters;       /* hierarchy: start from every pair of polygons */
     int    no_flat_clusters;  /* hierarchy: only polygons' nodes receive */
@@ -133,7 +140,7 @@ void bn_cli_camera_describe(const bn_camera *cam, char *buf, size_t n);
 /* The hierarchy's options given (eps, clusters, link samples, min area) onto h. */
 void bn_cli_hier_opts(const bn_cli_ff *ff, bn_hierarchy_opts *h);
 typedef struct bn_cli_solution {
-    int    method;     /* index into "auto|jacobi|gauss-seidel|neumann|direct" (default auto) */
+    const char *method;   /* "auto" or one of bn_solve_method_names(); NULL = auto */
     double tol;        /* 0 = default 1e-6 */
     size_t max_iter;   /* 0 = default */
 } bn_cli_solution;

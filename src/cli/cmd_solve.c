@@ -12,7 +12,8 @@ typedef struct bn__solve_cli {
     bn_optset set;
     bn_cli_scene so;
     bn_cli_ff ffo;
-    int method, stop, symmetric, bounces, with_terms;
+    const char *method;
+    int stop, symmetric, bounces, with_terms;
     double tol, atol, singular_threshold;
     size_t max_iter;
     const char *log, *output, *scene;
@@ -26,7 +27,7 @@ static int bn__solve_parse(int argc, char **argv, bn_cli_common *c, bn__solve_cl
     const char *pos[1];
     bn_error err;
     bn_solve_opts_default(&d);
-    a->method = 0;   /* auto */
+    a->method = NULL;   /* auto */
     a->tol = d.tol;
     a->atol = d.atol;
     a->max_iter = d.max_iter;
@@ -45,8 +46,8 @@ static int bn__solve_parse(int argc, char **argv, bn_cli_common *c, bn__solve_cl
         "system (a closed scene with reflectance 1) is refused with exit code 5.";
     bn_cli_add_scene(set, &a->so);
     bn_cli_add_ff(set, &a->ffo);
-    bn_optset_add(set, (bn_opt){"method", 'm', BN_OPT_CHOICE, &a->method,
-                                "auto|jacobi|gauss-seidel|neumann|direct", 0, 0, "M",
+    bn_optset_add(set, (bn_opt){"method", 'm', BN_OPT_NAME, &a->method,
+                                bn_cli_auto_or(bn_solve_method_names()), 0, 0, "M",
                                 "jacobi, gauss-seidel, neumann (series) or direct (LAPACK); auto (default): "
                                 "gauss-seidel, or jacobi where K has no rows (the hierarchy)"});
     bn_optset_add(set, (bn_opt){"tol", 0, BN_OPT_DOUBLE, &a->tol, NULL, 0, 1, "T",
@@ -86,9 +87,7 @@ static void bn__solve_opts(const bn__solve_cli *a, const bn_cli_common *c, bn_pi
 {
     bn_solve_opts *o = &po->solve;
     bn_cli_pipeline_opts(&a->so, &a->ffo, NULL, c, po);
-    po->method_auto = a->method == 0;
-    if (a->method > 0)
-        o->method = (bn_solve_method)(a->method - 1);
+    bn_cli_method(a->method, &o->method, &po->method_auto);
     o->tol = a->tol;
     o->atol = a->atol;
     o->max_iter = a->max_iter;

@@ -73,12 +73,11 @@ static int bn__conv_prec(const char *s, double *x)
 }
 static int bn__conv_method(const char *s, double *x)
 {
-    for (int m = 0; m < 4; m++)
-        if (strcmp(s, bn_solve_method_name((bn_solve_method)m)) == 0) {
-            *x = m;
-            return 1;
-        }
-    return 0;
+    bn_solve_method m;
+    if (bn_solve_method_parse(s, &m) != 0)
+        return 0;
+    *x = (double)m;
+    return 1;
 }
 
 int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
@@ -89,7 +88,8 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
     const char *pos[1], *vary = NULL, *out = "study.csv", *plot = NULL, *report = NULL, *methods = NULL, *tols = NULL, *against = NULL;
     const char *title = NULL;
     size_t max_iter = 0, ref_patches = 0, spp = 0;
-    int method = 3, ref_samples = 0, rr_depth = -1, refkind = 0;
+    const char *method = "direct";
+    int ref_samples = 0, rr_depth = -1, refkind = 0;
     size_t ref_spp = 0;
     int metric = 0;
     double target = 0.01, values[BN__MAXV], tolv[BN__MAXV], againstv[BN__MAXV];
@@ -130,7 +130,7 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
     bn_optset_add(&set, (bn_opt){"title", 0, BN_OPT_STRING, &title, NULL, 0, 0, "TEXT", "a title for the plot"});
     bn_cli_add_scene(&set, &so);
     bn_cli_add_ff(&set, &ffo);
-    bn_optset_add(&set, (bn_opt){"method", 0, BN_OPT_CHOICE, &method, "jacobi|gauss-seidel|neumann|direct", 0, 0,
+    bn_optset_add(&set, (bn_opt){"method", 0, BN_OPT_NAME, &method, bn_solve_method_names(), 0, 0,
                                  "M", "solver for the mesh, samples, ff, spp and precision studies (default direct)"});
     bn_optset_add(&set, (bn_opt){"methods", 0, BN_OPT_STRING, &methods, NULL, 0, 0, "M1,M2",
                                  "methods compared by bounces, max-iter and tol (default all four)"});
@@ -233,12 +233,9 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
     bn_cli_ff_opts(&ffo, c, &o.ff);
     o.ff.quiet = 1;
     o.ff.cache_path = NULL;   /* every setting is built and timed */
-    {
-        static const char *tn[] = {NULL, "dense", "sparse", "hierarchical"};
-        o.transport = ffo.transport == 0 ? ffo.storage : tn[ffo.transport];
-        bn_cli_hier_opts(&ffo, &o.hier);
-    }
-    o.solve.method = (bn_solve_method)method;
+    o.transport = ffo.transport && strcmp(ffo.transport, "auto") ? ffo.transport : ffo.storage;
+    bn_cli_hier_opts(&ffo, &o.hier);
+    bn_solve_method_parse(method, &o.solve.method);   /* checked against the names when parsed */
     if (max_iter)
         o.solve.max_iter = max_iter;
     o.trace.seed = c->seed;

@@ -18,8 +18,8 @@ void bn_cli_hier_opts(const bn_cli_ff *ff, bn_hierarchy_opts *h)
 void bn_cli_add_ff(bn_optset *s, bn_cli_ff *o)
 {
     o->eps = -1;
-    bn_optset_add(s, (bn_opt){"transport", 0, BN_OPT_CHOICE, &o->transport, "auto|dense|sparse|hierarchical", 0, 0,
-                              "auto|dense|sparse|hierarchical",
+    bn_optset_add(s, (bn_opt){"transport", 0, BN_OPT_NAME, &o->transport, bn_pipeline_transports(), 0, 0,
+                              bn_pipeline_transports(),
                               "how K is made: every pair's form factor kept dense or sparse, or hierarchical links "
                               "between clusters and elements; auto (default): hierarchical when dense F would not fit "
                               "or the scene has more than 6000 patches (--storage given: that storage); under mpirun -np P > 1 "
@@ -38,7 +38,7 @@ void bn_cli_add_ff(bn_optset *s, bn_cli_ff *o)
     bn_optset_add(s, (bn_opt){"min-area", 0, BN_OPT_DOUBLE, &o->min_area, NULL, -1, 1e300, "A",
                               "hierarchy: planar elements smaller than A (scene units^2) are not split (default: "
                               "2^-20 of the scene's surface area; a negative value: down to the patches)"});
-    bn_optset_add(s, (bn_opt){"ff", 0, BN_OPT_CHOICE, &o->method, "analytic|montecarlo|hemisphere", 0, 0,
+    bn_optset_add(s, (bn_opt){"ff", 0, BN_OPT_NAME, &o->method, bn_ff_method_names(), 0, 0,
                               "METHOD", "form factors: analytic (default), montecarlo or hemisphere"});
     bn_optset_add(s, (bn_opt){"samples", 0, BN_OPT_INT, &o->samples, NULL, 1, 1 << 24, "N",
                               "analytic: shadow rays per pair an occluder may block (default 32); montecarlo: "
@@ -47,7 +47,7 @@ void bn_cli_add_ff(bn_optset *s, bn_cli_ff *o)
                               "auto|float|double",
                               "storage precision of F (default auto: float, or double when float's rounding times "
                               "1/(1 - rho_max) would exceed --tol; sums are always double)"});
-    bn_optset_add(s, (bn_opt){"storage", 0, BN_OPT_STRING, &o->storage, NULL, 0, 0, "dense|sparse",
+    bn_optset_add(s, (bn_opt){"storage", 0, BN_OPT_NAME, &o->storage, bn_storage_names(), 0, 0, bn_storage_names(),
                               "F storage: dense N^2 (default) or sparse CSR without the exact zeros"});
     bn_optset_add(s, (bn_opt){"sparse-threshold", 0, BN_OPT_DOUBLE, &o->sparse_threshold, NULL, 0, 0.999, "T",
                               "sparse: also drop F_ij < T; the dropped mass per row is reported (default 0)"});
@@ -68,7 +68,8 @@ void bn_cli_add_ff(bn_optset *s, bn_cli_ff *o)
 void bn_cli_ff_opts(const bn_cli_ff *o, const bn_cli_common *c, bn_formfactor_opts *out)
 {
     bn_formfactor_opts_default(out);
-    out->method = (bn_ff_method)o->method;
+    if (o->method)
+        bn_ff_method_parse(o->method, &out->method);   /* checked against the names when parsed */
     out->samples = o->samples;
     out->precision = o->precision == 2 ? BN_PRECISION_DOUBLE : BN_PRECISION_FLOAT;   /* auto starts from float */
     if (o->storage)

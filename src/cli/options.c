@@ -68,6 +68,11 @@ static bn_status bn__set(const bn_opt *o, const char *v, bn_error *err)
             return bn_error_set(err, BN_EUSAGE, "--%s needs a non-empty value", o->name);
         *(const char **)o->dest = v;
         return BN_OK;
+    case BN_OPT_NAME:
+        if (bn__choice_index(o->choices, v) < 0)
+            return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not one of %s", o->name, v, o->choices);
+        *(const char **)o->dest = v;
+        return BN_OK;
     case BN_OPT_CHOICE: {
         int i = bn__choice_index(o->choices, v);
         if (i < 0)
@@ -325,3 +330,19 @@ int bn_cli_interrupted(void)
     return s == BN_OK ? 0 : bn_status_exit_code(s);
 }
 
+
+const char *bn_cli_auto_or(const char *names)
+{
+    static char buf[8][160];
+    static int next;
+    char *b = buf[next++ % 8];
+    snprintf(b, sizeof buf[0], "auto|%s", names);
+    return b;
+}
+
+void bn_cli_method(const char *name, bn_solve_method *m, int *method_auto)
+{
+    *method_auto = !name || !strcmp(name, "auto");
+    if (!*method_auto)
+        bn_solve_method_parse(name, m);   /* checked against the names when parsed */
+}

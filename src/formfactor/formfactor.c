@@ -32,14 +32,21 @@ static double bn__rowsum_error(int samples)
 }
 #define BN__ROWSUM_ERROR bn__rowsum_error(bn__samples(o))
 
-const char *bn_ff_method_name(bn_ff_method m)
+/* The form-factor methods in enum order (bn_ff_method). */
+#define BN__FF_METHODS(X) X("analytic") X("montecarlo") X("hemisphere")
+static const char *const bn__ff_method_names[] = {BN__FF_METHODS(BN__NAME_ITEM)};
+static const char bn__ff_method_list[] = BN__FF_METHODS(BN__NAME_BAR);
+#define BN__NFF (sizeof bn__ff_method_names / sizeof bn__ff_method_names[0])
+
+const char *bn_ff_method_name(bn_ff_method m) { return (unsigned)m < BN__NFF ? bn__ff_method_names[m] : "?"; }
+const char *bn_ff_method_names(void) { return bn__ff_method_list + 1; }
+
+int bn_ff_method_parse(const char *name, bn_ff_method *m)
 {
-    switch (m) {
-    case BN_FF_ANALYTIC: return "analytic";
-    case BN_FF_MONTECARLO: return "montecarlo";
-    case BN_FF_HEMISPHERE: return "hemisphere";
-    }
-    return "?";
+    int i = bn__name_find(bn__ff_method_names, BN__NFF, name);
+    if (i >= 0)
+        *m = (bn_ff_method)i;
+    return i >= 0 ? 0 : -1;
 }
 
 int bn_formfactor_default_samples(bn_ff_method m)

@@ -92,20 +92,14 @@ static bn_status bn__flat_ranges(const bn_flat_opts *o, char *msg, size_t msglen
     return bn__flat_fail(BN_EUSAGE, t, msg, msglen);
 }
 
-/* A solver by its name (as on the command line). */
+/* A solver by its name (bn_solve_method_names). */
 static bn_status bn__flat_method(const char *name, bn_solve_method *out, char *msg, size_t msglen)
 {
-    static const char *methods[] = {"jacobi", "gauss-seidel", "neumann", "direct"};
-    for (int i = 0; i < 4; i++)
-        if (strcmp(name, methods[i]) == 0) {
-            *out = (bn_solve_method)i;
-            return BN_OK;
-        }
-    {
-        char t[160];
-        snprintf(t, sizeof t, "method '%s' is not one of auto, jacobi, gauss-seidel, neumann, direct", name);
-        return bn__flat_fail(BN_EUSAGE, t, msg, msglen);
-    }
+    char t[192];
+    if (bn_solve_method_parse(name, out) == 0)
+        return BN_OK;
+    snprintf(t, sizeof t, "method '%.64s' is not one of auto|%s", name, bn_solve_method_names());
+    return bn__flat_fail(BN_EUSAGE, t, msg, msglen);
 }
 
 /* The pipeline options from the flat ones (strings checked; transport copied into f). */
@@ -126,13 +120,9 @@ static bn_status bn__flat_popts(const bn_flat_opts *o, bn_flat *f, char *msg, si
         po->method_auto = 0;
     }
     if (o->transport) {
-        const char *names[] = {"auto", "dense", "sparse", "hierarchical"};
-        int ok = 0;
-        for (int i = 0; i < 4; i++)
-            ok |= strcmp(o->transport, names[i]) == 0;
-        if (!ok) {
-            char t[160];
-            snprintf(t, sizeof t, "transport '%.64s' is not one of auto, dense, sparse, hierarchical", o->transport);
+        if (!bn_pipeline_transport_exists(o->transport)) {
+            char t[192];
+            snprintf(t, sizeof t, "transport '%.64s' is not one of %s", o->transport, bn_pipeline_transports());
             return bn__flat_fail(BN_EUSAGE, t, msg, msglen);
         }
         snprintf(f->transport_opt, sizeof f->transport_opt, "%s", o->transport);

@@ -7,6 +7,7 @@
 
 #include <math.h>
 #include <string.h>
+#include <threads.h>
 
 void bn_pipeline_opts_default(bn_pipeline_opts *o)
 {
@@ -49,8 +50,7 @@ bn_status bn_pipeline_opts_check(const bn_pipeline_opts *o, bn_error *err)
         return bn_error_set(err, BN_EUSAGE, "eps %g is not a finite tolerance >= 0", o->hier.eps);
     if (o->ff.storage && !bn_storage_exists(o->ff.storage))
         return bn_error_set(err, BN_EUSAGE, "unknown storage '%s' (one of %s)", o->ff.storage, bn_storage_names());
-    if (o->transport && strcmp(o->transport, "auto") && strcmp(o->transport, "hierarchical") &&
-        !bn_storage_exists(o->transport))
+    if (o->transport && !bn_pipeline_transport_exists(o->transport))
         return bn_error_set(err, BN_EUSAGE, "transport '%s' is not one of %s", o->transport, bn_pipeline_transports());
     return bn_solve_opts_check(&o->solve, err);
 }
@@ -148,7 +148,24 @@ bn_status bn_pipeline_scene(const char *path, const bn_pipeline_opts *o, bn_pipe
     return BN_OK;
 }
 
-const char *bn_pipeline_transports(void) { return "auto|dense|sparse|hierarchical"; }
+/* The transports: auto, every storage of src/transport's registry, and the hierarchy. */
+static char bn__transport_list[128];
+static void bn__transport_list_make(void)
+{
+    snprintf(bn__transport_list, sizeof bn__transport_list, "auto|%s|hierarchical", bn_storage_names());
+}
+
+const char *bn_pipeline_transports(void)
+{
+    static once_flag once = ONCE_FLAG_INIT;
+    call_once(&once, bn__transport_list_make);
+    return bn__transport_list;
+}
+
+int bn_pipeline_transport_exists(const char *name)
+{
+    return name && (!strcmp(name, "auto") || !strcmp(name, "hierarchical") || bn_storage_exists(name));
+}
 
 int bn_pipeline_use_hierarchy(const bn_pipeline_opts *o, size_t n, char *why, size_t why_size)
 {

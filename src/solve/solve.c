@@ -13,15 +13,25 @@
 #include <stdint.h>
 #include <string.h>
 
+/* The methods in enum order (bn_solve_method). */
+#define BN__METHODS(X) X("jacobi") X("gauss-seidel") X("neumann") X("direct")
+static const char *const bn__method_names[] = {BN__METHODS(BN__NAME_ITEM)};
+static const char bn__method_list[] = BN__METHODS(BN__NAME_BAR);
+#define BN__NMETHODS (sizeof bn__method_names / sizeof bn__method_names[0])
+
 const char *bn_solve_method_name(bn_solve_method m)
 {
-    switch (m) {
-    case BN_SOLVE_JACOBI: return "jacobi";
-    case BN_SOLVE_GAUSS_SEIDEL: return "gauss-seidel";
-    case BN_SOLVE_NEUMANN: return "neumann";
-    case BN_SOLVE_DIRECT: return "direct";
-    }
-    return "?";
+    return (unsigned)m < BN__NMETHODS ? bn__method_names[m] : "?";
+}
+
+const char *bn_solve_method_names(void) { return bn__method_list + 1; }
+
+int bn_solve_method_parse(const char *name, bn_solve_method *m)
+{
+    int i = bn__name_find(bn__method_names, BN__NMETHODS, name);
+    if (i >= 0)
+        *m = (bn_solve_method)i;
+    return i >= 0 ? 0 : -1;
 }
 
 const char *bn_stop_reason_name(bn_stop_reason r)

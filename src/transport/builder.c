@@ -6,8 +6,12 @@
 
 #include <string.h>
 
-/* Every storage bounce has; a new one is one more line here and its own file. */
-static const bn__storage *const bn__storages[] = {&bn__storage_dense, &bn__storage_sparse};
+/* Every storage bounce has; a new one is one more entry here and its own file. */
+#define BN__STORAGES(X) X(dense) X(sparse)
+#define BN__STORAGE_PTR(s) &bn__storage_##s,
+#define BN__STORAGE_BAR(s) "|" #s
+static const bn__storage *const bn__storages[] = {BN__STORAGES(BN__STORAGE_PTR)};
+static const char bn__storage_list[] = BN__STORAGES(BN__STORAGE_BAR);
 #define BN__NSTORAGES (sizeof bn__storages / sizeof bn__storages[0])
 
 static const bn__storage *bn__storage_find(const char *name)
@@ -20,7 +24,7 @@ static const bn__storage *bn__storage_find(const char *name)
     return NULL;
 }
 
-const char *bn_storage_names(void) { return "dense|sparse"; }
+const char *bn_storage_names(void) { return bn__storage_list + 1; }
 int bn_storage_exists(const char *name) { return bn__storage_find(name) != NULL; }
 
 int bn_storage_needs_pattern(const char *name)

@@ -247,7 +247,7 @@ static bn_status bn__hop_diag(void *ctx, double *d, bn_error *err)
 }
 
 const bn_transport_ops bn__hop_ops = {
-    .name = "hierarchy",
+    .name = "hierarchical",   /* as the transport option names it */
     .caps = BN_OP_DIAG,
     .apply = bn__hop_apply,
     .diag = bn__hop_diag,
