@@ -5,7 +5,8 @@
 # per-layer power) against that alpha's critical values, which depend only on the family size and
 # the samples and are read once per alpha from the command itself. Form factors are cached.
 # The observed rate's exact binomial 95% interval (Clopper-Pearson) must contain alpha or lie
-# below it. Prints a markdown table; the last line is the verdict.
+# below it. Prints a markdown table; the last line is the verdict. Resumable: each seed's result is
+# appended to WORKDIR/seeds.tsv, and seeds already there are not run again.
 # usage: bench/crosscheck_rate.sh BOUNCE SCENE UNIT SEEDS WORKDIR [LABEL]
 set -euo pipefail
 exe=$1 scene=$2 unit=$3 seeds=$4 work=$5 label=${6:-$(basename "$scene")}
@@ -24,11 +25,20 @@ for a in 0.05 0.1; do
   [ -n "${crit[$a]}" ] || { echo "crosscheck_rate: no verdict line from $exe ($line)" >&2; exit 1; }
 done
 t0=$(date +%s)
+# each seed's worst z values are kept in WORKDIR/seeds.tsv as they come: a run stopped part way
+# goes on from where it was (the same binary, scene and unit), and its seeds are not run again
+log="$work/seeds.tsv"
+touch "$log"
 for s in $(seq 1 "$seeds"); do
-  line=$(run "$s" 0.1)
-  wz=$(field worst_z "$line")
-  pz=$(field power_worst_z "$line")
-  [ -n "$wz" ] || { echo "crosscheck_rate: seed $s gave no verdict ($line)" >&2; exit 1; }
+  if ! grep -q "^$s	" "$log"; then
+    line=$(run "$s" 0.1)
+    wz=$(field worst_z "$line")
+    pz=$(field power_worst_z "$line")
+    [ -n "$wz" ] || { echo "crosscheck_rate: seed $s gave no verdict ($line)" >&2; exit 1; }
+    printf '%s\t%s\t%s\n' "$s" "$wz" "$pz" >>"$log"
+  fi
+  wz=$(awk -v s="$s" '$1 == s { print $2; exit }' "$log")
+  pz=$(awk -v s="$s" '$1 == s { print $3; exit }' "$log")
   for a in 0.05 0.1; do
     if awk -v w="$wz" -v c="${crit[$a]}" -v p="$pz" -v q="${pcrit[$a]}" 'BEGIN { exit !(w > c || p > q) }'; then
       fails[$a]=$((fails[$a] + 1))

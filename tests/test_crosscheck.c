@@ -163,6 +163,55 @@ BN_TEST(zero_count_bound)
     bn_scene_destroy(s);
 }
 
+/* An entry with few hits (samples 0 or h, k = spp T^2 / (T^2 + spp s^2) effective hits) is shown,
+ * not judged: T = 1e-3, s = 1e-4 is k = 256e-6 / (1e-6 + 2.56e-6) = 72 hits, and a radiosity value
+ * 20 s away passes (few_hits counts it; its light is too small to move the power test); the same
+ * distance with s = 1e-5, k = 250 hits, fails, as a normal tail there holds. */
+BN_TEST(few_hits_shown_not_judged)
+{
+    bn_rt *rt = NULL;
+    bn_trace_patches r;
+    bn_crosscheck_input in;
+    bn_crosscheck_result cr;
+    bn_error err;
+    double *rad;
+    bn_scene *s = furnace_traced(&rt, &r, &rad);
+    size_t n = r.n, k = (1 * n + 3) * 3 + 2, base;
+    bn_crosscheck_input_default(&in);
+    in.scene = s;
+    in.trace = &r;
+    in.rad = rad;
+    in.alpha = ALPHA;
+    if (bn_crosscheck_compare(&in, &cr, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    BN_ASSERT(cr.pass);
+    base = cr.few_hits;
+    bn_crosscheck_result_free(&cr);
+    r.mean[k] = 1e-3;
+    r.se[k] = 1e-4;   /* k_eff 72 */
+    rad[k] = 1e-3 + 20 * 1e-4;
+    if (bn_crosscheck_compare(&in, &cr, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    if (!cr.pass)
+        BN_FAIL("fail: few_hits %zu (base %zu), worst z %g z_excess %g untested %d patch %zu layer %d ch %d", cr.few_hits, base, cr.worst[0].z, cr.worst[0].z_excess, cr.worst[0].untested, cr.worst[0].patch, cr.worst[0].layer, cr.worst[0].channel);
+    BN_ASSERT_EQ(cr.few_hits, base + 1);
+    BN_ASSERT(cr.worst[0].untested == 1 || cr.worst[0].z_excess <= cr.crit);
+    bn_crosscheck_result_free(&cr);
+    r.se[k] = 1e-5;   /* k_eff 250 */
+    rad[k] = 1e-3 + 20 * 1e-5;
+    if (bn_crosscheck_compare(&in, &cr, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    BN_ASSERT(!cr.pass);
+    BN_ASSERT_EQ(cr.few_hits, base);
+    BN_ASSERT_EQ(cr.worst[0].layer, 1);
+    BN_ASSERT_NEAR(cr.worst[0].z, 20, 1e-6);
+    bn_crosscheck_result_free(&cr);
+    free(rad);
+    bn_trace_patches_free(&r);
+    bn_rt_destroy(rt);
+    bn_scene_destroy(s);
+}
+
 /* The tolerance from a second mesh level maps each patch to the other level's patch that holds
  * its centroid: with x of the centroid as the "solution", the difference is below one coarse
  * patch (0.5 m) and zero where the levels agree (the same mesh twice). */

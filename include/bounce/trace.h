@@ -149,7 +149,8 @@ typedef struct bn_crosscheck_entry {
     int    layer, channel;
     double radiosity, trace, se, tol;
     double z;          /* (radiosity - trace) / se (raw) */
-    double z_excess;   /* max(0, |radiosity - trace| - tol) / se: what the verdict tests */
+    double z_excess;   /* max(0, |radiosity - trace| - tol) / se: what the verdict tests (0 when untested) */
+    int    untested;   /* 1: too few nonzero samples for the t tail (few_hits); shown, not judged */
 } bn_crosscheck_entry;
 
 typedef struct bn_crosscheck_result {
@@ -158,6 +159,7 @@ typedef struct bn_crosscheck_result {
     double crit;             /* two-sided Student-t bound at alpha_each, dof spp - 1 */
     size_t within;           /* tests with z_excess <= crit */
     size_t within_raw;       /* tests with |z| <= crit (no discretisation allowance) */
+    size_t few_hits;         /* entries with under 100 effective nonzero samples: within, not judged */
     double worst_z;          /* largest z_excess */
     double worst_z_raw;      /* largest |z| */
     int    nworst;
