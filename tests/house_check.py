@@ -41,10 +41,7 @@ KNOWN_CIRCLES = {
 KNOWN_UPHILL = set()
 
 # library files whose strings still name command-line flags, and how many
-KNOWN_FLAGS = {
-    "formfactor/formfactor.c": 5, "pipeline/crosscheck.c": 2, "pipeline/pipeline.c": 3, "solve/direct.c": 1,
-    "solve/solve.c": 2, "study/study.c": 2, "trace/camera.c": 1, "transport/builder.c": 2,
-}
+KNOWN_FLAGS = {}
 
 
 def functions(path):

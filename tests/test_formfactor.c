@@ -522,8 +522,8 @@ BN_TEST(memory_limit_is_a_clear_error)
     BN_ASSERT(K == NULL);
     snprintf(want, sizeof want, "%zu patches", n);
     BN_ASSERT(strstr(err.msg, want) != NULL);
-    BN_ASSERT(strstr(err.msg, "--storage sparse") != NULL);
-    BN_ASSERT(strstr(err.msg, "--patch-size") != NULL);
+    BN_ASSERT(strstr(err.msg, "`storage` sparse") != NULL);
+    BN_ASSERT(strstr(err.msg, "`patch_size`") != NULL);
     BN_ASSERT_GT(bn_formfactor_bytes_needed(s, &o), n * n * 4);
     bn_rt_destroy(rt);
     bn_scene_destroy(s);

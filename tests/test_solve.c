@@ -672,7 +672,7 @@ BN_TEST(direct_memory_estimate)
     o.max_memory = 1000;
     o.log_sink.quiet = 1;
     BN_ASSERT_STATUS(bn_solve(k, E, &o, &res, &err), BN_ENOMEM);
-    BN_ASSERT(strstr(err.msg, "100 patches") != NULL && strstr(err.msg, "--method") != NULL);
+    BN_ASSERT(strstr(err.msg, "100 patches") != NULL && strstr(err.msg, "`method`") != NULL);
     BN_ASSERT_GE(bn_solve_direct_bytes(n), n * n * 8);
     bn_transport_destroy(k);
     free(F);

@@ -13,6 +13,7 @@ and status name. Nothing here computes: every number comes from the C library.
 """
 import ctypes
 import os
+import re
 
 import numpy as np
 
@@ -121,9 +122,14 @@ def _load():
     return lib
 
 
+def _keywords(text):
+    """bounce names its options backquoted as in its C structs (`max_iter`); here they are keywords."""
+    return re.sub(r"`(\w+)`", r"\1=", text)
+
+
 def _raise(lib, st, msg):
     name = lib.bn_status_name(st).decode()
-    text = msg.value.decode(errors="replace")
+    text = _keywords(msg.value.decode(errors="replace"))
     if name == "EINTR":   # Ctrl-C stopped the C loops (opts.sigint): the Python way to say so
         raise KeyboardInterrupt("bounce: " + (text or "interrupted"))
     raise BounceError(name, text)
@@ -183,7 +189,7 @@ class Result:
         msg = ctypes.create_string_buffer(1024)
         st = self._lib.bn_flat_form_factors(self._h, F.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), msg, len(msg))
         if st != 0:
-            raise BounceError(self._lib.bn_status_name(st).decode(), msg.value.decode(errors="replace"))
+            _raise(self._lib, st, msg)
         return F
 
     def bake(self, path, per_bounce=True, mesh="elements", ldr=False, exposure=None, crease=30.0):

@@ -92,6 +92,9 @@ const char *bn_cli_auto_or(const char *names);
 /* A solver method option: NULL or "auto" leave *method_auto 1; else the method. */
 void bn_cli_method(const char *name, bn_solve_method *m, int *method_auto);
 
+/* A library message with each backquoted option name (`max_iter`) written as its flag (--max-iter). */
+const char *bn_cli_translate(const char *msg, char *out, size_t n);
+
 /* The exit-code table, for --help. */
 extern const char bn_cli_exit_codes[];
 

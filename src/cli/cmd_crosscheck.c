@@ -76,7 +76,7 @@ int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c)
     bn_cli_pipeline_opts(&so, &ffo, NULL, c, &xo.pipeline);
     bn_formfactor_opts_describe(&xo.pipeline.ff, ffdesc, sizeof ffdesc);
     xo.pipeline.solve.quiet = 1;
-    xo.pipeline.solve.log_sink = (bn_log){NULL, NULL, 1};   /* warnings only: the report says how the solve went */
+    xo.pipeline.solve.log_sink = (bn_log){bn_cli_log, c, 1};   /* warnings only: the report says how the solve went */
     xo.trace.spp = spp;
     xo.trace.seed = c->seed;
     xo.trace.quiet = c->quiet;

@@ -10,15 +10,6 @@
 
 #define BN__MAXV 256
 
-static void bn__study_log(void *user, bn_log_level level, const char *msg)
-{
-    const bn_cli_common *c = user;
-    if (level == BN_LOG_WARN)
-        fprintf(stderr, "bounce: warning: %s\n", msg);
-    else if (level == BN_LOG_INFO && !c->quiet)
-        fprintf(stderr, "bounce: %s\n", msg);
-}
-
 /* Splits "a,b,c" and converts each item with conv; returns the count or -1 (message in err). */
 static int bn__list(const char *what, const char *s, double *out, int max, int (*conv)(const char *, double *),
                     bn_error *err)
@@ -221,7 +212,7 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
     o.load.unit = (bn_unit)so.unit;
     if (so.planar_tol > 0)
         o.load.planar_tol = so.planar_tol;
-    o.load.log.fn = bn__study_log;
+    o.load.log.fn = bn_cli_log;
     o.load.log.user = c;
     o.load.log.quiet = 1;   /* the scene is loaded once per setting: its notes once would be enough */
     o.mesh.patch_size = so.patch_size;
@@ -255,7 +246,7 @@ int bn_cmd_study(int argc, char **argv, bn_cli_common *c)
     o.nagainst = (size_t)na;
     o.target = target;
     o.metric_patch = metric == 1;
-    o.log.fn = bn__study_log;
+    o.log.fn = bn_cli_log;
     o.log.user = c;
     o.log.quiet = c->quiet;
 

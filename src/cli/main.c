@@ -103,7 +103,7 @@ int main(int argc, char **argv)
         bn_error err;
         bn_error_clear(&err);
         if (bn_dist_init(&argc, &argv, &err) != BN_OK) {
-            fprintf(stderr, "bounce: error: %s\n", err.msg);
+            bn_cli_fail(&err);
             return bn_status_exit_code(err.status);
         }
         if (bn_dist_rank() != 0) {

@@ -285,13 +285,46 @@ void bn_cli_add_scene(bn_optset *s, bn_cli_scene *o)
                               "non-planarity allowed before a polygon is split, relative to its size (default 1e-6)"});
 }
 
+/* The library names its options as they are in its structs, backquoted (`max_iter`, `patch_size`);
+ * on the command line they are flags: `--max-iter`, `--patch-size`, with these exceptions. */
+static const char *const bn__flag_exceptions[][2] = {
+    {"ff_method", "--ff"}, {"visibility", "--ff-visibility"},
+};
+
+/* msg with each `name` written as its command-line flag, into out. */
+const char *bn_cli_translate(const char *msg, char *out, size_t n)
+{
+    size_t k = 0;
+    for (const char *p = msg; *p && k + 1 < n; p++) {
+        const char *e = *p == '`' ? strchr(p + 1, '`') : NULL;
+        if (!e) {
+            out[k++] = *p;
+            continue;
+        }
+        char name[64], flag[80];
+        snprintf(name, sizeof name, "%.*s", (int)(e - p - 1), p + 1);
+        snprintf(flag, sizeof flag, "--%s", name);
+        for (char *q = flag; *q; q++)
+            *q = *q == '_' ? '-' : *q;
+        for (size_t i = 0; i < sizeof bn__flag_exceptions / sizeof bn__flag_exceptions[0]; i++)
+            if (!strcmp(name, bn__flag_exceptions[i][0]))
+                snprintf(flag, sizeof flag, "%s", bn__flag_exceptions[i][1]);
+        k += (size_t)snprintf(out + k, n - k, "%s", flag);
+        k = k < n ? k : n - 1;
+        p = e;
+    }
+    out[k] = '\0';
+    return out;
+}
+
 void bn_cli_log(void *user, bn_log_level level, const char *msg)
 {
     const bn_cli_common *c = user;
+    char t[2304];
     if (level == BN_LOG_WARN)
-        fprintf(stderr, "bounce: warning: %s\n", msg);
+        fprintf(stderr, "bounce: warning: %s\n", bn_cli_translate(msg, t, sizeof t));
     else if (level == BN_LOG_INFO && !c->quiet)
-        fprintf(stderr, "bounce: %s\n", msg);
+        fprintf(stderr, "bounce: %s\n", bn_cli_translate(msg, t, sizeof t));
 }
 
 bn_status bn_cli_load_scene(const char *path, const bn_cli_scene *o, const bn_cli_common *c, bn_scene **out)
@@ -312,15 +345,17 @@ bn_status bn_cli_load_scene(const char *path, const bn_cli_scene *o, const bn_cl
 void bn_cli_stdout_log(void *user, bn_log_level level, const char *msg)
 {
     const bn_cli_common *c = user;
+    char t[2304];
     if (level == BN_LOG_WARN)
-        fprintf(stderr, "bounce: warning: %s\n", msg);
+        fprintf(stderr, "bounce: warning: %s\n", bn_cli_translate(msg, t, sizeof t));
     else if (level == BN_LOG_INFO && !c->quiet)
-        printf("%s\n", msg);
+        printf("%s\n", bn_cli_translate(msg, t, sizeof t));
 }
 
 int bn_cli_fail(const bn_error *err)
 {
-    fprintf(stderr, "bounce: error: %s\n", err->msg[0] ? err->msg : bn_status_str(err->status));
+    char t[BN_ERROR_MSG_MAX + 256];
+    fprintf(stderr, "bounce: error: %s\n", err->msg[0] ? bn_cli_translate(err->msg, t, sizeof t) : bn_status_str(err->status));
     return bn_status_exit_code(err->status);
 }
 

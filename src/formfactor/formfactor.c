@@ -894,9 +894,9 @@ static bn_status bn__memory_error(size_t n, size_t need, size_t limit, const bn_
     bn__gib((double)limit, b, sizeof b);
     bn__gib(dense == SIZE_MAX ? 1.8e19 : (double)dense, c, sizeof c);
     return bn_error_set(err, BN_ENOMEM,
-                        "%s F for %zu patches needs %s (dense N^2 alone is %s), above the limit of %s (--max-memory%s). "
-                        "Remedies: a coarser mesh (about %zu patches would fit: raise --patch-size by %.2gx or lower "
-                        "--patches)%s, or raise --max-memory",
+                        "%s F for %zu patches needs %s (dense N^2 alone is %s), above the limit of %s (`max_memory`%s). "
+                        "Remedies: a coarser mesh (about %zu patches would fit: raise `patch_size` by %.2gx or lower "
+                        "`patches`)%s, or raise `max_memory`",
                         o->storage, n, a, c, b, o->max_memory ? "" : "; default 80% of physical memory",
                         (size_t)((double)n / sqrt(ratio) * 0.95), sqrt(sqrt(ratio)) * 1.05,
                         smaller);
@@ -1154,7 +1154,7 @@ static void bn__warn_rows(const bn_formfactor_opts *o, const bn_ff_diagnostics *
                 o->method == BN_FF_HEMISPHERE ? ""
                 : o->method == BN_FF_ANALYTIC && o->exact_visibility && d->pairs_exact == d->pairs_tested
                     ? ": the integration of the exactly visible parts over the patches (shadows crease it)"
-                    : ": sampling noise of the visibility estimate; more --samples reduce it");
+                    : ": sampling noise of the visibility estimate; more `samples` reduce it");
 }
 
 /* A cache hit: K read through the storage's builder, checked like a fresh assembly. *hit = 0 on
@@ -1386,7 +1386,7 @@ bn_status bn__ff_pairs_create(const bn_scene *scene, const bn_rt *rt, const bn_f
     *out = NULL;
     if (o->method == BN_FF_HEMISPHERE)
         return bn_error_set(err, BN_EUSAGE, "hemisphere form factors come a row at a time, not per pair "
-                                            "(use --ff analytic or montecarlo)");
+                                            "(use `ff_method` analytic or montecarlo)");
     p = bn__calloc(1, sizeof *p);
     if (!p)
         return bn_error_set(err, BN_ENOMEM, "out of memory");

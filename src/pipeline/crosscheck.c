@@ -55,8 +55,8 @@ static bn_status bn__second_mesh(const bn_crosscheck_opts *o, const bn_pipeline 
     m->no_subdivide = 0;
     m->patch_size = h > 0 ? (o->disc == BN_DISC_COARSE ? h * o->ratio : h / o->ratio) : 0;
     if (!(m->patch_size > 0) || o->pipeline.mesh.no_subdivide)
-        return bn_error_set(err, BN_EUSAGE, "crosscheck: --no-subdivide has no patch size to vary; use --disc none or "
-                                            "--patch-size");
+        return bn_error_set(err, BN_EUSAGE, "crosscheck: `no_subdivide` has no patch size to vary; use `disc` none or "
+                                            "`patch_size`");
     return BN_OK;
 }
 

@@ -135,7 +135,7 @@ bn_status bn_pipeline_scene(const char *path, const bn_pipeline_opts *o, bn_pipe
         bn_scene_stats ss = bn_scene_stats_get(p->scene);
         if (ss.contact_faces > 0)
             bn_logf(&o->load.log, BN_LOG_INFO,
-                    "contact lines: %zu segments on %zu face%s split %zu patches into %zu (--no-contacts: off)",
+                    "contact lines: %zu segments on %zu face%s split %zu patches into %zu (`no_contacts`: off)",
                     ss.contact_segments, ss.contact_faces, ss.contact_faces == 1 ? "" : "s", ss.contact_patches_split,
                     ss.contact_patches_made);
     }
@@ -249,7 +249,7 @@ bn_status bn_pipeline_operator(const bn_pipeline_opts *o, bn_pipeline *p, bn_err
     if (bn_dist_size() > 1 && !p->hierarchical) {   /* dense and sparse K are single-process */
         if (o->transport && strcmp(o->transport, "auto"))
             return bn_error_set(err, BN_EUSAGE,
-                                "--transport %s is single-process: under mpirun -np %d use --transport hierarchical "
+                                "`transport` %s is single-process: under mpirun -np %d use `transport` hierarchical "
                                 "(auto picks it there)", o->transport, bn_dist_size());
         p->hierarchical = 1;
         snprintf(why, sizeof why, "%d MPI processes: dense and sparse K are single-process", bn_dist_size());
@@ -263,7 +263,7 @@ bn_status bn_pipeline_operator(const bn_pipeline_opts *o, bn_pipeline *p, bn_err
         fo.precision = BN_PRECISION_DOUBLE;
         bn_logf(&o->solve.log_sink, BN_LOG_INFO,
                 "F stored in double: float's rounding (2^-24) amplified by 1 / (1 - rho_max) is %.2g, above the "
-                "tolerance %g (--precision float keeps float)", amp, o->solve.tol);
+                "tolerance %g (`precision` float keeps float)", amp, o->solve.tol);
     }
     bn_status st = bn_rt_create(p->scene, o->threads, &p->rt, err);
     if (!fo.threads)

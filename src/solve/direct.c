@@ -63,7 +63,7 @@ static bn_status bn__direct_solve(const bn__solve_ctx *ctx, double *L, int *sing
     if (need == SIZE_MAX || need > limit)
         return bn_error_set(err, BN_ENOMEM,
                             "direct solve: %zu patches need %.3g GiB for the dense double copy of I - K "
-                            "(N^2 x 8 bytes), above the limit of %.3g GiB; use an iterative --method "
+                            "(N^2 x 8 bytes), above the limit of %.3g GiB; use an iterative `method` "
                             "(jacobi, gauss-seidel, neumann) or fewer patches",
                             n, (double)need / 1073741824.0, (double)limit / 1073741824.0);
     if (n == 0)

@@ -486,7 +486,7 @@ static bn_status bn__solve_start(bn__solve *S)
                  res->predicted_iterations, o->method == BN_SOLVE_NEUMANN ? "bounces" : "iterations", o->tol,
                  o->method == BN_SOLVE_GAUSS_SEIDEL ? "; Gauss-Seidel needs at most this, often about half" : "");
     if (res->predicted_iterations != SIZE_MAX && res->predicted_iterations > o->max_iter && S->type->solve == NULL)
-        bn__note(o, BN_LOG_WARN, "the predicted %zu iterations exceed --max-iter %zu: expect the iteration limit",
+        bn__note(o, BN_LOG_WARN, "the predicted %zu iterations exceed `max_iter` %zu: expect the iteration limit",
                  res->predicted_iterations, o->max_iter);
     return BN_OK;
 }
@@ -595,7 +595,7 @@ static bn_status bn__solve_stop_test(bn__solve *S, int *done)
                             "%s did not converge within %zu iterations: residual %.6g > %.6g (tol %g x ||E|| %.6g)%s",
                             S->type->name, o->max_iter, row->residual_max, fmax(S->target, o->atol), o->tol,
                             res->norm_E,
-                            res->predicted_iterations != SIZE_MAX ? "; raise --max-iter to the predicted count" : "");
+                            res->predicted_iterations != SIZE_MAX ? "; raise `max_iter` to the predicted count" : "");
     }
     if (bn_interrupted() != BN_OK)
         return bn_error_set(S->err, bn_interrupted(), "%s interrupted at iteration %zu", S->type->name, it);

@@ -1294,7 +1294,7 @@ static void bn__warn_reference(const bn__study *S)
     if (isfinite(best) && R->ref_error > best / 3)
         bn_logf(&S->o->log, BN_LOG_WARN,
                 "the reference's estimated error (%.3g per surface) is not well below the smallest error measured "
-                "(%.3g): errors near it are uncertain; use a finer reference (--ref-patches, --ref-samples, --ref-spp)",
+                "(%.3g): errors near it are uncertain; use a finer reference (`ref_patches`, `ref_samples`, `ref_spp`)",
                 R->ref_error, best);
 }
 
@@ -1483,7 +1483,7 @@ static bn_status bn__study_run_body(const char *path, const bn_study_opts *o_in,
     res->fine_target = res->t_radiosity_fine = res->t_trace_fine = res->ratio_fine = NAN;
     res->ref_error = res->ref_error_patch = res->ref_order = res->ref_error_raw = NAN;
     if (!o->values || o->nvalues == 0)
-        return bn_error_set(err, BN_EUSAGE, "study: --vary needs at least one value");
+        return bn_error_set(err, BN_EUSAGE, "study: `vary` needs at least one value");
     for (size_t v = 0; v < o->nvalues; v++) {
         double x = o->values[v];
         int whole = x == floor(x);

@@ -37,7 +37,7 @@ static bn_status bn__trace_image_run_body(const bn_rt *rt, const bn_camera *cam,
         return bn_error_set(err, BN_EUSAGE, "trace: image size %dx%d and %d bounces", W, H, o->bounces);
     if (bytes == (size_t)-1 || bytes > bn_memory_limit_default())
         return bn_error_set(err, BN_ENOMEM, "trace: %dx%d pixels x %d layers x (mean, variance) need %.3g GiB, more "
-                            "than 80%% of memory; use a smaller --size or fewer bounces (-n)", W, H,
+                            "than 80%% of memory; use a smaller `size` or fewer `bounces`", W, H,
                             bn_layer_count(o->bounces), (double)bytes / 1073741824.0);
     st = bn__tracer_init(&t, rt, o, err);
     if (st != BN_OK)

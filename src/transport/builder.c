@@ -42,8 +42,8 @@ size_t bn_storage_bytes(const char *name, size_t n, size_t nnz, bn_precision pre
 void bn_storage_smaller(const char *name, bn_precision prec, char *buf, size_t size)
 {
     const bn__storage *s = bn__storage_find(name);
-    snprintf(buf, size, "%s%s", s && !s->needs_pattern ? ", --storage sparse" : "",
-             prec == BN_PRECISION_DOUBLE ? ", --precision float" : "");
+    snprintf(buf, size, "%s%s", s && !s->needs_pattern ? ", `storage` sparse" : "",
+             prec == BN_PRECISION_DOUBLE ? ", `precision` float" : "");
 }
 
 void bn_builder_opts_default(bn_builder_opts *o)

@@ -93,6 +93,15 @@ def test_errors_raise_with_bounces_message(tmp_path):
     assert e.value.status == "EUSAGE" and "cholesky" in str(e.value)
 
 
+def test_messages_name_options_as_python_keywords():
+    """bounce's messages name options as its C structs do, backquoted; Python shows keywords."""
+    with pytest.raises(bounce.BounceError) as e:
+        bounce.solve(CORNELL, unit="mm", transport="dense", patches=10**6)
+    text = str(e.value)
+    assert e.value.status == "ENOMEM" and "patch_size=" in text and "patches=" in text, text
+    assert "`" not in text and "--" not in text, text
+
+
 def test_arrays_share_the_library_memory():
     r = bounce.solve(CORNELL, unit="mm", patches=300)
     lib, h = r._lib, r._h
