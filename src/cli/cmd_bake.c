@@ -7,33 +7,24 @@
 #include <math.h>
 #include <string.h>
 
-int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
-{
-    bn_optset set;
+typedef struct bn__bake_cli {
     bn_cli_scene so;
     bn_cli_ff ff;
     bn_cli_solution sol;
-    const char *pos[1], *out = "baked.ply";
-    size_t np, nl = 1;
-    int n = 3, ldr = 0, flat = 0, per_bounce = 0, rc = 0, mesh = 0, elements, is_gltf = 0;
-    double ev = 0, crease = BN_BAKE_DEFAULT_CREASE;
-    bn_error err;
-    bn_pipeline p;
-    bn_bake *bake = NULL;
-    bn_status st;
-    bn_bake_layer *layers = NULL;
-    char (*names)[16] = NULL;
-    char solver[256], ffdesc[256], patches[32], evbuf[160], creasebuf[32], verts[32];
-    bn_formfactor_opts fo;
-    bn_bake_write_opts wo;
+    const char *out;
+    int n, ldr, flat, per_bounce, mesh, is_gltf;
+    double ev, crease;
+} bn__bake_cli;
 
-    memset(&set, 0, sizeof set);
-    memset(&so, 0, sizeof so);
-    memset(&ff, 0, sizeof ff);
-    memset(&sol, 0, sizeof sol);
-    memset(&p, 0, sizeof p);
-    set.usage = "bounce bake SCENE [-o baked.ply|.om|.obj|.glb|.gltf] [--ldr] [--per-bounce -n K] [options]";
-    set.summary =
+static void bn__bake_options(bn_optset *set, bn__bake_cli *a, bn_cli_common *c)
+{
+    memset(set, 0, sizeof *set);
+    memset(a, 0, sizeof *a);
+    a->out = "baked.ply";
+    a->n = 3;
+    a->crease = BN_BAKE_DEFAULT_CREASE;
+    set->usage = "bounce bake SCENE [-o baked.ply|.om|.obj|.glb|.gltf] [--ldr] [--per-bounce -n K] [options]";
+    set->summary =
         "Solves L = E + K L and bakes L to vertex colours on the patches (--mesh input: on the input\n"
         "polygons alone): each vertex takes the area-weighted mean of the patches around it within one\n"
         "smooth surface (adjacent faces of one material whose normals differ by less than --crease);\n"
@@ -44,138 +35,178 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
         ".glb / .gltf (+ .bin): glTF 2.0 in metres, COLOR_0 = L as float radiance, --per-bounce adds the\n"
         "attributes _E, _KE, ..., _REST, unlit materials with the reflectance in their extras, provenance in\n"
         "the asset's extras; --ldr adds COLOR_1, the 8-bit sRGB display set, beside the float ones.";
-    bn_optset_add(&set, (bn_opt){"output", 'o', BN_OPT_STRING, &out, NULL, 0, 0, "FILE",
+    bn_optset_add(set, (bn_opt){"output", 'o', BN_OPT_STRING, &a->out, NULL, 0, 0, "FILE",
                                  "baked mesh: .ply, .om, .obj, .glb or .gltf (default baked.ply)"});
-    bn_optset_add(&set, (bn_opt){"crease", 0, BN_OPT_DOUBLE, &crease, NULL, 0, 180, "DEG",
+    bn_optset_add(set, (bn_opt){"crease", 0, BN_OPT_DOUBLE, &a->crease, NULL, 0, 180, "DEG",
                                  "faces whose normals differ by more do not share vertices (default 30)"});
-    bn_optset_add(&set, (bn_opt){"flat", 0, BN_OPT_FLAG, &flat, NULL, 0, 0, NULL,
+    bn_optset_add(set, (bn_opt){"flat", 0, BN_OPT_FLAG, &a->flat, NULL, 0, 0, NULL,
                                  "every patch its own vertices, each with its patch's value (no blending: the patches "
                                  "as the solve sees them)"});
-    bn_optset_add(&set, (bn_opt){"ldr", 0, BN_OPT_FLAG, &ldr, NULL, 0, 0, NULL,
+    bn_optset_add(set, (bn_opt){"ldr", 0, BN_OPT_FLAG, &a->ldr, NULL, 0, 0, NULL,
                                  "8-bit sRGB colours at --exposure instead of float radiance"});
-    bn_optset_add(&set, (bn_opt){"exposure", 0, BN_OPT_DOUBLE, &ev, NULL, -64, 64, "EV",
+    bn_optset_add(set, (bn_opt){"exposure", 0, BN_OPT_DOUBLE, &a->ev, NULL, -64, 64, "EV",
                                  "--ldr: value * 2^EV before sRGB (default: auto, the 99th percentile of the "
                                  "patches' L at 0.9)"});
-    bn_optset_add(&set, (bn_opt){"per-bounce", 0, BN_OPT_FLAG, &per_bounce, NULL, 0, 0, NULL,
+    bn_optset_add(set, (bn_opt){"per-bounce", 0, BN_OPT_FLAG, &a->per_bounce, NULL, 0, 0, NULL,
                                  "also write each term E .. K^K E and rest as float vertex properties (PLY, OM, glTF)"});
-    bn_optset_add(&set, (bn_opt){"bounces", 'n', BN_OPT_INT, &n, NULL, 0, 64, "K",
+    bn_optset_add(set, (bn_opt){"bounces", 'n', BN_OPT_INT, &a->n, NULL, 0, 64, "K",
                                  "--per-bounce: terms E .. K^K E (default 3)"});
-    bn_optset_add(&set, (bn_opt){"mesh", 0, BN_OPT_CHOICE, &mesh, "elements|input", 0, 0, "elements|input",
+    bn_optset_add(set, (bn_opt){"mesh", 0, BN_OPT_CHOICE, &a->mesh, "elements|input", 0, 0, "elements|input",
                                  "faces written: every patch, the element mesh the solution lives on, whose vertices "
                                  "include every input vertex (default); or the scene's input polygons alone, each "
                                  "corner the mean of the patches around it"});
-    bn_cli_add_solution(&set, &sol);
-    bn_cli_add_ff(&set, &ff);
-    bn_cli_add_scene(&set, &so);
-    bn_cli_add_common(&set, c);
-    bn_error_clear(&err);
-    {
-        int prc;
-        if (!bn_cli_parse_scene_command(&set, argc, argv, pos, &prc))
-            return prc;
-    }
-    elements = mesh == 0;
-    if (flat && bn_cli_given(&set, "crease")) {
-        bn_error_set(&err, BN_EUSAGE, "--flat and --crease: a flat bake shares no vertices, so no crease applies");
-        return bn_cli_fail(&err);
-    }
-    {
-        const char *dot = strrchr(out, '.');
-        if (!dot || (strcmp(dot, ".ply") && strcmp(dot, ".om") && strcmp(dot, ".obj") && strcmp(dot, ".glb") &&
-                     strcmp(dot, ".gltf"))) {
-            bn_error_set(&err, BN_EUSAGE, "-o %s: bake writes .ply, .om, .obj, .glb or .gltf", out);
-            return bn_cli_fail(&err);
-        }
-        is_gltf = strcmp(dot, ".glb") == 0 || strcmp(dot, ".gltf") == 0;
-        if (per_bounce && strcmp(dot, ".obj") == 0) {
-            bn_error_set(&err, BN_EUSAGE, "--per-bounce needs .ply or .om (OBJ holds one colour per vertex)");
-            return bn_cli_fail(&err);
-        }
-    }
-    st = bn_cli_run_solution(pos[0], &so, &ff, &sol, c, per_bounce ? n : 0, &p, solver, sizeof solver);
-    if (st != BN_OK) {
-        rc = bn_status_exit_code(st);
-        goto done;
-    }
-    np = p.n;
-    nl = per_bounce ? (size_t)bn_layer_count(n) : 1;   /* L first, then E .. K^n E and rest */
-    layers = bn__calloc(nl, sizeof *layers);
-    names = bn__calloc(nl, sizeof *names);
-    if (!layers || !names) {
-        bn_error_set(&err, BN_ENOMEM, "out of memory");
-        rc = bn_cli_fail(&err);
-        goto done;
-    }
-    layers[0] = (bn_bake_layer){"L", p.res.L};
-    for (size_t l = 1; l < nl; l++) {
+    bn_cli_add_solution(set, &a->sol);
+    bn_cli_add_ff(set, &a->ff);
+    bn_cli_add_scene(set, &a->so);
+    bn_cli_add_common(set, c);
+}
+
+/* The options that go together, and the output's format. */
+static bn_status bn__bake_check(const bn_optset *set, bn__bake_cli *a, bn_error *err)
+{
+    const char *dot = strrchr(a->out, '.');
+    if (a->flat && bn_cli_given(set, "crease"))
+        return bn_error_set(err, BN_EUSAGE, "--flat and --crease: a flat bake shares no vertices, so no crease applies");
+    if (!dot || (strcmp(dot, ".ply") && strcmp(dot, ".om") && strcmp(dot, ".obj") && strcmp(dot, ".glb") &&
+                 strcmp(dot, ".gltf")))
+        return bn_error_set(err, BN_EUSAGE, "-o %s: bake writes .ply, .om, .obj, .glb or .gltf", a->out);
+    a->is_gltf = strcmp(dot, ".glb") == 0 || strcmp(dot, ".gltf") == 0;
+    if (a->per_bounce && strcmp(dot, ".obj") == 0)
+        return bn_error_set(err, BN_EUSAGE, "--per-bounce needs .ply or .om (OBJ holds one colour per vertex)");
+    return BN_OK;
+}
+
+/* L first, then (per bounce) E .. K^n E and rest; names: nl slots. */
+static bn_status bn__bake_layers(const bn__bake_cli *a, const bn_pipeline *p, bn_bake_layer **layers,
+                                 char (**names)[16], size_t *nl, bn_error *err)
+{
+    *nl = a->per_bounce ? (size_t)bn_layer_count(a->n) : 1;
+    *layers = bn__calloc(*nl, sizeof **layers);
+    *names = bn__calloc(*nl, sizeof **names);
+    if (!*layers || !*names)
+        return bn_error_set(err, BN_ENOMEM, "out of memory");
+    (*layers)[0] = (bn_bake_layer){"L", p->res.L};
+    for (size_t l = 1; l < *nl; l++) {
         int layer = (int)l - 1;
-        bn_layer_name(layer, n, names[l], sizeof names[l]);
-        layers[l] = (bn_bake_layer){names[l], layer <= n ? p.res.terms[layer] : p.rest};
+        bn_layer_name(layer, a->n, (*names)[l], sizeof (*names)[l]);
+        (*layers)[l] = (bn_bake_layer){(*names)[l], layer <= a->n ? p->res.terms[layer] : p->rest};
     }
-    st = bn_bake_create(p.scene, flat ? BN_BAKE_FLAT : crease, &bake, &err);
-    if (st != BN_OK) {
-        rc = bn_cli_fail(&err);
-        goto done;
-    }
-    if (!flat && p.rt) {
-        size_t enc = bn_bake_exclude_enclosed(bake, p.rt);
-        if (enc && !c->quiet)
-            fprintf(stderr, "bounce: bake: %zu patches inside closed objects (under the blocks) left out of the "
-                            "vertex averages\n", enc);
-    }
-    if ((ldr || is_gltf) && !bn_cli_given(&set, "exposure"))
-        ev = bn_bake_auto_exposure(p.res.L, np);
-    bn_cli_ff_opts(&ff, c, &fo);
+    return BN_OK;
+}
+
+/* How the colours are written, for the provenance and the summary line. */
+static void bn__bake_colours(const bn__bake_cli *a, char *buf, size_t n)
+{
+    if (a->is_gltf)
+        snprintf(buf, n, "COLOR_0 L x 2^%+.4f clamped to [0, 1]; _L radiance W m^-2 sr^-1%s", a->ev,
+                 a->ldr ? "; COLOR_1 8-bit sRGB" : "");
+    else if (a->ldr)
+        snprintf(buf, n, "8-bit sRGB at %+.4f EV", a->ev);
+    else
+        snprintf(buf, n, "float radiance, W m^-2 sr^-1");
+}
+
+/* The bake written with its provenance: how it was made, down to the crease and the colours. */
+static bn_status bn__bake_write(const bn__bake_cli *a, const bn_cli_common *c, const bn_pipeline *p,
+                                const bn_bake *bake, const bn_bake_layer *layers, size_t nl, const char *solver,
+                                bn_error *err)
+{
+    char ffdesc[256], patches[32], evbuf[160], creasebuf[32], verts[32], tolbuf[64];
+    int elements = a->mesh == 0;
+    bn_formfactor_opts fo;
+    bn_bake_write_opts wo;
+    bn_cli_ff_opts(&a->ff, c, &fo);
     bn_formfactor_opts_describe(&fo, ffdesc, sizeof ffdesc);
-    snprintf(patches, sizeof patches, "%zu", np);
+    snprintf(patches, sizeof patches, "%zu", p->n);
     if (elements)
         snprintf(verts, sizeof verts, "%zu", bn_bake_vertex_count(bake));
     else
         snprintf(verts, sizeof verts, "input polygons' corners");
-    if (flat)
+    if (a->flat)
         snprintf(creasebuf, sizeof creasebuf, "flat (no shared vertices)");
     else
-        snprintf(creasebuf, sizeof creasebuf, "%g degrees", crease);
-    if (is_gltf)
-        snprintf(evbuf, sizeof evbuf, "COLOR_0 L x 2^%+.4f clamped to [0, 1]; _L radiance W m^-2 sr^-1%s", ev,
-                 ldr ? "; COLOR_1 8-bit sRGB" : "");
-    else if (ldr)
-        snprintf(evbuf, sizeof evbuf, "8-bit sRGB at %+.4f EV", ev);
+        snprintf(creasebuf, sizeof creasebuf, "%g degrees", a->crease);
+    bn__bake_colours(a, evbuf, sizeof evbuf);
+    snprintf(tolbuf, sizeof tolbuf, "%g", a->sol.tol > 0 ? a->sol.tol : 1e-6);
+    bn_attr attrs[] = {
+        {"command line", c->cmdline}, {"scene", bn_scene_path(p->scene)}, {"solver", solver}, {"tolerance", tolbuf},
+        {"form factors", ffdesc},      {"patches", patches},          {"vertices", verts}, {"crease", creasebuf},
+        {"colours", evbuf},           {"faces", elements ? "the patches (element mesh)" : "the input polygons"},
+        {"vertex colour", a->flat ? "L of the vertex's own patch (flat: no vertex shared between patches)"
+                                  : "L, area-weighted mean of the patches around the vertex within its smooth surface"},
+    };
+    memset(&wo, 0, sizeof wo);
+    wo.input_mesh = !elements;
+    wo.ldr = a->ldr;
+    wo.exposure_ev = a->ev;
+    wo.attrs = attrs;
+    wo.nattrs = sizeof attrs / sizeof attrs[0];
+    return bn_bake_write(bake, a->out, layers, nl, &wo, err);
+}
+
+static void bn__bake_summary(const bn__bake_cli *a, const bn_pipeline *p, const bn_bake *bake)
+{
+    char evbuf[160];
+    size_t nf;
+    bn_scene_faces(p->scene, &nf);
+    bn__bake_colours(a, evbuf, sizeof evbuf);
+    if (a->mesh == 0)
+        printf("wrote %s (the element mesh: %zu vertices, %zu patches; %s%s)\n", a->out, bn_bake_vertex_count(bake),
+               p->n, evbuf, a->per_bounce ? "; per-bounce properties E .. rest" : "");
     else
-        snprintf(evbuf, sizeof evbuf, "float radiance, W m^-2 sr^-1");
-    {
-        char tolbuf[64];
-        bn_attr attrs[] = {
-            {"command line", c->cmdline}, {"scene", bn_scene_path(p.scene)}, {"solver", solver}, {"tolerance", tolbuf},
-            {"form factors", ffdesc},      {"patches", patches},         {"vertices", verts}, {"crease", creasebuf},
-            {"colours", evbuf},           {"faces", elements ? "the patches (element mesh)" : "the input polygons"},
-            {"vertex colour", flat ? "L of the vertex's own patch (flat: no vertex shared between patches)"
-                                   : "L, area-weighted mean of the patches around the vertex within its smooth surface"},
-        };
-        snprintf(tolbuf, sizeof tolbuf, "%g", sol.tol > 0 ? sol.tol : 1e-6);
-        memset(&wo, 0, sizeof wo);
-        wo.input_mesh = !elements;
-        wo.ldr = ldr;
-        wo.exposure_ev = ev;
-        wo.attrs = attrs;
-        wo.nattrs = sizeof attrs / sizeof attrs[0];
-        st = bn_bake_write(bake, out, layers, nl, &wo, &err);
-        if (st != BN_OK) {
-            rc = bn_cli_fail(&err);
-            goto done;
-        }
+        printf("wrote %s (the input mesh: %zu polygons; %s%s)\n", a->out, nf, evbuf,
+               a->per_bounce ? "; per-bounce properties E .. rest" : "");
+}
+
+/* The bake's vertices, leaving out patches inside closed objects, and the exposure. */
+static bn_status bn__bake_make(bn__bake_cli *a, const bn_optset *set, const bn_cli_common *c, const bn_pipeline *p,
+                               bn_bake **bake, bn_error *err)
+{
+    bn_status st = bn_bake_create(p->scene, a->flat ? BN_BAKE_FLAT : a->crease, bake, err);
+    if (st != BN_OK)
+        return st;
+    if (!a->flat && p->rt) {
+        size_t enc = bn_bake_exclude_enclosed(*bake, p->rt);
+        if (enc && !c->quiet)
+            fprintf(stderr, "bounce: bake: %zu patches inside closed objects (under the blocks) left out of the "
+                            "vertex averages\n", enc);
     }
-    if (!c->quiet) {
-        size_t nf;
-        bn_scene_faces(p.scene, &nf);
-        if (elements)
-            printf("wrote %s (the element mesh: %zu vertices, %zu patches; %s%s)\n", out, bn_bake_vertex_count(bake),
-                   np, evbuf, per_bounce ? "; per-bounce properties E .. rest" : "");
-        else
-            printf("wrote %s (the input mesh: %zu polygons; %s%s)\n", out, nf, evbuf,
-                   per_bounce ? "; per-bounce properties E .. rest" : "");
-    }
-done:
+    if ((a->ldr || a->is_gltf) && !bn_cli_given(set, "exposure"))
+        a->ev = bn_bake_auto_exposure(p->res.L, p->n);
+    return BN_OK;
+}
+
+int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
+{
+    bn_optset set;
+    bn__bake_cli a;
+    const char *pos[1];
+    size_t nl = 1;
+    int rc = 0, prc;
+    bn_error err;
+    bn_pipeline p;
+    bn_bake *bake = NULL;
+    bn_bake_layer *layers = NULL;
+    char (*names)[16] = NULL;
+    char solver[256];
+    bn_status st;
+
+    memset(&p, 0, sizeof p);
+    bn_error_clear(&err);
+    bn__bake_options(&set, &a, c);
+    if (!bn_cli_parse_scene_command(&set, argc, argv, pos, &prc))
+        return prc;
+    if (bn__bake_check(&set, &a, &err) != BN_OK)
+        return bn_cli_fail(&err);
+    st = bn_cli_run_solution(pos[0], &a.so, &a.ff, &a.sol, c, a.per_bounce ? a.n : 0, &p, solver, sizeof solver);
+    if (st != BN_OK)
+        rc = bn_status_exit_code(st);
+    else if (bn__bake_layers(&a, &p, &layers, &names, &nl, &err) != BN_OK ||
+             bn__bake_make(&a, &set, c, &p, &bake, &err) != BN_OK ||
+             bn__bake_write(&a, c, &p, bake, layers, nl, solver, &err) != BN_OK)
+        rc = bn_cli_fail(&err);
+    else if (!c->quiet)
+        bn__bake_summary(&a, &p, bake);
     free(layers);
     free(names);
     bn_bake_destroy(bake);
