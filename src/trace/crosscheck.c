@@ -272,6 +272,44 @@ static void bn__hit_sizes(const bn_crosscheck_input *in, const bn_patch *pa, siz
         *hall = buf[m / 2].h;
 }
 
+/* One entry (item i, layer l, channel c at index k) compared and judged into out's counts; h: the
+ * hit size for an estimate of exactly 0 (NAN: none); scale: the tolerance's; lscale: the layer's
+ * largest magnitude. */
+static void bn__judge(const bn_crosscheck_input *in, size_t k, size_t i, int l, int c, double h, double scale,
+                      double lscale, bn_crosscheck_entry *e, bn_crosscheck_result *out)
+{
+    const bn_trace_patches *tr = in->trace;
+    double R = in->rad[k], T = tr->mean[k];
+    e->patch = i;
+    e->layer = l;
+    e->channel = c;
+    e->radiosity = R;
+    e->trace = T;
+    e->se = tr->se[k];
+    e->untested = 0;
+    if (l > 0 && T == 0 && e->se == 0 && tr->spp > 1 && out->crit > 0 && isfinite(h))
+        /* no sample was nonzero (E, layer 0, is not sampled: exact in both) */
+        e->se = h * -log(out->alpha_each) / ((double)tr->spp * out->crit);
+    e->tol = (in->tol ? scale * in->tol[k] : 0) + in->rtol * fabs(R);
+    bn__ztest(R, T, e->se, e->tol, lscale, &e->z, &e->z_excess);
+    if (!isfinite(R) || !isfinite(T)) {
+        e->z = e->z_excess = INFINITY;
+    } else if (l > 0 && bn__few_hits(T, e->se, tr->spp)) {
+        e->untested = 1;   /* the t tail does not hold: shown, not judged (the power test is) */
+        e->z_excess = 0;
+        out->few_hits++;
+    }
+    if (e->z_excess <= out->crit) {
+        out->within++;
+        out->layer_within[l]++;
+    }
+    if (fabs(e->z) <= out->crit)
+        out->within_raw++;
+    out->worst_z = fmax(out->worst_z, e->z_excess);
+    out->worst_z_raw = fmax(out->worst_z_raw, fabs(e->z));
+    out->layer_worst_z[l] = fmax(out->layer_worst_z[l], e->z_excess);
+}
+
 bn_status bn_crosscheck_compare(const bn_crosscheck_input *in, bn_crosscheck_result *out, bn_error *err)
 {
     const bn_trace_patches *tr = in->trace;
@@ -330,39 +368,8 @@ bn_status bn_crosscheck_compare(const bn_crosscheck_input *in, bn_crosscheck_res
         for (size_t i = 0; i < n; i++)
             for (int c = 0; c < 3; c++) {
                 size_t k = (l * n + i) * 3 + (size_t)c;
-                bn_crosscheck_entry *e = &all[k];
-                double R = in->rad[k], T = tr->mean[k];
-                e->patch = i;
-                e->layer = (int)l;
-                e->channel = c;
-                e->radiosity = R;
-                e->trace = T;
-                e->se = tr->se[k];
-                if (l > 0 && T == 0 && e->se == 0 && tr->spp > 1 && out->crit > 0) {
-                    /* no sample was nonzero (E, layer 0, is not sampled: exact in both) */
-                    double h = hg[(size_t)c * ng + (in->part ? 0 : pa[i].face)];
-                    h = isfinite(h) ? h : hall[c];
-                    if (isfinite(h))
-                        e->se = h * -log(out->alpha_each) / ((double)tr->spp * out->crit);
-                }
-                e->tol = (in->tol ? scale * in->tol[k] : 0) + in->rtol * fabs(R);
-                bn__ztest(R, T, e->se, e->tol, lscale, &e->z, &e->z_excess);
-                if (!isfinite(R) || !isfinite(T)) {
-                    e->z = e->z_excess = INFINITY;
-                } else if (l > 0 && bn__few_hits(T, e->se, tr->spp)) {
-                    e->untested = 1;   /* the t tail does not hold: shown, not judged (the power test is) */
-                    e->z_excess = 0;
-                    out->few_hits++;
-                }
-                if (e->z_excess <= out->crit) {
-                    out->within++;
-                    out->layer_within[l]++;
-                }
-                if (fabs(e->z) <= out->crit)
-                    out->within_raw++;
-                out->worst_z = fmax(out->worst_z, e->z_excess);
-                out->worst_z_raw = fmax(out->worst_z_raw, fabs(e->z));
-                out->layer_worst_z[l] = fmax(out->layer_worst_z[l], e->z_excess);
+                double h = hg[(size_t)c * ng + (in->part ? 0 : pa[i].face)];
+                bn__judge(in, k, i, (int)l, c, isfinite(h) ? h : hall[c], scale, lscale, &all[k], out);
             }
     }
     free(hsz);
