@@ -550,7 +550,7 @@ BN_TEST(cli_outputs_cache_and_limits)
     txt = bn_test_read_file(bin, &size);
     BN_ASSERT(txt && memcmp(txt, "BNFF", 4) == 0);
     {
-        /* the layout documented in the README (BNFF v2): a 64-byte typed header */
+        /* the layout documented in doc/formfactors.md (BNFF v2): a 64-byte typed header */
         uint64_t n, nnz, klen, tlen;
         uint32_t version, vb, layout;
         double f01;

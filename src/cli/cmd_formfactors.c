@@ -25,7 +25,7 @@ int bn_cmd_formfactors(int argc, char **argv, bn_cli_common *c)
         "Computes the form factors F_ij (the share of the light leaving patch i that arrives at patch j,\n"
         "with visibility) for the meshed SCENE, prints the diagnostics (row sums, reciprocity, entries\n"
         "outside [0, 1], occlusion, rays, ||K||_inf, bytes, time) and writes F: .csv with provenance\n"
-        "lines, a header `patch,area,F0,F1,...` and one row per patch, or .bin (BNFF, see the README).\n"
+        "lines, a header `patch,area,F0,F1,...` and one row per patch, or .bin (BNFF, see doc/formfactors.md).\n"
         "An entry outside [0, 1] or not finite is an error (exit 5).";
     bn_cli_add_scene(&set, &so);
     bn_cli_add_ff(&set, &fo);

@@ -74,7 +74,7 @@ static void bn__report_table(FILE *fp, const bn_study_result *r)
         fputs("</tr>\n", fp);
     }
     fputs("</table>\n<p class=\"note\">Errors are relative: per patch and channel |L - L_ref| / max(|L_ref|, the "
-          "scene's mean radiance); per surface the area-weighted mean's; the README gives each formula.</p>\n",
+          "scene's mean radiance); per surface the area-weighted mean's; doc/study.md gives each formula.</p>\n",
           fp);
 }
 
