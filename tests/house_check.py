@@ -17,7 +17,7 @@ LIMIT = 100
 
 # function -> its length when listed (to be split: issue 39)
 KNOWN_LONG = {
-    "bn__ff_point_visible": 207, "bn_cmd_study": 206, "bn__gather_body": 201,
+    "bn__ff_point_visible": 207, "bn__gather_body": 201,
     "bn_partition_regions": 165, "bn__panels": 157, "bn_exr_write": 156,
     "bn_cmd_trace": 150, "bn_crosscheck_compare": 121, "bn__read_obj_stream": 143, "bn__draw": 139,
     "bn_cmd_bounces": 128, "bn__trace_items_run_body": 127, "bn_cmd_crosscheck": 126, "bn__methods": 123,
