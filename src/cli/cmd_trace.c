@@ -7,35 +7,17 @@
 #include <math.h>
 #include <string.h>
 
-static void bn__log_stderr(void *user, bn_log_level level, const char *msg)
-{
-    const bn_cli_common *c = user;
-    if (level == BN_LOG_WARN)
-        fprintf(stderr, "bounce: warning: %s\n", msg);
-    else if (level == BN_LOG_INFO && !c->quiet)
-        fprintf(stderr, "bounce: %s\n", msg);
-}
-
-int bn_cmd_trace(int argc, char **argv, bn_cli_common *c)
-{
-    bn_optset set;
+typedef struct bn__trace_cli {
     bn_cli_scene so;
     bn_cli_camera co;
-    bn_trace_opts to;
-    const char *pos[1], *out = NULL, *patches_out = NULL;
-    size_t spp = 64;   /* the camera group's --spp, also per patch */
-    int bounces = 3, strategy = 0, rr_depth = 3, half = 0, rc = 0;
-    bn_error err;
-    bn_scene *s = NULL;
-    bn_rt *rt = NULL;
-    bn_status st;
-    char header[2048];
+    const char *out, *patches_out;
+    int bounces, strategy, rr_depth, half;
+} bn__trace_cli;
 
-    memset(&set, 0, sizeof set);
-    memset(&so, 0, sizeof so);
-    memset(&co, 0, sizeof co);
-    set.usage = "bounce trace SCENE --spp N [-n K] -o pt.exr [--patches-out pt.csv] [camera, meshing options]";
-    set.summary =
+static void bn__trace_options(bn_optset *set, bn__trace_cli *a, bn_cli_common *c)
+{
+    set->usage = "bounce trace SCENE --spp N [-n K] -o pt.exr [--patches-out pt.csv] [camera, meshing options]";
+    set->summary =
         "Monte Carlo path tracing over the same patches and materials as radiosity (nothing else is shared:\n"
         "no form factors, no K, no solver). Every contribution is binned by its number of reflections:\n"
         "E (emission seen directly), KE (direct light), K2E, ..., K{n}E, rest (longer paths) and L (their\n"
@@ -43,125 +25,133 @@ int bn_cmd_trace(int argc, char **argv, bn_cli_common *c)
         "cosine sampling are combined by multiple importance sampling; Russian roulette after --rr-depth\n"
         "reflections. Per-patch estimates (patch-averaged outgoing radiance, with standard errors) go to\n"
         "--patches-out. Results are identical for any --threads.";
-    bn_optset_add(&set, (bn_opt){"bounces", 'n', BN_OPT_INT, &bounces, NULL, 0, 64, "K",
+    bn_optset_add(set, (bn_opt){"bounces", 'n', BN_OPT_INT, &a->bounces, NULL, 0, 64, "K",
                                  "terms E .. K{K}E kept as layers; longer paths go to rest (default 3)"});
-    bn_optset_add(&set, (bn_opt){"output", 'o', BN_OPT_STRING, &out, NULL, 0, 0, "FILE.exr",
+    bn_optset_add(set, (bn_opt){"output", 'o', BN_OPT_STRING, &a->out, NULL, 0, 0, "FILE.exr",
                                  "multi-layer OpenEXR of the camera image"});
-    bn_optset_add(&set, (bn_opt){"patches-out", 0, BN_OPT_STRING, &patches_out, NULL, 0, 0, "FILE.csv",
+    bn_optset_add(set, (bn_opt){"patches-out", 0, BN_OPT_STRING, &a->patches_out, NULL, 0, 0, "FILE.csv",
                                  "per-patch estimates and standard errors (CSV)"});
-    bn_optset_add(&set, (bn_opt){"strategy", 0, BN_OPT_CHOICE, &strategy, "mis|bsdf|nee", 0, 0, "mis|bsdf|nee",
+    bn_optset_add(set, (bn_opt){"strategy", 0, BN_OPT_CHOICE, &a->strategy, "mis|bsdf|nee", 0, 0, "mis|bsdf|nee",
                                  "how reflections gather emission (default mis: NEE + cosine sampling)"});
-    bn_optset_add(&set, (bn_opt){"rr-depth", 0, BN_OPT_INT, &rr_depth, NULL, 1, 1000000, "D",
+    bn_optset_add(set, (bn_opt){"rr-depth", 0, BN_OPT_INT, &a->rr_depth, NULL, 1, 1000000, "D",
                                  "reflections before Russian roulette (default 3)"});
-    bn_optset_add(&set, (bn_opt){"half", 0, BN_OPT_FLAG, &half, NULL, 0, 0, NULL, "store half floats in the EXR"});
-    bn_cli_add_camera(&set, &co);
+    bn_optset_add(set, (bn_opt){"half", 0, BN_OPT_FLAG, &a->half, NULL, 0, 0, NULL, "store half floats in the EXR"});
+    bn_cli_add_camera(set, &a->co);
     /* The camera group's --spp is the tracer's sample count, per pixel and per patch. */
-    for (size_t i = 0; i < set.n; i++)
-        if (strcmp(set.opt[i].name, "spp") == 0) {
-            set.opt[i].max = 1 << 30;
-            set.opt[i].help = "independent samples per pixel and per patch (default 64)";
+    for (size_t i = 0; i < set->n; i++)
+        if (strcmp(set->opt[i].name, "spp") == 0) {
+            set->opt[i].max = 1 << 30;
+            set->opt[i].help = "independent samples per pixel and per patch (default 64)";
         }
-    bn_cli_add_scene(&set, &so);
-    bn_cli_add_common(&set, c);
-    bn_error_clear(&err);
-    {
-        int prc;
-        if (!bn_cli_parse_scene_command(&set, argc, argv, pos, &prc))
-            return prc;
+    bn_cli_add_scene(set, &a->so);
+    bn_cli_add_common(set, c);
+}
+
+/* Per-patch estimates to the CSV, and each layer's power on stdout. */
+static bn_status bn__trace_patches_out(const bn__trace_cli *a, const bn_cli_common *c, const bn_rt *rt,
+                                       const bn_scene *s, const bn_trace_opts *to, const char *header, bn_error *err)
+{
+    bn_trace_patches r;
+    char name[16];
+    bn_status st = bn_trace_patches_run(rt, to, &r, err);
+    if (st != BN_OK)
+        return st;
+    st = bn_trace_patches_write_csv(a->patches_out, s, &r, header, err);
+    if (st == BN_OK && !c->quiet) {
+        printf("per-patch: %zu patches x %zu samples, %.3g rays in %.2f s (%.3g rays/s); wrote %s\n", r.n, to->spp,
+               (double)r.rays, r.seconds, (double)r.rays / fmax(r.seconds, 1e-9), a->patches_out);
+        printf("  %-6s %34s %34s\n", "layer", "power W (R G B)", "standard error W");
+        for (int l = 0; l < r.nlayers; l++) {
+            double w[3], e[3];
+            bn_trace_patches_power(s, &r, l, w, e);
+            printf("  %-6s %11.5g %11.5g %11.5g  %11.3g %11.3g %11.3g\n",
+                   bn_layer_name(l, a->bounces, name, sizeof name), w[0], w[1], w[2], e[0], e[1], e[2]);
+        }
     }
-    if (!out && !patches_out) {
+    bn_trace_patches_free(&r);
+    return st;
+}
+
+/* The camera image as a multi-layer EXR with its provenance. */
+static bn_status bn__trace_image_out(const bn_optset *set, bn__trace_cli *a, bn_cli_common *c, const char *scene_path,
+                                     const bn_rt *rt, const bn_scene *s, const bn_trace_opts *to, bn_error *err)
+{
+    bn_camera cam;
+    bn_trace_image img;
+    bn_log lg = {bn_cli_log, c, c->quiet};
+    char spp_s[32], n_s[16], method[96];
+    bn_status st = bn_cli_make_camera(set, &a->co, scene_path, s, &cam, err);
+    if (st == BN_OK)
+        st = bn_trace_image_run(rt, &cam, to, &img, err);
+    if (st != BN_OK)
+        return st;
+    snprintf(spp_s, sizeof spp_s, "%zu", to->spp);
+    snprintf(n_s, sizeof n_s, "%d", a->bounces);
+    snprintf(method, sizeof method, "path tracer (strategy %s, Russian roulette after %d)",
+             bn_trace_strategy_name(to->strategy), to->rr_depth);
+    bn_attr attrs[6] = {
+        {"bounce:command", c->cmdline}, {"bounce:version", bn_version()}, {"bounce:method", method},
+        {"bounce:spp", spp_s},          {"bounce:bounces", n_s},
+        {"bounce:units", "radiance W m^-2 sr^-1; *_var: variance of the pixel mean"},
+    };
+    st = bn_trace_image_write(&img, a->out, attrs, 6, a->half, &lg, err);
+    if (st == BN_OK && !c->quiet)
+        printf("image: %dx%d x %zu samples, %.3g rays in %.2f s (%.3g rays/s); wrote %s (layers E .. L and *_var)\n",
+               img.width, img.height, to->spp, (double)img.rays, img.seconds,
+               (double)img.rays / fmax(img.seconds, 1e-9), a->out);
+    bn_trace_image_free(&img);
+    return st;
+}
+
+int bn_cmd_trace(int argc, char **argv, bn_cli_common *c)
+{
+    bn_optset set;
+    bn__trace_cli a;
+    bn_trace_opts to;
+    const char *pos[1];
+    size_t np;
+    int rc = 0, prc;
+    bn_error err;
+    bn_scene *s = NULL;
+    bn_rt *rt = NULL;
+    bn_status st;
+    char header[2048];
+
+    memset(&set, 0, sizeof set);
+    memset(&a, 0, sizeof a);
+    a.bounces = 3;
+    a.rr_depth = 3;
+    bn__trace_options(&set, &a, c);
+    bn_error_clear(&err);
+    if (!bn_cli_parse_scene_command(&set, argc, argv, pos, &prc))
+        return prc;
+    if (!a.out && !a.patches_out) {
         bn_error_set(&err, BN_EUSAGE, "trace needs -o FILE.exr, --patches-out FILE.csv, or both");
         return bn_cli_fail(&err);
     }
-    if (bn_cli_given(&set, "spp"))
-        spp = (size_t)co.spp;
-    st = bn_cli_load_scene(pos[0], &so, c, &s);
-    if (st != BN_OK)
+    if ((st = bn_cli_load_scene(pos[0], &a.so, c, &s)) != BN_OK)
         return bn_status_exit_code(st);
-    st = bn_rt_create(s, c->threads, &rt, &err);
-    if (st != BN_OK) {
-        rc = bn_cli_fail(&err);
-        goto done;
-    }
     bn_trace_opts_default(&to);
-    to.spp = spp;
-    to.bounces = bounces;
-    to.rr_depth = rr_depth;
-    to.strategy = (bn_trace_strategy)strategy;
+    to.spp = bn_cli_given(&set, "spp") ? (size_t)a.co.spp : 64;   /* the camera group's --spp, also per patch */
+    to.bounces = a.bounces;
+    to.rr_depth = a.rr_depth;
+    to.strategy = (bn_trace_strategy)a.strategy;
     to.seed = c->seed;
     to.quiet = c->quiet;
     to.threads = c->threads;
-    {
-        size_t np;
-        bn_scene_patches(s, &np);
-        snprintf(header, sizeof header,
-                 "# command=%s\n# bounce=%s\n# scene=%s\n# unit=%s\n# patches=%zu\n# spp=%zu\n# bounces=%d\n"
-                 "# strategy=%s\n# rr_depth=%d\n# seed=%llu\n# radiance=W m^-2 sr^-1\n",
-                 c->cmdline, bn_version(), pos[0], bn_unit_name(bn_scene_unit(s)), np, spp, bounces,
-                 bn_trace_strategy_name(to.strategy), rr_depth, (unsigned long long)c->seed);
-    }
-
-    if (patches_out) {
-        bn_trace_patches r;
-        st = bn_trace_patches_run(rt, &to, &r, &err);
-        if (st != BN_OK) {
-            rc = bn_cli_fail(&err);
-            goto done;
-        }
-        st = bn_trace_patches_write_csv(patches_out, s, &r, header, &err);
-        if (st != BN_OK) {
-            bn_trace_patches_free(&r);
-            rc = bn_cli_fail(&err);
-            goto done;
-        }
-        if (!c->quiet) {
-            char name[16];
-            printf("per-patch: %zu patches x %zu samples, %.3g rays in %.2f s (%.3g rays/s); wrote %s\n", r.n, spp,
-                   (double)r.rays, r.seconds, (double)r.rays / fmax(r.seconds, 1e-9), patches_out);
-            printf("  %-6s %34s %34s\n", "layer", "power W (R G B)", "standard error W");
-            for (int l = 0; l < r.nlayers; l++) {
-                double w[3], e[3];
-                bn_trace_patches_power(s, &r, l, w, e);
-                printf("  %-6s %11.5g %11.5g %11.5g  %11.3g %11.3g %11.3g\n",
-                       bn_layer_name(l, bounces, name, sizeof name), w[0], w[1], w[2], e[0], e[1], e[2]);
-            }
-        }
-        bn_trace_patches_free(&r);
-    }
-
-    if (out) {
-        bn_camera cam;
-        bn_trace_image img;
-        bn_log lg = {bn__log_stderr, c, c->quiet};
-        char spp_s[32], n_s[16];
-        bn_attr attrs[6];
-        st = bn_cli_make_camera(&set, &co, pos[0], s, &cam, &err);
-        if (st == BN_OK)
-            st = bn_trace_image_run(rt, &cam, &to, &img, &err);
-        if (st != BN_OK) {
-            rc = bn_cli_fail(&err);
-            goto done;
-        }
-        snprintf(spp_s, sizeof spp_s, "%zu", spp);
-        snprintf(n_s, sizeof n_s, "%d", bounces);
-        attrs[0] = (bn_attr){"bounce:command", c->cmdline};
-        attrs[1] = (bn_attr){"bounce:version", bn_version()};
-        attrs[2] = (bn_attr){"bounce:method", "path tracer (NEE + cosine sampling, MIS power heuristic)"};
-        attrs[3] = (bn_attr){"bounce:spp", spp_s};
-        attrs[4] = (bn_attr){"bounce:bounces", n_s};
-        attrs[5] = (bn_attr){"bounce:units", "radiance W m^-2 sr^-1; *_var: variance of the pixel mean"};
-        st = bn_trace_image_write(&img, out, attrs, 6, half, &lg, &err);
-        if (st == BN_OK && !c->quiet)
-            printf("image: %dx%d x %zu samples, %.3g rays in %.2f s (%.3g rays/s); wrote %s (layers E .. L and *_var)\n",
-                   img.width, img.height, spp, (double)img.rays, img.seconds,
-                   (double)img.rays / fmax(img.seconds, 1e-9), out);
-        bn_trace_image_free(&img);
-        if (st != BN_OK) {
-            rc = bn_cli_fail(&err);
-            goto done;
-        }
-    }
-done:
+    bn_scene_patches(s, &np);
+    snprintf(header, sizeof header,
+             "# command=%s\n# bounce=%s\n# scene=%s\n# unit=%s\n# patches=%zu\n# spp=%zu\n# bounces=%d\n"
+             "# strategy=%s\n# rr_depth=%d\n# seed=%llu\n# radiance=W m^-2 sr^-1\n",
+             c->cmdline, bn_version(), pos[0], bn_unit_name(bn_scene_unit(s)), np, to.spp, a.bounces,
+             bn_trace_strategy_name(to.strategy), a.rr_depth, (unsigned long long)c->seed);
+    st = bn_rt_create(s, c->threads, &rt, &err);
+    if (st == BN_OK && a.patches_out)
+        st = bn__trace_patches_out(&a, c, rt, s, &to, header, &err);
+    if (st == BN_OK && a.out)
+        st = bn__trace_image_out(&set, &a, c, pos[0], rt, s, &to, &err);
+    if (st != BN_OK)
+        rc = bn_cli_fail(&err);
     bn_rt_destroy(rt);
     bn_scene_destroy(s);
     return rc;

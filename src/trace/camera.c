@@ -19,6 +19,44 @@ size_t bn_trace_image_bytes(const bn_camera *cam, int bounces)
     return b;
 }
 
+/* Pixel (row, col)'s spp jittered samples into out's mean and variance. */
+static void bn__trace_pixel(const bn__tracer *t, const bn_rt *rt, const bn_camera *cam, const bn_trace_opts *o, int row,
+                            int col, size_t npx, size_t nl, double *sample, double *mean, double *m2,
+                            bn_trace_image *out, unsigned long long *rays)
+{
+    size_t m = nl * 3, W = (size_t)cam->width;
+    size_t px = (size_t)row * W + (size_t)col;
+    memset(mean, 0, m * sizeof(double));
+    memset(m2, 0, m * sizeof(double));
+    for (size_t s = 0; s < o->spp; s++) {
+        if ((s & 4095) == 4095 && bn_interrupted() != BN_OK)
+            break;   /* a row of many samples takes seconds: stop within one batch (discarded) */
+        bn__rng rng = bn__rng_make(o->seed ^ BN__TRACE_TAG_PIXEL, px, s);
+        double org[3], dir[3], *L = sample + 3 * (nl - 1);
+        double jx = o->spp == 1 ? 0.5 : bn__rng_uniform(&rng), jy = o->spp == 1 ? 0.5 : bn__rng_uniform(&rng);
+        bn_hit h;
+        memset(sample, 0, m * sizeof(double));
+        bn_camera_ray(cam, col + jx, row + jy, org, dir);
+        (*rays)++;
+        if (bn_rt_intersect(rt, org, dir, 0, INFINITY, &h) && h.front) {
+            for (int c = 0; c < 3; c++)
+                sample[c] = t->Le[3 * h.patch + c];
+            bn__tracer_path(t, h.p, h.patch, &rng, sample, rays);
+        }
+        for (size_t l = 0; l + 1 < nl; l++)
+            for (int c = 0; c < 3; c++)
+                L[c] += sample[3 * l + c];
+        bn__welford_add(mean, m2, sample, m, s + 1);
+    }
+    for (size_t l = 0; l < nl; l++)
+        for (int c = 0; c < 3; c++) {
+            size_t k = (l * npx + px) * 3 + (size_t)c, j = 3 * l + (size_t)c;
+            double var = o->spp > 1 ? m2[j] / (double)(o->spp - 1) / (double)o->spp : 0;
+            out->mean[k] = (float)mean[j];
+            out->var[k] = (float)fmax(var, 0.0);
+        }
+}
+
 static bn_status bn__trace_image_run_body(const bn_rt *rt, const bn_camera *cam, const bn_trace_opts *o, bn_trace_image *out,
                              bn_error *err)
 {
@@ -74,34 +112,7 @@ static bn_status bn__trace_image_run_body(const bn_rt *rt, const bn_camera *cam,
             if (!sample || !mean || !m2 || bn_interrupted() != BN_OK || !bn_dist_mine((size_t)row))
                 continue;
             for (int col = 0; col < W; col++) {
-                size_t px = (size_t)row * (size_t)W + (size_t)col;
-                memset(mean, 0, m * sizeof(double));
-                memset(m2, 0, m * sizeof(double));
-                for (size_t s = 0; s < o->spp; s++) {
-                    bn__rng rng = bn__rng_make(o->seed ^ BN__TRACE_TAG_PIXEL, px, s);
-                    double org[3], dir[3], *L = sample + 3 * (nl - 1);
-                    double jx = o->spp == 1 ? 0.5 : bn__rng_uniform(&rng), jy = o->spp == 1 ? 0.5 : bn__rng_uniform(&rng);
-                    bn_hit h;
-                    memset(sample, 0, m * sizeof(double));
-                    bn_camera_ray(cam, col + jx, row + jy, org, dir);
-                    rays++;
-                    if (bn_rt_intersect(rt, org, dir, 0, INFINITY, &h) && h.front) {
-                        for (int c = 0; c < 3; c++)
-                            sample[c] = t.Le[3 * h.patch + c];
-                        bn__tracer_path(&t, h.p, h.patch, &rng, sample, &rays);
-                    }
-                    for (size_t l = 0; l + 1 < nl; l++)
-                        for (int c = 0; c < 3; c++)
-                            L[c] += sample[3 * l + c];
-                    bn__welford_add(mean, m2, sample, m, s + 1);
-                }
-                for (size_t l = 0; l < nl; l++)
-                    for (int c = 0; c < 3; c++) {
-                        size_t k = (l * npx + px) * 3 + (size_t)c, j = 3 * l + (size_t)c;
-                        double var = o->spp > 1 ? m2[j] / (double)(o->spp - 1) / (double)o->spp : 0;
-                        out->mean[k] = (float)mean[j];
-                        out->var[k] = (float)fmax(var, 0.0);
-                    }
+                bn__trace_pixel(&t, rt, cam, o, row, col, npx, nl, sample, mean, m2, out, &rays);
             }
             bn__progress_step(&prog, &done, 1);
         }

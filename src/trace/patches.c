@@ -13,6 +13,53 @@
 
 #define BN__TRACE_TAG_REGION 0x726567696f6eULL   /* "region" */
 
+/* Item i's spp samples (a patch, or a region's patches by area) into out's mean and se. */
+static void bn__trace_item(const bn__tracer *t, const bn_partition *part, const bn_trace_opts *o, size_t i, size_t n,
+                           size_t nl, double *sample, double *mean, double *m2, bn_trace_patches *out,
+                           unsigned long long *rays)
+{
+    size_t m = nl * 3;
+    memset(mean, 0, m * sizeof(double));
+    memset(m2, 0, m * sizeof(double));
+    for (size_t s = 0; s < o->spp; s++) {
+        if ((s & 4095) == 4095 && bn_interrupted() != BN_OK)
+            break;   /* an item of 1e6 samples takes seconds: stop within one batch (discarded) */
+        bn__rng rng = bn__rng_make(o->seed ^ (part ? BN__TRACE_TAG_REGION : BN__TRACE_TAG_PATCH), i, s);
+        size_t p = i;
+        if (part) {   /* the region's patch by area (independent draws: se from the samples) */
+            double u0 = bn__rng_uniform(&rng);
+            size_t lo = part->start[i], hi = part->start[i + 1] - 1;
+            while (lo < hi) {
+                size_t mid = lo + (hi - lo) / 2;
+                if (part->cum[mid] > u0)
+                    hi = mid;
+                else
+                    lo = mid + 1;
+            }
+            p = part->patch[lo];
+        }
+        double x[3], u1 = bn__rng_uniform(&rng), u2 = bn__rng_uniform(&rng), u3 = bn__rng_uniform(&rng);
+        double *L = sample + 3 * (nl - 1);
+        memset(sample, 0, m * sizeof(double));
+        bn__tracer_patch_point(t, p, u1, u2, u3, x);
+        /* Bin 0: the patch's own emission, seen directly. */
+        for (int c = 0; c < 3; c++)
+            sample[c] = t->Le[3 * p + c];
+        bn__tracer_path(t, x, p, &rng, sample, rays);
+        for (size_t l = 0; l + 1 < nl; l++)
+            for (int c = 0; c < 3; c++)
+                L[c] += sample[3 * l + c];
+        bn__welford_add(mean, m2, sample, m, s + 1);
+    }
+    for (size_t l = 0; l < nl; l++)
+        for (int c = 0; c < 3; c++) {
+            size_t k = (l * n + i) * 3 + (size_t)c, j = 3 * l + (size_t)c;
+            double var = o->spp > 1 ? m2[j] / (double)(o->spp - 1) : 0;
+            out->mean[k] = mean[j];
+            out->se[k] = sqrt(fmax(var, 0.0) / (double)o->spp);
+        }
+}
+
 /* part NULL: one item per patch; else one per region, its points uniform in area over the region. */
 static bn_status bn__trace_items_run_body(const bn_rt *rt, const bn_partition *part, const bn_trace_opts *o,
                                           bn_trace_patches *out, bn_error *err)
@@ -68,43 +115,7 @@ static bn_status bn__trace_items_run_body(const bn_rt *rt, const bn_partition *p
              * mpirun each rank traces its own items (bn_dist_mine), whole, as one process would */
             if (!sample || !mean || !m2 || bn_interrupted() != BN_OK || !bn_dist_mine(i))
                 continue;
-            memset(mean, 0, m * sizeof(double));
-            memset(m2, 0, m * sizeof(double));
-            for (size_t s = 0; s < o->spp; s++) {
-                bn__rng rng = bn__rng_make(o->seed ^ (part ? BN__TRACE_TAG_REGION : BN__TRACE_TAG_PATCH), i, s);
-                size_t p = i;
-                if (part) {   /* the region's patch by area (independent draws: se from the samples) */
-                    double u0 = bn__rng_uniform(&rng);
-                    size_t lo = part->start[i], hi = part->start[i + 1] - 1;
-                    while (lo < hi) {
-                        size_t mid = lo + (hi - lo) / 2;
-                        if (part->cum[mid] > u0)
-                            hi = mid;
-                        else
-                            lo = mid + 1;
-                    }
-                    p = part->patch[lo];
-                }
-                double x[3], u1 = bn__rng_uniform(&rng), u2 = bn__rng_uniform(&rng), u3 = bn__rng_uniform(&rng);
-                double *L = sample + 3 * (nl - 1);
-                memset(sample, 0, m * sizeof(double));
-                bn__tracer_patch_point(&t, p, u1, u2, u3, x);
-                /* Bin 0: the patch's own emission, seen directly. */
-                for (int c = 0; c < 3; c++)
-                    sample[c] = t.Le[3 * p + c];
-                bn__tracer_path(&t, x, p, &rng, sample, &rays);
-                for (size_t l = 0; l + 1 < nl; l++)
-                    for (int c = 0; c < 3; c++)
-                        L[c] += sample[3 * l + c];
-                bn__welford_add(mean, m2, sample, m, s + 1);
-            }
-            for (size_t l = 0; l < nl; l++)
-                for (int c = 0; c < 3; c++) {
-                    size_t k = (l * n + i) * 3 + (size_t)c, j = 3 * l + (size_t)c;
-                    double var = o->spp > 1 ? m2[j] / (double)(o->spp - 1) : 0;
-                    out->mean[k] = mean[j];
-                    out->se[k] = sqrt(fmax(var, 0.0) / (double)o->spp);
-                }
+            bn__trace_item(&t, part, o, i, n, nl, sample, mean, m2, out, &rays);
             bn__progress_step(&prog, &done, 1);
         }
         free(sample);
