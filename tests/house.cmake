@@ -8,3 +8,9 @@ if(BN_PYTHON3)
     ${PROJECT_BINARY_DIR}/CMakeFiles/bounce.dir)
   set_tests_properties(house.rules PROPERTIES LABELS house TIMEOUT 120)
 endif()
+# The manual's relative links, and the README tour's cheap lines as written (tests/docs_check.py).
+if(BN_PYTHON3 AND NOT BOUNCE_SANITIZE)
+  add_test(NAME docs.links_and_tour COMMAND ${BN_PYTHON3} ${CMAKE_CURRENT_LIST_DIR}/docs_check.py ${PROJECT_SOURCE_DIR}
+    $<TARGET_FILE:bounce_cli>)
+  set_tests_properties(docs.links_and_tour PROPERTIES LABELS docs TIMEOUT 300)
+endif()
