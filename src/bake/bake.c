@@ -449,14 +449,13 @@ void bn_bake_interpolate(const bn_bake *b, const double *vv, size_t patch, const
 
 double bn_bake_auto_exposure(const double *L, size_t np)
 {
-    bn_image img;
-    double ev = 0;
-    if (bn_image_alloc(&img, (int)(np < 1 ? 1 : np > 1u << 30 ? 1u << 30 : np), 1, NULL) != BN_OK)
+    float *rgb = bn__malloc_array(np ? 3 * np : 1, sizeof(float));
+    double ev;
+    if (!rgb)
         return 0;
-    for (size_t i = 0; i < np && i < (size_t)img.width; i++)
-        for (int c = 0; c < 3; c++)
-            img.rgb[3 * i + c] = (float)L[3 * i + c];
-    ev = bn_image_auto_exposure(&img);
-    bn_image_free(&img);
+    for (size_t i = 0; i < 3 * np; i++)
+        rgb[i] = (float)L[i];
+    ev = bn__auto_exposure(rgb, np);
+    free(rgb);
     return ev;
 }

@@ -54,6 +54,8 @@ void bn__threads_end(int prev);
 
 /* Physical memory in bytes (0 if unknown) and the default --max-memory (80% of it). */
 size_t bn__physical_memory(void);
+/* Images' and bakes' automatic exposure (EV): the 99th percentile luminance of n RGB values at 0.9. */
+double bn__auto_exposure(const float *rgb, size_t n);
 
 /* Monotonic wall clock in seconds. */
 double bn__now(void);

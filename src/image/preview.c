@@ -22,32 +22,9 @@ unsigned char bn_tonemap_srgb8(double v, double ev)
     return (unsigned char)floor(s * 255 + 0.5);
 }
 
-static int bn__cmp_float(const void *a, const void *b)
-{
-    float x = *(const float *)a, y = *(const float *)b;
-    return (x > y) - (x < y);
-}
-
 double bn_image_auto_exposure(const bn_image *img)
 {
-    size_t n = (size_t)img->width * img->height, m = 0;
-    float *lum = bn__malloc_array(n ? n : 1, sizeof(float));
-    double p, ev = 0;
-    if (!lum)
-        return 0;
-    for (size_t i = 0; i < n; i++) {
-        const float *c = img->rgb + 3 * i;
-        float y = 0.2126f * c[0] + 0.7152f * c[1] + 0.0722f * c[2];
-        if (y > 0 && isfinite(y))
-            lum[m++] = y;
-    }
-    if (m > 0) {
-        qsort(lum, m, sizeof *lum, bn__cmp_float);
-        p = lum[(size_t)floor(0.99 * (double)(m - 1))];
-        ev = p > 0 ? log2(0.9 / p) : 0;
-    }
-    free(lum);
-    return ev;
+    return bn__auto_exposure(img->rgb, (size_t)img->width * img->height);
 }
 
 static void bn__to_rgb8(const bn_image *img, double ev, unsigned char *out)
