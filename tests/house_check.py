@@ -31,7 +31,6 @@ KNOWN_LONG = {
 KNOWN_CIRCLES = {
     ("base/util.c", "dist/dist.c"),
     ("adapters/openmesh_io.cpp", "scene/obj.c", "scene/off.c", "scene/ply.c", "scene/scene.c"),
-    ("formfactor/kernel.c", "formfactor/visible.c"),
     ("dir base", "dir dist"),
     ("dir adapters", "dir scene"),
     ("dir bake", "dir gather", "dir image"),
