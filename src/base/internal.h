@@ -85,6 +85,9 @@ void bn__outfile_abort(bn__outfile *f);
  * OpenMesh): *tmp is malloc'd; call bn__tmpname_commit / bn__tmpname_abort afterwards. */
 bn_status bn__tmpname_reserve(const char *path, char **tmp, bn_error *err);
 bn_status bn__tmpname_commit(const char *path, char *tmp, bn_error *err);
+/* Under mpirun every rank computes and rank 0 alone writes: bn_dist_init gives base the rank, so
+ * base needs nothing of src/dist. */
+void bn__set_writer_rank(int rank);
 void bn__tmpname_abort(char *tmp);
 /* Removes every registered temporary file; async-signal-safe. */
 void bn__tmp_remove_all(void);

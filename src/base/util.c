@@ -1,7 +1,6 @@
 /* Checked allocation, clocks, counter-based RNG, atomic output files and progress bars. */
 #define _POSIX_C_SOURCE 200809L
 #include "base/internal.h"
-#include "bounce/dist.h"
 
 #include <errno.h>
 #include <signal.h>
@@ -177,10 +176,14 @@ bn_status bn__tmpname_reserve(const char *path, char **tmp, bn_error *err)
     return BN_OK;
 }
 
+/* This process's rank under mpirun (bn_dist_init says so): only rank 0 commits outputs. */
+static int bn__writer_rank = 0;
+void bn__set_writer_rank(int rank) { bn__writer_rank = rank; }
+
 bn_status bn__tmpname_commit(const char *path, char *tmp, bn_error *err)
 {
     bn_status st = BN_OK;
-    if (bn_dist_rank() != 0) {   /* under mpirun, rank 0 alone writes outputs: the others drop theirs */
+    if (bn__writer_rank != 0) {   /* under mpirun, rank 0 alone writes outputs: the others drop theirs */
         bn__tmpname_abort(tmp);
         return BN_OK;
     }

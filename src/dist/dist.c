@@ -33,6 +33,7 @@ bn_status bn_dist_init(int *argc, char ***argv, bn_error *err)
     MPI_Comm_set_errhandler(MPI_COMM_WORLD, MPI_ERRORS_RETURN);
     MPI_Comm_rank(MPI_COMM_WORLD, &bn__rank);
     MPI_Comm_size(MPI_COMM_WORLD, &bn__size);
+    bn__set_writer_rank(bn__rank);
     bn__joined = 1;
 #else
     (void)argc;
