@@ -29,7 +29,6 @@ KNOWN_LONG = {
 # circles between files (and between src/ directories, "dir NAME") not yet removed, from what each
 # object file calls (nm); and calls from src/transport up into src/formfactor
 KNOWN_CIRCLES = {
-    ("adapters/openmesh_io.cpp", "scene/obj.c", "scene/off.c", "scene/ply.c", "scene/scene.c"),
     ("dir adapters", "dir scene"),
     ("dir bake", "dir gather", "dir image"),
 }

@@ -61,21 +61,6 @@ typedef struct {
                            taken as on it, so cuts never leave slivers thinner than this */
 } bn__cx;
 
-static int bn__grow(void **p, size_t *cap, size_t need, size_t size)
-{
-    size_t c = *cap ? *cap : 16;
-    void *q;
-    if (need <= *cap)
-        return 1;
-    while (c < need)
-        c *= 2;
-    q = bn__realloc_array(*p, c, size);
-    if (!q)
-        return 0;
-    *p = q;
-    *cap = c;
-    return 1;
-}
 
 static const double *bn__fvert(const bn_scene *s, const bn_face *f, unsigned i)
 {

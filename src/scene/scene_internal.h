@@ -43,6 +43,9 @@ bn_status bn__read_ply(const char *path, bn__soup *out, const bn_log *log, bn_er
 bn_status bn__read_off(const char *path, bn__soup *out, const bn_log *log, bn_error *err);
 bn_status bn__read_off_binary(const char *path, bn__soup *out, const bn_log *log, bn_error *err);
 
+/* Grows *p (capacity *cap elements of elem bytes) to hold need; 0 when out of memory (soup.c). */
+int bn__grow(void **p, size_t *cap, size_t need, size_t elem);
+
 /* Validates a soup and builds faces; takes ownership of nothing (copies). */
 bn_status bn__scene_build(const char *path, const bn__soup *soup, const bn_load_opts *o,
                           bn_scene **out, bn_error *err);

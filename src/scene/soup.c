@@ -1,0 +1,133 @@
+/* The polygon soup every reader fills (OBJ, OFF, PLY, OpenMesh's binary OFF, arrays from the
+ * API) and scene.c validates: vertices, polygons by vertex index, materials. */
+#include "scene/scene_internal.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+void bn__soup_free(bn__soup *s)
+{
+    free(s->verts);
+    free(s->counts);
+    free(s->mat);
+    free(s->line);
+    free(s->idx);
+    free(s->mats);
+    memset(s, 0, sizeof *s);
+}
+
+int bn__grow(void **p, size_t *cap, size_t need, size_t elem)
+{
+    size_t nc;
+    void *q;
+    if (need <= *cap)
+        return 1;
+    nc = *cap ? *cap : 64;
+    while (nc < need) {
+        if (nc > SIZE_MAX / 2)
+            return 0;
+        nc *= 2;
+    }
+    q = bn__realloc_array(*p, nc, elem);
+    if (!q)
+        return 0;
+    *p = q;
+    *cap = nc;
+    return 1;
+}
+
+int bn__soup_add_vertex(bn__soup *s, const double p[3])
+{
+    if (!bn__grow((void **)&s->verts, &s->verts_cap, 3 * (s->nverts + 1), sizeof(double)))
+        return 0;
+    memcpy(s->verts + 3 * s->nverts, p, 3 * sizeof(double));
+    s->nverts++;
+    return 1;
+}
+
+int bn__soup_add_polygon(bn__soup *s, const size_t *idx, unsigned n, unsigned mat, unsigned line)
+{
+    size_t cap = s->polys_cap;
+    if (s->npolys + 1 > cap) {
+        size_t c1 = cap, c2 = cap, c3 = cap;
+        if (!bn__grow((void **)&s->counts, &c1, s->npolys + 1, sizeof(unsigned)) ||
+            !bn__grow((void **)&s->mat, &c2, s->npolys + 1, sizeof(unsigned)) ||
+            !bn__grow((void **)&s->line, &c3, s->npolys + 1, sizeof(unsigned)))
+            return 0;
+        s->polys_cap = c1;
+    }
+    if (!bn__grow((void **)&s->idx, &s->idx_cap, s->nidx + n, sizeof(size_t)))
+        return 0;
+    memcpy(s->idx + s->nidx, idx, n * sizeof(size_t));
+    s->nidx += n;
+    s->counts[s->npolys] = n;
+    s->mat[s->npolys] = mat;
+    s->line[s->npolys] = line;
+    s->npolys++;
+    return 1;
+}
+
+int bn__soup_add_material(bn__soup *s, const bn_material *m)
+{
+    if (!bn__grow((void **)&s->mats, &s->mats_cap, s->nmats + 1, sizeof *m))
+        return 0;
+    s->mats[s->nmats++] = *m;
+    return 1;
+}
+
+/* Materials from per-polygon keys (reflectance RGB, emission RGB: 6 values a polygon): one material
+ * per distinct key, named prefix0, prefix1, ... in order of first use. Sorting groups equal keys
+ * (each run in polygon order), so this is O(n log n) even when every polygon has its own colour. */
+typedef struct bn__mat_key {
+    double v[6];
+    size_t poly;
+} bn__mat_key;
+
+static int bn__mat_key_cmp(const void *a, const void *b)
+{
+    const bn__mat_key *x = a, *y = b;
+    for (int q = 0; q < 6; q++)
+        if (x->v[q] != y->v[q])
+            return x->v[q] < y->v[q] ? -1 : 1;
+    return x->poly < y->poly ? -1 : x->poly > y->poly;
+}
+
+int bn__soup_materials_from_keys(bn__soup *s, const double *keys, const char *prefix)
+{
+    size_t n = s->npolys;
+    bn__mat_key *k = bn__malloc_array(n ? n : 1, sizeof *k);
+    size_t *head = bn__malloc_array(n ? n : 1, sizeof(size_t));    /* first polygon with the same key */
+    unsigned *num = bn__malloc_array(n ? n : 1, sizeof(unsigned)); /* material of a head polygon */
+    int ok = k && head && num;
+    for (size_t f = 0; ok && f < n; f++) {
+        memcpy(k[f].v, keys + 6 * f, sizeof k[f].v);
+        k[f].poly = f;
+        num[f] = UINT32_MAX;
+    }
+    if (ok)
+        qsort(k, n, sizeof *k, bn__mat_key_cmp);
+    for (size_t q = 0, run = 0; ok && q < n; q++) {
+        if (q > 0 && memcmp(k[q].v, k[q - 1].v, sizeof k[q].v) != 0)
+            run = q;
+        head[k[q].poly] = k[run].poly;
+    }
+    /* Walking the polygons in order, a run is first met at its head, whose key is its own. */
+    for (size_t f = 0; ok && f < n; f++) {
+        size_t h = head[f];
+        if (num[h] == UINT32_MAX) {
+            bn_material m;
+            memset(&m, 0, sizeof m);
+            snprintf(m.name, sizeof m.name, "%s%zu", prefix, s->nmats);
+            memcpy(m.rho, keys + 6 * f, 3 * sizeof(double));
+            memcpy(m.Le, keys + 6 * f + 3, 3 * sizeof(double));
+            num[h] = (unsigned)s->nmats;
+            ok = bn__soup_add_material(s, &m);
+        }
+        s->mat[f] = num[h];
+    }
+    free(k);
+    free(head);
+    free(num);
+    return ok;
+}
