@@ -22,7 +22,7 @@ KNOWN_LONG = {
     "bn_crosscheck_compare": 121, "bn__read_obj_stream": 143, "bn__draw": 139,
     "bn_cmd_bounces": 128, "bn__methods": 123,
     "bn__study_compare": 121, "bn__solid_planes": 121, 
-    "bn__solids_find": 115, "bn_cmd_info": 113, "bn__ply_record": 112, "bn__grid": 112,
+    "bn__solids_find": 115, "bn__ply_record": 112, "bn__grid": 112,
     "bn__mesh_contacts": 112, "bn__pair_value": 107, "bn__tree_build": 104, "bn__integral": 104,
 }
 

@@ -17,96 +17,72 @@ static void bn__bytes(double b, char *buf, size_t n)
     snprintf(buf, n, "%.3g %s", b, u[i]);
 }
 
-int bn_cmd_info(int argc, char **argv, bn_cli_common *c)
+/* Faces, vertices, bounds, area, emitters, patches, contacts and dense K's size. */
+static void bn__info_summary(const bn_scene *s, const bn_cli_scene *so)
 {
-    bn_optset set;
-    bn_cli_scene so;
-    const char *pos[1];
-    size_t nf, np, nm, nv;
-    int all_faces = 0;
-    bn_error err;
-    bn_scene *s = NULL;
-    const bn_face *faces;
-    const bn_material *mats;
-    double lo[3], hi[3], total = 0, watts[3], m;
-    bn_scene_stats st;
+    size_t nf, np, nv;
+    const bn_face *faces = bn_scene_faces(s, &nf);
+    bn_scene_stats st = bn_scene_stats_get(s);
+    double lo[3], hi[3], total = 0, watts[3], m = bn_unit_to_metres(bn_scene_unit(s));
+    const char *unit = bn_unit_name(bn_scene_unit(s));
     char buf[64];
-
-    memset(&set, 0, sizeof set);
-    memset(&so, 0, sizeof so);
-    set.usage = "bounce info SCENE [meshing options]";
-    set.summary = "Loads and validates SCENE (.obj with .mtl, .ply, .off), meshes it into patches and prints\n"
-                  "its faces, patches, emitters, materials, bounding box, total area, emitted power and the\n"
-                  "memory a dense K would take (N^2 floats).";
-    bn_cli_add_scene(&set, &so);
-    bn_optset_add(&set, (bn_opt){"all-faces", 0, BN_OPT_FLAG, &all_faces, NULL, 0, 0, NULL,
-                                 "list every face even when there are more than 64"});
-    bn_cli_add_common(&set, c);
-    bn_error_clear(&err);
-    {
-        int prc;
-        if (!bn_cli_parse_scene_command(&set, argc, argv, pos, &prc))
-            return prc;
-    }
-    {
-        bn_status lst = bn_cli_load_scene(pos[0], &so, c, &s);
-        if (lst != BN_OK)
-            return bn_status_exit_code(lst);
-    }
-
-    faces = bn_scene_faces(s, &nf);
-    mats = bn_scene_materials(s, &nm);
     bn_scene_patches(s, &np);
     bn_scene_vertices(s, &nv);
     bn_scene_bounds(s, lo, hi);
-    st = bn_scene_stats_get(s);
-    m = bn_unit_to_metres(bn_scene_unit(s));
     for (size_t f = 0; f < nf; f++)
         total += faces[f].area;
     bn_scene_emitted_power(s, watts);
-
     printf("scene       %s\n", bn_scene_path(s));
-    printf("unit        %s (areas below in %s^2; powers in W)\n", bn_unit_name(bn_scene_unit(s)),
-           bn_unit_name(bn_scene_unit(s)));
+    printf("unit        %s (areas below in %s^2; powers in W)\n", unit, unit);
     printf("polygons    %zu read; %zu faces after validation (%zu non-planar split, %zu triangulated, "
            "%zu degenerate dropped, %zu duplicates dropped)\n",
            st.input_polygons, nf, st.nonplanar_split, st.polygons_triangulated, st.degenerate_dropped,
            st.duplicates_dropped);
     printf("vertices    %zu\n", nv);
     printf("bounds      (%.6g, %.6g, %.6g) .. (%.6g, %.6g, %.6g)\n", lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
-    printf("total area  %.10g %s^2 (%.6g m^2)\n", total, bn_unit_name(bn_scene_unit(s)), total * m * m);
+    printf("total area  %.10g %s^2 (%.6g m^2)\n", total, unit, total * m * m);
     printf("emitters    %zu face%s; emitted power %.6g %.6g %.6g W (R G B; pi * sum A Le)\n",
            bn_scene_emitter_count(s), bn_scene_emitter_count(s) == 1 ? "" : "s", watts[0], watts[1], watts[2]);
-    printf("patches     %zu (largest patch edge %.6g %s)\n", np, bn_scene_largest_patch_edge(s),
-           bn_unit_name(bn_scene_unit(s)));
+    printf("patches     %zu (largest patch edge %.6g %s)\n", np, bn_scene_largest_patch_edge(s), unit);
     printf("contacts    %zu segments on %zu faces split %zu patches into %zu%s\n", st.contact_segments,
            st.contact_faces, st.contact_patches_split, st.contact_patches_made,
-           so.no_contacts ? " (--no-contacts)" : "");
+           so->no_contacts ? " (--no-contacts)" : "");
     bn__bytes((double)np * (double)np * 4.0, buf, sizeof buf);
     printf("dense K     %s as float (N^2 x 4 bytes; F is stored once for all channels)\n", buf);
-    {
-        /* the hierarchy: its nodes exactly, its links as the range measured on the Cornell box and
-         * the bunny box at the default eps (15 and 235 links per patch; ~4 us per link on 2 cores) */
-        bn_pipeline_opts po;
-        char why[200], b1[32], b2[32], b3[32];
-        size_t nh = np;
-        int mesh_given = so.patch_size > 0 || so.patches || so.no_subdivide;
-        bn_cli_pipeline_opts(&so, NULL, NULL, c, &po);
-        po.transport = "auto";
-        int h = bn_pipeline_use_hierarchy(&po, np, why, sizeof why);
-        printf("transport   auto chooses %s: %s\n", h ? "hierarchical" : "dense", why);
-        if (!mesh_given && nh < nf + BN_HIERARCHY_EXTRA_PATCHES)
-            nh = nf + BN_HIERARCHY_EXTRA_PATCHES;   /* its default mesh aims at this */
-        bn__bytes((double)(2 * nh) * 88.0, b1, sizeof b1);
-        bn__bytes((double)nh * 15 * 8.0, b2, sizeof b2);
-        bn__bytes((double)nh * 250 * 8.0, b3, sizeof b3);
-        printf("hierarchy   %s%zu patches, %zu nodes (%s); at eps %g typically 15 to 250 links per patch (%s to %s "
-               "at 8 bytes a link, twice that while refining), ~4 us a link on 2 cores: %.2g to %.2g s\n",
-               mesh_given ? "" : "about ", nh, 2 * nh - 1, b1, BN_HIERARCHY_EPS_DEFAULT, b2, b3,
-               (double)nh * 15 * 4e-6 * 2 / bn_threads_resolve(c->threads),
-               (double)nh * 250 * 4e-6 * 2 / bn_threads_resolve(c->threads));
-    }
+}
 
+/* What auto would choose, and the hierarchy's size: its nodes exactly, its links as the range seen
+ * at the default eps (15 to 250 links per patch, Cornell box to bunny box); how long a link takes
+ * is a measured figure, in bench/results.md, not here. */
+static void bn__info_hierarchy(const bn_scene *s, const bn_cli_scene *so, bn_cli_common *c)
+{
+    bn_pipeline_opts po;
+    char why[200], b1[32], b2[32], b3[32];
+    size_t nf, np;
+    int mesh_given = so->patch_size > 0 || so->patches || so->no_subdivide;
+    bn_scene_faces(s, &nf);
+    bn_scene_patches(s, &np);
+    size_t nh = np;
+    bn_cli_pipeline_opts(so, NULL, NULL, c, &po);
+    po.transport = "auto";
+    int h = bn_pipeline_use_hierarchy(&po, np, why, sizeof why);
+    printf("transport   auto chooses %s: %s\n", h ? "hierarchical" : "dense", why);
+    if (!mesh_given && nh < nf + BN_HIERARCHY_EXTRA_PATCHES)
+        nh = nf + BN_HIERARCHY_EXTRA_PATCHES;   /* its default mesh aims at this */
+    bn__bytes((double)(2 * nh) * 88.0, b1, sizeof b1);
+    bn__bytes((double)nh * 15 * 8.0, b2, sizeof b2);
+    bn__bytes((double)nh * 250 * 8.0, b3, sizeof b3);
+    printf("hierarchy   %s%zu patches, %zu nodes (%s); at eps %g typically 15 to 250 links per patch (%s to %s "
+           "at 8 bytes a link, twice that while refining; time per link: bench/results.md)\n",
+           mesh_given ? "" : "about ", nh, 2 * nh - 1, b1, BN_HIERARCHY_EPS_DEFAULT, b2, b3);
+}
+
+/* The materials with their faces and areas, then the faces (64 unless all). */
+static void bn__info_tables(const bn_scene *s, int all_faces)
+{
+    size_t nf, nm;
+    const bn_face *faces = bn_scene_faces(s, &nf);
+    const bn_material *mats = bn_scene_materials(s, &nm);
     printf("\nmaterials   %zu\n", nm);
     printf("  %-3s %-20s %-26s %-26s %6s %14s\n", "id", "name", "rho (Kd)", "Le (Ke, W m^-2 sr^-1)", "faces", "area");
     for (size_t i = 0; i < nm; i++) {
@@ -127,6 +103,36 @@ int bn_cmd_info(int argc, char **argv, bn_cli_common *c)
                faces[f].nverts, faces[f].area, faces[f].normal[0], faces[f].normal[1], faces[f].normal[2]);
     if (nf > 64 && !all_faces)
         printf("  ... %zu more (--all-faces lists them)\n", nf - 64);
+}
+
+int bn_cmd_info(int argc, char **argv, bn_cli_common *c)
+{
+    bn_optset set;
+    bn_cli_scene so;
+    const char *pos[1];
+    int all_faces = 0, prc;
+    bn_error err;
+    bn_scene *s = NULL;
+    bn_status st;
+
+    memset(&set, 0, sizeof set);
+    memset(&so, 0, sizeof so);
+    set.usage = "bounce info SCENE [meshing options]";
+    set.summary = "Loads and validates SCENE (.obj with .mtl, .ply, .off), meshes it into patches and prints\n"
+                  "its faces, patches, emitters, materials, bounding box, total area, emitted power and the\n"
+                  "memory a dense K would take (N^2 floats).";
+    bn_cli_add_scene(&set, &so);
+    bn_optset_add(&set, (bn_opt){"all-faces", 0, BN_OPT_FLAG, &all_faces, NULL, 0, 0, NULL,
+                                 "list every face even when there are more than 64"});
+    bn_cli_add_common(&set, c);
+    bn_error_clear(&err);
+    if (!bn_cli_parse_scene_command(&set, argc, argv, pos, &prc))
+        return prc;
+    if ((st = bn_cli_load_scene(pos[0], &so, c, &s)) != BN_OK)
+        return bn_status_exit_code(st);
+    bn__info_summary(s, &so);
+    bn__info_hierarchy(s, &so, c);
+    bn__info_tables(s, all_faces);
     bn_scene_destroy(s);
     return 0;
 }
