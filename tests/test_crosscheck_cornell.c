@@ -238,8 +238,8 @@ BN_TEST(cornell_regions)
     cornell_free(&c);
 }
 
-/* Under the hierarchy the cross-check's tolerance adds the eps level's difference to the mesh
- * level's: recomputed here from the mesh level alone (its region means, Fs |R_h - R_mesh| / (r - 1)),
+/* Under the hierarchy, compared with light transport itself (the continuous model), the
+ * cross-check's tolerance adds the eps level's difference to the mesh level's: recomputed here from the mesh level alone (its region means, Fs |R_h - R_mesh| / (r - 1)),
  * the tolerance is at least that everywhere and larger somewhere, and the eps level has the mesh
  * asked with fewer links (eps x 4). Cornell box, 8 regions, 64 paths each (the verdict is not the
  * point here). */
@@ -264,6 +264,7 @@ BN_TEST(hierarchy_tolerance_adds_eps_level)
     o.pipeline.solve.log_sink = (bn_log){NULL, NULL, 1};
     o.trace.spp = 64;
     o.trace.quiet = 1;
+    o.trace.model = BN_TRACE_CONTINUOUS;
     o.regions = 8;
     if (bn_crosscheck_run_scene(bn_test_path("meshes/cornell-box.obj"), &o, &run, &err) != BN_OK)
         BN_FAIL("%s", err.msg);

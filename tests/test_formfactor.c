@@ -580,9 +580,28 @@ BN_TEST(cli_outputs_cache_and_limits)
     BN_ASSERT_EQ(bn_test_bounce(cmd, &out), 0);
     BN_ASSERT(strstr(out, "read from the cache") != NULL);
     free(out);
+    /* another seed: F drew no random sample (no occluder, the closed form), so the cache holds */
+    snprintf(cmd, sizeof cmd, "formfactors %s --no-subdivide --cache %s --seed 7", scene, cache);
+    BN_ASSERT_EQ(bn_test_bounce(cmd, &out), 0);
+    BN_ASSERT(strstr(out, "read from the cache") != NULL);
+    free(out);
     snprintf(cmd, sizeof cmd, "formfactors %s --no-subdivide --cache %s --samples 8", scene, cache);
     BN_ASSERT_EQ(bn_test_bounce(cmd, &out), 0);
     BN_ASSERT(strstr(out, "read from the cache") == NULL);
+    free(out);
+    /* Monte Carlo pairs draw on the seed: the same seed hits, another one misses */
+    snprintf(cmd, sizeof cmd, "formfactors %s --no-subdivide --ff montecarlo --cache %s", scene, cache);
+    BN_ASSERT_EQ(bn_test_bounce(cmd, &out), 0);
+    free(out);
+    BN_ASSERT_EQ(bn_test_bounce(cmd, &out), 0);
+    BN_ASSERT(strstr(out, "read from the cache") != NULL);
+    free(out);
+    snprintf(cmd, sizeof cmd, "formfactors %s --no-subdivide --ff montecarlo --cache %s --seed 7", scene, cache);
+    BN_ASSERT_EQ(bn_test_bounce(cmd, &out), 0);
+    BN_ASSERT(strstr(out, "read from the cache") == NULL);
+    free(out);
+    snprintf(cmd, sizeof cmd, "formfactors %s --no-subdivide --cache %s --samples 8", scene, cache);
+    BN_ASSERT_EQ(bn_test_bounce(cmd, &out), 0);
     free(out);
     /* a corrupted F (View3D's F = 1.31) is never let through, even from a cache */
     {

@@ -108,16 +108,27 @@ void bn_pipeline_describe_solve(const bn_pipeline_opts *o, const bn_pipeline *p,
 
 /* ---- the cross-check: radiosity against the independent path tracer on the same patches ----
  * The pipeline at the mesh asked (the rays kept for the tracer), the tracer's per-patch estimates,
- * a second mesh level for the discretisation tolerance (two-level grid-convergence estimate,
- * Roache 1994, order 1), then bn_crosscheck_compare. The tracer shares only the scene and the rays. */
-typedef enum bn_disc { BN_DISC_COARSE, BN_DISC_FINE, BN_DISC_NONE } bn_disc;
+ * the allowances for what the two estimate differently, then bn_crosscheck_compare. The tracer
+ * shares only the scene and the rays.
+ *
+ * What is compared follows trace.model. PATCH (the default): the tracer estimates the
+ * patch-constant transport radiosity solves on these patches, so dense and sparse K get no
+ * allowance at all and a failure is an error of F, K or the solver; the hierarchy gets one for its
+ * own approximation (the mesh asked at eps x r^2). CONTINUOUS: the tracer estimates light transport
+ * itself, and radiosity's discretisation error is allowed from a second mesh level (two-level
+ * grid-convergence estimate, Roache 1994, order 1), plus the eps level under the hierarchy. The
+ * second level underestimates the error where the solution is singular (concave corners, contacts):
+ * the continuous check states no false-alarm rate there. */
+typedef enum bn_disc { BN_DISC_AUTO, BN_DISC_COARSE, BN_DISC_FINE, BN_DISC_NONE } bn_disc;
 
 typedef struct bn_crosscheck_opts {
     bn_pipeline_opts pipeline;   /* scene, meshing, form factors; its solve's tol and bounces are set here */
-    bn_trace_opts trace;         /* spp, strategy, seed, threads (bounces set here) */
+    bn_trace_opts trace;         /* spp, strategy, model (default PATCH here), seed, threads (bounces set here) */
     int    bounces;              /* terms compared one by one, then rest and L (default 3) */
     double solve_tol;            /* radiosity's tolerance (default 1e-10: far below the tracer's noise) */
-    bn_disc disc;                /* second level: patch size x ratio, / ratio, or none (default coarse) */
+    bn_disc disc;                /* allowances: AUTO (default) as the model says above; COARSE, FINE: a second
+                                    mesh level, patch size x ratio or / ratio (and the eps level under the
+                                    hierarchy, x or / r^2); NONE: no allowance */
     double ratio;                /* patch-size ratio of the levels (default 2) */
     double tol_scale;            /* safety factor Fs of the two-level estimate (default 3) */
     double rtol, alpha;          /* a further relative allowance (0); family-wise false-failure rate (0.01) */

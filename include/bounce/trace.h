@@ -29,6 +29,16 @@ extern "C" {
 typedef enum bn_trace_strategy { BN_TRACE_MIS, BN_TRACE_BSDF, BN_TRACE_NEE } bn_trace_strategy;
 const char *bn_trace_strategy_name(bn_trace_strategy s);   /* "mis", "bsdf", "nee" */
 
+/* What transport the tracer estimates. CONTINUOUS is light transport itself on the scene's
+ * surfaces: the physical answer, which radiosity approaches as its patches shrink. PATCH restarts
+ * each path, after every reflection, at a point drawn uniformly on the patch it hit: the estimate
+ * is then the piecewise-constant (Galerkin) transport the radiosity solves on the same patches,
+ * F_ij = (1/A_i) int_i int_j cos cos V / (pi r^2), with no discretisation error between the two, so
+ * a disagreement is an error of the form factors, K or the solver, never of the mesh. Both draw
+ * only on the scene and the ray caster. */
+typedef enum bn_trace_model { BN_TRACE_CONTINUOUS, BN_TRACE_PATCH } bn_trace_model;
+const char *bn_trace_model_name(bn_trace_model m);   /* "continuous", "patch" */
+
 typedef struct bn_trace_opts {
     size_t   spp;          /* independent samples per pixel or per patch (default 64) */
     int      bounces;      /* bins K^0 E .. K^bounces E kept separately (default 3, >= 0); longer paths go to `rest` */
@@ -36,6 +46,7 @@ typedef struct bn_trace_opts {
     int      max_depth;    /* safety cap on reflections (default 100000; with roulette's survival
                               probability <= 0.95 a path reaches it with probability < 1e-2000) */
     bn_trace_strategy strategy;  /* default MIS */
+    bn_trace_model model;  /* default CONTINUOUS */
     uint64_t seed;         /* streams are keyed by (seed, pixel or patch, sample index) */
     int      quiet;        /* no progress bar */
     int      threads;      /* 0 = the caller's (all cores by default); results do not depend on it */
@@ -53,6 +64,8 @@ typedef struct bn_trace_patches {
     size_t spp;
     double *mean;      /* nlayers * n * 3: mean[(layer * n + i) * 3 + c] (owned) */
     double *se;        /* same layout: standard error of the mean (owned) */
+    double *skew;      /* same layout: sample skewness g1 of the spp samples themselves, m3 / m2^1.5
+                          (0 when they do not vary); the cross-check corrects its t test with it (owned) */
     unsigned long long rays;   /* rays cast (intersection + shadow) */
     double seconds;
 } bn_trace_patches;

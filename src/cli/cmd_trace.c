@@ -11,7 +11,7 @@ typedef struct bn__trace_cli {
     bn_cli_scene so;
     bn_cli_camera co;
     const char *out, *patches_out;
-    int bounces, strategy, rr_depth, half;
+    int bounces, strategy, model, rr_depth, half;
 } bn__trace_cli;
 
 static void bn__trace_options(bn_optset *set, bn__trace_cli *a, bn_cli_common *c)
@@ -24,7 +24,10 @@ static void bn__trace_options(bn_optset *set, bn__trace_cli *a, bn_cli_common *c
         "sum), with the variance of each pixel's mean as E_var, KE_var, .... Next-event estimation and\n"
         "cosine sampling are combined by multiple importance sampling; Russian roulette after --rr-depth\n"
         "reflections. Per-patch estimates (patch-averaged outgoing radiance, with standard errors) go to\n"
-        "--patches-out. Results are identical for any --threads.";
+        "--patches-out. --model patch restarts each path, after every reflection, at a uniform point of the\n"
+        "patch it hit: the estimate is then the patch-constant transport radiosity solves on these patches\n"
+        "(what `bounce crosscheck` compares with), and images show each patch's mean. Results are identical\n"
+        "for any --threads.";
     bn_optset_add(set, (bn_opt){"bounces", 'n', BN_OPT_INT, &a->bounces, NULL, 0, 64, "K",
                                  "terms E .. K{K}E kept as layers; longer paths go to rest (default 3)"});
     bn_optset_add(set, (bn_opt){"output", 'o', BN_OPT_STRING, &a->out, NULL, 0, 0, "FILE.exr",
@@ -33,6 +36,9 @@ static void bn__trace_options(bn_optset *set, bn__trace_cli *a, bn_cli_common *c
                                  "per-patch estimates and standard errors (CSV)"});
     bn_optset_add(set, (bn_opt){"strategy", 0, BN_OPT_CHOICE, &a->strategy, "mis|bsdf|nee", 0, 0, "mis|bsdf|nee",
                                  "how reflections gather emission (default mis: NEE + cosine sampling)"});
+    bn_optset_add(set, (bn_opt){"model", 0, BN_OPT_CHOICE, &a->model, "continuous|patch", 0, 0, "continuous|patch",
+                                 "light transport itself, or the patch-constant transport of radiosity on these "
+                                 "patches (default continuous)"});
     bn_optset_add(set, (bn_opt){"rr-depth", 0, BN_OPT_INT, &a->rr_depth, NULL, 1, 1000000, "D",
                                  "reflections before Russian roulette (default 3)"});
     bn_optset_add(set, (bn_opt){"half", 0, BN_OPT_FLAG, &a->half, NULL, 0, 0, NULL, "store half floats in the EXR"});
@@ -87,8 +93,8 @@ static bn_status bn__trace_image_out(const bn_optset *set, bn__trace_cli *a, bn_
         return st;
     snprintf(spp_s, sizeof spp_s, "%zu", to->spp);
     snprintf(n_s, sizeof n_s, "%d", a->bounces);
-    snprintf(method, sizeof method, "path tracer (strategy %s, Russian roulette after %d)",
-             bn_trace_strategy_name(to->strategy), to->rr_depth);
+    snprintf(method, sizeof method, "path tracer (%s transport, strategy %s, Russian roulette after %d)",
+             bn_trace_model_name(to->model), bn_trace_strategy_name(to->strategy), to->rr_depth);
     bn_attr attrs[6] = {
         {"bounce:command", c->cmdline}, {"bounce:version", bn_version()}, {"bounce:method", method},
         {"bounce:spp", spp_s},          {"bounce:bounces", n_s},
@@ -136,15 +142,17 @@ int bn_cmd_trace(int argc, char **argv, bn_cli_common *c)
     to.bounces = a.bounces;
     to.rr_depth = a.rr_depth;
     to.strategy = (bn_trace_strategy)a.strategy;
+    to.model = (bn_trace_model)a.model;
     to.seed = c->seed;
     to.quiet = c->quiet;
     to.threads = c->threads;
     bn_scene_patches(s, &np);
     snprintf(header, sizeof header,
              "# command=%s\n# bounce=%s\n# scene=%s\n# unit=%s\n# patches=%zu\n# spp=%zu\n# bounces=%d\n"
-             "# strategy=%s\n# rr_depth=%d\n# seed=%llu\n# radiance=W m^-2 sr^-1\n",
+             "# model=%s\n# strategy=%s\n# rr_depth=%d\n# seed=%llu\n# radiance=W m^-2 sr^-1\n",
              c->cmdline, bn_version(), pos[0], bn_unit_name(bn_scene_unit(s)), np, to.spp, a.bounces,
-             bn_trace_strategy_name(to.strategy), a.rr_depth, (unsigned long long)c->seed);
+             bn_trace_model_name(to.model), bn_trace_strategy_name(to.strategy), a.rr_depth,
+             (unsigned long long)c->seed);
     st = bn_rt_create(s, c->threads, &rt, &err);
     if (st == BN_OK && a.patches_out)
         st = bn__trace_patches_out(&a, c, rt, s, &to, header, &err);

@@ -313,8 +313,15 @@ static int bn__read_values(FILE *fp, const bn__bnff_head *h, const bn__file_patt
     return ok;
 }
 
-bn_status bn__ff_read_cache(const char *path, const char *key, size_t n, const char *storage, bn_precision prec,
-                            const double *rho, bn_transport **out, char *why, size_t why_size)
+/* Does the file's key text (klen bytes) equal `key` or, when given, `alt`? */
+static int bn__key_matches(const char *text, uint64_t klen, const char *key, const char *alt)
+{
+    return (klen == strlen(key) && memcmp(text, key, (size_t)klen) == 0) ||
+           (alt && klen == strlen(alt) && memcmp(text, alt, (size_t)klen) == 0);
+}
+
+bn_status bn__ff_read_cache(const char *path, const char *key, const char *alt, size_t n, const char *storage,
+                            bn_precision prec, const double *rho, bn_transport **out, char *why, size_t why_size)
 {
     FILE *fp = fopen(path, "rb");
     bn__bnff_head h;
@@ -334,13 +341,13 @@ bn_status bn__ff_read_cache(const char *path, const char *key, size_t n, const c
     if (!bn__read_head(fp, &h, why, why_size))
         goto done;
     if (h.n != n || strcmp(h.storage, storage) != 0 || h.vbytes != bn_precision_bytes(prec) ||
-        h.layout > 1 || h.klen != strlen(key) || h.tlen > BN__BNFF_TEXT_MAX ||
+        h.layout > 1 || h.klen > 4096 || h.tlen > BN__BNFF_TEXT_MAX ||
         (h.layout == 0 && h.nnz != (uint64_t)n * n) || h.nnz > (uint64_t)n * n) {
         snprintf(why, why_size, "its patch count, storage, precision or layout differ");
         goto done;
     }
     text = malloc((size_t)h.klen + 1);
-    if (!text || !bn__read(fp, text, 1, (size_t)h.klen) || memcmp(text, key, (size_t)h.klen) != 0) {
+    if (!text || !bn__read(fp, text, 1, (size_t)h.klen) || !bn__key_matches(text, h.klen, key, alt)) {
         snprintf(why, why_size, "its key differs (scene, meshing or form-factor options changed)");
         goto done;
     }

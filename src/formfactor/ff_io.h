@@ -10,10 +10,10 @@
 bn_status bn__ff_write_file(const bn_transport *k, const bn_scene *scene, const char *path, const char *key,
                             const char *provenance, bn_precision prec, const char *storage, bn_error *err);
 
-/* Reads a BNFF cache whose typed header matches (N, storage name, precision, key) into K =
- * diag(rho) F through the storage's builder. On a miss returns non-OK with the reason in why
- * (empty if the file does not exist) and *out NULL. */
-bn_status bn__ff_read_cache(const char *path, const char *key, size_t n, const char *storage, bn_precision prec,
-                            const double *rho, bn_transport **out, char *why, size_t why_size);
+/* Reads a BNFF cache whose typed header matches (N, storage name, precision, and key or, when not
+ * NULL, alt) into K = diag(rho) F through the storage's builder. On a miss returns non-OK with the
+ * reason in why (empty if the file does not exist) and *out NULL. */
+bn_status bn__ff_read_cache(const char *path, const char *key, const char *alt, size_t n, const char *storage,
+                            bn_precision prec, const double *rho, bn_transport **out, char *why, size_t why_size);
 
 #endif

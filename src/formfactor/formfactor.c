@@ -1028,11 +1028,21 @@ static double bn__rowsum_tol(const bn_formfactor_opts *o)
 
 /* ---- the stages of the assembly ---- */
 
-/* The cache key: everything that changes F (scene, meshing through its digest, options). */
-static void bn__cache_key(const bn_scene *scene, const bn_formfactor_opts *o, size_t n, char *key, size_t size)
+/* The cache key: everything that changes F (scene, meshing through its digest, options). The seed
+ * is part of it only when the assembly drew random samples (Monte Carlo pairs, hemisphere rays, the
+ * closed form's shadow rays): `seeded` 0 writes "seed=unused", which any seed's lookup accepts. */
+static void bn__cache_key(const bn_scene *scene, const bn_formfactor_opts *o, size_t n, int seeded, char *key,
+                          size_t size)
 {
-    char desc[400];
+    char desc[400], *at;
     bn_formfactor_opts_describe(o, desc, sizeof desc);
+    at = strstr(desc, " seed=");
+    if (!seeded && at) {
+        char rest[400];
+        const char *after = strchr(at + 1, ' ');
+        snprintf(rest, sizeof rest, "%s", after ? after : "");
+        snprintf(at, sizeof desc - (size_t)(at - desc), " seed=unused%s", rest);
+    }
     snprintf(key, size, "bounce-ff-cache v2 bounce=%s scene=%016llx patches=%zu %s", bn_version(),
              (unsigned long long)bn_scene_digest(scene), n, desc);
 }
@@ -1160,7 +1170,7 @@ static void bn__warn_rows(const bn_formfactor_opts *o, const bn_ff_diagnostics *
 /* A cache hit: K read through the storage's builder, checked like a fresh assembly. *hit = 0 on
  * a miss (said as a note), which is not an error. */
 static bn_status bn__from_cache(const bn_scene *scene, const bn_formfactor_opts *o, const char *key,
-                                bn_transport **out, bn_ff_diagnostics *d, int *hit, bn_error *err)
+                                const char *alt, bn_transport **out, bn_ff_diagnostics *d, int *hit, bn_error *err)
 {
     char why[256];
     bn_status st;
@@ -1173,7 +1183,7 @@ static bn_status bn__from_cache(const bn_scene *scene, const bn_formfactor_opts 
     if (!rho)
         return bn_error_set(err, BN_ENOMEM, "out of memory");
     bn_scene_patch_reflectance(scene, rho);
-    st = bn__ff_read_cache(o->cache_path, key, n, o->storage, o->precision, rho, out, why, sizeof why);
+    st = bn__ff_read_cache(o->cache_path, key, alt, n, o->storage, o->precision, rho, out, why, sizeof why);
     free(rho);
     if (st != BN_OK) {
         if (why[0])
@@ -1225,7 +1235,7 @@ static bn_status bn__formfactor_build_body(const bn_scene *scene, const bn_rt *r
     bn__ffg g;
     bn__sink *sink = NULL;
     bn__counts tot;
-    char key[512];
+    char key[512], unseeded[512];
     double t0 = bn__now();
     size_t n;
     int hit = 0;
@@ -1241,9 +1251,10 @@ static bn_status bn__formfactor_build_body(const bn_scene *scene, const bn_rt *r
     d->method = o.method;
     d->samples = bn__samples(&o);
     d->row_sum_tol = bn__rowsum_tol(&o);
-    bn__cache_key(scene, &o, n, key, sizeof key);
+    bn__cache_key(scene, &o, n, 1, key, sizeof key);
+    bn__cache_key(scene, &o, n, 0, unseeded, sizeof unseeded);
     if (o.cache_path) {
-        st = bn__from_cache(scene, &o, key, out, d, &hit, err);
+        st = bn__from_cache(scene, &o, key, unseeded, out, d, &hit, err);
         d->seconds = bn__now() - t0;
         if (st != BN_OK || hit)
             return st;
@@ -1277,7 +1288,9 @@ static bn_status bn__formfactor_build_body(const bn_scene *scene, const bn_rt *r
     if (o.cache_path) {
         bn_error cerr;
         bn_error_clear(&cerr);
-        if (bn__ff_write_file(*out, scene, o.cache_path, key, NULL, o.precision, o.storage, &cerr) != BN_OK)
+        int seeded = o.method != BN_FF_ANALYTIC || d->rays > 0;   /* the closed form with exact visibility: no draws */
+        if (bn__ff_write_file(*out, scene, o.cache_path, seeded ? key : unseeded, NULL, o.precision, o.storage,
+                              &cerr) != BN_OK)
             bn_logf(&o.log, BN_LOG_WARN, "cannot write the form-factor cache: %s", cerr.msg);
     }
     return BN_OK;

@@ -1,5 +1,5 @@
-/* The cross-check run (include/bounce/pipeline.h): radiosity at the mesh asked and at a second
- * level, the path tracer on the same patches, the discretisation tolerance, the comparison. */
+/* The cross-check run (include/bounce/pipeline.h): radiosity at the mesh asked, the path tracer on
+ * the same patches, the allowances (a second mesh level, the hierarchy's eps level), the comparison. */
 #include "bounce/pipeline.h"
 #include "base/internal.h"
 #include "base/vec.h"
@@ -13,9 +13,10 @@ void bn_crosscheck_opts_default(bn_crosscheck_opts *o)
     bn_pipeline_opts_default(&o->pipeline);
     bn_trace_opts_default(&o->trace);
     o->trace.spp = 1024;
+    o->trace.model = BN_TRACE_PATCH;
     o->bounces = 3;
     o->solve_tol = 1e-10;
-    o->disc = BN_DISC_COARSE;
+    o->disc = BN_DISC_AUTO;
     o->ratio = 2;
     o->tol_scale = 3;
     o->alpha = 0.01;
@@ -53,7 +54,7 @@ static bn_status bn__second_mesh(const bn_crosscheck_opts *o, const bn_pipeline 
     *m = o->pipeline.mesh;
     m->target_patches = 0;
     m->no_subdivide = 0;
-    m->patch_size = h > 0 ? (o->disc == BN_DISC_COARSE ? h * o->ratio : h / o->ratio) : 0;
+    m->patch_size = h > 0 ? (o->disc == BN_DISC_FINE ? h / o->ratio : h * o->ratio) : 0;
     if (!(m->patch_size > 0) || o->pipeline.mesh.no_subdivide)
         return bn_error_set(err, BN_EUSAGE, "crosscheck: `no_subdivide` has no patch size to vary; use `disc` none or "
                                             "`patch_size`");
@@ -120,12 +121,52 @@ static bn_status bn__tolerance(const bn_crosscheck_opts *o, bn_crosscheck_run *r
     return st;
 }
 
+/* Which allowances a run makes (bn_crosscheck_opts.disc): the second mesh level, the eps level. */
+static int bn__mesh_level(const bn_crosscheck_opts *o)
+{
+    return o->disc == BN_DISC_COARSE || o->disc == BN_DISC_FINE ||
+           (o->disc == BN_DISC_AUTO && o->trace.model == BN_TRACE_CONTINUOUS);
+}
+
+static int bn__eps_level(const bn_crosscheck_opts *o, const bn_crosscheck_run *run)
+{
+    return o->disc != BN_DISC_NONE && run->fine.hierarchical && o->pipeline.hier.eps > 0;
+}
+
+/* The allowances, each level's |difference| added to run->tol and run->power_tol. */
+static bn_status bn__allowances(const char *path, const bn_crosscheck_opts *o, bn_crosscheck_run *run, bn_error *err)
+{
+    bn_crosscheck_opts o2 = *o;
+    bn_mesh_opts m2;
+    bn_status st = BN_OK;
+    o2.pipeline.ff.cache_path = NULL;   /* the cache holds the mesh asked for */
+    if (bn__mesh_level(o)) {
+        st = bn__second_mesh(o, &run->fine, &m2, err);
+        if (st == BN_OK)
+            st = bn__level(path, &o2, &m2, &run->other, &run->layers_other, &run->seconds_other, err);
+        if (st == BN_OK)
+            st = bn__tolerance(o, run, run->other.scene, run->layers_other, err);
+    }
+    if (st == BN_OK && bn__eps_level(o, run)) {
+        /* the hierarchy's other discretisation parameter on the mesh asked: eps x r^2 (its error
+         * falls about as sqrt(eps) on the Cornell box, so as h, and one order fits both). Coarsened
+         * together with the mesh, the two errors cancelled at the bunny box's base (the regions'
+         * values there move one way with eps and the other with h): each counts on its own. */
+        double r2 = o->ratio * o->ratio, *layers = NULL;
+        o2.pipeline.hier.eps = o->disc == BN_DISC_FINE ? o->pipeline.hier.eps / r2 : o->pipeline.hier.eps * r2;
+        st = bn__level(path, &o2, &o2.pipeline.mesh, &run->other_eps, &layers, &run->seconds_other_eps, err);
+        if (st == BN_OK)
+            st = bn__tolerance(o, run, run->other_eps.scene, layers, err);
+        free(layers);
+    }
+    return st;
+}
+
 bn_status bn_crosscheck_run_scene(const char *path, const bn_crosscheck_opts *o, bn_crosscheck_run *run,
                                   bn_error *err)
 {
     bn_trace_opts to = o->trace;
     bn_crosscheck_input *in = &run->in;
-    bn_mesh_opts m2;
     bn_status st;
     memset(run, 0, sizeof *run);
     to.bounces = o->bounces;
@@ -141,27 +182,8 @@ bn_status bn_crosscheck_run_scene(const char *path, const bn_crosscheck_opts *o,
         }
     } else if (st == BN_OK)
         st = bn_trace_patches_run(run->fine.rt, &to, &run->trace, err);
-    if (st == BN_OK && o->disc != BN_DISC_NONE) {
-        bn_crosscheck_opts o2 = *o;
-        o2.pipeline.ff.cache_path = NULL;   /* the cache holds the mesh asked for */
-        st = bn__second_mesh(o, &run->fine, &m2, err);
-        if (st == BN_OK)
-            st = bn__level(path, &o2, &m2, &run->other, &run->layers_other, &run->seconds_other, err);
-        if (st == BN_OK)
-            st = bn__tolerance(o, run, run->other.scene, run->layers_other, err);
-        if (st == BN_OK && run->fine.hierarchical && o->pipeline.hier.eps > 0) {
-            /* the hierarchy's other discretisation parameter on the mesh asked: eps x r^2 (its error
-             * falls about as sqrt(eps) on the Cornell box, so as h, and one order fits both). Coarsened
-             * together with the mesh, the two errors cancelled at the bunny box's base (the regions'
-             * values there move one way with eps and the other with h): each counts on its own. */
-            double r2 = o->ratio * o->ratio, *layers = NULL;
-            o2.pipeline.hier.eps = o->disc == BN_DISC_FINE ? o->pipeline.hier.eps / r2 : o->pipeline.hier.eps * r2;
-            st = bn__level(path, &o2, &o2.pipeline.mesh, &run->other_eps, &layers, &run->seconds_other_eps, err);
-            if (st == BN_OK)
-                st = bn__tolerance(o, run, run->other_eps.scene, layers, err);
-            free(layers);
-        }
-    }
+    if (st == BN_OK)
+        st = bn__allowances(path, o, run, err);
     if (st != BN_OK)
         return st;
     bn_crosscheck_input_default(in);
@@ -174,9 +196,8 @@ bn_status bn_crosscheck_run_scene(const char *path, const bn_crosscheck_opts *o,
     /* Two-level grid-convergence estimate with order p = 1 (patch-constant radiosity): the error of
      * the mesh asked is |R_h - R_other| / (r - 1) when the other level is coarser by r, and
      * r |R_h - R_other| / (r - 1) when it is finer; times the safety factor Fs. */
-    in->tol_scale = o->disc == BN_DISC_NONE ? 0
-                                            : o->tol_scale * (o->disc == BN_DISC_COARSE ? 1 / (o->ratio - 1)
-                                                                                        : o->ratio / (o->ratio - 1));
+    in->tol_scale = !run->tol ? 0
+                              : o->tol_scale * (o->disc == BN_DISC_FINE ? o->ratio / (o->ratio - 1) : 1 / (o->ratio - 1));
     in->rtol = o->rtol;
     in->alpha = o->alpha;
     in->worst = o->worst;

@@ -41,6 +41,8 @@ static void bn__trace_pixel(const bn__tracer *t, const bn_rt *rt, const bn_camer
         if (bn_rt_intersect(rt, org, dir, 0, INFINITY, &h) && h.front) {
             for (int c = 0; c < 3; c++)
                 sample[c] = t->Le[3 * h.patch + c];
+            if (o->model == BN_TRACE_PATCH)
+                bn__tracer_restart(t, h.patch, &rng, h.p);   /* each patch shows its mean, as radiosity's flat images */
             bn__tracer_path(t, h.p, h.patch, &rng, sample, rays);
         }
         for (size_t l = 0; l + 1 < nl; l++)
@@ -122,7 +124,7 @@ static bn_status bn__trace_image_run_body(const bn_rt *rt, const bn_camera *cam,
     }
     bn__progress_end(&prog);
     bn__tracer_free(&t);
-    if ((st = bn__trace_combine(no_buffers, out->mean, out->var, 0, npx * nl * 3, &rays, err)) != BN_OK) {
+    if ((st = bn__trace_combine(no_buffers, out->mean, out->var, NULL, 0, npx * nl * 3, &rays, err)) != BN_OK) {
         bn_trace_image_free(out);
         return st;
     }

@@ -19,8 +19,9 @@ static void bn__trace_item(const bn__tracer *t, const bn_partition *part, const 
                            unsigned long long *rays)
 {
     size_t m = nl * 3;
+    double *m3 = m2 + m;
     memset(mean, 0, m * sizeof(double));
-    memset(m2, 0, m * sizeof(double));
+    memset(m2, 0, 2 * m * sizeof(double));
     for (size_t s = 0; s < o->spp; s++) {
         if ((s & 4095) == 4095 && bn_interrupted() != BN_OK)
             break;   /* an item of 1e6 samples takes seconds: stop within one batch (discarded) */
@@ -49,7 +50,7 @@ static void bn__trace_item(const bn__tracer *t, const bn_partition *part, const 
         for (size_t l = 0; l + 1 < nl; l++)
             for (int c = 0; c < 3; c++)
                 L[c] += sample[3 * l + c];
-        bn__welford_add(mean, m2, sample, m, s + 1);
+        bn__moments_add(mean, m2, m3, sample, m, s + 1);
     }
     for (size_t l = 0; l < nl; l++)
         for (int c = 0; c < 3; c++) {
@@ -57,6 +58,7 @@ static void bn__trace_item(const bn__tracer *t, const bn_partition *part, const 
             double var = o->spp > 1 ? m2[j] / (double)(o->spp - 1) : 0;
             out->mean[k] = mean[j];
             out->se[k] = sqrt(fmax(var, 0.0) / (double)o->spp);
+            out->skew[k] = m2[j] > 0 ? sqrt((double)o->spp) * m3[j] / pow(m2[j], 1.5) : 0;
         }
 }
 
@@ -93,10 +95,11 @@ static bn_status bn__trace_items_run_body(const bn_rt *rt, const bn_partition *p
     out->spp = o->spp;
     out->mean = bn__calloc(n * nl * 3, sizeof(double));
     out->se = bn__calloc(n * nl * 3, sizeof(double));
-    if (!out->mean || !out->se) {
+    out->skew = bn__calloc(n * nl * 3, sizeof(double));
+    if (!out->mean || !out->se || !out->skew) {
         bn__tracer_free(&t);
         bn_trace_patches_free(out);
-        return bn_error_set(err, BN_ENOMEM, "trace: out of memory for 2 x %zu bytes of per-patch estimates", bytes);
+        return bn_error_set(err, BN_ENOMEM, "trace: out of memory for 3 x %zu bytes of per-patch estimates", bytes);
     }
     bn__progress_begin(&prog, part ? "path tracing regions" : "path tracing", n, o->quiet);
 
@@ -104,7 +107,7 @@ static bn_status bn__trace_items_run_body(const bn_rt *rt, const bn_partition *p
     {
         size_t m = nl * 3;
         double *sample = malloc(m * sizeof(double)), *mean = malloc(m * sizeof(double)),
-               *m2 = malloc(m * sizeof(double));
+               *m2 = malloc(2 * m * sizeof(double));   /* M2, then M3 */
         if (!sample || !mean || !m2) {
 #pragma omp atomic write
             no_buffers = 1;
@@ -124,7 +127,7 @@ static bn_status bn__trace_items_run_body(const bn_rt *rt, const bn_partition *p
     }
     bn__progress_end(&prog);
     bn__tracer_free(&t);
-    if ((st = bn__trace_combine(no_buffers, out->mean, out->se, 1, n * nl * 3, &rays, err)) != BN_OK) {
+    if ((st = bn__trace_combine(no_buffers, out->mean, out->se, out->skew, 1, n * nl * 3, &rays, err)) != BN_OK) {
         bn_trace_patches_free(out);
         return st;
     }
@@ -176,7 +179,8 @@ void bn_trace_patches_free(bn_trace_patches *r)
         return;
     free(r->mean);
     free(r->se);
-    r->mean = r->se = NULL;
+    free(r->skew);
+    r->mean = r->se = r->skew = NULL;
 }
 
 void bn_trace_patches_power(const bn_scene *s, const bn_trace_patches *r, int layer, double watts[3], double se[3])
@@ -199,8 +203,8 @@ void bn_trace_patches_power(const bn_scene *s, const bn_trace_patches *r, int la
     }
 }
 
-bn_status bn__trace_combine(int no_buffers, void *mean, void *spread, int dbl, size_t n, unsigned long long *rays,
-                            bn_error *err)
+bn_status bn__trace_combine(int no_buffers, void *mean, void *spread, double *third, int dbl, size_t n,
+                            unsigned long long *rays, bn_error *err)
 {
     bn_status here = no_buffers ? BN_ENOMEM : bn_interrupted(), all = bn_dist_agree(here), st;
     if (all != BN_OK && here == BN_OK)
@@ -210,6 +214,8 @@ bn_status bn__trace_combine(int no_buffers, void *mean, void *spread, int dbl, s
     st = dbl ? bn_dist_sum(mean, n, err) : bn_dist_sum_float(mean, n, err);
     if (st == BN_OK)
         st = dbl ? bn_dist_sum(spread, n, err) : bn_dist_sum_float(spread, n, err);
+    if (st == BN_OK && third)
+        st = bn_dist_sum(third, n, err);
     if (st == BN_OK)
         st = bn_dist_sum_u64(rays, 1, err);
     return st;

@@ -14,6 +14,11 @@
 #include <math.h>
 #include <string.h>
 
+const char *bn_trace_model_name(bn_trace_model m)
+{
+    return m == BN_TRACE_PATCH ? "patch" : m == BN_TRACE_CONTINUOUS ? "continuous" : "?";
+}
+
 const char *bn_trace_strategy_name(bn_trace_strategy s)
 {
     switch (s) {
@@ -32,6 +37,7 @@ void bn_trace_opts_default(bn_trace_opts *o)
     o->rr_depth = 3;
     o->max_depth = 100000;
     o->strategy = BN_TRACE_MIS;
+    o->model = BN_TRACE_CONTINUOUS;
     o->seed = 1;
 }
 
@@ -144,6 +150,12 @@ static size_t bn__pick_emitter(const bn__tracer *t, double u)
     return t->em_patch[lo];
 }
 
+void bn__tracer_restart(const bn__tracer *t, size_t p, bn__rng *rng, double x[3])
+{
+    double u1 = bn__rng_uniform(rng), u2 = bn__rng_uniform(rng), u3 = bn__rng_uniform(rng);
+    bn__tracer_patch_point(t, p, u1, u2, u3, x);
+}
+
 static double bn__max3(const double *v) { return fmax(v[0], fmax(v[1], v[2])); }
 
 void bn__tracer_path(const bn__tracer *t, const double x0[3], size_t p0, bn__rng *rng, double *bins,
@@ -235,7 +247,10 @@ void bn__tracer_path(const bn__tracer *t, const double x0[3], size_t p0, bn__rng
             }
         }
         memcpy(beta, bx, sizeof beta);
-        memcpy(x, h.p, sizeof x);
         p = h.patch;
+        if (t->o.model == BN_TRACE_PATCH)
+            bn__tracer_restart(t, p, rng, x);   /* the patch-constant transport: anywhere on p */
+        else
+            memcpy(x, h.p, sizeof x);
     }
 }

@@ -29,11 +29,14 @@ void bn__tracer_free(bn__tracer *t);
 /* Under mpirun, after each rank traced its own items into zeroed arrays: every rank's status first
  * (all stop together), then mean and spread (doubles or floats: dbl) and the ray count summed over
  * ranks (bn_dist_sum: each element from one rank, exact). BN_OK, or the status to stop with. */
-bn_status bn__trace_combine(int no_buffers, void *mean, void *spread, int dbl, size_t n, unsigned long long *rays,
-                            bn_error *err);
+bn_status bn__trace_combine(int no_buffers, void *mean, void *spread, double *third, int dbl, size_t n,
+                            unsigned long long *rays, bn_error *err);
 
 /* A uniform point on patch p from two uniforms. */
 void bn__tracer_patch_point(const bn__tracer *t, size_t p, double u1, double u2, double u3, double x[3]);
+
+/* The patch model's restart: x a uniform point on patch p, from three draws of rng. */
+void bn__tracer_restart(const bn__tracer *t, size_t p, bn__rng *rng, double x[3]);
 
 /* Radiance reflected at x (on the front of patch p) towards any direction, for a Lambertian
  * surface: one path starting with the reflection at x (reflection 1), with NEE/BSDF/MIS at each
@@ -41,6 +44,19 @@ void bn__tracer_patch_point(const bn__tracer *t, size_t p, double u1, double u2,
  * bins[3 * min(k, bounces + 1) + c], k = reflections. *rays counts rays cast. */
 void bn__tracer_path(const bn__tracer *t, const double x[3], size_t p, bn__rng *rng, double *bins,
                      unsigned long long *rays);
+
+/* Running mean, M2 and M3 (central moment sums; Welford, Terriberry's third-moment update) of one
+ * sample vector of `m` doubles. */
+static inline void bn__moments_add(double *mean, double *m2, double *m3, const double *x, size_t m, size_t count_after)
+{
+    double nn = (double)count_after;
+    for (size_t j = 0; j < m; j++) {
+        double d = x[j] - mean[j], dn = d / nn, t1 = d * dn * (nn - 1);
+        mean[j] += dn;
+        m3[j] += t1 * dn * (nn - 2) - 3 * dn * m2[j];
+        m2[j] += t1;
+    }
+}
 
 /* Running mean and M2 (Welford) of one sample vector of `m` doubles. */
 static inline void bn__welford_add(double *mean, double *m2, const double *x, size_t m, size_t count_after)
