@@ -15,7 +15,7 @@
 #                 ../shared/data/scenes/make-model-box.py), whole `bounce bounces` runs, and the MPI
 #                 identity checks on the bunny box (tests/mpi_check.sh with BN_TEST_BIG=1; ~9 minutes)
 #   --rates [N]   also the crosscheck's false-alarm rate at alpha 0.05 and 0.1 over N seeds (default 400)
-#                 on the furnace and the Cornell box (bench/crosscheck_rate.sh; ~15 + ~80 minutes at 400)
+#                 on the furnace and the Cornell box (bench/crosscheck_rate.sh; ~10 + ~9 minutes at 400)
 #   --no-build    use the executables already in the build directory
 # Environment: BENCH_TIMEOUT (seconds per bench program, default 150), OMP_NUM_THREADS (default: all
 # cores). A bench that is missing, fails or times out is reported as such; the others still run.

@@ -220,73 +220,53 @@ static int bn__same_mesh(const bn_scene *a, const bn_scene *b)
     return 1;
 }
 
-bn_status bn__study_compare(const bn__study_ref *ref, const bn_scene *s, const double *L, bn_study_row *row,
-                            bn_error *err)
+/* A finer setting read as what it says about each reference patch: the area mean of its patches
+ * whose centroids fall in it (a point value at the reference's centroid would add the variation
+ * across the coarse patch as error). Reference patches no centroid falls in keep the centroid
+ * lookup map. *avg: 4 nr values (R, G, B, area), malloc'd. */
+static bn_status bn__area_means(const bn__study_ref *ref, const bn_scene *s, const double *L, const size_t *map,
+                                double **avg, bn_error *err)
 {
     size_t ns, nr = ref->n;
-    const bn_patch *pr = bn_scene_patches(ref->scene, &nr);
-    size_t *map = NULL;
-    double *E = NULL, *means = NULL, *avg = NULL, power[3], sum_a = 0, sum_e1 = 0, sum_e2 = 0;
-    int same = bn__same_mesh(ref->scene, s);
     const bn_patch *ps = bn_scene_patches(s, &ns);
-    row->ground = same ? 0 : 1;
-    E = bn__malloc_array(3 * ns + 1, sizeof(double));
-    means = bn__malloc_array(3 * ref->nsurf + 1, sizeof(double));
-    if (!same)
-        map = bn__malloc_array(nr + 1, sizeof(size_t));
-    if (!E || !means || (!same && !map)) {
-        free(E);
-        free(means);
-        free(map);
-        return bn_error_set(err, BN_ENOMEM, "study: out of memory comparing %zu patches", ns);
-    }
-    if (!same) {
-        bn_status st = bn__lookup(ref->scene, s, map, err);
-        if (st != BN_OK) {
-            free(E);
-            free(means);
-            free(map);
-            return st;
-        }
-    }
-    if (!same && ns > nr) {
-        /* A finer setting is read as what it says about each reference patch: the area mean of its
-         * patches whose centroids fall in it (a point value at the reference's centroid would add
-         * the variation across the coarse patch as error). Reference patches no centroid falls in
-         * keep the centroid lookup. */
-        size_t *back = bn__malloc_array(ns + 1, sizeof(size_t));
-        double *acc = bn__calloc(4 * nr + 1, sizeof(double));
-        bn_status st = back && acc ? bn__lookup(s, ref->scene, back, err)
-                                   : bn_error_set(err, BN_ENOMEM, "study: out of memory comparing %zu patches", ns);
-        if (st != BN_OK) {
-            free(back);
-            free(acc);
-            free(E);
-            free(means);
-            free(map);
-            return st;
-        }
-        for (size_t j = 0; j < ns; j++) {
-            double *a = acc + 4 * back[j];
-            a[3] += ps[j].area;
-            for (int c = 0; c < 3; c++)
-                a[c] += ps[j].area * L[3 * j + (size_t)c];
-        }
-        avg = acc;
-        for (size_t i = 0; i < nr; i++)
-            for (int c = 0; c < 3; c++)
-                avg[4 * i + (size_t)c] = acc[4 * i + 3] > 0 ? acc[4 * i + (size_t)c] / acc[4 * i + 3]
-                                                            : L[3 * map[i] + (size_t)c];
+    size_t *back = bn__malloc_array(ns + 1, sizeof(size_t));
+    double *acc = bn__calloc(4 * nr + 1, sizeof(double));
+    bn_status st = back && acc ? bn__lookup(s, ref->scene, back, err)
+                               : bn_error_set(err, BN_ENOMEM, "study: out of memory comparing %zu patches", ns);
+    if (st != BN_OK) {
         free(back);
-        row->ground = 2;
+        free(acc);
+        return st;
     }
-    /* Per patch and channel the error relative to s_c = max(|L_ref|, the scene's area-weighted mean
-     * radiance in that channel): a scale that cannot vanish, so patches that see no light (under a
-     * block, L_ref ~ 0) count at the scene's typical brightness instead of blowing up. Then the
-     * largest, and the area-weighted L1 and L2 (RMS) norms. */
+    for (size_t j = 0; j < ns; j++) {
+        double *a = acc + 4 * back[j];
+        a[3] += ps[j].area;
+        for (int c = 0; c < 3; c++)
+            a[c] += ps[j].area * L[3 * j + (size_t)c];
+    }
+    for (size_t i = 0; i < nr; i++)
+        for (int c = 0; c < 3; c++)
+            acc[4 * i + (size_t)c] = acc[4 * i + 3] > 0 ? acc[4 * i + (size_t)c] / acc[4 * i + 3]
+                                                        : L[3 * map[i] + (size_t)c];
+    free(back);
+    *avg = acc;
+    return BN_OK;
+}
+
+/* Per patch and channel the error relative to s_c = max(|L_ref|, the scene's area-weighted mean
+ * radiance in that channel): a scale that cannot vanish, so patches that see no light (under a
+ * block, L_ref ~ 0) count at the scene's typical brightness instead of blowing up. Then the
+ * largest, and the area-weighted L1 and L2 (RMS) norms. */
+static void bn__patch_errors(const bn__study_ref *ref, const double *L, const size_t *map, const double *avg,
+                             bn_study_row *row)
+{
+    size_t nr;
+    const bn_patch *pr = bn_scene_patches(ref->scene, &nr);
+    double sum_a = 0, sum_e1 = 0, sum_e2 = 0;
+    nr = ref->n;
     row->err_inf = row->err_max_rel = 0;
     for (size_t i = 0; i < nr; i++) {
-        size_t j = same ? i : map[i];
+        size_t j = map ? map[i] : i;
         for (int c = 0; c < 3; c++) {
             double v = avg ? avg[4 * i + (size_t)c] : L[3 * j + (size_t)c];
             double lr = ref->L[3 * i + (size_t)c], d = fabs(v - lr);
@@ -301,43 +281,73 @@ bn_status bn__study_compare(const bn__study_ref *ref, const bn_scene *s, const d
     row->err_inf_rel = ref->norm_L > 0 ? row->err_inf / ref->norm_L : row->err_inf;
     row->err_l1_rel = sum_a > 0 ? sum_e1 / sum_a : 0;
     row->err_rms_rel = sum_a > 0 ? sqrt(sum_e2 / sum_a) : 0;
+}
 
-    bn_scene_patch_emission(s, E);
-    bn__study_reflected_power(s, L, E, power);
-    row->err_energy_rel = 0;
-    for (int c = 0; c < 3; c++)
-        if (ref->power[c] > 0)
-            row->err_energy_rel = fmax(row->err_energy_rel, fabs(power[c] - ref->power[c]) / ref->power[c]);
-
-    bn__study_surface_means(s, L, ref->nsurf, means);
+/* Per surface (material): the largest relative error of its mean over the channels, and their
+ * largest and mean over the surfaces used. */
+static void bn__surface_errors(const bn__study_ref *ref, const double *means, bn_study_row *row)
+{
+    size_t counted = 0;
     row->err_surface_max = 0;
     row->err_surface_mean = 0;
-    {
-        size_t counted = 0;
-        for (size_t m = 0; m < ref->nsurf; m++) {
-            double e = 0, top = 0;
-            for (int c = 0; c < 3; c++)
-                top = fmax(top, ref->surf_mean[3 * m + (size_t)c]);
-            if (top <= 0) {   /* a material no patch uses */
-                if (row->err_surface)
-                    row->err_surface[m] = NAN;
-                continue;
-            }
-            for (int c = 0; c < 3; c++) {
-                double r = ref->surf_mean[3 * m + (size_t)c];
-                e = fmax(e, fabs(means[3 * m + (size_t)c] - r) / fmax(r, 1e-6 * top));
-            }
+    for (size_t m = 0; m < ref->nsurf; m++) {
+        double e = 0, top = 0;
+        for (int c = 0; c < 3; c++)
+            top = fmax(top, ref->surf_mean[3 * m + (size_t)c]);
+        if (top <= 0) {   /* a material no patch uses */
             if (row->err_surface)
-                row->err_surface[m] = e;
-            row->err_surface_max = fmax(row->err_surface_max, e);
-            row->err_surface_mean += e;
-            counted++;
+                row->err_surface[m] = NAN;
+            continue;
         }
-        row->err_surface_mean = counted ? row->err_surface_mean / (double)counted : 0;
+        for (int c = 0; c < 3; c++) {
+            double r = ref->surf_mean[3 * m + (size_t)c];
+            e = fmax(e, fabs(means[3 * m + (size_t)c] - r) / fmax(r, 1e-6 * top));
+        }
+        if (row->err_surface)
+            row->err_surface[m] = e;
+        row->err_surface_max = fmax(row->err_surface_max, e);
+        row->err_surface_mean += e;
+        counted++;
+    }
+    row->err_surface_mean = counted ? row->err_surface_mean / (double)counted : 0;
+}
+
+bn_status bn__study_compare(const bn__study_ref *ref, const bn_scene *s, const double *L, bn_study_row *row,
+                            bn_error *err)
+{
+    size_t ns, nr = ref->n;
+    size_t *map = NULL;
+    double *E = NULL, *means = NULL, *avg = NULL, power[3];
+    int same = bn__same_mesh(ref->scene, s);
+    bn_status st = BN_OK;
+    bn_scene_patches(s, &ns);
+    row->ground = same ? 0 : 1;
+    E = bn__malloc_array(3 * ns + 1, sizeof(double));
+    means = bn__malloc_array(3 * ref->nsurf + 1, sizeof(double));
+    if (!same)
+        map = bn__malloc_array(nr + 1, sizeof(size_t));
+    if (!E || !means || (!same && !map))
+        st = bn_error_set(err, BN_ENOMEM, "study: out of memory comparing %zu patches", ns);
+    if (st == BN_OK && !same)
+        st = bn__lookup(ref->scene, s, map, err);
+    if (st == BN_OK && !same && ns > nr) {
+        st = bn__area_means(ref, s, L, map, &avg, err);
+        row->ground = 2;
+    }
+    if (st == BN_OK) {
+        bn__patch_errors(ref, L, same ? NULL : map, avg, row);
+        bn_scene_patch_emission(s, E);
+        bn__study_reflected_power(s, L, E, power);
+        row->err_energy_rel = 0;
+        for (int c = 0; c < 3; c++)
+            if (ref->power[c] > 0)
+                row->err_energy_rel = fmax(row->err_energy_rel, fabs(power[c] - ref->power[c]) / ref->power[c]);
+        bn__study_surface_means(s, L, ref->nsurf, means);
+        bn__surface_errors(ref, means, row);
     }
     free(E);
     free(means);
     free(map);
     free(avg);
-    return BN_OK;
+    return st;
 }

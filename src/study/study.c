@@ -416,35 +416,118 @@ static int bn__cmp_desc(const void *a, const void *b)
     return (x < y) - (x > y);
 }
 
+/* The monitor's buffers for ntols tolerances (sorted, descending) of m values each. */
+static bn_status bn__mon_init(bn__mon *M, const bn__study *S, const bn__study_ref *ref, double *tols, size_t ntols,
+                              bn_error *err)
+{
+    memset(M, 0, sizeof *M);
+    M->Lref = ref->L;
+    M->normL = ref->norm_L;
+    M->normE = S->res->norm_E;
+    M->m = 3 * ref->n;
+    M->tols = tols;
+    M->ntols = ntols;
+    M->Lat = bn__calloc(ntols + 1, sizeof(double *));
+    M->it_at = bn__calloc(ntols + 1, sizeof(size_t));
+    M->t_at = bn__calloc(ntols + 1, sizeof(double));
+    if (!M->Lat || !M->it_at || !M->t_at)
+        return bn_error_set(err, BN_ENOMEM, "study: out of memory");
+    for (size_t t = 0; t < ntols; t++)
+        if (!(M->Lat[t] = bn__malloc_array(M->m + 1, sizeof(double))))
+            return bn_error_set(err, BN_ENOMEM, "study: out of memory");
+    return BN_OK;
+}
+
+static void bn__mon_free(bn__mon *M)
+{
+    if (M->Lat)
+        for (size_t t = 0; t < M->ntols; t++)
+            free(M->Lat[t]);
+    free(M->Lat);
+    free(M->it_at);
+    free(M->t_at);
+}
+
+/* One row per tolerance of an iterative method, from what the monitor kept. */
+static bn_status bn__method_rows(bn__study *S, const bn__study_ref *ref, const bn__mon *M, const char *name,
+                                 double t_mesh, double t_ff, bn_error *err)
+{
+    bn_status st = BN_OK;
+    for (size_t t = 0; t < M->ntols && st == BN_OK; t++) {
+        char v[32];
+        bn_study_row *row;
+        snprintf(v, sizeof v, "%g", M->tols[t]);
+        if (!(row = bn__row_new(S, name, v, M->tols[t], err)))
+            return err ? err->status : BN_ENOMEM;
+        row->patches = ref->n;
+        row->k_norm = S->res->k_norm;
+        row->t_mesh = t_mesh;
+        row->t_ff = t_ff;
+        if (t < M->next) {
+            row->iterations = M->it_at[t];
+            row->t_solve = M->t_at[t];
+            row->t_iterate = M->t_at[t] - M->t_row0;
+            st = bn__study_compare(ref, ref->scene, M->Lat[t], row, err);
+        } else {   /* never reached within max-iter */
+            row->iterations = SIZE_MAX;
+            row->t_solve = row->err_inf = row->err_inf_rel = row->err_max_rel = row->err_rms_rel = NAN;
+            row->err_energy_rel = row->err_surface_max = row->err_surface_mean = NAN;
+        }
+        row->peak_mb = bn__study_peak_mb();
+        bn__row_total(row);
+    }
+    return st;
+}
+
+/* The direct solve's rows: it is the reference, so its error is not measured against itself but
+ * bounded a posteriori, ||r||_inf / (1 - ||K||_inf); and its one-point curve. */
+static bn_status bn__direct_rows(bn__study *S, const bn__study_ref *ref, const double *tols, size_t ntols,
+                                 double t_mesh, double t_ff, double t_direct, bn_error *err)
+{
+    bn_study_curve *c = bn__curve_new(S, "direct", 1, err);
+    if (!c)
+        return err ? err->status : BN_ENOMEM;
+    for (size_t t = 0; t < ntols; t++) {
+        char v[32];
+        bn_study_row *row;
+        snprintf(v, sizeof v, "%g", tols[t]);
+        if (!(row = bn__row_new(S, "direct", v, tols[t], err)))
+            return err ? err->status : BN_ENOMEM;
+        row->patches = ref->n;
+        row->k_norm = S->res->k_norm;
+        row->t_mesh = t_mesh;
+        row->t_ff = t_ff;
+        row->t_solve = t_direct;
+        row->t_iterate = S->direct_iterate;
+        row->peak_mb = NAN;
+        row->err_inf_rel = S->res->ref_error;
+        row->err_inf = S->res->ref_error * ref->norm_L;
+        row->err_max_rel = row->err_rms_rel = row->err_energy_rel = NAN;
+        row->err_surface_max = row->err_surface_mean = NAN;
+        for (size_t q = 0; q < ref->nsurf; q++)
+            row->err_surface[q] = NAN;
+        bn__row_total(row);
+    }
+    c->t[0] = t_direct;
+    c->err[0] = S->res->ref_error > 0 ? S->res->ref_error : DBL_EPSILON;
+    c->n = 1;
+    return BN_OK;
+}
+
 static bn_status bn__methods(bn__study *S, const bn__study_ref *ref, const bn_transport *K, const double *E,
                              const double *tols_in, size_t ntols, double t_mesh, double t_ff, double t_direct,
                              bn_error *err)
 {
     const bn_study_opts *o = S->o;
-    size_t m = 3 * ref->n;
     double *tols = bn__malloc_array(ntols + 1, sizeof(double));
     bn__mon M;
-    bn_status st = BN_OK;
+    bn_status st;
     static const bn_solve_method iters[3] = {BN_SOLVE_JACOBI, BN_SOLVE_GAUSS_SEIDEL, BN_SOLVE_NEUMANN};
-    memset(&M, 0, sizeof M);
     if (!tols)
         return bn_error_set(err, BN_ENOMEM, "study: out of memory");
     memcpy(tols, tols_in, ntols * sizeof(double));
     qsort(tols, ntols, sizeof(double), bn__cmp_desc);
-    M.Lref = ref->L;
-    M.normL = ref->norm_L;
-    M.normE = S->res->norm_E;
-    M.m = m;
-    M.tols = tols;
-    M.ntols = ntols;
-    M.Lat = bn__calloc(ntols + 1, sizeof(double *));
-    M.it_at = bn__calloc(ntols + 1, sizeof(size_t));
-    M.t_at = bn__calloc(ntols + 1, sizeof(double));
-    if (!M.Lat || !M.it_at || !M.t_at)
-        st = bn_error_set(err, BN_ENOMEM, "study: out of memory");
-    for (size_t t = 0; st == BN_OK && t < ntols; t++)
-        if (!(M.Lat[t] = bn__malloc_array(m + 1, sizeof(double))))
-            st = bn_error_set(err, BN_ENOMEM, "study: out of memory");
+    st = bn__mon_init(&M, S, ref, tols, ntols, err);
     for (int q = 0; st == BN_OK && q < 3; q++) {
         bn_solve_method meth = iters[q];
         bn_solve_opts so = o->solve;
@@ -466,76 +549,13 @@ static bn_status bn__methods(bn__study *S, const bn__study_ref *ref, const bn_tr
         so.monitor_user = &M;
         bn__study_peak_reset();
         st = bn__solve(K, E, &so, &L, NULL, &ts, err);
-        if (st != BN_OK)
-            break;
-        for (size_t t = 0; t < ntols && st == BN_OK; t++) {
-            char v[32];
-            bn_study_row *row;
-            snprintf(v, sizeof v, "%g", tols[t]);
-            if (!(row = bn__row_new(S, name, v, tols[t], err))) {
-                st = err ? err->status : BN_ENOMEM;
-                break;
-            }
-            row->patches = ref->n;
-            row->k_norm = S->res->k_norm;
-            row->t_mesh = t_mesh;
-            row->t_ff = t_ff;
-            if (t < M.next) {
-                row->iterations = M.it_at[t];
-                row->t_solve = M.t_at[t];
-                row->t_iterate = M.t_at[t] - M.t_row0;
-                st = bn__study_compare(ref, ref->scene, M.Lat[t], row, err);
-            } else {   /* never reached within max-iter */
-                row->iterations = SIZE_MAX;
-                row->t_solve = row->err_inf = row->err_inf_rel = row->err_max_rel = row->err_rms_rel = NAN;
-                row->err_energy_rel = row->err_surface_max = row->err_surface_mean = NAN;
-            }
-            row->peak_mb = bn__study_peak_mb();
-            bn__row_total(row);
-        }
+        if (st == BN_OK)
+            st = bn__method_rows(S, ref, &M, name, t_mesh, t_ff, err);
         free(L);
     }
-    if (st == BN_OK && (o->methods & (1u << BN_SOLVE_DIRECT))) {
-        bn_study_curve *c = bn__curve_new(S, "direct", 1, err);
-        for (size_t t = 0; c && t < ntols && st == BN_OK; t++) {
-            char v[32];
-            bn_study_row *row;
-            snprintf(v, sizeof v, "%g", tols[t]);
-            if (!(row = bn__row_new(S, "direct", v, tols[t], err))) {
-                st = err ? err->status : BN_ENOMEM;
-                break;
-            }
-            row->patches = ref->n;
-            row->k_norm = S->res->k_norm;
-            row->t_mesh = t_mesh;
-            row->t_ff = t_ff;
-            row->t_solve = t_direct;
-            row->t_iterate = S->direct_iterate;
-            row->peak_mb = NAN;
-            /* The direct solve is the reference: its error is not measured against itself but
-             * bounded a posteriori, ||r||_inf / (1 - ||K||_inf). */
-            row->err_inf_rel = S->res->ref_error;
-            row->err_inf = S->res->ref_error * ref->norm_L;
-            row->err_max_rel = row->err_rms_rel = row->err_energy_rel = NAN;
-            row->err_surface_max = row->err_surface_mean = NAN;
-            for (size_t q = 0; q < ref->nsurf; q++)
-                row->err_surface[q] = NAN;
-            bn__row_total(row);
-        }
-        if (!c)
-            st = err ? err->status : BN_ENOMEM;
-        else {
-            c->t[0] = t_direct;
-            c->err[0] = S->res->ref_error > 0 ? S->res->ref_error : DBL_EPSILON;
-            c->n = 1;
-        }
-    }
-    if (M.Lat)
-        for (size_t t = 0; t < ntols; t++)
-            free(M.Lat[t]);
-    free(M.Lat);
-    free(M.it_at);
-    free(M.t_at);
+    if (st == BN_OK && (o->methods & (1u << BN_SOLVE_DIRECT)))
+        st = bn__direct_rows(S, ref, tols, ntols, t_mesh, t_ff, t_direct, err);
+    bn__mon_free(&M);
     free(tols);
     return st;
 }
