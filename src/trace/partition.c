@@ -89,112 +89,75 @@ void bn_partition_free(bn_partition *p)
     memset(p, 0, sizeof *p);
 }
 
-bn_status bn_partition_regions(const bn_scene *s, size_t nregions, bn_partition *out, bn_error *err)
+/* Material m's faces (file order) into about k regions: polygons larger than an even share are
+ * regions of their own (a wall), so that splits by area among the rest do not leave slivers beside
+ * them; the rest split by area medians. faces: scratch of nf. */
+static void bn__split_material(bn__split *S, const bn_face *f, size_t nf, unsigned m, double marea, size_t k,
+                               uint32_t *faces)
 {
-    size_t np, nf, nm, nv, ni;
-    const bn_patch *pa = bn_scene_patches(s, &np);
-    const bn_face *f = bn_scene_faces(s, &nf);
-    const double *v = bn_scene_vertices(s, &nv);
-    const size_t *idx = bn_scene_face_indices(s, &ni);
-    bn_scene_materials(s, &nm);
-    bn__split S = {0};
-    double *fc = NULL, *marea = NULL, total = 0;
-    uint32_t *faces = NULL;
-    size_t *mcount = NULL;
-    bn_status st = BN_OK;
-
-    memset(out, 0, sizeof *out);
-    if (nregions < 1)
-        return bn_error_set(err, BN_EUSAGE, "partition: %zu regions (at least 1)", nregions);
-    if (np == 0 || nf == 0)
-        return bn_error_set(err, BN_EINPUT, "%s: no patches to partition", bn_scene_path(s));
-    fc = bn__malloc_array(3 * nf, sizeof(double));
-    S.region = bn__malloc_array(nf, sizeof(uint32_t));
-    S.keys = bn__malloc_array(nf, sizeof *S.keys);
-    faces = bn__malloc_array(nf, sizeof(uint32_t));
-    marea = bn__calloc(nm + 1, sizeof(double));
-    mcount = bn__calloc(nm + 1, sizeof(size_t));
-    double *fa = bn__malloc_array(nf, sizeof(double));
-    if (!fc || !S.region || !S.keys || !faces || !marea || !mcount || !fa)
-        goto oom;
-    for (size_t k = 0; k < nf; k++) {
-        double c[3] = {0, 0, 0};
-        for (unsigned j = 0; j < f[k].nverts; j++)
-            bn_v3_add(c, v + 3 * idx[f[k].first + j], c);
-        bn_v3_scale(c, 1.0 / f[k].nverts, fc + 3 * k);
-        fa[k] = f[k].area;
-        marea[f[k].material] += f[k].area;
-        total += f[k].area;
-    }
+    size_t cnt = 0, big = 0;
+    double left = marea;
     for (size_t q = 0; q < nf; q++)
-        S.region[q] = UINT32_MAX;   /* faces of a material without area stay in no region */
-    S.fc = fc;
-    S.fa = fa;
-    for (size_t m = 0; m < nm; m++) {   /* each material's faces, in file order, then split */
-        size_t cnt = 0, k;
-        if (!(marea[m] > 0))
-            continue;
-        for (size_t q = 0; q < nf; q++)
-            if (f[q].material == m)
-                faces[cnt++] = (uint32_t)q;
-        k = (size_t)llround((double)nregions * marea[m] / total);
-        k = k < 1 ? 1 : k;
-        {   /* polygons larger than an even share are regions of their own (a wall), so that splits
-             * by area among the rest do not leave slivers beside them */
-            double left = marea[m];
-            size_t big = 0;
-            for (size_t q = 0; q < cnt; q++)
-                S.keys[q] = (bn__pkey){-fa[faces[q]], faces[q]};
-            qsort(S.keys, cnt, sizeof *S.keys, bn__pkey_cmp);
-            while (big < cnt && k > 1 && -S.keys[big].k >= left / (double)k) {
-                S.region[S.keys[big].f] = (uint32_t)S.next++;
-                left += S.keys[big].k;
-                big++;
-                k--;
-            }
-            if (big) {   /* the rest, in file order */
-                size_t w = 0;
-                for (size_t q = 0; q < cnt; q++) {
-                    int own = 0;
-                    for (size_t b = 0; b < big && !own; b++)
-                        own = S.keys[b].f == faces[q];
-                    if (!own)
-                        faces[w++] = faces[q];
-                }
-                cnt = w;
-            }
-        }
-        if (cnt)
-            bn__split_faces(&S, faces, cnt, k);
+        if (f[q].material == m)
+            faces[cnt++] = (uint32_t)q;
+    for (size_t q = 0; q < cnt; q++)
+        S->keys[q] = (bn__pkey){-S->fa[faces[q]], faces[q]};
+    qsort(S->keys, cnt, sizeof *S->keys, bn__pkey_cmp);
+    while (big < cnt && k > 1 && -S->keys[big].k >= left / (double)k) {
+        S->region[S->keys[big].f] = (uint32_t)S->next++;
+        left += S->keys[big].k;
+        big++;
+        k--;
     }
-    {   /* regions whose polygons hold no patch are dropped (the tracer needs a patch to sample) */
-        uint32_t *id = bn__malloc_array(S.next + 1, sizeof(uint32_t));
-        unsigned char *used = bn__calloc(S.next + 1, 1);
-        size_t kept = 0;
-        if (!id || !used) {
-            free(id);
-            free(used);
-            goto oom;
+    if (big) {   /* the rest, in file order */
+        size_t w = 0;
+        for (size_t q = 0; q < cnt; q++) {
+            int own = 0;
+            for (size_t b = 0; b < big && !own; b++)
+                own = S->keys[b].f == faces[q];
+            if (!own)
+                faces[w++] = faces[q];
         }
-        for (size_t i = 0; i < np; i++) {
-            if (S.region[pa[i].face] == UINT32_MAX) {   /* a patch on a face of no area: cannot happen */
-                free(id);
-                free(used);
-                st = bn_error_set(err, BN_EINTERNAL, "partition: patch %zu lies in no region", i);
-                goto fail;
-            }
-            used[S.region[pa[i].face]] = 1;
-        }
-        for (size_t g = 0; g < S.next; g++)
+        cnt = w;
+    }
+    if (cnt)
+        bn__split_faces(S, faces, cnt, k);
+}
+
+/* Regions whose polygons hold no patch are dropped (the tracer needs a patch to sample), the rest
+ * renumbered in order. */
+static bn_status bn__drop_empty(bn__split *S, const bn_patch *pa, size_t np, size_t nf, bn_error *err)
+{
+    uint32_t *id = bn__malloc_array(S->next + 1, sizeof(uint32_t));
+    unsigned char *used = bn__calloc(S->next + 1, 1);
+    size_t kept = 0;
+    bn_status st = id && used ? BN_OK : bn_error_set(err, BN_ENOMEM, "out of memory for a partition");
+    for (size_t i = 0; st == BN_OK && i < np; i++) {
+        if (S->region[pa[i].face] == UINT32_MAX)   /* a patch on a face of no area: cannot happen */
+            st = bn_error_set(err, BN_EINTERNAL, "partition: patch %zu lies in no region", i);
+        else
+            used[S->region[pa[i].face]] = 1;
+    }
+    if (st == BN_OK) {
+        for (size_t g = 0; g < S->next; g++)
             id[g] = used[g] ? (uint32_t)kept++ : UINT32_MAX;
         for (size_t q = 0; q < nf; q++)
-            if (S.region[q] != UINT32_MAX)
-                S.region[q] = id[S.region[q]];
-        S.next = kept;
-        free(id);
-        free(used);
+            if (S->region[q] != UINT32_MAX)
+                S->region[q] = id[S->region[q]];
+        S->next = kept;
     }
-    out->n = S.next;
+    free(id);
+    free(used);
+    return st;
+}
+
+/* out's arrays from each face's region: patches grouped by region, their running area shares, each
+ * region's area, material and area-weighted centroid. */
+static bn_status bn__partition_fill(const bn__split *S, const bn_patch *pa, size_t np, bn_partition *out,
+                                    bn_error *err)
+{
+    size_t *fill;
+    out->n = S->next;
     out->npatch = np;
     out->of_patch = bn__malloc_array(np, sizeof(uint32_t));
     out->start = bn__calloc(out->n + 1, sizeof(size_t));
@@ -203,10 +166,14 @@ bn_status bn_partition_regions(const bn_scene *s, size_t nregions, bn_partition 
     out->area = bn__calloc(out->n, sizeof(double));
     out->material = bn__calloc(out->n, sizeof(unsigned));
     out->centroid = bn__calloc(3 * out->n, sizeof(double));
-    if (!out->of_patch || !out->start || !out->patch || !out->cum || !out->area || !out->material || !out->centroid)
-        goto oom;
+    fill = bn__malloc_array(out->n + 1, sizeof(size_t));
+    if (!out->of_patch || !out->start || !out->patch || !out->cum || !out->area || !out->material || !out->centroid ||
+        !fill) {
+        free(fill);
+        return bn_error_set(err, BN_ENOMEM, "out of memory for a partition of %zu patches", np);
+    }
     for (size_t i = 0; i < np; i++) {
-        uint32_t g = S.region[pa[i].face];
+        uint32_t g = S->region[pa[i].face];
         out->of_patch[i] = g;
         out->start[g + 1]++;
         out->area[g] += pa[i].area;
@@ -219,17 +186,10 @@ bn_status bn_partition_regions(const bn_scene *s, size_t nregions, bn_partition 
         for (int c = 0; c < 3; c++)
             out->centroid[3 * g + c] /= out->area[g] > 0 ? out->area[g] : 1;
     }
-    {
-        size_t *fill = bn__malloc_array(out->n + 1, sizeof(size_t));
-        if (!fill)
-            goto oom;
-        memcpy(fill, out->start, out->n * sizeof(size_t));
-        for (size_t i = 0; i < np; i++) {
-            size_t at = fill[out->of_patch[i]]++;
-            out->patch[at] = (uint32_t)i;
-        }
-        free(fill);
-    }
+    memcpy(fill, out->start, out->n * sizeof(size_t));
+    for (size_t i = 0; i < np; i++)
+        out->patch[fill[out->of_patch[i]]++] = (uint32_t)i;
+    free(fill);
     for (size_t g = 0; g < out->n; g++) {
         double acc = 0;
         for (size_t k = out->start[g]; k < out->start[g + 1]; k++) {
@@ -239,19 +199,64 @@ bn_status bn_partition_regions(const bn_scene *s, size_t nregions, bn_partition 
         if (out->start[g + 1] > out->start[g])
             out->cum[out->start[g + 1] - 1] = 1;
     }
-    goto done;
-oom:
-    st = bn_error_set(err, BN_ENOMEM, "out of memory for a partition of %zu polygons", nf);
-fail:
-    bn_partition_free(out);
-done:
+    return BN_OK;
+}
+
+bn_status bn_partition_regions(const bn_scene *s, size_t nregions, bn_partition *out, bn_error *err)
+{
+    size_t np, nf, nm, nv, ni;
+    const bn_patch *pa = bn_scene_patches(s, &np);
+    const bn_face *f = bn_scene_faces(s, &nf);
+    const double *v = bn_scene_vertices(s, &nv);
+    const size_t *idx = bn_scene_face_indices(s, &ni);
+    bn__split S = {0};
+    double *fc, *fa, *marea, total = 0;
+    uint32_t *faces;
+    bn_status st = BN_OK;
+
+    bn_scene_materials(s, &nm);
+    memset(out, 0, sizeof *out);
+    if (nregions < 1)
+        return bn_error_set(err, BN_EUSAGE, "partition: %zu regions (at least 1)", nregions);
+    if (np == 0 || nf == 0)
+        return bn_error_set(err, BN_EINPUT, "%s: no patches to partition", bn_scene_path(s));
+    fc = bn__malloc_array(3 * nf, sizeof(double));
+    fa = bn__malloc_array(nf, sizeof(double));
+    S.region = bn__malloc_array(nf, sizeof(uint32_t));
+    S.keys = bn__malloc_array(nf, sizeof *S.keys);
+    faces = bn__malloc_array(nf, sizeof(uint32_t));
+    marea = bn__calloc(nm + 1, sizeof(double));
+    if (!fc || !fa || !S.region || !S.keys || !faces || !marea)
+        st = bn_error_set(err, BN_ENOMEM, "out of memory for a partition of %zu polygons", nf);
+    for (size_t k = 0; st == BN_OK && k < nf; k++) {
+        double c[3] = {0, 0, 0};
+        for (unsigned j = 0; j < f[k].nverts; j++)
+            bn_v3_add(c, v + 3 * idx[f[k].first + j], c);
+        bn_v3_scale(c, 1.0 / f[k].nverts, fc + 3 * k);
+        fa[k] = f[k].area;
+        marea[f[k].material] += f[k].area;
+        total += f[k].area;
+        S.region[k] = UINT32_MAX;   /* faces of a material without area stay in no region */
+    }
+    S.fc = fc;
+    S.fa = fa;
+    for (size_t m = 0; st == BN_OK && m < nm; m++) {   /* each material's faces, in file order, then split */
+        size_t k = (size_t)llround((double)nregions * marea[m] / total);
+        if (marea[m] > 0)
+            bn__split_material(&S, f, nf, (unsigned)m, marea[m], k < 1 ? 1 : k, faces);
+    }
+    if (st == BN_OK)
+        st = bn__drop_empty(&S, pa, np, nf, err);
+    if (st == BN_OK)
+        st = bn__partition_fill(&S, pa, np, out, err);
+    if (st != BN_OK)
+        bn_partition_free(out);
     free(fc);
     free(fa);
     free(S.region);
     free(S.keys);
     free(faces);
     free(marea);
-    free(mcount);
     return st;
 }
 
