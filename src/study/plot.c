@@ -91,25 +91,20 @@ static void bn__label(PLINT axis, PLFLT v, char *out, PLINT n, PLPointer data)
 static double bn__tr(double v, int lg) { return lg ? log10(v) : v; }
 static int bn__ok(double v, int lg) { return isfinite(v) && (!lg || v > 0); }
 
-static void bn__draw(const bn__panel *p)
+/* The window: the data's range (log10 on log axes), log axes at least 1.2 decades, 5% margins and
+ * room for the legend above (or below) the data. r: x0, x1, y0, y1. */
+static void bn__ranges(const bn__panel *p, double r[4])
 {
-    double x0 = INFINITY, x1 = -INFINITY, y0 = INFINITY, y1 = -INFINITY;
-    PLINT opts[BN__MAXSER], colors[BN__MAXSER], styles[BN__MAXSER], snum[BN__MAXSER];
-    PLFLT widths[BN__MAXSER], sscale[BN__MAXSER];
-    const char *text[BN__MAXSER], *syms[BN__MAXSER];
-    int nleg = 0;
+    double x0 = INFINITY, x1 = -INFINITY, y0 = INFINITY, y1 = -INFINITY, dx, dy, room = 0;
     for (int i = 0; i < p->nser; i++)
         for (int k = 0; k < p->ser[i].n; k++) {
             double x = p->ser[i].x[k], y = p->ser[i].y[k];
             if (!bn__ok(x, p->xlog) || !bn__ok(y, p->ylog))
                 continue;
-            if (p->ser[i].vline) {
-                x0 = fmin(x0, bn__tr(x, p->xlog));
-                x1 = fmax(x1, bn__tr(x, p->xlog));
-                continue;
-            }
             x0 = fmin(x0, bn__tr(x, p->xlog));
             x1 = fmax(x1, bn__tr(x, p->xlog));
+            if (p->ser[i].vline)
+                continue;
             y0 = fmin(y0, bn__tr(y, p->ylog));
             y1 = fmax(y1, bn__tr(y, p->ylog));
         }
@@ -132,102 +127,131 @@ static void bn__draw(const bn__panel *p)
         y0 = c - 0.6;
         y1 = c + 0.6;
     }
-    {   /* margins: 5% (at least a unit's share when the range is flat) */
-        double dx = x1 - x0 > 0 ? 0.05 * (x1 - x0) : (p->xlog ? 0.5 : 0.5 + 0.05 * fabs(x0));
-        double dy = y1 - y0 > 0 ? 0.08 * (y1 - y0) : (p->ylog ? 0.5 : 0.5 + 0.05 * fabs(y0));
-        x0 -= dx;
-        x1 += dx;
-        y0 -= dy;
-        /* room for the legend: about a tenth of the data's height per entry */
-        double room = 0;
-        for (int i = 0; i < p->nser; i++)
-            room += p->ser[i].n > 0 ? 0.11 * (y1 - y0 > 0 ? y1 - y0 : 1) : 0;
-        if (p->legend_low)
-            y0 -= dy + room;
-        else
-            y1 += dy + room;
-    }
+    /* margins: 5% (at least a unit's share when the range is flat) */
+    dx = x1 - x0 > 0 ? 0.05 * (x1 - x0) : (p->xlog ? 0.5 : 0.5 + 0.05 * fabs(x0));
+    dy = y1 - y0 > 0 ? 0.08 * (y1 - y0) : (p->ylog ? 0.5 : 0.5 + 0.05 * fabs(y0));
+    x0 -= dx;
+    x1 += dx;
+    y0 -= dy;
+    /* room for the legend: about a tenth of the data's height per entry */
+    for (int i = 0; i < p->nser; i++)
+        room += p->ser[i].n > 0 ? 0.11 * (y1 - y0 > 0 ? y1 - y0 : 1) : 0;
+    if (p->legend_low)
+        y0 -= dy + room;
+    else
+        y1 += dy + room;
+    r[0] = x0, r[1] = x1, r[2] = y0, r[3] = y1;
+}
+
+/* Viewport, window, the labelled box and the axis titles; then the bands (under everything) and
+ * the grid over them. */
+static void bn__frame(const bn__panel *p, const double r[4])
+{
+    static bn__labstep step;
     pladv(0);
     plvpor(0.15, 0.97, 0.12, 0.90);
-    plwind(x0, x1, y0, y1);
+    plwind(r[0], r[1], r[2], r[3]);
     plcol0(1);
     plwidth(1.0);
     pllsty(1);
     plschr(0, 0.9);
-    {   /* log axes: a labelled decade every 1, 2, 3... decades so that at most ~9 labels show */
-        static bn__labstep step;
-        step.x = p->xlog ? (int)ceil((x1 - x0) / 9) : 1;
-        step.y = p->ylog ? (int)ceil((y1 - y0) / 9) : 1;
-        plslabelfunc(bn__label, &step);
-        plbox(p->xlog ? "bcgnstlo" : "bcgnst", 0, 0, p->ylog ? "bcgnstvlo" : "bcgnstv", 0, 0);
-        plslabelfunc(NULL, NULL);
-    }
+    /* log axes: a labelled decade every 1, 2, 3... decades so that at most ~9 labels show */
+    step.x = p->xlog ? (int)ceil((r[1] - r[0]) / 9) : 1;
+    step.y = p->ylog ? (int)ceil((r[3] - r[2]) / 9) : 1;
+    plslabelfunc(bn__label, &step);
+    plbox(p->xlog ? "bcgnstlo" : "bcgnst", 0, 0, p->ylog ? "bcgnstvlo" : "bcgnstv", 0, 0);
+    plslabelfunc(NULL, NULL);
     pllab(p->xlab, "", p->title);
     plmtex("l", 5.2, 0.5, 0.5, p->ylab);
-    for (int i = 0; i < p->nser; i++) {   /* bands first, under everything */
+    for (int i = 0; i < p->nser; i++) {
         const bn__series *s = &p->ser[i];
         if (s->band && s->n >= 2 && bn__ok(s->y[0], p->ylog) && bn__ok(s->x[0], p->xlog) &&
             bn__ok(s->x[s->n - 1], p->xlog)) {
             PLFLT bx[4], by[4], top = bn__tr(s->y[0], p->ylog);
             bx[0] = bx[3] = bn__tr(s->x[0], p->xlog);
             bx[1] = bx[2] = bn__tr(s->x[s->n - 1], p->xlog);
-            by[0] = by[1] = y0;
-            by[2] = by[3] = top > y0 ? top : y0;
+            by[0] = by[1] = r[2];
+            by[2] = by[3] = top > r[2] ? top : r[2];
             plcol0(BN__BAND_COLOR);
             plfill(4, bx, by);
         }
     }
     plcol0(1);
-    plbox(p->xlog ? "bcgst" : "bcgst", 0, 0, p->ylog ? "bcgst" : "bcgst", 0, 0);   /* the grid over the band */
-    for (int i = 0; i < p->nser; i++) {
-        const bn__series *s = &p->ser[i];
-        PLFLT xs[BN__MAXPTS], ys[BN__MAXPTS];
-        int m = 0;
-        for (int k = 0; k < s->n; k++)
-            if (bn__ok(s->x[k], p->xlog) && bn__ok(s->y[k], p->ylog)) {
-                xs[m] = bn__tr(s->x[k], p->xlog);
-                ys[m] = bn__tr(s->y[k], p->ylog);
-                m++;
-            }
-        if (m == 0)
-            continue;
-        if (s->vline) {
-            xs[1] = xs[0];
-            ys[0] = y0;
-            ys[1] = y1;
-            m = 2;
+    plbox("bcgst", 0, 0, "bcgst", 0, 0);   /* the grid over the band */
+}
+
+/* The legend's entries, one per series drawn. */
+typedef struct bn__legend {
+    PLINT opts[BN__MAXSER], colors[BN__MAXSER], styles[BN__MAXSER], snum[BN__MAXSER];
+    PLFLT widths[BN__MAXSER], sscale[BN__MAXSER];
+    const char *text[BN__MAXSER], *syms[BN__MAXSER];
+    int n;
+} bn__legend;
+
+/* Series i's line and symbols (a vertical line spans the window), and its legend entry. */
+static void bn__series_draw(const bn__panel *p, int i, const double r[4], bn__legend *lg)
+{
+    const bn__series *s = &p->ser[i];
+    PLFLT xs[BN__MAXPTS], ys[BN__MAXPTS];
+    int m = 0, sym;
+    for (int k = 0; k < s->n; k++)
+        if (bn__ok(s->x[k], p->xlog) && bn__ok(s->y[k], p->ylog)) {
+            xs[m] = bn__tr(s->x[k], p->xlog);
+            ys[m] = bn__tr(s->y[k], p->ylog);
+            m++;
         }
-        plcol0(s->color);
-        pllsty(s->style);
-        plwidth(2.0);
-        if (m > 1 && s->style > 0)
-            plline(m, xs, ys);
-        if ((s->symbol || m == 1) && !s->vline)
-            plstring(m, xs, ys, bn__glyph(i));
-        opts[nleg] = (s->style > 0 ? PL_LEGEND_LINE : 0) | ((s->symbol || m == 1) && !s->vline ? PL_LEGEND_SYMBOL : 0);
-        colors[nleg] = s->color;
-        styles[nleg] = s->style > 0 ? s->style : 1;
-        widths[nleg] = 2.0;
-        sscale[nleg] = 1.0;
-        snum[nleg] = 1;
-        syms[nleg] = bn__glyph(i);
-        text[nleg] = s->label;
-        nleg++;
+    if (m == 0)
+        return;
+    if (s->vline) {
+        xs[1] = xs[0];
+        ys[0] = r[2];
+        ys[1] = r[3];
+        m = 2;
     }
+    sym = (s->symbol || m == 1) && !s->vline;
+    plcol0(s->color);
+    pllsty(s->style);
+    plwidth(2.0);
+    if (m > 1 && s->style > 0)
+        plline(m, xs, ys);
+    if (sym)
+        plstring(m, xs, ys, bn__glyph(i));
+    lg->opts[lg->n] = (s->style > 0 ? PL_LEGEND_LINE : 0) | (sym ? PL_LEGEND_SYMBOL : 0);
+    lg->colors[lg->n] = s->color;
+    lg->styles[lg->n] = s->style > 0 ? s->style : 1;
+    lg->widths[lg->n] = 2.0;
+    lg->sscale[lg->n] = 1.0;
+    lg->snum[lg->n] = 1;
+    lg->syms[lg->n] = bn__glyph(i);
+    lg->text[lg->n] = s->label;
+    lg->n++;
+}
+
+static void bn__draw(const bn__panel *p)
+{
+    double r[4];
+    bn__legend lg;
+    lg.n = 0;
+    bn__ranges(p, r);
+    bn__frame(p, r);
+    for (int i = 0; i < p->nser; i++)
+        bn__series_draw(p, i, r, &lg);
     pllsty(1);
     plwidth(1.0);
     plcol0(1);
     for (int i = 0; i < p->nnotes; i++)
         if (bn__ok(p->nx[i], p->xlog) && bn__ok(p->ny[i], p->ylog))
             plptex(bn__tr(p->nx[i], p->xlog), bn__tr(p->ny[i], p->ylog), 1, 0, -0.15, p->notes[i]);
-    if (nleg > 0) {
+    if (lg.n > 0) {
         PLFLT lw, lh;
         PLINT tcol[BN__MAXSER];
-        for (int i = 0; i < nleg; i++)
+        for (int i = 0; i < lg.n; i++)
             tcol[i] = 1;
-        pllegend(&lw, &lh, PL_LEGEND_BACKGROUND | PL_LEGEND_BOUNDING_BOX, (p->legend_low ? PL_POSITION_BOTTOM | PL_POSITION_LEFT : PL_POSITION_TOP | PL_POSITION_RIGHT) | PL_POSITION_INSIDE,
-                 0.01, 0.01, 0.08, 0, 1, 1, 0, 0, nleg, opts, 0.8, 0.75, 1.8, 0.0, tcol, text, NULL, NULL, NULL, NULL,
-                 colors, styles, widths, colors, sscale, snum, syms);
+        pllegend(&lw, &lh, PL_LEGEND_BACKGROUND | PL_LEGEND_BOUNDING_BOX,
+                 (p->legend_low ? PL_POSITION_BOTTOM | PL_POSITION_LEFT : PL_POSITION_TOP | PL_POSITION_RIGHT) |
+                     PL_POSITION_INSIDE,
+                 0.01, 0.01, 0.08, 0, 1, 1, 0, 0, lg.n, lg.opts, 0.8, 0.75, 1.8, 0.0, tcol, lg.text, NULL, NULL, NULL,
+                 NULL, lg.colors, lg.styles, lg.widths, lg.colors, lg.sscale, lg.snum, lg.syms);
     }
 }
 
@@ -274,16 +298,10 @@ static double bn__fit_order(const bn_study_result *r)
     return (m * sxy - sx * sy) / (m * sxx - sx * sx);
 }
 
-static void bn__panels(const bn_study_result *r, bn__panel *a, bn__panel *b)
+/* The distinct methods of the rows, in order of first appearance. */
+static int bn__methods_of(const bn_study_result *r, const char **methods)
 {
-    const char *methods[BN__MAXSER];
     int nm = 0;
-    int op = r->param == BN_STUDY_BOUNCES || r->param == BN_STUDY_MAX_ITER || r->param == BN_STUDY_TOL;
-    memset(a, 0, sizeof *a);
-    memset(b, 0, sizeof *b);
-    a->xlog = a->ylog = 1;
-    a->legend_low = 1;
-    snprintf(a->xlab, sizeof a->xlab, "time (s)");
     for (size_t i = 0; i < r->nrows && nm < BN__MAXSER; i++) {
         int seen = 0;
         for (int k = 0; k < nm; k++)
@@ -291,145 +309,181 @@ static void bn__panels(const bn_study_result *r, bn__panel *a, bn__panel *b)
         if (!seen)
             methods[nm++] = r->rows[i].method;
     }
+    return nm;
+}
+
+/* One series per method of the rows, y against x as `pick` reads them from a row. */
+static void bn__by_method(bn__panel *pn, const bn_study_result *r, const char **methods, int nm,
+                          void (*pick)(const bn_study_row *w, double *x, double *y))
+{
+    for (int k = 0; k < nm; k++) {
+        bn__series *s = bn__add(pn, methods[k], 1, 1);
+        for (size_t i = 0; i < r->nrows; i++)
+            if (strcmp(r->rows[i].method, methods[k]) == 0) {
+                double x, y;
+                pick(&r->rows[i], &x, &y);
+                bn__pt(s, x, y);
+            }
+    }
+}
+
+static void bn__pick_solve(const bn_study_row *w, double *x, double *y) { *x = w->t_solve, *y = w->err_inf_rel; }
+static void bn__pick_total(const bn_study_row *w, double *x, double *y) { *x = w->t_total, *y = w->err_surface_max; }
+static void bn__pick_tol(const bn_study_row *w, double *x, double *y) { *x = w->x, *y = w->t_solve; }
+
+/* Panel a: error against time: the solvers' curves on one K (operator studies), or every setting's
+ * total time (the others), with the tracer's target. */
+static void bn__panel_time(const bn_study_result *r, int op, const char **methods, int nm, bn__panel *a)
+{
+    a->xlog = a->ylog = 1;
+    a->legend_low = 1;
+    snprintf(a->xlab, sizeof a->xlab, "time (s)");
     if (op) {
         snprintf(a->ylab, sizeof a->ylab, "||L - L#dref#u||#d∞#u / ||L#dref#u||#d∞#u");
         snprintf(a->title, sizeof a->title, "error against time (%zu patches)", r->ref_patches);
-        if (r->ncurves > 0)
-            for (size_t c = 0; c < r->ncurves; c++) {
-                int direct = strcmp(r->curves[c].label, "direct") == 0;
-                bn__series *s = bn__add(a, direct ? "direct (exact to rounding)" : r->curves[c].label, direct ? 2 : 1, 0);
-                if (s)
-                    s->vline = direct;
-                /* S_0 = E costs no time: the series is drawn from S_1 */
-                for (size_t k = strcmp(r->curves[c].label, "truncated series") == 0 ? 1 : 0; k < r->curves[c].n; k++)
-                    bn__pt(s, r->curves[c].t[k], r->curves[c].err[k]);
-            }
-        else
-            for (int k = 0; k < nm; k++) {
-                bn__series *s = bn__add(a, methods[k], 1, 1);
-                for (size_t i = 0; i < r->nrows; i++)
-                    if (strcmp(r->rows[i].method, methods[k]) == 0)   /* the solve: K is shared */
-                        bn__pt(s, r->rows[i].t_solve, r->rows[i].err_inf_rel);
-            }
-    } else {
-        snprintf(a->ylab, sizeof a->ylab, "max per-surface relative error");
-        snprintf(a->title, sizeof a->title, "error against time (all phases)");
-        for (int k = 0; k < nm; k++) {
-            bn__series *s = bn__add(a, methods[k], 1, 1);
-            for (size_t i = 0; i < r->nrows; i++)
-                if (strcmp(r->rows[i].method, methods[k]) == 0)
-                    bn__pt(s, r->rows[i].t_total, r->rows[i].err_surface_max);
+        if (r->ncurves == 0)
+            bn__by_method(a, r, methods, nm, bn__pick_solve);   /* the solve: K is shared */
+        for (size_t c = 0; c < r->ncurves; c++) {
+            int direct = strcmp(r->curves[c].label, "direct") == 0;
+            bn__series *s = bn__add(a, direct ? "direct (exact to rounding)" : r->curves[c].label, direct ? 2 : 1, 0);
+            if (s)
+                s->vline = direct;
+            /* S_0 = E costs no time: the series is drawn from S_1 */
+            for (size_t k = strcmp(r->curves[c].label, "truncated series") == 0 ? 1 : 0; k < r->curves[c].n; k++)
+                bn__pt(s, r->curves[c].t[k], r->curves[c].err[k]);
         }
-        if (!isnan(r->best_trace)) {
-            bn__series *s = bn__add(a, "target", 2, 0);
-            double t0 = INFINITY, t1 = 0;
-            for (size_t i = 0; i < r->nrows; i++) {
-                t0 = fmin(t0, r->rows[i].t_total);
-                t1 = fmax(t1, r->rows[i].t_total);
+        return;
+    }
+    snprintf(a->ylab, sizeof a->ylab, "max per-surface relative error");
+    snprintf(a->title, sizeof a->title, "error against time (all phases)");
+    bn__by_method(a, r, methods, nm, bn__pick_total);
+    if (!isnan(r->best_trace)) {
+        bn__series *s = bn__add(a, "target", 2, 0);
+        double t0 = INFINITY, t1 = 0;
+        for (size_t i = 0; i < r->nrows; i++) {
+            t0 = fmin(t0, r->rows[i].t_total);
+            t1 = fmax(t1, r->rows[i].t_total);
+        }
+        bn__pt(s, t0, r->target);
+        bn__pt(s, t1, r->target);
+    }
+}
+
+/* Panel b of a bounces study: the truncation error, its bounds and estimate, the reference's own. */
+static void bn__panel_bounces(const bn_study_result *r, bn__panel *b)
+{
+    bn__series *m = bn__add(b, "measured ||L - S#dn#u||#d∞#u", 1, 1);
+    bn__series *bd = bn__add(b, "bound ||K||#un+1#d/(1-||K||) ||E||", 2, 0);
+    bn__series *bk = bn__add(b, "bound ||K||#un#d/(1-||K||) ||KE||", 2, 0);
+    bn__series *es = bn__add(b, "estimate #gr/(1-#gr) ||K#un#d E||", 3, 0);
+    bn__series *fl = bn__add(b, "reference's own error", 4, 0);   /* drawn when within 1e3 of the data */
+    double n0 = INFINITY, n1 = -INFINITY, emin = INFINITY;
+    snprintf(b->ylab, sizeof b->ylab, "||L - S#dn#u||#d∞#u (W m#u-2#d sr#u-1#d)");
+    snprintf(b->title, sizeof b->title, "truncation error: ||K||#d∞#u = %.4g, #gr(K) ~ %.4g", r->k_norm,
+             r->spectral_radius);
+    for (size_t i = 0; i < r->nrows; i++)
+        if (strcmp(r->rows[i].method, "truncated") == 0) {
+            bn__pt(m, r->rows[i].x, r->rows[i].err_inf);
+            bn__pt(bd, r->rows[i].x, r->rows[i].bound);
+            bn__pt(bk, r->rows[i].x, r->rows[i].bound_ke);
+            bn__pt(es, r->rows[i].x, r->rows[i].estimate);
+            n0 = fmin(n0, r->rows[i].x);
+            n1 = fmax(n1, r->rows[i].x);
+            if (r->rows[i].err_inf > 0)
+                emin = fmin(emin, r->rows[i].err_inf);
+        }
+    if (r->ref_error > 0 && isfinite(n0) && r->ref_error * r->norm_L > 1e-3 * emin) {
+        bn__pt(fl, n0, r->ref_error * r->norm_L);
+        bn__pt(fl, n1, r->ref_error * r->norm_L);
+    }
+}
+
+/* Panel b of an iteration-limit study: the error after k sweeps and each method's a priori bound. */
+static void bn__panel_max_iter(const bn_study_result *r, const char **methods, int nm, bn__panel *b)
+{
+    b->xlog = 1;
+    snprintf(b->ylab, sizeof b->ylab, "||L - L#dk#u||#d∞#u (W m#u-2#d sr#u-1#d)");
+    snprintf(b->title, sizeof b->title, "error after k sweeps, and the a priori bound (dashed)");
+    for (int k = 0; k < nm; k++) {
+        bn__series *s = bn__add(b, methods[k], 1, 1), *bd;
+        char lab[64];
+        snprintf(lab, sizeof lab, "%s bound", methods[k]);
+        bd = bn__add(b, lab, 2, 0);
+        if (bd)
+            bd->color = s ? s->color : 2;
+        for (size_t i = 0; i < r->nrows; i++)
+            if (strcmp(r->rows[i].method, methods[k]) == 0) {
+                bn__pt(s, r->rows[i].x, r->rows[i].err_inf);
+                bn__pt(bd, r->rows[i].x, r->rows[i].bound);
             }
-            bn__pt(s, t0, r->target);
-            bn__pt(s, t1, r->target);
+    }
+}
+
+/* Panel b of the mesh and form-factor studies: the errors against the setting, the reference's own
+ * error as a band, and (mesh studies) the fitted convergence order in the title. */
+static void bn__panel_errors(const bn_study_result *r, bn__panel *b)
+{
+    int categorical = r->param == BN_STUDY_FF || r->param == BN_STUDY_PRECISION, idx = 0;
+    bn__series *sm = bn__add(b, "max per-surface", 1, 1), *pm = bn__add(b, "max per-patch", 1, 1);
+    bn__series *rm = bn__add(b, "RMS per-patch", 1, 1), *em = bn__add(b, "reflected power", 1, 1);
+    bn__series *fl = bn__add(b, "reference's own error, per surface (shaded)", 2, 0);
+    double x0 = INFINITY, x1 = -INFINITY, p = bn__fit_order(r);
+    b->xlog = !categorical;
+    snprintf(b->ylab, sizeof b->ylab, "relative error");
+    snprintf(b->title, sizeof b->title, "error vs %s (ref. %zu patches)", bn_study_param_name(r->param),
+             r->ref_patches);
+    if (categorical)
+        snprintf(b->xlab, sizeof b->xlab, "%s (setting)", bn__param_axis(r->param));
+    for (size_t i = 0; i < r->nrows; i++) {
+        const bn_study_row *w = &r->rows[i];
+        double x;
+        if (strcmp(w->method, "trace") == 0 && r->param != BN_STUDY_SPP)
+            continue;   /* the tracer rows of an equal-error study are on the time panel */
+        x = categorical ? ++idx : (r->param == BN_STUDY_PATCHES ? (double)w->patches : w->x);
+        bn__pt(sm, x, w->err_surface_max);
+        bn__pt(pm, x, w->err_max_rel);
+        bn__pt(rm, x, w->err_rms_rel);
+        bn__pt(em, x, w->err_energy_rel);
+        x0 = fmin(x0, x);
+        x1 = fmax(x1, x);
+        if (categorical && b->nnotes < 8) {
+            snprintf(b->notes[b->nnotes], sizeof b->notes[0], "%s", w->value);
+            b->nx[b->nnotes] = x;
+            b->ny[b->nnotes] = w->err_surface_max;
+            b->nnotes++;
         }
     }
+    if (r->ref_error > 0 && isfinite(x0)) {
+        bn__pt(fl, x0, r->ref_error);
+        bn__pt(fl, x1, r->ref_error);
+        fl->band = 1;
+    }
+    /* the fitted convergence order of the per-surface error: err ~ h^p, h ~ patches^-1/2 */
+    if (isfinite(p))
+        snprintf(b->title + strlen(b->title), sizeof b->title - strlen(b->title), ", fitted order %.2f", p);
+}
 
+static void bn__panels(const bn_study_result *r, bn__panel *a, bn__panel *b)
+{
+    const char *methods[BN__MAXSER];
+    int nm = bn__methods_of(r, methods);
+    int op = r->param == BN_STUDY_BOUNCES || r->param == BN_STUDY_MAX_ITER || r->param == BN_STUDY_TOL;
+    memset(a, 0, sizeof *a);
+    memset(b, 0, sizeof *b);
+    bn__panel_time(r, op, methods, nm, a);
     snprintf(b->xlab, sizeof b->xlab, "%s", bn__param_axis(r->param));
     b->ylog = 1;
-    if (r->param == BN_STUDY_BOUNCES) {
-        bn__series *m = bn__add(b, "measured ||L - S#dn#u||#d∞#u", 1, 1);
-        bn__series *bd = bn__add(b, "bound ||K||#un+1#d/(1-||K||) ||E||", 2, 0);
-        bn__series *bk = bn__add(b, "bound ||K||#un#d/(1-||K||) ||KE||", 2, 0);
-        bn__series *es = bn__add(b, "estimate #gr/(1-#gr) ||K#un#d E||", 3, 0);
-        bn__series *fl = bn__add(b, "reference's own error", 4, 0);   /* drawn when within 1e3 of the data */
-        double n0 = INFINITY, n1 = -INFINITY, emin = INFINITY;
-        snprintf(b->ylab, sizeof b->ylab, "||L - S#dn#u||#d∞#u (W m#u-2#d sr#u-1#d)");
-        snprintf(b->title, sizeof b->title, "truncation error: ||K||#d∞#u = %.4g, #gr(K) ~ %.4g", r->k_norm,
-                 r->spectral_radius);
-        for (size_t i = 0; i < r->nrows; i++)
-            if (strcmp(r->rows[i].method, "truncated") == 0) {
-                bn__pt(m, r->rows[i].x, r->rows[i].err_inf);
-                bn__pt(bd, r->rows[i].x, r->rows[i].bound);
-                bn__pt(bk, r->rows[i].x, r->rows[i].bound_ke);
-                bn__pt(es, r->rows[i].x, r->rows[i].estimate);
-                n0 = fmin(n0, r->rows[i].x);
-                n1 = fmax(n1, r->rows[i].x);
-                if (r->rows[i].err_inf > 0)
-                    emin = fmin(emin, r->rows[i].err_inf);
-            }
-        if (r->ref_error > 0 && isfinite(n0) && r->ref_error * r->norm_L > 1e-3 * emin) {
-            bn__pt(fl, n0, r->ref_error * r->norm_L);
-            bn__pt(fl, n1, r->ref_error * r->norm_L);
-        }
-    } else if (r->param == BN_STUDY_MAX_ITER) {
-        b->xlog = 1;
-        snprintf(b->ylab, sizeof b->ylab, "||L - L#dk#u||#d∞#u (W m#u-2#d sr#u-1#d)");
-        snprintf(b->title, sizeof b->title, "error after k sweeps, and the a priori bound (dashed)");
-        for (int k = 0; k < nm; k++) {
-            bn__series *s = bn__add(b, methods[k], 1, 1);
-            char lab[64];
-            bn__series *bd;
-            snprintf(lab, sizeof lab, "%s bound", methods[k]);
-            bd = bn__add(b, lab, 2, 0);
-            if (bd)
-                bd->color = s ? s->color : 2;
-            for (size_t i = 0; i < r->nrows; i++)
-                if (strcmp(r->rows[i].method, methods[k]) == 0) {
-                    bn__pt(s, r->rows[i].x, r->rows[i].err_inf);
-                    bn__pt(bd, r->rows[i].x, r->rows[i].bound);
-                }
-        }
-    } else if (r->param == BN_STUDY_TOL || (op && r->param != BN_STUDY_BOUNCES)) {
+    if (r->param == BN_STUDY_BOUNCES)
+        bn__panel_bounces(r, b);
+    else if (r->param == BN_STUDY_MAX_ITER)
+        bn__panel_max_iter(r, methods, nm, b);
+    else if (op) {   /* tol */
         b->xlog = 1;
         snprintf(b->ylab, sizeof b->ylab, "time to tolerance (s)");
         snprintf(b->title, sizeof b->title, "time to each tolerance, same K (%zu patches)", r->ref_patches);
-        for (int k = 0; k < nm; k++) {
-            bn__series *s = bn__add(b, methods[k], 1, 1);
-            for (size_t i = 0; i < r->nrows; i++)
-                if (strcmp(r->rows[i].method, methods[k]) == 0)
-                    bn__pt(s, r->rows[i].x, r->rows[i].t_solve);
-        }
-    } else {
-        int categorical = r->param == BN_STUDY_FF || r->param == BN_STUDY_PRECISION;
-        bn__series *sm = bn__add(b, "max per-surface", 1, 1), *pm = bn__add(b, "max per-patch", 1, 1);
-        bn__series *rm = bn__add(b, "RMS per-patch", 1, 1), *em = bn__add(b, "reflected power", 1, 1);
-        bn__series *fl = bn__add(b, "reference's own error, per surface (shaded)", 2, 0);
-        double x0 = INFINITY, x1 = -INFINITY;
-        int idx = 0;
-        b->xlog = !categorical;
-        snprintf(b->ylab, sizeof b->ylab, "relative error");
-        snprintf(b->title, sizeof b->title, "error vs %s (ref. %zu patches)", bn_study_param_name(r->param),
-                 r->ref_patches);
-        if (categorical)
-            snprintf(b->xlab, sizeof b->xlab, "%s (setting)", bn__param_axis(r->param));
-        for (size_t i = 0; i < r->nrows; i++) {
-            const bn_study_row *w = &r->rows[i];
-            double x;
-            if (strcmp(w->method, "trace") == 0 && r->param != BN_STUDY_SPP)
-                continue;   /* the tracer rows of an equal-error study are on the time panel */
-            x = categorical ? ++idx : (r->param == BN_STUDY_PATCHES ? (double)w->patches : w->x);
-            bn__pt(sm, x, w->err_surface_max);
-            bn__pt(pm, x, w->err_max_rel);
-            bn__pt(rm, x, w->err_rms_rel);
-            bn__pt(em, x, w->err_energy_rel);
-            x0 = fmin(x0, x);
-            x1 = fmax(x1, x);
-            if (categorical && b->nnotes < 8) {
-                snprintf(b->notes[b->nnotes], sizeof b->notes[0], "%s", w->value);
-                b->nx[b->nnotes] = x;
-                b->ny[b->nnotes] = w->err_surface_max;
-                b->nnotes++;
-            }
-        }
-        if (r->ref_error > 0 && isfinite(x0)) {
-            bn__pt(fl, x0, r->ref_error);
-            bn__pt(fl, x1, r->ref_error);
-            fl->band = 1;
-        }
-        {   /* the fitted convergence order of the per-surface error: err ~ h^p, h ~ patches^-1/2 */
-            double p = bn__fit_order(r);
-            if (isfinite(p))
-                snprintf(b->title + strlen(b->title), sizeof b->title - strlen(b->title), ", fitted order %.2f", p);
-        }
-    }
+        bn__by_method(b, r, methods, nm, bn__pick_tol);
+    } else
+        bn__panel_errors(r, b);
 }
 
 static void bn__palette(void)
