@@ -246,146 +246,173 @@ bn_status bn__read_obj(const char *path, bn__soup *s, const bn_log *log, bn_erro
     return st;
 }
 
+/* The OBJ reader's state across lines. */
+typedef struct bn__objr {
+    const char *path;
+    bn__soup *s;
+    const bn_log *log;
+    char *dir;              /* the file's folder, for mtllib */
+    size_t *fv, fv_cap;     /* the face being read */
+    unsigned line;
+    int cur, default_mat;   /* the material in use (-1: none yet), the default one (-1: not made) */
+} bn__objr;
+
+/* "v x y z" */
+static bn_status bn__obj_vertex(bn__objr *R, char *c, bn_error *err)
+{
+    double p[3];
+    char *t[3];
+    for (int k = 0; k < 3; k++)
+        t[k] = bn__token(&c);
+    for (int k = 0; k < 3; k++)
+        if (!bn__parse_double(t[k], &p[k]))
+            return bn_error_set(err, BN_EINPUT, "%s:%u: vertex coordinate '%s' is not a finite number", R->path, R->line,
+                                bn__show(t[k]));
+    if (!bn__soup_add_vertex(R->s, p))
+        return bn_error_set(err, BN_ENOMEM, "out of memory reading %s", R->path);
+    return BN_OK;
+}
+
+/* The vertex references of an "f" line into R->fv, *n of them. */
+static bn_status bn__obj_face_refs(bn__objr *R, char *c, unsigned *n, bn_error *err)
+{
+    char *t;
+    *n = 0;
+    while ((t = bn__token(&c)) != NULL) {
+        size_t vi;
+        int r;
+        if (*n >= BN__MAX_FACE_VERTS)
+            return bn_error_set(err, BN_EINPUT, "%s:%u: face with more than %u vertices", R->path, R->line,
+                                BN__MAX_FACE_VERTS);
+        r = bn__resolve_index(t, R->s->nverts, &vi);
+        if (r < 0)
+            return bn_error_set(err, BN_EINPUT,
+                                "%s:%u: malformed vertex reference '%s' (expected v, v/vt, v//vn or v/vt/vn)", R->path,
+                                R->line, t);
+        if (r == 0)
+            return bn_error_set(err, BN_EINPUT, "%s:%u: vertex index '%s' is out of range (%zu vertices defined so far)",
+                                R->path, R->line, t, R->s->nverts);
+        if (*n >= R->fv_cap) {
+            size_t nc = R->fv_cap ? 2 * R->fv_cap : 16;
+            size_t *p = bn__realloc_array(R->fv, nc, sizeof *p);
+            if (!p)
+                return bn_error_set(err, BN_ENOMEM, "out of memory reading %s", R->path);
+            R->fv = p;
+            R->fv_cap = nc;
+        }
+        R->fv[(*n)++] = vi;
+    }
+    return BN_OK;
+}
+
+/* "f v1 v2 v3 ...": a polygon of the material in use, or of the default one (made once, said once). */
+static bn_status bn__obj_face(bn__objr *R, char *c, bn_error *err)
+{
+    unsigned n;
+    bn_status st = bn__obj_face_refs(R, c, &n, err);
+    if (st != BN_OK)
+        return st;
+    if (n < 3)
+        return bn_error_set(err, BN_EINPUT, "%s:%u: face with %u vertices (a face needs at least 3)", R->path, R->line,
+                            n);
+    if (R->cur < 0) {
+        if (R->default_mat < 0) {
+            bn_material m;
+            memset(&m, 0, sizeof m);
+            snprintf(m.name, sizeof m.name, "(default)");
+            m.rho[0] = m.rho[1] = m.rho[2] = 0.5;
+            bn_logf(R->log, BN_LOG_WARN, "%s:%u: faces without usemtl get the default material (grey, rho 0.5)",
+                    R->path, R->line);
+            if (!bn__soup_add_material(R->s, &m))
+                return bn_error_set(err, BN_ENOMEM, "out of memory");
+            R->default_mat = (int)R->s->nmats - 1;
+        }
+        R->cur = R->default_mat;
+    }
+    if (!bn__soup_add_polygon(R->s, R->fv, n, (unsigned)R->cur, R->line))
+        return bn_error_set(err, BN_ENOMEM, "out of memory reading %s", R->path);
+    return BN_OK;
+}
+
+/* "usemtl NAME": a material some mtllib defined. */
+static bn_status bn__obj_usemtl(bn__objr *R, char *c, bn_error *err)
+{
+    char *name = bn__token(&c);
+    if (!name)
+        return bn_error_set(err, BN_EINPUT, "%s:%u: usemtl without a name", R->path, R->line);
+    R->cur = bn__find_material(R->s, name);
+    if (R->cur < 0)
+        return bn_error_set(err, BN_EINPUT, "%s:%u: unknown material '%s' (not defined in any mtllib read so far)",
+                            R->path, R->line, name);
+    return BN_OK;
+}
+
+/* "mtllib A.mtl [B.mtl ...]", relative to the OBJ's folder. */
+static bn_status bn__obj_mtllib(bn__objr *R, char *c, bn_error *err)
+{
+    char *name;
+    bn_status st = BN_OK;
+    while (st == BN_OK && (name = bn__token(&c)) != NULL) {
+        size_t n = strlen(R->dir) + strlen(name) + 1;
+        char *p = malloc(n);
+        if (!p)
+            return bn_error_set(err, BN_ENOMEM, "out of memory");
+        snprintf(p, n, "%s%s", name[0] == '/' ? "" : R->dir, name);
+        st = bn__read_mtl(p, R->path, R->line, R->s, R->log, err);
+        free(p);
+    }
+    return st;
+}
+
+/* Statements a Lambertian patch model does not need. */
+static int bn__obj_ignored(const char *kw)
+{
+    static const char *const skip[] = {"vt", "vn", "vp", "g", "o", "s", "l", "p", "mg", "usemap", "maplib"};
+    for (size_t i = 0; i < sizeof skip / sizeof *skip; i++)
+        if (strcmp(kw, skip[i]) == 0)
+            return 1;
+    return 0;
+}
+
 bn_status bn__read_obj_stream(FILE *fp, const char *path, bn__soup *s, const bn_log *log, bn_error *err)
 {
-    char *buf = NULL, *dir;
-    size_t cap = 0, *fv = NULL, fv_cap = 0;
-    unsigned line = 0;
-    int cur = -1, default_mat = -1;
+    bn__objr R = {path, s, log, NULL, NULL, 0, 0, -1, -1};
+    const char *slash = strrchr(path, '/');
+    char *buf = NULL;
+    size_t cap = 0;
     ssize_t len;
     bn_status st = BN_OK;
-    const char *slash;
 
-    slash = strrchr(path, '/');
-    dir = bn__strdup(path);
-    if (!dir)
+    if (!(R.dir = bn__strdup(path)))
         return bn_error_set(err, BN_ENOMEM, "out of memory");
-    dir[slash ? (size_t)(slash - path) + 1 : 0] = '\0';
-
+    R.dir[slash ? (size_t)(slash - path) + 1 : 0] = '\0';
     while (st == BN_OK && (len = getline(&buf, &cap, fp)) >= 0) {
-        char *l, *kw, *c;
+        char *c, *kw;
         int cb;
-        line++;
+        R.line++;
         if ((cb = bn__control_byte(buf, len)) >= 0) {
-            st = bn_error_set(err, BN_EINPUT, "%s:%u: control byte 0x%02x in OBJ text (not a text file?)", path, line, cb);
+            st = bn_error_set(err, BN_EINPUT, "%s:%u: control byte 0x%02x in OBJ text (not a text file?)", path, R.line,
+                              cb);
             break;
         }
-        l = bn__strip(buf);
-        c = l;
-        kw = bn__token(&c);
-        if (!kw)
+        c = bn__strip(buf);
+        if (!(kw = bn__token(&c)))
             continue;
-        if (strcmp(kw, "v") == 0) {
-            double p[3];
-            char *t[3];
-            for (int k = 0; k < 3; k++)
-                t[k] = bn__token(&c);
-            for (int k = 0; k < 3; k++)
-                if (!bn__parse_double(t[k], &p[k])) {
-                    st = bn_error_set(err, BN_EINPUT, "%s:%u: vertex coordinate '%s' is not a finite number", path,
-                                      line, bn__show(t[k]));
-                    break;
-                }
-            if (st == BN_OK && !bn__soup_add_vertex(s, p))
-                st = bn_error_set(err, BN_ENOMEM, "out of memory reading %s", path);
-        } else if (strcmp(kw, "f") == 0) {
-            unsigned n = 0;
-            char *t;
-            while ((t = bn__token(&c)) != NULL) {
-                size_t vi;
-                if (n >= BN__MAX_FACE_VERTS) {
-                    st = bn_error_set(err, BN_EINPUT, "%s:%u: face with more than %u vertices", path, line,
-                                      BN__MAX_FACE_VERTS);
-                    break;
-                }
-                int r = bn__resolve_index(t, s->nverts, &vi);
-                if (r < 0) {
-                    st = bn_error_set(err, BN_EINPUT, "%s:%u: malformed vertex reference '%s' (expected v, v/vt, v//vn or v/vt/vn)",
-                                      path, line, t);
-                    break;
-                }
-                if (r == 0) {
-                    st = bn_error_set(err, BN_EINPUT,
-                                      "%s:%u: vertex index '%s' is out of range (%zu vertices defined so far)",
-                                      path, line, t, s->nverts);
-                    break;
-                }
-                if (n >= fv_cap) {
-                    size_t nc = fv_cap ? 2 * fv_cap : 16;
-                    size_t *p = bn__realloc_array(fv, nc, sizeof *p);
-                    if (!p) {
-                        st = bn_error_set(err, BN_ENOMEM, "out of memory reading %s", path);
-                        break;
-                    }
-                    fv = p;
-                    fv_cap = nc;
-                }
-                fv[n++] = vi;
-            }
-            if (st != BN_OK)
-                break;
-            if (n < 3) {
-                st = bn_error_set(err, BN_EINPUT, "%s:%u: face with %u vertices (a face needs at least 3)", path,
-                                  line, n);
-                break;
-            }
-            if (cur < 0) {
-                if (default_mat < 0) {
-                    bn_material m;
-                    memset(&m, 0, sizeof m);
-                    snprintf(m.name, sizeof m.name, "(default)");
-                    m.rho[0] = m.rho[1] = m.rho[2] = 0.5;
-                    bn_logf(log, BN_LOG_WARN, "%s:%u: faces without usemtl get the default material (grey, rho 0.5)",
-                            path, line);
-                    if (!bn__soup_add_material(s, &m)) {
-                        st = bn_error_set(err, BN_ENOMEM, "out of memory");
-                        break;
-                    }
-                    default_mat = (int)s->nmats - 1;
-                }
-                cur = default_mat;
-            }
-            if (!bn__soup_add_polygon(s, fv, n, (unsigned)cur, line))
-                st = bn_error_set(err, BN_ENOMEM, "out of memory reading %s", path);
-        } else if (strcmp(kw, "usemtl") == 0) {
-            char *name = bn__token(&c);
-            if (!name) {
-                st = bn_error_set(err, BN_EINPUT, "%s:%u: usemtl without a name", path, line);
-                break;
-            }
-            cur = bn__find_material(s, name);
-            if (cur < 0)
-                st = bn_error_set(err, BN_EINPUT, "%s:%u: unknown material '%s' (not defined in any mtllib read so far)",
-                                  path, line, name);
-        } else if (strcmp(kw, "mtllib") == 0) {
-            char *name;
-            while ((name = bn__token(&c)) != NULL && st == BN_OK) {
-                size_t n = strlen(dir) + strlen(name) + 1;
-                char *p = malloc(n);
-                if (!p) {
-                    st = bn_error_set(err, BN_ENOMEM, "out of memory");
-                    break;
-                }
-                if (name[0] == '/')
-                    snprintf(p, n, "%s", name);
-                else
-                    snprintf(p, n, "%s%s", dir, name);
-                st = bn__read_mtl(p, path, line, s, log, err);
-                free(p);
-            }
-        } else if (strcmp(kw, "vt") == 0 || strcmp(kw, "vn") == 0 || strcmp(kw, "vp") == 0 ||
-                   strcmp(kw, "g") == 0 || strcmp(kw, "o") == 0 || strcmp(kw, "s") == 0 ||
-                   strcmp(kw, "l") == 0 || strcmp(kw, "p") == 0 || strcmp(kw, "mg") == 0 ||
-                   strcmp(kw, "usemap") == 0 || strcmp(kw, "maplib") == 0) {
-            /* Not needed for a Lambertian patch model. */
-        } else {
-            bn_logf(log, BN_LOG_DEBUG, "%s:%u: statement '%s' ignored", path, line, kw);
-        }
+        if (strcmp(kw, "v") == 0)
+            st = bn__obj_vertex(&R, c, err);
+        else if (strcmp(kw, "f") == 0)
+            st = bn__obj_face(&R, c, err);
+        else if (strcmp(kw, "usemtl") == 0)
+            st = bn__obj_usemtl(&R, c, err);
+        else if (strcmp(kw, "mtllib") == 0)
+            st = bn__obj_mtllib(&R, c, err);
+        else if (!bn__obj_ignored(kw))
+            bn_logf(log, BN_LOG_DEBUG, "%s:%u: statement '%s' ignored", path, R.line, kw);
     }
     if (st == BN_OK && ferror(fp))
         st = bn_error_set(err, BN_EIO, "%s: read error", path);
     free(buf);
-    free(fv);
-    free(dir);
+    free(R.fv);
+    free(R.dir);
     return st;
 }
