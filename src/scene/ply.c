@@ -365,16 +365,122 @@ typedef struct bn__ply_state {
     int seen_vertex;
 } bn__ply_state;
 
+/* What one record holds as it is read. */
+typedef struct bn__ply_rec {
+    double p[3], fp[6], rgb[3];   /* position, face properties, colour */
+    size_t nidx;                  /* vertex indices read into S->idx */
+    unsigned start;               /* its first line (ASCII) */
+    unsigned long long r;         /* its number within the element */
+} bn__ply_rec;
+
+/* "path:line:" for ASCII files (empty for binary ones), with or without the colon. */
+static void bn__ply_where(const bn__ply *P, unsigned line, int colon, char *where, size_t size)
+{
+    where[0] = '\0';
+    if (P->format == F_ASCII)
+        snprintf(where, size, colon ? "%u:" : "%u", line);
+}
+
+/* A face's vertex index, checked against the vertices read. */
+static bn_status bn__ply_push_index(const bn__ply *P, bn__ply_state *S, bn__ply_rec *R, double v, bn_error *err)
+{
+    if (R->nidx == S->idx_cap) {
+        size_t cap = S->idx_cap ? 2 * S->idx_cap : 16;
+        size_t *q = bn__realloc_array(S->idx, cap, sizeof(size_t));
+        if (!q)
+            return bn_error_set(err, BN_ENOMEM, "out of memory");
+        S->idx = q;
+        S->idx_cap = cap;
+    }
+    if (v < 0 || v >= (double)S->nverts || !S->seen_vertex) {
+        char where[24];
+        bn__ply_where(P, R->start, 1, where, sizeof where);
+        return bn_error_set(err, BN_EINPUT, "%s:%s face %llu: vertex index %.0f is out of range (%zu vertices)",
+                            P->path, where, R->r, v, S->nverts);
+    }
+    S->idx[R->nidx++] = (size_t)v;
+    return BN_OK;
+}
+
+/* Value v of property k where the columns say it goes. */
+static void bn__ply_take(const bn__ply_cols *c, int k, double v, int is_v, int is_f, bn__ply_rec *R)
+{
+    if (is_v)
+        for (int q = 0; q < 3; q++) {
+            if (k == (q == 0 ? c->x : q == 1 ? c->y : c->z))
+                R->p[q] = v;
+            if (k == c->vrgb[q])
+                R->rgb[q] = v * c->vrgb_scale[q];
+        }
+    for (int q = 0; q < 6 && is_f; q++)
+        if (k == c->fprop[q])
+            R->fp[q] = v;
+    for (int q = 0; q < 3 && is_f; q++)
+        if (k == c->frgb[q])
+            R->rgb[q] = v * c->frgb_scale[q];
+}
+
+/* A finished vertex record into the soup (and its colour). */
+static bn_status bn__ply_vertex_done(const bn__ply *P, bn__ply_state *S, const bn__ply_rec *R, bn__soup *out,
+                                     bn_error *err)
+{
+    for (int q = 0; q < 3; q++)
+        if (!isfinite(R->p[q])) {
+            char where[24];
+            bn__ply_where(P, R->start, 0, where, sizeof where);
+            return bn_error_set(err, BN_EINPUT, "%s:%s vertex %llu has a non-finite coordinate (%g)", P->path, where,
+                                R->r, R->p[q]);
+        }
+    if (!bn__soup_add_vertex(out, R->p))
+        return bn_error_set(err, BN_ENOMEM, "out of memory");
+    if (S->vertex_colour)
+        memcpy(S->vrgb + 3 * (out->nverts - 1), R->rgb, sizeof R->rgb);
+    return BN_OK;
+}
+
+/* A finished face record into the soup and the face columns; one with a repeated vertex has no
+ * area to speak of and is dropped (counted). */
+static bn_status bn__ply_face_done(const bn__ply *P, const bn__ply_cols *c, bn__ply_state *S, const bn__ply_rec *R,
+                                   bn__soup *out, bn_error *err)
+{
+    char where[24];
+    size_t f = S->F.n;
+    int distinct = 1;
+    bn__ply_where(P, R->start, 1, where, sizeof where);
+    if (R->nidx < 3)
+        return bn_error_set(err, BN_EINPUT, "%s:%s face %llu has %zu vertices (at least 3 needed)", P->path, where,
+                            R->r, R->nidx);
+    for (int q = 0; q < 6; q++)
+        if (c->fprop[q] >= 0 && !isfinite(R->fp[q]))
+            return bn_error_set(err, BN_EINPUT, "%s:%s face %llu: %s is not finite", P->path, where, R->r,
+                                bn__face_props[q]);
+    for (size_t a = 0; a < R->nidx && distinct; a++)
+        for (size_t b = a + 1; b < R->nidx && distinct; b++)
+            distinct = S->idx[a] != S->idx[b];
+    if (!distinct) {
+        S->dropped++;
+        return BN_OK;
+    }
+    if (!bn__faces_grow(&S->F, f + 1) ||
+        !bn__soup_add_polygon(out, S->idx, (unsigned)R->nidx, 0, P->format == F_ASCII ? R->start : 0))
+        return bn_error_set(err, BN_ENOMEM, "out of memory");
+    S->F.line[f] = P->format == F_ASCII ? R->start : 0;
+    memcpy(S->F.props + 6 * f, R->fp, sizeof R->fp);
+    memcpy(S->F.rgb + 3 * f, R->rgb, sizeof R->rgb);
+    S->F.n++;
+    return BN_OK;
+}
+
 /* One record of element e: its values into the soup (vertex) or the face columns (face). */
 static bn_status bn__ply_record(bn__ply *P, const bn__ply_elem *e, const bn__ply_cols *c, int is_v, int is_f,
                                 unsigned long long r, bn__ply_state *S, bn__soup *out, bn_error *err)
 {
-    double p[3] = {0, 0, 0}, fp[6] = {0, 0, 0, 0, 0, 0}, rgb[3] = {0, 0, 0};
-    size_t nidx = 0;
-    unsigned start;
+    bn__ply_rec R;
     char bad[80];
+    memset(&R, 0, sizeof R);
+    R.r = r;
     bn__ply_skip_ws(P);
-    start = P->line;
+    R.start = P->line;
     for (size_t k = 0; k < e->nprops; k++) {
         const bn__ply_prop *pr = &e->props[k];
         double v;
@@ -399,80 +505,17 @@ static bn_status bn__ply_record(bn__ply *P, const bn__ply_elem *e, const bn__ply
                 goto truncated;
             }
             if ((int)k == c->idx) {
-                if (nidx == S->idx_cap) {
-                    size_t cap = S->idx_cap ? 2 * S->idx_cap : 16;
-                    size_t *q = bn__realloc_array(S->idx, cap, sizeof(size_t));
-                    if (!q)
-                        return bn_error_set(err, BN_ENOMEM, "out of memory");
-                    S->idx = q;
-                    S->idx_cap = cap;
-                }
-                if (v < 0 || v >= (double)S->nverts || !S->seen_vertex) {
-                    char where[24] = "";
-                    if (P->format == F_ASCII)
-                        snprintf(where, sizeof where, "%u:", start);
-                    return bn_error_set(err, BN_EINPUT, "%s:%s face %llu: vertex index %.0f is out of range (%zu vertices)",
-                                        P->path, where, r, v, S->nverts);
-                }
-                S->idx[nidx++] = (size_t)v;
+                bn_status st = bn__ply_push_index(P, S, &R, v, err);
+                if (st != BN_OK)
+                    return st;
             }
-            if (is_v)
-                for (int q = 0; q < 3; q++) {
-                    if ((int)k == (q == 0 ? c->x : q == 1 ? c->y : c->z))
-                        p[q] = v;
-                    if ((int)k == c->vrgb[q])
-                        rgb[q] = v * c->vrgb_scale[q];
-                }
-            for (int q = 0; q < 6 && is_f; q++)
-                if ((int)k == c->fprop[q])
-                    fp[q] = v;
-            for (int q = 0; q < 3 && is_f; q++)
-                if ((int)k == c->frgb[q])
-                    rgb[q] = v * c->frgb_scale[q];
+            bn__ply_take(c, (int)k, v, is_v, is_f, &R);
         }
     }
-    if (is_v) {
-        for (int q = 0; q < 3; q++)
-            if (!isfinite(p[q])) {
-                char where[24] = "";
-                if (P->format == F_ASCII)
-                    snprintf(where, sizeof where, "%u", start);
-                return bn_error_set(err, BN_EINPUT, "%s:%s vertex %llu has a non-finite coordinate (%g)", P->path, where,
-                                    r, p[q]);
-            }
-        if (!bn__soup_add_vertex(out, p))
-            return bn_error_set(err, BN_ENOMEM, "out of memory");
-        if (S->vertex_colour)
-            memcpy(S->vrgb + 3 * (out->nverts - 1), rgb, sizeof rgb);
-    }
-    if (is_f) {
-        char where[24] = "";
-        size_t f = S->F.n;
-        int distinct = 1;
-        if (P->format == F_ASCII)
-            snprintf(where, sizeof where, "%u:", start);
-        if (nidx < 3)
-            return bn_error_set(err, BN_EINPUT, "%s:%s face %llu has %zu vertices (at least 3 needed)", P->path, where, r,
-                                nidx);
-        for (int q = 0; q < 6; q++)
-            if (c->fprop[q] >= 0 && !isfinite(fp[q]))
-                return bn_error_set(err, BN_EINPUT, "%s:%s face %llu: %s is not finite", P->path, where, r,
-                                    bn__face_props[q]);
-        for (size_t a = 0; a < nidx && distinct; a++)
-            for (size_t b = a + 1; b < nidx && distinct; b++)
-                distinct = S->idx[a] != S->idx[b];
-        if (!distinct) {   /* a face with a repeated vertex has no area to speak of: dropped */
-            S->dropped++;
-            return BN_OK;
-        }
-        if (!bn__faces_grow(&S->F, f + 1) ||
-            !bn__soup_add_polygon(out, S->idx, (unsigned)nidx, 0, P->format == F_ASCII ? start : 0))
-            return bn_error_set(err, BN_ENOMEM, "out of memory");
-        S->F.line[f] = P->format == F_ASCII ? start : 0;
-        memcpy(S->F.props + 6 * f, fp, sizeof fp);
-        memcpy(S->F.rgb + 3 * f, rgb, sizeof rgb);
-        S->F.n++;
-    }
+    if (is_v)
+        return bn__ply_vertex_done(P, S, &R, out, err);
+    if (is_f)
+        return bn__ply_face_done(P, c, S, &R, out, err);
     return BN_OK;
 truncated:
     return bn_error_set(err, BN_EINPUT, "%s: the file ends inside element '%s' (the header promises %llu)", P->path,
