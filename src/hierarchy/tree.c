@@ -322,26 +322,9 @@ done:
     return st;
 }
 
-bn_status bn__tree_build(const bn_scene *s, int merge, bn__tree *t, bn_error *err)
+/* The tree's arrays for cap nodes over np patches; 0 when out of memory. */
+static int bn__tree_alloc(bn__tree *t, size_t cap, size_t np)
 {
-    size_t np, nf, nm, npv, cap;
-    bn__tb b;
-    uint32_t *faces = NULL, *plane_of = NULL;
-    size_t nfaces = 0;
-    memset(t, 0, sizeof *t);
-    memset(&b, 0, sizeof b);
-    b.patch = bn_scene_patches(s, &np);
-    bn_scene_faces(s, &nf);
-    b.mat = bn_scene_materials(s, &nm);
-    b.pverts = bn_scene_patch_vertices(s, &npv);
-    if (np == 0)
-        return bn_error_set(err, BN_EINPUT, "%s: no patches (mesh the scene first)", bn_scene_path(s));
-    if (np >= (size_t)UINT32_MAX / 2)
-        return bn_error_set(err, BN_EINPUT, "%s: %zu patches; the hierarchy holds at most %u", bn_scene_path(s), np,
-                            UINT32_MAX / 2 - 1);
-    cap = 2 * np;
-    t->npatch = np;
-    b.t = t;
     t->parent = bn__malloc_array(cap, sizeof(uint32_t));
     t->child = bn__malloc_array(cap, sizeof(uint32_t));
     t->lo = bn__malloc_array(cap, sizeof(uint32_t));
@@ -355,72 +338,111 @@ bn_status bn__tree_build(const bn_scene *s, int merge, bn__tree *t, bn_error *er
     t->order = bn__malloc_array(np, sizeof(uint32_t));
     t->leaf = bn__malloc_array(np, sizeof(uint32_t));
     t->cum_area = bn__malloc_array(np + 1, sizeof(double));
-    b.pc = bn__malloc_array(3 * np, sizeof(double));
-    b.fc = bn__calloc(3 * nf, sizeof(double));
-    b.face_first = bn__calloc(nf + 1, sizeof(uint32_t));
-    b.face_count = bn__calloc(nf + 1, sizeof(uint32_t));
-    b.byface = bn__malloc_array(np, sizeof(uint32_t));
-    b.keys = bn__malloc_array(np > nf ? np : nf, sizeof(bn__key));
-    faces = bn__malloc_array(nf + 1, sizeof(uint32_t));
+    return t->parent && t->child && t->lo && t->hi && t->plane && t->area && t->box && t->rho_max && t->normal &&
+           t->spread && t->order && t->leaf && t->cum_area;
+}
+
+/* The builder's scratch over np patches and nf faces; 0 when out of memory. */
+static int bn__tb_alloc(bn__tb *b, size_t np, size_t nf)
+{
+    b->pc = bn__malloc_array(3 * np, sizeof(double));
+    b->fc = bn__calloc(3 * nf, sizeof(double));
+    b->face_first = bn__calloc(nf + 1, sizeof(uint32_t));
+    b->face_count = bn__calloc(nf + 1, sizeof(uint32_t));
+    b->byface = bn__malloc_array(np, sizeof(uint32_t));
+    b->keys = bn__malloc_array(np > nf ? np : nf, sizeof(bn__key));
+    return b->pc && b->fc && b->face_first && b->face_count && b->byface && b->keys;
+}
+
+static void bn__tb_free(bn__tb *b)
+{
+    free(b->pc);
+    free(b->fc);
+    free(b->face_first);
+    free(b->face_count);
+    free(b->byface);
+    free(b->keys);
+}
+
+/* Patches by plane (a counting sort keeps the mesher's order inside a plane), each plane's
+ * area-weighted centroid, and the planes that hold patches in faces[0 .. *nfaces). */
+static bn_status bn__by_plane(bn__tb *b, size_t np, size_t nf, uint32_t *faces, size_t *nfaces, bn_error *err)
+{
+    const bn__tree *t = b->t;
     double *farea = bn__calloc(nf + 1, sizeof(double));
+    uint32_t *fill = bn__calloc(nf + 1, sizeof(uint32_t));
+    if (!farea || !fill) {
+        free(farea);
+        free(fill);
+        return bn_error_set(err, BN_ENOMEM, "out of memory for the hierarchy of %zu patches", np);
+    }
+    for (size_t i = 0; i < np; i++) {
+        size_t f = b->plane_of[b->patch[i].face];
+        b->face_count[f]++;
+        memcpy(b->pc + 3 * i, b->patch[i].centroid, 3 * sizeof(double));
+        for (int c = 0; c < 3; c++)
+            b->fc[3 * f + c] += b->patch[i].area * b->patch[i].centroid[c];
+        farea[f] += b->patch[i].area;
+    }
+    *nfaces = 0;
+    for (size_t f = 0, acc = 0; f < t->nplanes; f++) {
+        b->face_first[f] = (uint32_t)acc;
+        acc += b->face_count[f];
+        if (b->face_count[f]) {
+            faces[(*nfaces)++] = (uint32_t)f;
+            for (int c = 0; c < 3; c++)
+                b->fc[3 * f + c] /= farea[f];
+        }
+    }
+    for (size_t i = 0; i < np; i++) {
+        size_t f = b->plane_of[b->patch[i].face];
+        b->byface[b->face_first[f] + fill[f]++] = (uint32_t)i;
+    }
+    free(farea);
+    free(fill);
+    return BN_OK;
+}
+
+bn_status bn__tree_build(const bn_scene *s, int merge, bn__tree *t, bn_error *err)
+{
+    size_t np, nf, nm, npv, nfaces = 0;
+    bn__tb b;
+    uint32_t *faces = NULL, *plane_of = NULL;
+    bn_status st = BN_OK;
+    memset(t, 0, sizeof *t);
+    memset(&b, 0, sizeof b);
+    b.patch = bn_scene_patches(s, &np);
+    bn_scene_faces(s, &nf);
+    b.mat = bn_scene_materials(s, &nm);
+    b.pverts = bn_scene_patch_vertices(s, &npv);
+    if (np == 0)
+        return bn_error_set(err, BN_EINPUT, "%s: no patches (mesh the scene first)", bn_scene_path(s));
+    if (np >= (size_t)UINT32_MAX / 2)
+        return bn_error_set(err, BN_EINPUT, "%s: %zu patches; the hierarchy holds at most %u", bn_scene_path(s), np,
+                            UINT32_MAX / 2 - 1);
+    t->npatch = np;
+    b.t = t;
+    faces = bn__malloc_array(nf + 1, sizeof(uint32_t));
     plane_of = bn__malloc_array(nf + 1, sizeof(uint32_t));
     b.plane_of = plane_of;
-    bn_status st = BN_OK;
-    if (!plane_of || !t->parent || !t->child || !t->lo || !t->hi || !t->plane || !t->area || !t->box || !t->rho_max || !t->normal || !t->spread || !t->order ||
-        !t->leaf || !t->cum_area || !b.pc || !b.fc || !b.face_first || !b.face_count || !b.byface || !b.keys || !faces ||
-        !farea) {
+    if (!bn__tree_alloc(t, 2 * np, np) || !bn__tb_alloc(&b, np, nf) || !faces || !plane_of)
         st = bn_error_set(err, BN_ENOMEM, "out of memory for the hierarchy of %zu patches", np);
-        goto done;
+    if (st == BN_OK)
+        st = bn__planes(s, merge, t, plane_of, err);
+    if (st == BN_OK)
+        st = bn__by_plane(&b, np, nf, faces, &nfaces, err);
+    if (st == BN_OK) {
+        bn__node_new(t, BN__NONE);
+        bn__build_faces(&b, 0, faces, nfaces);
+        t->cum_area[0] = 0;
+        for (size_t k = 0; k < np; k++)
+            t->cum_area[k + 1] = t->cum_area[k] + b.patch[t->order[k]].area;
+        for (uint32_t v = 0; v < t->n; v++)
+            if (t->child[v] == BN__NONE)
+                t->leaf[t->order[t->lo[v]]] = v;
     }
-    if ((st = bn__planes(s, merge, t, plane_of, err)) != BN_OK)
-        goto done;
-    /* patches by plane (counting sort keeps the mesher's order inside a plane) */
-    for (size_t i = 0; i < np; i++) {
-        size_t f = plane_of[b.patch[i].face];
-        b.face_count[f]++;
-        memcpy(b.pc + 3 * i, b.patch[i].centroid, 3 * sizeof(double));
-        for (int c = 0; c < 3; c++)
-            b.fc[3 * f + c] += b.patch[i].area * b.patch[i].centroid[c];
-        farea[f] += b.patch[i].area;
-    }
-    for (size_t f = 0, acc = 0; f < t->nplanes; f++) {
-        b.face_first[f] = (uint32_t)acc;
-        acc += b.face_count[f];
-        if (b.face_count[f]) {
-            faces[nfaces++] = (uint32_t)f;
-            for (int c = 0; c < 3; c++)
-                b.fc[3 * f + c] /= farea[f];
-        }
-    }
-    {
-        uint32_t *fill = bn__calloc(nf + 1, sizeof(uint32_t));
-        if (!fill) {
-            st = bn_error_set(err, BN_ENOMEM, "out of memory for the hierarchy of %zu patches", np);
-            goto done;
-        }
-        for (size_t i = 0; i < np; i++) {
-            size_t f = plane_of[b.patch[i].face];
-            b.byface[b.face_first[f] + fill[f]++] = (uint32_t)i;
-        }
-        free(fill);
-    }
-    bn__node_new(t, BN__NONE);
-    bn__build_faces(&b, 0, faces, nfaces);
-    t->cum_area[0] = 0;
-    for (size_t k = 0; k < np; k++)
-        t->cum_area[k + 1] = t->cum_area[k] + b.patch[t->order[k]].area;
-    for (uint32_t v = 0; v < t->n; v++)
-        if (t->child[v] == BN__NONE)
-            t->leaf[t->order[t->lo[v]]] = v;
-done:
-    free(b.pc);
-    free(b.fc);
-    free(b.face_first);
-    free(b.face_count);
-    free(b.byface);
-    free(b.keys);
+    bn__tb_free(&b);
     free(faces);
-    free(farea);
     free(plane_of);
     if (st != BN_OK)
         bn__tree_free(t);
