@@ -662,16 +662,93 @@ static double bn__exact_visible(const bn__ffg *g, double I, size_t i, size_t j, 
     return qs.seen ? bn_clamp(I - G, 0, I) : 0;
 }
 
+/* Does a face in the shaft (occ[0 .. nocc)) hide pair p wholly, or several faces of one convex
+ * solid together (a floor patch behind a block's edge, or under the block, seen from a wall)? Each
+ * solid in the list once, not one the pair is on. */
+static int bn__pair_hidden(const bn__ffg *g, const bn__pair *p, const size_t *occ, size_t nocc, size_t i, size_t j)
+{
+    size_t si = bn__solid_of(g->solids, g->patch[i].face), sj = bn__solid_of(g->solids, g->patch[j].face);
+    for (size_t q = 0; q < nocc; q++)
+        if (bn__face_blocks_all(g, occ[q], p))
+            return 1;
+    for (size_t q = 0; q < nocc; q++) {
+        size_t k = bn__solid_of(g->solids, occ[q]), r = 0;
+        if (k == SIZE_MAX || k == si || k == sj)
+            continue;
+        while (r < q && bn__solid_of(g->solids, occ[r]) != k)
+            r++;
+        if (r == q && bn__solid_blocks_all(g->solids, k, p->a, p->na, p->b, p->nb, g->tol))
+            return 1;
+    }
+    return 0;
+}
+
+/* The visible fraction of pair p by shadow rays between stratified kernel points, in [0, 1] by
+ * construction: vis = sum_k F(x_k -> b) V_k / sum_k F(x_k -> b), a ratio of two means, but of
+ * bounded, smooth weights (F(x -> b) varies slowly over a and the x_k are stratified), so its O(1/S)
+ * bias is far below the noise. */
+static double bn__ray_visible(const bn_rt *rt, const bn__ffg *g, const bn_formfactor_opts *o, const bn__pair *p,
+                              size_t i, size_t j, bn__scratch *s, bn__counts *cnt)
+{
+    const double *ni = g->patch[i].normal, *nj = g->patch[j].normal;
+    bn__rng r = bn__rng_make(o->seed, i, j);
+    double sw = 0, sv = 0;
+    bn__kernel_points(&r, p, ni, nj, s);
+    cnt->rays += bn__pair_rays(rt, g, ni, nj, s);
+    cnt->pairs_tested++;
+    for (size_t k = 0; k < s->S; k++) {
+        sw += s->w[k];
+        if (!s->blocked[k])
+            sv += s->w[k];
+    }
+    return sw > 0 ? sv / sw : 1;
+}
+
+/* Monte Carlo point pairs with Wallace's disk regulariser: each sample is the form factor of a
+ * disk of area max(Aa, Ab)/S, bounded where the 1/r^2 kernel is not; shadow rays when `maybe`. */
+static double bn__mc_pair(const bn_rt *rt, const bn__ffg *g, const bn_formfactor_opts *o, const bn__pair *p,
+                          size_t i, size_t j, int maybe, bn__scratch *s, bn__counts *cnt)
+{
+    const double *ni = g->patch[i].normal, *nj = g->patch[j].normal;
+    bn__rng r = bn__rng_make(o->seed, i, j);
+    double a_reg = fmax(p->Aa, p->Ab) / (double)s->S, sum = 0;
+    int any_blocked = 0;
+    bn__pair_points(&r, p, s);
+    for (size_t k = 0; k < s->S; k++) {
+        double d[3], r2, ci, cj;
+        bn_v3_sub(s->y + 3 * k, s->x + 3 * k, d);
+        r2 = bn_v3_dot(d, d);
+        ci = bn_v3_dot(ni, d);
+        cj = -bn_v3_dot(nj, d);
+        s->w[k] = ci > 0 && cj > 0 && r2 > 0 ? (ci * cj / r2) / (BN_PI * r2 + a_reg) : 0;
+        s->blocked[k] = 0;
+    }
+    if (maybe) {
+        cnt->rays += bn__pair_rays(rt, g, ni, nj, s);
+        cnt->pairs_tested++;
+    }
+    for (size_t k = 0; k < s->S; k++) {
+        if (!s->blocked[k])
+            sum += s->w[k];
+        else
+            any_blocked = 1;
+    }
+    if (any_blocked)
+        cnt->pairs_blocked++;
+    return p->Aa * p->Ab * sum / (double)s->S;
+}
+
 /* A_i F_ij = A_j F_ji of the pair i < j, with visibility; 0 when they cannot see each other.
  * cand: the faces that may occlude (row i's candidates), or NULL: always cast the rays. */
 static double bn__pair_value(const bn_rt *rt, const bn__ffg *g, const bn_formfactor_opts *o, double rtol,
                              const size_t *cand, size_t ncand, size_t i, size_t j, bn__scratch *s, bn__counts *cnt)
 {
     bn__pair p;
-    const double *ni = g->patch[i].normal, *nj = g->patch[j].normal;
+    const double *ni = g->patch[i].normal;
     double I = 0, vis = 1;
     size_t occ[BN__VIS_OCC_MAX + 1], nocc = SIZE_MAX;
     int maybe;
+    bn__quad_stats qs;
     if (!bn__pair_prep(g, i, j, &p))
         return 0;
     cnt->pairs_nonzero++;
@@ -682,94 +759,34 @@ static double bn__pair_value(const bn_rt *rt, const bn__ffg *g, const bn_formfac
     maybe = nocc > 0;
     if (!maybe)
         cnt->pairs_culled++;
-    if (o->method == BN_FF_ANALYTIC) {
-        bn__quad_stats qs;
-        /* A_i F_ij to relative rtol; the absolute floor keeps F errors below 1e-6 rtol. */
-        I = o->quadrature_only
-                ? bn__ff_polygon_integral(p.a, p.na, ni, p.b, p.nb, rtol, 1e-6 * rtol * fmin(p.Aa, p.Ab), &qs)
-                : bn__ff_unoccluded(p.a, p.na, ni, p.b, p.nb, rtol, 1e-6 * rtol * fmin(p.Aa, p.Ab), &qs);
-        cnt->evals += qs.evals;
-        int hidden = 0;
-        /* a face found in the shaft (the first only, with rays) that hides the pair wholly: 0,
-         * with no ray cast and nothing integrated (Cornell box: 55,000 of the 187,000 tested pairs
-         * with rays, 29% of the rays; 87,000 with the exact visible part) */
-        for (size_t q = 0; maybe && nocc != SIZE_MAX && q < nocc && !hidden; q++)
-            hidden = bn__face_blocks_all(g, occ[q], &p);
-        /* or several faces of one convex solid together (a floor patch behind a block's edge, or
-         * under the block, seen from a wall): each solid in the list once, not one the pair is on */
-        for (size_t q = 0, si = bn__solid_of(g->solids, g->patch[i].face), sj = bn__solid_of(g->solids, g->patch[j].face);
-             maybe && nocc != SIZE_MAX && q < nocc && !hidden; q++) {
-            size_t k = bn__solid_of(g->solids, occ[q]), r = 0;
-            if (k == SIZE_MAX || k == si || k == sj)
-                continue;
-            while (r < q && bn__solid_of(g->solids, occ[r]) != k)
-                r++;
-            if (r == q)
-                hidden = bn__solid_blocks_all(g->solids, k, p.a, p.na, p.b, p.nb, g->tol);
-        }
-        if (hidden) {
-            vis = 0;
-            cnt->pairs_tested++;
-            cnt->pairs_exact++;
+    if (o->method != BN_FF_ANALYTIC)
+        return bn__mc_pair(rt, g, o, &p, i, j, maybe, s, cnt);
+    /* A_i F_ij to relative rtol; the absolute floor keeps F errors below 1e-6 rtol. */
+    I = o->quadrature_only
+            ? bn__ff_polygon_integral(p.a, p.na, ni, p.b, p.nb, rtol, 1e-6 * rtol * fmin(p.Aa, p.Ab), &qs)
+            : bn__ff_unoccluded(p.a, p.na, ni, p.b, p.nb, rtol, 1e-6 * rtol * fmin(p.Aa, p.Ab), &qs);
+    cnt->evals += qs.evals;
+    /* a face found in the shaft (the first only, with rays) that hides the pair wholly, or a convex
+     * solid: 0, with no ray cast and nothing integrated (Cornell box: 55,000 of the 187,000 tested
+     * pairs with rays, 29% of the rays; 87,000 with the exact visible part) */
+    if (maybe && nocc != SIZE_MAX && bn__pair_hidden(g, &p, occ, nocc, i, j)) {
+        vis = 0;
+        cnt->pairs_tested++;
+        cnt->pairs_exact++;
+        cnt->pairs_blocked++;
+    } else if (maybe && nocc <= BN__VIS_OCC_MAX && o->exact_visibility) {
+        double V = bn__exact_visible(g, I, i, j, &p, occ, nocc, cnt);
+        cnt->pairs_tested++;
+        cnt->pairs_exact++;
+        if (V < I)
             cnt->pairs_blocked++;
-        } else if (maybe && nocc <= BN__VIS_OCC_MAX && o->exact_visibility) {
-            double V = bn__exact_visible(g, I, i, j, &p, occ, nocc, cnt);
-            cnt->pairs_tested++;
-            cnt->pairs_exact++;
-            if (V < I)
-                cnt->pairs_blocked++;
-            I = V;
-        } else if (maybe) {
-            bn__rng r = bn__rng_make(o->seed, i, j);
-            double sw = 0, sv = 0;
-            bn__kernel_points(&r, &p, ni, nj, s);
-            cnt->rays += bn__pair_rays(rt, g, ni, nj, s);
-            cnt->pairs_tested++;
-            for (size_t k = 0; k < s->S; k++) {
-                sw += s->w[k];
-                if (!s->blocked[k])
-                    sv += s->w[k];
-            }
-            /* visible fraction in [0, 1] by construction:
-             *   vis = sum_k F(x_k -> b) V_k / sum_k F(x_k -> b)
-             * a ratio of two means, but of bounded, smooth weights (F(x -> b) varies slowly
-             * over a and the x_k are stratified), so its O(1/S) bias is far below the noise */
-            vis = sw > 0 ? sv / sw : 1;
-            if (vis < 1)
-                cnt->pairs_blocked++;
-        }
-        I *= vis;
-    } else {
-        /* Monte Carlo point pairs with Wallace's disk regulariser: each sample is the form
-         * factor of a disk of area max(Aa, Ab)/S, bounded where the 1/r^2 kernel is not. */
-        bn__rng r = bn__rng_make(o->seed, i, j);
-        double a_reg = fmax(p.Aa, p.Ab) / (double)s->S, sum = 0;
-        int any_blocked = 0;
-        bn__pair_points(&r, &p, s);
-        for (size_t k = 0; k < s->S; k++) {
-            double d[3], r2, ci, cj;
-            bn_v3_sub(s->y + 3 * k, s->x + 3 * k, d);
-            r2 = bn_v3_dot(d, d);
-            ci = bn_v3_dot(ni, d);
-            cj = -bn_v3_dot(nj, d);
-            s->w[k] = ci > 0 && cj > 0 && r2 > 0 ? (ci * cj / r2) / (BN_PI * r2 + a_reg) : 0;
-            s->blocked[k] = 0;
-        }
-        if (maybe) {
-            cnt->rays += bn__pair_rays(rt, g, ni, nj, s);
-            cnt->pairs_tested++;
-        }
-        for (size_t k = 0; k < s->S; k++) {
-            if (!s->blocked[k])
-                sum += s->w[k];
-            else
-                any_blocked = 1;
-        }
-        if (any_blocked)
+        I = V;
+    } else if (maybe) {
+        vis = bn__ray_visible(rt, g, o, &p, i, j, s, cnt);
+        if (vis < 1)
             cnt->pairs_blocked++;
-        I = p.Aa * p.Ab * sum / (double)s->S;
     }
-    return I;
+    return I * vis;
 }
 
 static void bn__analytic_or_mc_pair(const bn_rt *rt, const bn__ffg *g, const bn_formfactor_opts *o, double rtol,
