@@ -221,6 +221,50 @@ static void bn__leaf_make(bn__qctx *q, bn__leaf *l, const double a[3], const dou
  * evaluations per leaf) whatever the tolerance asks. */
 #define BN__MAX_LEAVES 20000
 
+/* tri[0 .. 9 *ntri) cut `split` times into four by its edges' midpoints (the corner triangles and the
+ * middle one), while the 64 triangles' room lasts. */
+static void bn__split4(double *tri, size_t *ntri, size_t split)
+{
+    static const int kid[4][3] = {{0, 3, 5}, {3, 1, 4}, {5, 4, 2}, {3, 4, 5}};
+    for (size_t lev = 0; lev < split && 4 * *ntri <= 64; lev++) {
+        for (size_t k = *ntri; k-- > 0;) {
+            double p[6][3];
+            memcpy(p, tri + 9 * k, 9 * sizeof(double));
+            for (int e = 0; e < 3; e++)
+                for (int c = 0; c < 3; c++)
+                    p[3 + e][c] = 0.5 * (p[e][c] + p[(e + 1) % 3][c]);
+            for (int d = 0; d < 4; d++)
+                for (int v = 0; v < 3; v++)
+                    memcpy(tri + 9 * (4 * k + (size_t)d) + 3 * v, p[kid[d][v]], 3 * sizeof(double));
+        }
+        *ntri *= 4;
+    }
+}
+
+/* The worst leaf bisected along its longest edge (v[e], v[e+1]): thin triangles become rounder,
+ * where a four-way split would keep their shape. The running sum and error follow; 0 when out of
+ * memory. */
+static int bn__bisect_worst(bn__qctx *q, bn__heap *h, double *sum, double *err)
+{
+    bn__leaf l = bn__heap_pop(h), kids[2];
+    double mid[3], l0 = bn_v3_dist(l.v[0], l.v[1]), l1 = bn_v3_dist(l.v[1], l.v[2]), l2 = bn_v3_dist(l.v[2], l.v[0]);
+    int e = l0 >= l1 && l0 >= l2 ? 0 : (l1 >= l2 ? 1 : 2);
+    const double *a = l.v[e], *b = l.v[(e + 1) % 3], *c = l.v[(e + 2) % 3];
+    for (int k = 0; k < 3; k++)
+        mid[k] = 0.5 * (a[k] + b[k]);
+    bn__leaf_make(q, &kids[0], a, mid, c, l.area / 2, l.depth + 1);
+    bn__leaf_make(q, &kids[1], mid, b, c, l.area / 2, l.depth + 1);
+    *sum -= l.q5;
+    *err -= l.err;
+    for (int k = 0; k < 2; k++) {
+        *sum += kids[k].q5;
+        *err += kids[k].err;
+        if (!bn__heap_push(h, &kids[k]))
+            return 0;
+    }
+    return 1;
+}
+
 static double bn__integral(bn__qctx q, const double *pi, size_t ni, const double ni_n[3], const double *pj, size_t nj,
                            double rtol, double atol, bn__quad_stats *st)
 {
@@ -243,31 +287,17 @@ static double bn__integral(bn__qctx q, const double *pi, size_t ni, const double
     for (size_t t = 0; t + 2 < ni; t++) {
         /* each fan triangle, cut into 4^split by its midpoints first */
         double tri[3 * 3 * 64];
-        size_t ntri = 1, split = (size_t)q.split;
+        size_t ntri = 1;
         double area = bn__tri_area(pi, pi + 3 * (t + 1), pi + 3 * (t + 2));
         if (!(area > 0))
             continue;
         memcpy(tri, pi, 3 * sizeof(double));
         memcpy(tri + 3, pi + 3 * (t + 1), 3 * sizeof(double));
         memcpy(tri + 6, pi + 3 * (t + 2), 3 * sizeof(double));
-        for (size_t lev = 0; lev < split && 4 * ntri <= 64; lev++) {
-            for (size_t k = ntri; k-- > 0;) {
-                /* the corner triangles and the middle one, over the corners v and midpoints m */
-                static const int kid[4][3] = {{0, 3, 5}, {3, 1, 4}, {5, 4, 2}, {3, 4, 5}};
-                double p[6][3];
-                memcpy(p, tri + 9 * k, 9 * sizeof(double));
-                for (int e = 0; e < 3; e++)
-                    for (int c = 0; c < 3; c++)
-                        p[3 + e][c] = 0.5 * (p[e][c] + p[(e + 1) % 3][c]);
-                for (int d = 0; d < 4; d++)
-                    for (int v = 0; v < 3; v++)
-                        memcpy(tri + 9 * (4 * k + (size_t)d) + 3 * v, p[kid[d][v]], 3 * sizeof(double));
-            }
-            ntri *= 4;
-        }
+        bn__split4(tri, &ntri, (size_t)q.split);
         for (size_t k = 0; k < ntri; k++) {
             bn__leaf l;
-            bn__leaf_make(&q, &l, tri + 9 * k, tri + 9 * k + 3, tri + 9 * k + 6, area / (double)ntri, (int)split);
+            bn__leaf_make(&q, &l, tri + 9 * k, tri + 9 * k + 3, tri + 9 * k + 6, area / (double)ntri, q.split);
             sum += l.q5;
             err += l.err;
             if (!bn__heap_push(&h, &l)) {
@@ -280,35 +310,12 @@ static double bn__integral(bn__qctx q, const double *pi, size_t ni, const double
      * (relative to the running integral, with an absolute floor) and every triangle is small
      * against its distance to P_j. */
     while (h.n > 0 && h.n < BN__MAX_LEAVES) {
-        bn__leaf l, kids[2];
-        double mid[3];
-        int e;
         double tol = fmax(fmax(rtol * fabs(sum), atol), 64 * DBL_EPSILON * fabs(sum));
         if (h.a[0].key < 0 || (h.a[0].key != INFINITY && err <= tol))
             break;
-        l = bn__heap_pop(&h);
-        /* Bisect the longest edge (v[e], v[e+1]): thin triangles become rounder, where a
-         * four-way split would keep their shape. */
-        {
-            double l0 = bn_v3_dist(l.v[0], l.v[1]), l1 = bn_v3_dist(l.v[1], l.v[2]), l2 = bn_v3_dist(l.v[2], l.v[0]);
-            e = l0 >= l1 && l0 >= l2 ? 0 : (l1 >= l2 ? 1 : 2);
-        }
-        {
-            const double *a = l.v[e], *b = l.v[(e + 1) % 3], *c = l.v[(e + 2) % 3];
-            for (int k = 0; k < 3; k++)
-                mid[k] = 0.5 * (a[k] + b[k]);
-            bn__leaf_make(&q, &kids[0], a, mid, c, l.area / 2, l.depth + 1);
-            bn__leaf_make(&q, &kids[1], mid, b, c, l.area / 2, l.depth + 1);
-        }
-        sum -= l.q5;
-        err -= l.err;
-        for (int k = 0; k < 2; k++) {
-            sum += kids[k].q5;
-            err += kids[k].err;
-            if (!bn__heap_push(&h, &kids[k])) {
-                sum = NAN;
-                goto done;
-            }
+        if (!bn__bisect_worst(&q, &h, &sum, &err)) {
+            sum = NAN;
+            goto done;
         }
     }
     /* The running sums drift by rounding: add the leaves afresh. */

@@ -807,6 +807,76 @@ done:
     return ok;
 }
 
+/* Face q's contacts with face fi (polygon poly in fi's frame), once per fi (stamp); 0 when out of
+ * memory. */
+static int bn__visit(bn__cx *c, size_t fi, const double (*poly)[2], size_t *stamp, size_t q)
+{
+    const bn_face *f = &c->s->faces[fi];
+    if (q == fi || stamp[q] == fi + 1)
+        return 1;
+    stamp[q] = fi + 1;
+    return bn__contacts_of(c, f, poly, f->nverts, &c->s->faces[q]);
+}
+
+/* The contact segments on face fi from every face near it (the grid's cells around its box, and the
+ * big faces), or from every face when its box spans too many cells; 0 when out of memory. */
+static int bn__face_contacts(bn__cx *c, bn__fgrid *g, size_t fi, const double (*poly)[2], size_t *stamp)
+{
+    const bn_face *f = &c->s->faces[fi];
+    double lo[3], hi[3];
+    int64_t a[3], b[3];
+    bn__face_box(c->s, f, c->tol, lo, hi);
+    bn__cell_range(g, lo, hi, a, b);
+    if (bn__cells(a, b) > BN__BIG_CELLS) {
+        for (size_t q = 0; q < c->s->nfaces; q++)
+            if (!bn__visit(c, fi, poly, stamp, q))
+                return 0;
+        return 1;
+    }
+    for (int64_t z = a[2]; z <= b[2]; z++)
+        for (int64_t y = a[1]; y <= b[1]; y++)
+            for (int64_t x = a[0]; x <= b[0]; x++) {
+                size_t h = bn__bucket(g, x, y, z);
+                for (size_t i = g->start[h]; i < g->start[h + 1]; i++)
+                    if (!bn__visit(c, fi, poly, stamp, g->items[i]))
+                        return 0;
+            }
+    for (size_t i = 0; i < g->nbig; i++)
+        if (!bn__visit(c, fi, poly, stamp, g->big[i]))
+            return 0;
+    return 1;
+}
+
+/* first[f] .. first[f + 1]: face f's patches (they come in face order); 0 if they do not. */
+static int bn__face_firsts(const bn_patch *patches, size_t np, size_t nf, size_t *first)
+{
+    for (size_t p = 0; p < np; p++)
+        first[patches[p].face + 1]++;
+    for (size_t f = 0; f < nf; f++)
+        first[f + 1] += first[f];
+    for (size_t p = 0; p + 1 < np; p++)
+        if (patches[p].face > patches[p + 1].face)
+            return 0;
+    return 1;
+}
+
+/* Face fi's patches as they are (no contact on it), or cut along its contact segments. */
+static int bn__face_cut(bn__cx *c, size_t fi, bn_patch *patches, const size_t *first, const double (*poly)[2],
+                        bn_scene_stats *st)
+{
+    if (c->nsegs == 0) {
+        size_t n = first[fi + 1] - first[fi];
+        if (!bn__grow((void **)&c->patches, &c->np_cap, c->np + n, sizeof *c->patches))
+            return 0;
+        memcpy(c->patches + c->np, patches + first[fi], n * sizeof *c->patches);
+        c->np += n;
+        return 1;
+    }
+    st->contact_segments += c->nsegs;
+    st->contact_faces++;
+    return bn__cut_face(c, fi, patches, first[fi], first[fi + 1], poly, st);
+}
+
 bn_status bn__mesh_contacts(bn_scene *s, double gap, bn_patch **patches, size_t *np, double **pv, size_t *nv,
                            bn_error *err)
 {
@@ -835,62 +905,21 @@ bn_status bn__mesh_contacts(bn_scene *s, double gap, bn_patch **patches, size_t 
     stamp = bn__calloc(nf, sizeof(size_t));
     if (!first || !stamp)
         goto fail;
-    for (size_t p = 0; p < *np; p++)
-        first[(*patches)[p].face + 1]++;
-    for (size_t f = 0; f < nf; f++)
-        first[f + 1] += first[f];
-    for (size_t p = 0; p + 1 < *np; p++)
-        if ((*patches)[p].face > (*patches)[p + 1].face) {
-            rc = bn_error_set(err, BN_EINTERNAL, "contact cuts: patches are not in face order");
-            goto fail;
-        }
+    if (!bn__face_firsts(*patches, *np, nf, first)) {
+        rc = bn_error_set(err, BN_EINTERNAL, "contact cuts: patches are not in face order");
+        goto fail;
+    }
     for (size_t fi = 0; fi < nf; fi++) {
         const bn_face *f = &s->faces[fi];
-        double poly[4][2], lo[3], hi[3];
-        int64_t a[3], b[3];
+        double poly[4][2];
         c.nsegs = 0;
         if (bn_interrupted() != BN_OK)
             goto fail;
         bn__frame_of(s, f, &c.fr);
         for (unsigned k = 0; k < f->nverts; k++)
             bn__to2(&c.fr, bn__fvert(s, f, k), poly[k]);
-        bn__face_box(s, f, c.tol, lo, hi);
-        bn__cell_range(&g, lo, hi, a, b);
-#define BN__VISIT(q)                                                                                  \
-    do {                                                                                              \
-        size_t q_ = (q);                                                                              \
-        if (q_ != fi && stamp[q_] != fi + 1) {                                                        \
-            stamp[q_] = fi + 1;                                                                       \
-            if (!bn__contacts_of(&c, f, (const double(*)[2])poly, f->nverts, &s->faces[q_]))          \
-                goto fail;                                                                            \
-        }                                                                                             \
-    } while (0)
-        if (bn__cells(a, b) > BN__BIG_CELLS) {
-            for (size_t q = 0; q < nf; q++)
-                BN__VISIT(q);
-        } else {
-            for (int64_t z = a[2]; z <= b[2]; z++)
-                for (int64_t y = a[1]; y <= b[1]; y++)
-                    for (int64_t x = a[0]; x <= b[0]; x++) {
-                        size_t h = bn__bucket(&g, x, y, z);
-                        for (size_t i = g.start[h]; i < g.start[h + 1]; i++)
-                            BN__VISIT(g.items[i]);
-                    }
-            for (size_t i = 0; i < g.nbig; i++)
-                BN__VISIT(g.big[i]);
-        }
-#undef BN__VISIT
-        if (c.nsegs == 0) {
-            size_t n = first[fi + 1] - first[fi];
-            if (!bn__grow((void **)&c.patches, &c.np_cap, c.np + n, sizeof *c.patches))
-                goto fail;
-            memcpy(c.patches + c.np, *patches + first[fi], n * sizeof *c.patches);
-            c.np += n;
-            continue;
-        }
-        st->contact_segments += c.nsegs;
-        st->contact_faces++;
-        if (!bn__cut_face(&c, fi, *patches, first[fi], first[fi + 1], (const double(*)[2])poly, st))
+        if (!bn__face_contacts(&c, &g, fi, (const double(*)[2])poly, stamp) ||
+            !bn__face_cut(&c, fi, *patches, first, (const double(*)[2])poly, st))
             goto fail;
     }
     free(*patches);

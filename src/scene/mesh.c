@@ -57,6 +57,68 @@ static double bn__count(const bn_scene *s, double size)
     return total;
 }
 
+/* A patch of face fi with the given corners, finished (area, centroid, normal). */
+static void bn__grid_patch(bn_patch *p, size_t fi, const bn_face *f, unsigned nc, const size_t *corner,
+                           const double *pv)
+{
+    memset(p, 0, sizeof *p);
+    p->face = fi;
+    p->material = f->material;
+    p->ncorners = nc;
+    for (unsigned k = 0; k < nc; k++)
+        p->corner[k] = corner[k];
+    bn__scene_patch_finish(p, pv, f->normal);
+}
+
+/* A quad face's nu x nv grid: its (nu + 1)(nv + 1) points from pv + 3 *iv on, then its patches. */
+static void bn__grid_quad(const bn_scene *s, size_t fi, unsigned nu, unsigned nvv, bn_patch *patches, size_t *ip,
+                          double *pv, size_t *iv)
+{
+    const bn_face *f = &s->faces[fi];
+    const double *a = bn__fv(s, f, 0), *b = bn__fv(s, f, 1), *c = bn__fv(s, f, 2), *d = bn__fv(s, f, 3);
+    size_t base = *iv;
+    for (unsigned j = 0; j <= nvv; j++)
+        for (unsigned i = 0; i <= nu; i++) {
+            double u = (double)i / nu, v = (double)j / nvv;
+            double *q = pv + 3 * (*iv)++;
+            /* Exact corners at the ends keep neighbouring faces' vertices identical. */
+            for (int k = 0; k < 3; k++)
+                q[k] = (1 - u) * (1 - v) * a[k] + u * (1 - v) * b[k] + u * v * c[k] + (1 - u) * v * d[k];
+        }
+    for (unsigned j = 0; j < nvv; j++)
+        for (unsigned i = 0; i < nu; i++) {
+            size_t c0 = base + (size_t)j * (nu + 1) + i, cr[4] = {c0, c0 + 1, c0 + 1 + (nu + 1), c0 + (nu + 1)};
+            bn__grid_patch(&patches[(*ip)++], fi, f, 4, cr, pv);
+        }
+}
+
+/* A triangle's n-fold split: row j holds the points i = 0 .. n - j, at base + row_start(j) + i;
+ * then its n^2 triangles, upright and inverted. */
+static void bn__grid_tri(const bn_scene *s, size_t fi, unsigned n, bn_patch *patches, size_t *ip, double *pv,
+                         size_t *iv)
+{
+    const bn_face *f = &s->faces[fi];
+    const double *a = bn__fv(s, f, 0), *b = bn__fv(s, f, 1), *c = bn__fv(s, f, 2);
+    size_t base = *iv;
+#define BN__TRI_ID(i, j) (base + (size_t)(j) * (n + 1) - (size_t)(j) * ((j) - 1) / 2 + (i))
+    for (unsigned j = 0; j <= n; j++)
+        for (unsigned i = 0; i + j <= n; i++) {
+            double u = (double)i / n, v = (double)j / n;
+            double *q = pv + 3 * (*iv)++;
+            for (int k = 0; k < 3; k++)
+                q[k] = (1 - u - v) * a[k] + u * b[k] + v * c[k];
+        }
+    for (unsigned j = 0; j < n; j++)
+        for (unsigned i = 0; i + j < n; i++) {
+            size_t up[3] = {BN__TRI_ID(i, j), BN__TRI_ID(i + 1, j), BN__TRI_ID(i, j + 1)};
+            size_t down[3] = {BN__TRI_ID(i + 1, j), BN__TRI_ID(i + 1, j + 1), BN__TRI_ID(i, j + 1)};
+            bn__grid_patch(&patches[(*ip)++], fi, f, 3, up, pv);
+            if (i + j + 1 < n)
+                bn__grid_patch(&patches[(*ip)++], fi, f, 3, down, pv);
+        }
+#undef BN__TRI_ID
+}
+
 /* The regular grid of every face at patch edge `size`, then the contact cuts (unless off). */
 static bn_status bn__grid(bn_scene *s, double size, int contacts, double gap, bn_patch **out_p, size_t *out_np, double **out_v,
                           size_t *out_nv, bn_error *err)
@@ -67,13 +129,8 @@ static bn_status bn__grid(bn_scene *s, double size, int contacts, double gap, bn
     for (size_t f = 0; f < s->nfaces; f++) {
         unsigned nu, nvv;
         bn__face_grid(s, &s->faces[f], size, &nu, &nvv);
-        if (s->faces[f].nverts == 4) {
-            np += (size_t)nu * nvv;
-            nv += (size_t)(nu + 1) * (nvv + 1);
-        } else {
-            np += (size_t)nu * nu;
-            nv += (size_t)(nu + 1) * (nu + 2) / 2;
-        }
+        np += s->faces[f].nverts == 4 ? (size_t)nu * nvv : (size_t)nu * nu;
+        nv += s->faces[f].nverts == 4 ? (size_t)(nu + 1) * (nvv + 1) : (size_t)(nu + 1) * (nu + 2) / 2;
     }
     patches = bn__malloc_array(np, sizeof *patches);
     pv = bn__malloc_array(nv, 3 * sizeof(double));
@@ -83,75 +140,17 @@ static bn_status bn__grid(bn_scene *s, double size, int contacts, double gap, bn
         return bn_error_set(err, BN_ENOMEM, "out of memory for %zu patches", np);
     }
     for (size_t fi = 0; fi < s->nfaces; fi++) {
-        const bn_face *f = &s->faces[fi];
         unsigned nu, nvv;
-        size_t base = iv;
         if (bn_interrupted() != BN_OK) {   /* a face may hold a million patches: stop between faces */
             free(patches);
             free(pv);
             return bn_error_set(err, bn_interrupted(), "meshing interrupted");
         }
-        bn__face_grid(s, f, size, &nu, &nvv);
-        if (f->nverts == 4) {
-            const double *a = bn__fv(s, f, 0), *b = bn__fv(s, f, 1), *c = bn__fv(s, f, 2), *d = bn__fv(s, f, 3);
-            for (unsigned j = 0; j <= nvv; j++)
-                for (unsigned i = 0; i <= nu; i++) {
-                    double u = (double)i / nu, v = (double)j / nvv;
-                    double *q = pv + 3 * iv++;
-                    /* Exact corners at the ends keep neighbouring faces' vertices identical. */
-                    for (int k = 0; k < 3; k++)
-                        q[k] = (1 - u) * (1 - v) * a[k] + u * (1 - v) * b[k] + u * v * c[k] + (1 - u) * v * d[k];
-                }
-            for (unsigned j = 0; j < nvv; j++)
-                for (unsigned i = 0; i < nu; i++) {
-                    bn_patch *p = &patches[ip++];
-                    memset(p, 0, sizeof *p);
-                    p->face = fi;
-                    p->material = f->material;
-                    p->ncorners = 4;
-                    p->corner[0] = base + (size_t)j * (nu + 1) + i;
-                    p->corner[1] = p->corner[0] + 1;
-                    p->corner[2] = p->corner[1] + (nu + 1);
-                    p->corner[3] = p->corner[0] + (nu + 1);
-                    bn__scene_patch_finish(p, pv, f->normal);
-                }
-        } else {
-            const double *a = bn__fv(s, f, 0), *b = bn__fv(s, f, 1), *c = bn__fv(s, f, 2);
-            unsigned n = nu;
-            /* Row j holds the points i = 0 .. n - j: index base + row_start(j) + i. */
-#define BN__TRI_ID(i, j) (base + (size_t)(j) * (n + 1) - (size_t)(j) * ((j) - 1) / 2 + (i))
-            for (unsigned j = 0; j <= n; j++)
-                for (unsigned i = 0; i + j <= n; i++) {
-                    double u = (double)i / n, v = (double)j / n;
-                    double *q = pv + 3 * iv++;
-                    for (int k = 0; k < 3; k++)
-                        q[k] = (1 - u - v) * a[k] + u * b[k] + v * c[k];
-                }
-            for (unsigned j = 0; j < n; j++)
-                for (unsigned i = 0; i + j < n; i++) {
-                    bn_patch *p = &patches[ip++];
-                    memset(p, 0, sizeof *p);
-                    p->face = fi;
-                    p->material = f->material;
-                    p->ncorners = 3;
-                    p->corner[0] = BN__TRI_ID(i, j);
-                    p->corner[1] = BN__TRI_ID(i + 1, j);
-                    p->corner[2] = BN__TRI_ID(i, j + 1);
-                    bn__scene_patch_finish(p, pv, f->normal);
-                    if (i + j + 1 < n) {
-                        p = &patches[ip++];
-                        memset(p, 0, sizeof *p);
-                        p->face = fi;
-                        p->material = f->material;
-                        p->ncorners = 3;
-                        p->corner[0] = BN__TRI_ID(i + 1, j);
-                        p->corner[1] = BN__TRI_ID(i + 1, j + 1);
-                        p->corner[2] = BN__TRI_ID(i, j + 1);
-                        bn__scene_patch_finish(p, pv, f->normal);
-                    }
-                }
-#undef BN__TRI_ID
-        }
+        bn__face_grid(s, &s->faces[fi], size, &nu, &nvv);
+        if (s->faces[fi].nverts == 4)
+            bn__grid_quad(s, fi, nu, nvv, patches, &ip, pv, &iv);
+        else
+            bn__grid_tri(s, fi, nu, patches, &ip, pv, &iv);
     }
     BN_CHECK(ip == np && iv == nv);
     s->stats.contact_segments = s->stats.contact_faces = 0;
