@@ -87,18 +87,14 @@ static int bn__one_cycle(const bn__edge *be, size_t nb)
     return steps == nb;
 }
 
-/* The planes of the component whose faces are f[0..m) (outward: every vertex inside): 0 if it is
- * not a convex solid closed but for at most one planar missing facet. */
-static int bn__solid_planes(const double *fv, const unsigned *fnc, const double *fn, const size_t *f, size_t m,
-                            double tol, double *pl, int *np, int *missing)
+/* Each face's plane of the component f[0..m), oriented so that every vertex of the component is on
+ * its inner side, into pl (np of them); 0 if some plane has vertices on both sides (not convex) or
+ * every vertex lies in one plane (flat: no solid). */
+static int bn__face_planes(const double *fv, const unsigned *fnc, const double *fn, const size_t *f, size_t m,
+                           double tol, double *pl, int *np)
 {
-    bn__edge *e, *be;
-    bn__vref *v;
-    size_t ne = 0, nb = 0, nv = 0;
     double diam, lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-    int ok = 1, offplane = 0;
-    if (m < 2 || m + 1 > BN__SOLID_PLANES_MAX)
-        return 0;
+    int offplane = 0;
     for (size_t q = 0; q < m; q++)
         for (unsigned k = 0; k < fnc[f[q]]; k++)
             for (int c = 0; c < 3; c++) {
@@ -106,10 +102,8 @@ static int bn__solid_planes(const double *fv, const unsigned *fnc, const double 
                 hi[c] = fmax(hi[c], fv[12 * f[q] + 3 * k + c]);
             }
     diam = bn_v3_dist(lo, hi);
-    /* each face's plane, oriented so that every vertex of the component is on its inner side */
     *np = 0;
-    *missing = -1;
-    for (size_t q = 0; q < m && ok; q++) {
+    for (size_t q = 0; q < m; q++) {
         const double *n = fn + 3 * f[q];
         double d = bn_v3_dot(n, fv + 12 * f[q]), mx = -INFINITY, mn = INFINITY, sg;
         for (size_t r = 0; r < m; r++)
@@ -127,21 +121,18 @@ static int bn__solid_planes(const double *fv, const unsigned *fnc, const double 
         bn_v3_scale(n, sg, pl + 4 * *np);
         pl[4 * (*np)++ + 3] = sg * d;
     }
-    if (!offplane)
-        return 0;
-    /* the edges used by one face only (an edge of three faces: not a solid's surface) */
-    for (size_t q = 0; q < m; q++)
-        ne += fnc[f[q]];
-    e = bn__malloc_array(ne, sizeof *e);
-    be = bn__malloc_array(ne, sizeof *be);
-    v = bn__malloc_array(2 * ne, sizeof *v);
-    if (!e || !be || !v) {
-        free(e);
-        free(be);
-        free(v);
-        return 0;
-    }
-    ne = 0;
+    return offplane;
+}
+
+/* The edges of f[0..m) used by one face only into be (*nb of them); 0 if an edge has three faces
+ * (not a solid's surface) or the boundary is not one cycle (each boundary vertex ends two boundary
+ * edges, and a walk visits them all). e: scratch of the total corner count, v: of twice that. */
+static int bn__boundary(const double *fv, const unsigned *fnc, const size_t *f, size_t m, bn__edge *e, bn__edge *be,
+                        bn__vref *v, size_t *nb)
+{
+    size_t ne = 0, nv = 0;
+    int ok = 1;
+    *nb = 0;
     for (size_t q = 0; q < m; q++)
         for (unsigned k = 0; k < fnc[f[q]]; k++) {
             const double *a = fv + 12 * f[q] + 3 * k, *b = fv + 12 * f[q] + 3 * (k + 1 < fnc[f[q]] ? k + 1 : 0);
@@ -158,72 +149,93 @@ static int bn__solid_planes(const double *fv, const unsigned *fnc, const double 
         if (k2 - k > 2)
             ok = 0;
         else if (k2 - k == 1) {
-            be[nb++] = e[k];
+            be[(*nb)++] = e[k];
             memcpy(v[nv++].x, e[k].a, sizeof v[0].x);
             memcpy(v[nv++].x, e[k].b, sizeof v[0].x);
         }
         k = k2;
     }
-    if (ok && nb) {
-        /* one cycle: each boundary vertex ends two boundary edges, and a walk visits them all */
+    if (ok && *nb) {
         qsort(v, nv, sizeof *v, bn__vref_cmp);
         for (size_t k = 0; k < nv && ok; k += 2)
             ok = k + 1 < nv && bn__vref_cmp(&v[k], &v[k + 1]) == 0 && (k + 2 >= nv || bn__vref_cmp(&v[k + 1], &v[k + 2]) != 0);
-        ok = ok && bn__one_cycle(be, nb);
+        ok = ok && bn__one_cycle(be, *nb);
     }
-    if (ok && nb) {
-        /* its plane: across two non-parallel boundary edges, every boundary vertex within tol */
-        double nn[3] = {0, 0, 0}, d, mx = -INFINITY, mn = INFINITY;
-        int found = 0;
-        for (size_t k = 0; k < nb && !found; k++)
-            for (size_t l = k + 1; l < nb && !found; l++) {
-                double u[3], w[3], x[3];
-                bn_v3_sub(be[k].b, be[k].a, u);
-                bn_v3_sub(be[l].b, be[l].a, w);
-                bn_v3_cross(u, w, x);
-                if (bn_v3_len(x) > 1e-6 * bn_v3_len(u) * bn_v3_len(w)) {
-                    bn_v3_scale(x, 1 / bn_v3_len(x), nn);
-                    found = 1;
-                }
+    return ok;
+}
+
+/* The missing facet's plane: across two non-parallel boundary edges, every boundary vertex within
+ * tol and every vertex on one side; appended to pl as plane *np (*missing). 0 if there is none. */
+static int bn__missing_plane(const double *fv, const unsigned *fnc, const size_t *f, size_t m, const bn__edge *be,
+                             size_t nb, double tol, double *pl, int *np, int *missing)
+{
+    double nn[3] = {0, 0, 0}, d, mx = -INFINITY, mn = INFINITY, sg;
+    int found = 0, ok;
+    for (size_t k = 0; k < nb && !found; k++)
+        for (size_t l = k + 1; l < nb && !found; l++) {
+            double u[3], w[3], x[3];
+            bn_v3_sub(be[k].b, be[k].a, u);
+            bn_v3_sub(be[l].b, be[l].a, w);
+            bn_v3_cross(u, w, x);
+            if (bn_v3_len(x) > 1e-6 * bn_v3_len(u) * bn_v3_len(w)) {
+                bn_v3_scale(x, 1 / bn_v3_len(x), nn);
+                found = 1;
             }
-        d = bn_v3_dot(nn, be[0].a);
-        ok = found && *np < BN__SOLID_PLANES_MAX;
-        for (size_t k = 0; k < nb && ok; k++)
-            ok = fabs(bn_v3_dot(nn, be[k].a) - d) <= tol && fabs(bn_v3_dot(nn, be[k].b) - d) <= tol;
-        for (size_t q = 0; q < m && ok; q++)
-            for (unsigned k = 0; k < fnc[f[q]]; k++) {
-                double h = bn_v3_dot(nn, fv + 12 * f[q] + 3 * k) - d;
-                mx = fmax(mx, h);
-                mn = fmin(mn, h);
-            }
-        if (ok && (mx <= tol || mn >= -tol)) {
-            double sg = mx <= tol ? 1 : -1;
-            bn_v3_scale(nn, sg, pl + 4 * *np);
-            pl[4 * *np + 3] = sg * d;
-            *missing = (*np)++;
-        } else {
-            ok = 0;
         }
-    }
+    d = bn_v3_dot(nn, be[0].a);
+    ok = found && *np < BN__SOLID_PLANES_MAX;
+    for (size_t k = 0; k < nb && ok; k++)
+        ok = fabs(bn_v3_dot(nn, be[k].a) - d) <= tol && fabs(bn_v3_dot(nn, be[k].b) - d) <= tol;
+    for (size_t q = 0; q < m && ok; q++)
+        for (unsigned k = 0; k < fnc[f[q]]; k++) {
+            double h = bn_v3_dot(nn, fv + 12 * f[q] + 3 * k) - d;
+            mx = fmax(mx, h);
+            mn = fmin(mn, h);
+        }
+    if (!ok || !(mx <= tol || mn >= -tol))
+        return 0;
+    sg = mx <= tol ? 1 : -1;
+    bn_v3_scale(nn, sg, pl + 4 * *np);
+    pl[4 * *np + 3] = sg * d;
+    *missing = (*np)++;
+    return 1;
+}
+
+/* The planes of the component whose faces are f[0..m) (outward: every vertex inside): 0 if it is
+ * not a convex solid closed but for at most one planar missing facet. */
+static int bn__solid_planes(const double *fv, const unsigned *fnc, const double *fn, const size_t *f, size_t m,
+                            double tol, double *pl, int *np, int *missing)
+{
+    bn__edge *e, *be;
+    bn__vref *v;
+    size_t ne = 0, nb = 0;
+    int ok;
+    if (m < 2 || m + 1 > BN__SOLID_PLANES_MAX)
+        return 0;
+    *missing = -1;
+    if (!bn__face_planes(fv, fnc, fn, f, m, tol, pl, np))
+        return 0;
+    for (size_t q = 0; q < m; q++)
+        ne += fnc[f[q]];
+    e = bn__malloc_array(ne, sizeof *e);
+    be = bn__malloc_array(ne, sizeof *be);
+    v = bn__malloc_array(2 * ne, sizeof *v);
+    ok = e && be && v && bn__boundary(fv, fnc, f, m, e, be, v, &nb);
+    if (ok && nb)
+        ok = bn__missing_plane(fv, fnc, f, m, be, nb, tol, pl, np, missing);
     free(e);
     free(be);
     free(v);
     return ok;
 }
 
-bn_status bn__solids_find(const double *fv, const unsigned *fnc, const double *fn, const size_t *fidx,
-                          const size_t *ffirst, size_t nf, double tol, bn__solids **out)
+/* root[f]: face f's connected component (faces joined by a shared vertex index or equal
+ * coordinates), by union-find; 0 when out of memory. */
+static int bn__components(const double *fv, const unsigned *fnc, const size_t *fidx, const size_t *ffirst, size_t nf,
+                          size_t *root)
 {
-    bn__solids *s = bn__calloc(1, sizeof *s);
-    size_t *parent = NULL, *root = NULL /* per face: its component's root */, nref = 0, *vowner = NULL, maxidx = 0;
-    bn__vref *vr = NULL;
-    *out = NULL;
-    if (!s)
-        return BN_ENOMEM;
-    s->nf = nf;
-    s->of = bn__malloc_array(nf, sizeof *s->of);
-    parent = bn__malloc_array(nf, sizeof *parent);
-    root = bn__malloc_array(nf, sizeof *root);
+    size_t *parent = bn__malloc_array(nf, sizeof *parent), nref = 0, *vowner = NULL, maxidx = 0;
+    bn__vref *vr;
     for (size_t f = 0; f < nf; f++)
         nref += fnc[f];
     vr = bn__malloc_array(nref, sizeof *vr);
@@ -231,17 +243,14 @@ bn_status bn__solids_find(const double *fv, const unsigned *fnc, const double *f
         for (unsigned k = 0; k < fnc[f]; k++)
             maxidx = fidx[ffirst[f] + k] > maxidx ? fidx[ffirst[f] + k] : maxidx;
     vowner = bn__malloc_array(maxidx + 1, sizeof *vowner);
-    if (!s->of || !parent || !root || !vr || !vowner) {
+    if (!parent || !vr || !vowner) {
         free(parent);
-        free(root);
         free(vr);
         free(vowner);
-        bn__solids_free(s);
-        return BN_ENOMEM;
+        return 0;
     }
     for (size_t f = 0; f < nf; f++)
         parent[f] = f;
-    /* shared vertex indices, then equal coordinates */
     for (size_t k = 0; k <= maxidx; k++)
         vowner[k] = SIZE_MAX;
     nref = 0;
@@ -259,69 +268,86 @@ bn_status bn__solids_find(const double *fv, const unsigned *fnc, const double *f
     for (size_t k = 1; k < nref; k++)
         if (bn__vref_cmp(&vr[k - 1], &vr[k]) == 0)
             bn__uf_union(parent, vr[k - 1].f, vr[k].f);
+    for (size_t f = 0; f < nf; f++)
+        root[f] = bn__uf_find(parent, f);
     free(vr);
     free(vowner);
-    /* the components, each tested */
-    for (size_t f = 0; f < nf; f++) {
-        s->of[f] = SIZE_MAX;
-        root[f] = bn__uf_find(parent, f);
+    free(parent);
+    return 1;
+}
+
+/* A solid of np planes (missing: the open facet's, or -1) into s, its arrays doubling as needed;
+ * 0 when out of memory (no more solids: fewer shortcuts, the same answers). */
+static int bn__solids_add(bn__solids *s, size_t *cap, const double *pl, int np, int missing)
+{
+    if (s->ns == *cap) {   /* doubling: scenes with many small solids */
+        size_t nc = *cap ? 2 * *cap : 16;
+        double *npl = bn__realloc_array(s->plane, nc * 4 * BN__SOLID_PLANES_MAX, sizeof *npl);
+        int *nnp, *nmi;
+        if (!npl)
+            return 0;
+        s->plane = npl;
+        if (!(nnp = bn__realloc_array(s->nplanes, nc, sizeof *nnp)))
+            return 0;
+        s->nplanes = nnp;
+        if (!(nmi = bn__realloc_array(s->missing, nc, sizeof *nmi)))
+            return 0;
+        s->missing = nmi;
+        *cap = nc;
     }
-    {
-        /* faces grouped by root: counting sort over roots */
-        size_t *start = bn__calloc(nf + 1, sizeof *start), *members = bn__malloc_array(nf, sizeof *members), cap = 0;
-        if (!start || !members) {
-            free(start);
-            free(members);
-            free(parent);
-            free(root);
-            bn__solids_free(s);
-            return BN_ENOMEM;
-        }
-        for (size_t f = 0; f < nf; f++)
-            start[root[f] + 1]++;
-        for (size_t r = 0; r < nf; r++)
-            start[r + 1] += start[r];
-        for (size_t f = 0; f < nf; f++)
-            members[start[root[f]]++] = f;
-        for (size_t r = nf; r > 0; r--)
-            start[r] = start[r - 1];
-        start[0] = 0;
-        for (size_t r = 0; r < nf; r++) {
-            size_t m = start[r + 1] - start[r];
-            double pl[4 * BN__SOLID_PLANES_MAX];
-            int np = 0, missing = -1;
-            if (m < 2 || m + 1 > BN__SOLID_PLANES_MAX)
-                continue;
-            if (!bn__solid_planes(fv, fnc, fn, members + start[r], m, tol, pl, &np, &missing))
-                continue;
-            if (s->ns == cap) {   /* doubling: scenes with many small solids */
-                size_t nc = cap ? 2 * cap : 16;
-                double *npl = bn__realloc_array(s->plane, nc * 4 * BN__SOLID_PLANES_MAX, sizeof *npl);
-                int *nnp, *nmi;
-                if (!npl)
-                    break;   /* no more solids: fewer shortcuts, the same answers */
-                s->plane = npl;
-                nnp = bn__realloc_array(s->nplanes, nc, sizeof *nnp);
-                if (!nnp)
-                    break;
-                s->nplanes = nnp;
-                nmi = bn__realloc_array(s->missing, nc, sizeof *nmi);
-                if (!nmi)
-                    break;
-                s->missing = nmi;
-                cap = nc;
-            }
-            memcpy(s->plane + s->ns * 4 * BN__SOLID_PLANES_MAX, pl, (size_t)np * 4 * sizeof(double));
-            s->nplanes[s->ns] = np;
-            s->missing[s->ns] = missing;
-            for (size_t q = start[r]; q < start[r + 1]; q++)
-                s->of[members[q]] = s->ns;
-            s->ns++;
-        }
+    memcpy(s->plane + s->ns * 4 * BN__SOLID_PLANES_MAX, pl, (size_t)np * 4 * sizeof(double));
+    s->nplanes[s->ns] = np;
+    s->missing[s->ns] = missing;
+    return 1;
+}
+
+bn_status bn__solids_find(const double *fv, const unsigned *fnc, const double *fn, const size_t *fidx,
+                          const size_t *ffirst, size_t nf, double tol, bn__solids **out)
+{
+    bn__solids *s = bn__calloc(1, sizeof *s);
+    size_t *root = NULL, *start = NULL, *members = NULL, cap = 0;
+    *out = NULL;
+    if (!s)
+        return BN_ENOMEM;
+    s->nf = nf;
+    s->of = bn__malloc_array(nf, sizeof *s->of);
+    root = bn__malloc_array(nf, sizeof *root);
+    start = bn__calloc(nf + 1, sizeof *start);
+    members = bn__malloc_array(nf, sizeof *members);
+    if (!s->of || !root || !start || !members || !bn__components(fv, fnc, fidx, ffirst, nf, root)) {
+        free(root);
         free(start);
         free(members);
+        bn__solids_free(s);
+        return BN_ENOMEM;
     }
-    free(parent);
+    /* faces grouped by root (a counting sort over roots), each group tested */
+    for (size_t f = 0; f < nf; f++) {
+        s->of[f] = SIZE_MAX;
+        start[root[f] + 1]++;
+    }
+    for (size_t r = 0; r < nf; r++)
+        start[r + 1] += start[r];
+    for (size_t f = 0; f < nf; f++)
+        members[start[root[f]]++] = f;
+    for (size_t r = nf; r > 0; r--)
+        start[r] = start[r - 1];
+    start[0] = 0;
+    for (size_t r = 0; r < nf; r++) {
+        size_t m = start[r + 1] - start[r];
+        double pl[4 * BN__SOLID_PLANES_MAX];
+        int np = 0, missing = -1;
+        if (m < 2 || m + 1 > BN__SOLID_PLANES_MAX ||
+            !bn__solid_planes(fv, fnc, fn, members + start[r], m, tol, pl, &np, &missing))
+            continue;
+        if (!bn__solids_add(s, &cap, pl, np, missing))
+            break;
+        for (size_t q = start[r]; q < start[r + 1]; q++)
+            s->of[members[q]] = s->ns;
+        s->ns++;
+    }
+    free(start);
+    free(members);
     free(root);
     *out = s;
     return BN_OK;
