@@ -227,26 +227,12 @@ static void bn__compose(const bn__gather *G, const bn_camera *cam, const double 
     }
 }
 
-static bn_status bn__gather_body(const bn_rt *rt, const bn_camera *cam, const double *const *terms, int n,
-                                 const double *rest, const bn_gather_opts *o, bn_image *out, bn_gather_stats *stats,
-                                 bn_error *err)
+/* The camera, the term count, the sample counts and the output images, checked. */
+static bn_status bn__gather_check(const bn_camera *cam, int n, const bn_gather_opts *o, const bn_image *out,
+                                  bn_error *err)
 {
-    bn__gather G;
-    const bn_scene *sc = bn_rt_scene(rt);
-    size_t nf, nm, nvert, nidx, np, nimg = (size_t)n + 3;
-    const bn_face *faces = bn_scene_faces(sc, &nf);
-    const double *verts = bn_scene_vertices(sc, &nvert);
-    const size_t *idx = bn_scene_face_indices(sc, &nidx);
-    bn_status st;
-    int sx, sy;
-    volatile int stop = 0;
-    double t0 = bn__now(), cr = 0, sr = 0, gr = 0;
-    bn__progress prog;
-    size_t done = 0, npix, stride;
-    double *aux = NULL;
-
-    memset(&G, 0, sizeof G);
-    if ((st = bn_camera_validate(cam, err)) != BN_OK)
+    bn_status st = bn_camera_validate(cam, err);
+    if (st != BN_OK)
         return st;
     if (n < 1 || n > 20)
         return bn_error_set(err, BN_EINPUT, "gather: %d bounce terms; the gather needs E and KE at least (-n 1), and "
@@ -256,27 +242,26 @@ static bn_status bn__gather_body(const bn_rt *rt, const bn_camera *cam, const do
     if (o->light_samples < 1 || o->light_samples > (1 << 16) || o->hemi_samples < 1 || o->hemi_samples > (1 << 20))
         return bn_error_set(err, BN_EINPUT, "gather: %d light and %d gather samples (1 .. 65536 and 1 .. 2^20)",
                             o->light_samples, o->hemi_samples);
-    for (size_t l = 0; l < nimg; l++)
+    for (size_t l = 0; l < (size_t)n + 3; l++)
         if (!out[l].rgb || out[l].width != cam->width || out[l].height != cam->height)
             return bn_error_set(err, BN_EINTERNAL, "gather: output image %zu is not allocated at %dx%d", l, cam->width,
                                 cam->height);
-    G.rt = rt;
-    G.scene = sc;
-    G.patch = bn_scene_patches(sc, &np);
-    G.mat = bn_scene_materials(sc, &nm);
-    G.terms = terms;
-    G.rest = rest;
-    G.n = n;
-    G.gl = bn__side(o->light_samples);
-    G.gh = bn__side(o->hemi_samples);
-    G.eps = bn_rt_epsilon(rt);
-    G.smooth = o->smooth;
-    G.em = bn__calloc(bn_scene_emitter_count(sc) + 1, sizeof *G.em);
-    if (!G.em)
+    return BN_OK;
+}
+
+/* The emitting faces (their polygons, normals and radiance), for the closed-form direct light. */
+static bn_status bn__gather_emitters(bn__gather *G, bn_error *err)
+{
+    size_t nf, nvert, nidx;
+    const bn_face *faces = bn_scene_faces(G->scene, &nf);
+    const double *verts = bn_scene_vertices(G->scene, &nvert);
+    const size_t *idx = bn_scene_face_indices(G->scene, &nidx);
+    G->em = bn__calloc(bn_scene_emitter_count(G->scene) + 1, sizeof *G->em);
+    if (!G->em)
         return bn_error_set(err, BN_ENOMEM, "out of memory");
     for (size_t f = 0; f < nf; f++) {
-        const double *Le = G.mat[faces[f].material].Le;
-        bn__emitter *e = &G.em[G.nem];
+        const double *Le = G->mat[faces[f].material].Le;
+        bn__emitter *e = &G->em[G->nem];
         if (!(Le[0] > 0 || Le[1] > 0 || Le[2] > 0))
             continue;
         e->nv = faces[f].nverts;
@@ -285,32 +270,131 @@ static bn_status bn__gather_body(const bn_rt *rt, const bn_camera *cam, const do
         memcpy(e->n, faces[f].normal, sizeof e->n);
         memcpy(e->Le, Le, sizeof e->Le);
         e->face = f;
-        G.nem++;
+        G->nem++;
     }
-    if (o->smooth) {
-        size_t nv = bn_bake_vertex_count(o->smooth);
-        G.vv = bn__calloc((size_t)n + 1, sizeof *G.vv);
-        for (int l = 0; G.vv && l <= n; l++) {
-            if (!(G.vv[l] = bn__malloc_array(nv, 3 * sizeof(double)))) {
-                st = bn_error_set(err, BN_ENOMEM, "out of memory for %zu vertex values", nv);
-                goto done;
+    return BN_OK;
+}
+
+/* --smooth: the vertex values of K^1 E .. K^n E and rest, read at the gather's hits. */
+static bn_status bn__gather_smooth(bn__gather *G, const bn_bake *smooth, bn_error *err)
+{
+    size_t nv = bn_bake_vertex_count(smooth);
+    if (!(G->vv = bn__calloc((size_t)G->n + 1, sizeof *G->vv)))
+        return bn_error_set(err, BN_ENOMEM, "out of memory");
+    for (int l = 0; l <= G->n; l++) {
+        if (!(G->vv[l] = bn__malloc_array(nv, 3 * sizeof(double))))
+            return bn_error_set(err, BN_ENOMEM, "out of memory for %zu vertex values", nv);
+        bn_bake_vertex_values(smooth, l < G->n ? G->terms[l + 1] : G->rest, G->vv[l]);
+    }
+    return BN_OK;
+}
+
+/* G from the ray caster, the terms and the options: the emitters, and the vertex values with
+ * --smooth. */
+static bn_status bn__gather_init(bn__gather *G, const bn_rt *rt, const double *const *terms, int n, const double *rest,
+                                 const bn_gather_opts *o, bn_error *err)
+{
+    size_t nm, np;
+    bn_status st;
+    G->rt = rt;
+    G->scene = bn_rt_scene(rt);
+    G->patch = bn_scene_patches(G->scene, &np);
+    G->mat = bn_scene_materials(G->scene, &nm);
+    G->terms = terms;
+    G->rest = rest;
+    G->n = n;
+    G->gl = bn__side(o->light_samples);
+    G->gh = bn__side(o->hemi_samples);
+    G->eps = bn_rt_epsilon(rt);
+    G->smooth = o->smooth;
+    if ((st = bn__gather_emitters(G, err)) != BN_OK)
+        return st;
+    return o->smooth ? bn__gather_smooth(G, o->smooth, err) : BN_OK;
+}
+
+/* Per-thread buffers of one pixel's samples. */
+typedef struct bn__pixbuf {
+    double *acc, *hv, *gp, *gr;   /* 6; 3 (n + 1) each */
+} bn__pixbuf;
+
+/* Pixel (x, y): its spp jittered samples (sx x sy strata), E and KE into out[0..1], the face all its
+ * samples saw (plus one; 0: mixed or missed) and the gathered means into aux (stride values). */
+static void bn__gather_pixel(const bn__gather *G, const bn_camera *cam, const bn_gather_opts *o, int x, int y, int sx,
+                             int sy, bn__pixbuf *B, bn_image *out, double *aux, bn_gather_stats *ls)
+{
+    size_t pix = (size_t)y * (size_t)cam->width + (size_t)x, nl3 = 3 * ((size_t)G->n + 1), nf;
+    const bn_face *faces = bn_scene_faces(G->scene, &nf);
+    long face = -2;   /* -2: no sample yet; -1: mixed or missed */
+    double *a = aux + pix * (1 + nl3);
+    memset(B->acc, 0, 6 * sizeof(double));
+    memset(B->gp, 0, nl3 * sizeof(double));
+    memset(B->gr, 0, nl3 * sizeof(double));
+    for (int s = 0; s < cam->spp; s++) {
+        double fx = 0.5, fy = 0.5, org[3], dir[3];
+        bn__rng r;
+        long f;
+        if (cam->spp > 1) {
+            bn__rng j = bn__rng_make(o->seed, pix, (uint64_t)s);
+            fx = ((s % sx) + bn__rng_uniform(&j)) / sx;
+            fy = ((s / sx) + bn__rng_uniform(&j)) / sy;
+        }
+        r = bn__rng_make(o->seed ^ BN__GATHER_STREAM, pix, (uint64_t)s);
+        bn_camera_ray(cam, x + fx, y + fy, org, dir);
+        f = bn__sample(G, org, dir, &r, B->acc, B->hv, ls);
+        face = face == -2 ? f : face == f ? face : -1;
+        if (f >= 0) {
+            const double *rho = G->mat[faces[f].material].rho;
+            for (size_t k = 0; k < nl3; k++) {
+                B->gp[k] += B->hv[k];
+                B->gr[k] += rho[k % 3] * B->hv[k];
             }
-            bn_bake_vertex_values(o->smooth, l < n ? terms[l + 1] : rest, G.vv[l]);
-        }
-        if (!G.vv) {
-            st = bn_error_set(err, BN_ENOMEM, "out of memory");
-            goto done;
         }
     }
-    {
-        int a = (int)floor(sqrt((double)cam->spp));
-        while (a > 1 && cam->spp % a != 0)
-            a--;
-        sx = a;
-        sy = cam->spp / a;
-    }
-    npix = (size_t)cam->width * (size_t)cam->height;
-    stride = 1 + 3 * ((size_t)n + 1);
+    for (int l = 0; l < 2; l++)
+        for (int c = 0; c < 3; c++)
+            out[l].rgb[3 * pix + c] = (float)(B->acc[3 * l + c] / cam->spp);
+    a[0] = face >= 0 ? (double)face + 1 : 0;
+    for (size_t k = 0; k < nl3; k++)
+        a[1 + k] = (face >= 0 ? B->gp[k] : B->gr[k]) / cam->spp;
+}
+
+/* Under mpirun: every rank's status, then its rows to every rank (each pixel nonzero on one rank:
+ * exact). stop: 2 out of memory, 1 interrupted. */
+static bn_status bn__gather_share(int stop, bn_image *out, const bn_camera *cam, double *aux, size_t naux,
+                                  bn_error *err)
+{
+    bn_status here = stop == 2 ? BN_ENOMEM : bn_interrupted() != BN_OK ? bn_interrupted() : stop ? BN_EINTR : BN_OK;
+    bn_status all = bn_dist_agree(here), st = BN_OK;
+    if (all != BN_OK)
+        return all == BN_ENOMEM ? bn_error_set(err, all, "out of memory while gathering")
+                                : bn_error_set(err, all, "gather interrupted");
+    for (size_t l = 0; l < 2 && bn_dist_size() > 1 && st == BN_OK; l++)
+        st = bn_dist_sum_float(out[l].rgb, (size_t)3 * (size_t)cam->width * (size_t)cam->height, err);
+    if (st == BN_OK && bn_dist_size() > 1)
+        st = bn_dist_sum(aux, naux, err);
+    return st;
+}
+
+static bn_status bn__gather_body(const bn_rt *rt, const bn_camera *cam, const double *const *terms, int n,
+                                 const double *rest, const bn_gather_opts *o, bn_image *out, bn_gather_stats *stats,
+                                 bn_error *err)
+{
+    bn__gather G;
+    size_t npix = (size_t)cam->width * (size_t)cam->height, stride = 1 + 3 * ((size_t)n + 1), done = 0;
+    bn_status st;
+    int sx, sy;
+    volatile int stop = 0;
+    double t0 = bn__now(), cr = 0, sr = 0, gr = 0, *aux = NULL;
+    bn__progress prog;
+
+    memset(&G, 0, sizeof G);
+    if ((st = bn__gather_check(cam, n, o, out, err)) != BN_OK)
+        return st;
+    if ((st = bn__gather_init(&G, rt, terms, n, rest, o, err)) != BN_OK)
+        goto done;
+    for (sx = (int)floor(sqrt((double)cam->spp)); sx > 1 && cam->spp % sx != 0;)
+        sx--;
+    sy = cam->spp / sx;
     if (!(aux = bn__malloc_array(npix, stride * sizeof(double)))) {
         st = bn_error_set(err, BN_ENOMEM, "out of memory for the gather's %zu x %zu values", npix, stride);
         goto done;
@@ -319,8 +403,8 @@ static bn_status bn__gather_body(const bn_rt *rt, const bn_camera *cam, const do
 #pragma omp parallel reduction(+ : cr, sr, gr)
     {
         size_t nl3 = 3 * ((size_t)n + 1);
-        double *acc = malloc(6 * sizeof(double)), *hv = malloc(nl3 * sizeof(double)),
-               *gp = malloc(nl3 * sizeof(double)), *gr_ = malloc(nl3 * sizeof(double));
+        bn__pixbuf B = {malloc(6 * sizeof(double)), malloc(nl3 * sizeof(double)), malloc(nl3 * sizeof(double)),
+                        malloc(nl3 * sizeof(double))};
 #pragma omp for schedule(dynamic, 1)
         for (int y = 0; y < cam->height; y++) {
             if (stop || !bn_dist_mine((size_t)y)) {
@@ -331,7 +415,7 @@ static bn_status bn__gather_body(const bn_rt *rt, const bn_camera *cam, const do
                 memset(aux + (size_t)y * (size_t)cam->width * stride, 0, (size_t)cam->width * stride * sizeof(double));
                 continue;
             }
-            if (!acc || !hv || !gp || !gr_) {
+            if (!B.acc || !B.hv || !B.gp || !B.gr) {
                 stop = 2;
                 continue;
             }
@@ -340,70 +424,25 @@ static bn_status bn__gather_body(const bn_rt *rt, const bn_camera *cam, const do
                 continue;
             }
             for (int x = 0; x < cam->width; x++) {
-                size_t pix = (size_t)y * (size_t)cam->width + (size_t)x;
                 bn_gather_stats ls = {0};
-                long face = -2;   /* -2: no sample yet; -1: mixed or missed */
-                double *a = aux + pix * stride;
-                memset(acc, 0, 6 * sizeof(double));
-                memset(gp, 0, nl3 * sizeof(double));
-                memset(gr_, 0, nl3 * sizeof(double));
-                for (int s = 0; s < cam->spp; s++) {
-                    double fx = 0.5, fy = 0.5, org[3], dir[3];
-                    bn__rng r;
-                    long f;
-                    if (cam->spp > 1) {
-                        bn__rng j = bn__rng_make(o->seed, pix, (uint64_t)s);
-                        fx = ((s % sx) + bn__rng_uniform(&j)) / sx;
-                        fy = ((s / sx) + bn__rng_uniform(&j)) / sy;
-                    }
-                    r = bn__rng_make(o->seed ^ BN__GATHER_STREAM, pix, (uint64_t)s);
-                    bn_camera_ray(cam, x + fx, y + fy, org, dir);
-                    f = bn__sample(&G, org, dir, &r, acc, hv, &ls);
-                    face = face == -2 ? f : face == f ? face : -1;
-                    if (f >= 0) {
-                        const double *rho = G.mat[faces[f].material].rho;
-                        for (size_t k = 0; k < nl3; k++) {
-                            gp[k] += hv[k];
-                            gr_[k] += rho[k % 3] * hv[k];
-                        }
-                    }
-                }
+                bn__gather_pixel(&G, cam, o, x, y, sx, sy, &B, out, aux, &ls);
                 cr += ls.camera_rays;
                 sr += ls.shadow_rays;
                 gr += ls.gather_rays;
-                for (int l = 0; l < 2; l++)
-                    for (int c = 0; c < 3; c++)
-                        out[l].rgb[3 * pix + c] = (float)(acc[3 * l + c] / cam->spp);
-                a[0] = face >= 0 ? (double)face + 1 : 0;
-                for (size_t k = 0; k < nl3; k++)
-                    a[1 + k] = (face >= 0 ? gp[k] : gr_[k]) / cam->spp;
             }
             bn__progress_step(&prog, &done, 1);
         }
-        free(acc);
-        free(hv);
-        free(gp);
-        free(gr_);
+        free(B.acc);
+        free(B.hv);
+        free(B.gp);
+        free(B.gr);
     }
     bn__progress_end(&prog);
-    {   /* every rank's status, then its rows to every rank (each pixel nonzero on one rank: exact) */
-        bn_status here = stop == 2 ? BN_ENOMEM : bn_interrupted() != BN_OK ? bn_interrupted() : stop ? BN_EINTR : BN_OK;
-        bn_status all = bn_dist_agree(here);
-        if (all != BN_OK) {
-            st = all == BN_ENOMEM ? bn_error_set(err, all, "out of memory while gathering")
-                                  : bn_error_set(err, all, "gather interrupted");
-            goto done;
-        }
-        for (size_t l = 0; l < 2 && bn_dist_size() > 1; l++)
-            if ((st = bn_dist_sum_float(out[l].rgb, (size_t)3 * (size_t)cam->width * (size_t)cam->height, err)) !=
-                BN_OK)
-                goto done;
-        if (bn_dist_size() > 1 && (st = bn_dist_sum(aux, npix * stride, err)) != BN_OK)
-            goto done;
-    }
+    if ((st = bn__gather_share(stop, out, cam, aux, npix * stride, err)) != BN_OK)
+        goto done;
     bn__compose(&G, cam, aux, o->filter, out);
-    for (size_t l = 0; l < nimg; l++)
-        for (size_t k = 0; k < (size_t)3 * (size_t)cam->width * (size_t)cam->height; k++)
+    for (size_t l = 0; l < (size_t)n + 3; l++)
+        for (size_t k = 0; k < (size_t)3 * npix; k++)
             if (!isfinite(out[l].rgb[k])) {
                 st = bn_error_set(err, BN_ENUMERIC, "gather: a non-finite value in layer %zu at pixel %zu", l, k / 3);
                 goto done;
