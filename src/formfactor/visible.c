@@ -142,48 +142,60 @@ static void bn__sort(double *t, size_t n)
     }
 }
 
-double bn__ff_point_visible(const double x[3], const double n[3], const double *b, size_t nb, const double bn[3],
-                            const double *occ, const unsigned *occ_n, size_t nocc, double tol, uint32_t *shadowed)
+/* One point's visible-part computation: b and the occluders' projections in b's plane. */
+typedef struct bn__vis {
+    bn__poly2 poly[1 + BN__VIS_OCC_MAX];   /* poly[0]: b; then the projections kept */
+    size_t np;
+    bn__vis_frame fr;                      /* b's plane: origin b[0], e1, e2 (counter-clockwise b) */
+    double hx;                             /* x's height over b's plane */
+    double c[3];                           /* b's vertex mean */
+    double pl[BN__FF_POLY_MAX + 3][4];     /* the pyramid's planes (unit normal, offset) */
+    size_t npl;
+    double diam;                           /* b's diameter */
+} bn__vis;
+
+/* b in its plane's frame, counter-clockwise (the frame mirrored if it is not), its vertex mean and
+ * diameter; 0 when x is not in front of b. */
+static int bn__vis_base(bn__vis *V, const double x[3], const double *b, size_t nb, const double bn[3])
 {
-    bn__poly2 poly[1 + BN__VIS_OCC_MAX];
-    size_t np = 1;
-    bn__vis_frame fr;
-    double hx, r[3], c[3] = {0, 0, 0}, pl[BN__FF_POLY_MAX + 3][4], sum = 0, diam = 0;
-    size_t npl = 0;
-    *shadowed = 0;
-    if (nocc == 0)
-        return bn__ff_point_polygon(x, n, b, nb);
-    if (nb < 3 || nb > BN__FF_POLY_MAX || nocc > BN__VIS_OCC_MAX)
+    double r[3];
+    memcpy(V->fr.o, b, sizeof V->fr.o);
+    bn_v3_sub(x, V->fr.o, r);
+    V->hx = bn_v3_dot(bn, r);
+    if (!(V->hx > 0))
         return 0;
-    memcpy(fr.o, b, sizeof fr.o);
-    bn_v3_sub(x, fr.o, r);
-    hx = bn_v3_dot(bn, r);
-    if (!(hx > 0))
-        return 0;
-    bn_v3_basis(bn, fr.e1, fr.e2);
-
-    /* b in the plane's frame, counter-clockwise (mirror the frame if it is not) */
-    poly[0].n = nb;
+    bn_v3_basis(bn, V->fr.e1, V->fr.e2);
+    V->poly[0].n = nb;
+    V->c[0] = V->c[1] = V->c[2] = 0;
     for (size_t k = 0; k < nb; k++) {
-        bn_v3_sub(b + 3 * k, fr.o, r);
-        poly[0].p[2 * k] = bn_v3_dot(fr.e1, r);
-        poly[0].p[2 * k + 1] = bn_v3_dot(fr.e2, r);
-        bn_v3_add(c, b + 3 * k, c);
+        bn_v3_sub(b + 3 * k, V->fr.o, r);
+        V->poly[0].p[2 * k] = bn_v3_dot(V->fr.e1, r);
+        V->poly[0].p[2 * k + 1] = bn_v3_dot(V->fr.e2, r);
+        bn_v3_add(V->c, b + 3 * k, V->c);
     }
-    if (bn__area2(poly[0].p, nb) < 0) {
-        bn_v3_scale(fr.e2, -1, fr.e2);
+    if (bn__area2(V->poly[0].p, nb) < 0) {
+        bn_v3_scale(V->fr.e2, -1, V->fr.e2);
         for (size_t k = 0; k < nb; k++)
-            poly[0].p[2 * k + 1] = -poly[0].p[2 * k + 1];
+            V->poly[0].p[2 * k + 1] = -V->poly[0].p[2 * k + 1];
     }
-    bn_v3_scale(c, 1.0 / (double)nb, c);
+    bn_v3_scale(V->c, 1.0 / (double)nb, V->c);
+    V->diam = 0;
     for (size_t k = 0; k < nb; k++)
-        for (size_t m = k + 1; m < nb; m++)
-            diam = fmax(diam, sqrt((poly[0].p[2 * k] - poly[0].p[2 * m]) * (poly[0].p[2 * k] - poly[0].p[2 * m]) +
-                                   (poly[0].p[2 * k + 1] - poly[0].p[2 * m + 1]) * (poly[0].p[2 * k + 1] - poly[0].p[2 * m + 1])));
-    bn__poly2_edges(&poly[0]);
+        for (size_t m = k + 1; m < nb; m++) {
+            const double *p = V->poly[0].p;
+            V->diam = fmax(V->diam, sqrt((p[2 * k] - p[2 * m]) * (p[2 * k] - p[2 * m]) +
+                                         (p[2 * k + 1] - p[2 * m + 1]) * (p[2 * k + 1] - p[2 * m + 1])));
+        }
+    bn__poly2_edges(&V->poly[0]);
+    return 1;
+}
 
-    /* the pyramid from x to b: a side plane through x and each edge, facing in; b's plane, shifted
-     * by tol so that faces lying in it do not block; a plane just short of x; x's tangent plane */
+/* The pyramid from x to b: a side plane through x and each edge, facing in; b's plane, shifted by
+ * tol so that faces lying in it do not block; a plane just short of x; x's tangent plane. */
+static void bn__vis_pyramid(bn__vis *V, const double x[3], const double n[3], const double *b, size_t nb,
+                            const double bn[3], double tol)
+{
+    V->npl = 0;
     for (size_t k = 0; k < nb; k++) {
         double ra[3], rb[3], nn[3], rc[3], len;
         bn_v3_sub(b + 3 * k, x, ra);
@@ -192,160 +204,197 @@ double bn__ff_point_visible(const double x[3], const double n[3], const double *
         len = bn_v3_len(nn);
         if (!(len > 0))
             continue;
-        bn_v3_sub(c, x, rc);
+        bn_v3_sub(V->c, x, rc);
         bn_v3_scale(nn, (bn_v3_dot(nn, rc) < 0 ? -1 : 1) / len, nn);
-        memcpy(pl[npl], nn, sizeof nn);
-        pl[npl++][3] = bn_v3_dot(nn, x);
+        memcpy(V->pl[V->npl], nn, sizeof nn);
+        V->pl[V->npl++][3] = bn_v3_dot(nn, x);
     }
-    memcpy(pl[npl], bn, 3 * sizeof(double));
-    pl[npl++][3] = bn_v3_dot(bn, fr.o) + tol;
-    pl[npl][0] = -bn[0];
-    pl[npl][1] = -bn[1];
-    pl[npl][2] = -bn[2];
-    pl[npl++][3] = -bn_v3_dot(bn, x) + 1e-9 * hx;
+    memcpy(V->pl[V->npl], bn, 3 * sizeof(double));
+    V->pl[V->npl++][3] = bn_v3_dot(bn, V->fr.o) + tol;
+    V->pl[V->npl][0] = -bn[0];
+    V->pl[V->npl][1] = -bn[1];
+    V->pl[V->npl][2] = -bn[2];
+    V->pl[V->npl++][3] = -bn_v3_dot(bn, x) + 1e-9 * V->hx;
     /* Nothing behind x's own plane can block. Exactly at the plane, not tol in front: where b
      * touches that plane (a wall seen grazing from a block's top) the side plane through x and
      * that edge is x's plane itself, and an offset would leave every occluder's cut edge a few
      * tol from b's edge once projected, where the inside and collinear tests can disagree. */
-    memcpy(pl[npl], n, 3 * sizeof(double));
-    pl[npl++][3] = bn_v3_dot(n, x);
+    memcpy(V->pl[V->npl], n, 3 * sizeof(double));
+    V->pl[V->npl++][3] = bn_v3_dot(n, x);
+}
 
+/* Occluder o (m corners) clipped to the pyramid and projected from x onto b's plane as
+ * poly[V->np]: 1 kept, 0 nothing of it in view (or beside b), -1 it covers b wholly. */
+static int bn__vis_occluder(bn__vis *V, const double x[3], const double bn[3], const double *o, size_t m, double tol)
+{
+    double buf[2][3 * BN__VIS_CORNERS], r[3], area;
+    size_t cur = 0, nb = V->poly[0].n;
+    bn__poly2 *P = &V->poly[V->np];
+    memcpy(buf[0], o, 3 * m * sizeof(double));
+    for (size_t k = 0; k < V->npl && m; k++) {
+        double p[3];
+        bn_v3_scale(V->pl[k], V->pl[k][3], p);   /* a point of the plane (unit normal) */
+        m = m + 1 < BN__VIS_CORNERS ? bn__poly_clip(buf[cur], m, V->pl[k], p, tol, buf[1 - cur]) : 0;
+        cur = 1 - cur;
+    }
+    if (!m)
+        return 0;
+    for (size_t k = 0; k < m; k++) {
+        double *y = buf[cur] + 3 * k, d[3], t, pp[3];
+        bn_v3_sub(y, x, d);
+        t = V->hx / -bn_v3_dot(bn, d);   /* y is between the planes: -bn.d in (0, hx) */
+        bn_v3_madd(x, t, d, pp);
+        bn_v3_sub(pp, V->fr.o, r);
+        P->p[2 * k] = bn_v3_dot(V->fr.e1, r);
+        P->p[2 * k + 1] = bn_v3_dot(V->fr.e2, r);
+    }
+    P->n = m;
+    area = bn__area2(P->p, m);
+    if (!(fabs(area) > 1e-14 * V->diam * V->diam))
+        return 0;
+    if (area < 0)
+        for (size_t k = 0; k < m / 2; k++)
+            for (int cc = 0; cc < 2; cc++) {
+                double t = P->p[2 * k + cc];
+                P->p[2 * k + cc] = P->p[2 * (m - 1 - k) + cc];
+                P->p[2 * (m - 1 - k) + cc] = t;
+            }
+    bn__poly2_edges(P);
+    if (P->lo[0] > V->poly[0].hi[0] - tol || P->hi[0] < V->poly[0].lo[0] + tol || P->lo[1] > V->poly[0].hi[1] - tol ||
+        P->hi[1] < V->poly[0].lo[1] + tol)
+        return 0;   /* beside b (rounding past the pyramid's sides) */
+    /* one projection (convex, clipped to b) covers b: nothing of it is seen */
+    for (size_t k = 0; k < nb; k++)
+        if (!bn__inside_tol(P, V->poly[0].p + 2 * k, tol))
+            return 1;
+    return -1;
+}
+
+/* Where edge k of poly[q] is cut by the other polygons' edges (crossings, collinear edges' ends),
+ * as parameters in [0, 1] with both ends, into ts (sorted); their count. */
+static size_t bn__vis_cuts(const bn__vis *V, size_t q, size_t k, double tol, double *ts)
+{
+    const double *p0 = V->poly[q].p + 2 * k, *d = V->poly[q].d + 2 * k;
+    double dlen = V->poly[q].len[k], elo[2], ehi[2];
+    size_t nt = 0;   /* at most two per edge of every polygon: ts never fills */
+    for (int cc = 0; cc < 2; cc++) {
+        elo[cc] = fmin(p0[cc], p0[cc] + d[cc]) - tol;
+        ehi[cc] = fmax(p0[cc], p0[cc] + d[cc]) + tol;
+    }
+    ts[nt++] = 0;
+    ts[nt++] = 1;
+    for (size_t s = 0; s < V->np; s++) {
+        const bn__poly2 *S = &V->poly[s];
+        if (s == q || S->lo[0] > ehi[0] || S->hi[0] < elo[0] || S->lo[1] > ehi[1] || S->hi[1] < elo[1])
+            continue;
+        for (size_t e = 0; e < S->n; e++) {
+            const double *c0 = S->p + 2 * e, *f = S->d + 2 * e;
+            double w[2], den;
+            if ((c0[0] > ehi[0] && c0[0] + f[0] > ehi[0]) || (c0[0] < elo[0] && c0[0] + f[0] < elo[0]) ||
+                (c0[1] > ehi[1] && c0[1] + f[1] > ehi[1]) || (c0[1] < elo[1] && c0[1] + f[1] < elo[1]))
+                continue;   /* apart */
+            w[0] = c0[0] - p0[0];
+            w[1] = c0[1] - p0[1];
+            den = bn__cross2(d, f);
+            if (fabs(den) > 1e-12 * dlen * S->len[e]) {
+                /* t = tn / den on this edge, u = un / den on the other: divide only a crossing */
+                double sg = den > 0 ? 1 : -1, tn = sg * bn__cross2(w, f), un = sg * bn__cross2(w, d), ad = fabs(den);
+                if (tn > 0 && tn < ad && un >= -1e-9 * ad && un <= (1 + 1e-9) * ad)
+                    ts[nt++] = tn / ad;
+            } else if (fabs(bn__cross2(d, w)) <= tol * dlen) {
+                /* collinear: the other edge's ends */
+                double t0 = (w[0] * d[0] + w[1] * d[1]) / (dlen * dlen);
+                double t1 = ((w[0] + f[0]) * d[0] + (w[1] + f[1]) * d[1]) / (dlen * dlen);
+                if (t0 > 0 && t0 < 1)
+                    ts[nt++] = t0;
+                if (t1 > 0 && t1 < 1)
+                    ts[nt++] = t1;
+            }
+        }
+    }
+    bn__sort(ts, nt);
+    return nt;
+}
+
+/* The pieces of edge k of poly[q] between its cuts that have the visible region on exactly one
+ * side, each one's Lambert term added to *sum in order (the visible region on the left:
+ * counter-clockwise). A piece lying on an edge of an earlier polygon is that polygon's to count. */
+static void bn__vis_edge(const bn__vis *V, size_t q, size_t k, const double *ts, size_t nt, const double x[3],
+                         const double n[3], double tol, double *sum)
+{
+    const double *p0 = V->poly[q].p + 2 * k, *d = V->poly[q].d + 2 * k, *left = V->poly[q].nl + 2 * k;
+    double dlen = V->poly[q].len[k], right[2] = {-left[0], -left[1]};
+    for (size_t a = 0; a + 1 < nt; a++) {
+        double m[2], A[3], B[3], pa[2], pb[2];
+        int dup = 0, in_l, in_r;
+        if (!((ts[a + 1] - ts[a]) * dlen > tol))
+            continue;
+        m[0] = p0[0] + 0.5 * (ts[a] + ts[a + 1]) * d[0];
+        m[1] = p0[1] + 0.5 * (ts[a] + ts[a + 1]) * d[1];
+        pa[0] = p0[0] + ts[a] * d[0];
+        pa[1] = p0[1] + ts[a] * d[1];
+        pb[0] = p0[0] + ts[a + 1] * d[0];
+        pb[1] = p0[1] + ts[a + 1] * d[1];
+        for (size_t s = 0; s < q && !dup; s++)
+            dup = bn__collinear_edge(&V->poly[s], pa, pb, m, tol);
+        if (dup)
+            continue;
+        /* b (q = 0) has itself on its left; an occluder has itself on its left and so never the
+         * visible region there */
+        in_l = q == 0;
+        in_r = q != 0 && bn__inside_moved(&V->poly[0], m, right, tol);
+        for (size_t s = 1; s < V->np && (in_l || in_r); s++) {
+            if (s == q)
+                continue;
+            if (in_l && bn__inside_moved(&V->poly[s], m, left, tol))
+                in_l = 0;
+            if (in_r && bn__inside_moved(&V->poly[s], m, right, tol))
+                in_r = 0;
+        }
+        if (in_l == in_r)
+            continue;
+        bn__lift(&V->fr, pa, A);
+        bn__lift(&V->fr, pb, B);
+        *sum += in_l ? bn__edge_term(x, n, A, B) : bn__edge_term(x, n, B, A);
+    }
+}
+
+double bn__ff_point_visible(const double x[3], const double n[3], const double *b, size_t nb, const double bn[3],
+                            const double *occ, const unsigned *occ_n, size_t nocc, double tol, uint32_t *shadowed)
+{
+    bn__vis V;
+    double sum = 0;
+    *shadowed = 0;
+    if (nocc == 0)
+        return bn__ff_point_polygon(x, n, b, nb);
+    if (nb < 3 || nb > BN__FF_POLY_MAX || nocc > BN__VIS_OCC_MAX)
+        return 0;
+    if (!bn__vis_base(&V, x, b, nb, bn))
+        return 0;
+    bn__vis_pyramid(&V, x, n, b, nb, bn, tol);
+    V.np = 1;
     /* occluders: clipped to the pyramid, projected from x onto b's plane */
     for (size_t q = 0; q < nocc; q++) {
-        double buf[2][3 * BN__VIS_CORNERS];
-        size_t m = occ_n[q], cur = 0;
-        memcpy(buf[0], occ + 12 * q, 3 * m * sizeof(double));
-        for (size_t k = 0; k < npl && m; k++) {
-            double p[3];
-            bn_v3_scale(pl[k], pl[k][3], p);   /* a point of the plane (unit normal) */
-            m = m + 1 < BN__VIS_CORNERS ? bn__poly_clip(buf[cur], m, pl[k], p, tol, buf[1 - cur]) : 0;
-            cur = 1 - cur;
-        }
-        if (!m)
+        int kept = bn__vis_occluder(&V, x, bn, occ + 12 * q, occ_n[q], tol);
+        if (kept == 0)
             continue;
-        for (size_t k = 0; k < m; k++) {
-            double *y = buf[cur] + 3 * k, d[3], t, pp[3];
-            bn_v3_sub(y, x, d);
-            t = hx / -bn_v3_dot(bn, d);   /* y is between the planes: -bn.d in (0, hx) */
-            bn_v3_madd(x, t, d, pp);
-            bn_v3_sub(pp, fr.o, r);
-            poly[np].p[2 * k] = bn_v3_dot(fr.e1, r);
-            poly[np].p[2 * k + 1] = bn_v3_dot(fr.e2, r);
-        }
-        poly[np].n = m;
-        {
-            double a = bn__area2(poly[np].p, m);
-            if (!(fabs(a) > 1e-14 * diam * diam))
-                continue;
-            if (a < 0)
-                for (size_t k = 0; k < m / 2; k++)
-                    for (int cc = 0; cc < 2; cc++) {
-                        double t = poly[np].p[2 * k + cc];
-                        poly[np].p[2 * k + cc] = poly[np].p[2 * (m - 1 - k) + cc];
-                        poly[np].p[2 * (m - 1 - k) + cc] = t;
-                    }
-        }
-        bn__poly2_edges(&poly[np]);
-        if (poly[np].lo[0] > poly[0].hi[0] - tol || poly[np].hi[0] < poly[0].lo[0] + tol ||
-            poly[np].lo[1] > poly[0].hi[1] - tol || poly[np].hi[1] < poly[0].lo[1] + tol)
-            continue;   /* beside b (rounding past the pyramid's sides) */
         *shadowed |= 1u << (q & 31);
-        {
-            /* one projection (convex, clipped to b) covers b: nothing of it is seen */
-            size_t k = 0;
-            for (; k < nb; k++)
-                if (!bn__inside_tol(&poly[np], poly[0].p + 2 * k, tol))
-                    break;
-            if (k == nb)
-                return 0;
-        }
-        np++;
+        if (kept < 0)
+            return 0;
+        V.np++;
     }
-    if (np == 1)
+    if (V.np == 1)
         return bn__ff_point_polygon(x, n, b, nb);
-
-    /* the boundary of b minus the union: every piece of every edge, cut where other edges cross
-     * it, that has the visible region on exactly one side. A piece lying on an edge of an earlier
-     * polygon is that polygon's to count. */
-    for (size_t q = 0; q < np; q++) {
-        for (size_t k = 0; k < poly[q].n; k++) {
-            const double *p0 = poly[q].p + 2 * k, *d = poly[q].d + 2 * k, *left = poly[q].nl + 2 * k;
-            double dlen = poly[q].len[k], right[2] = {-left[0], -left[1]}, ts[2 + 2 * (1 + BN__VIS_OCC_MAX) * BN__VIS_CORNERS];
-            double elo[2], ehi[2];
-            size_t nt = 0;   /* at most two per edge of every polygon: ts never fills */
-            if (!(dlen > tol))
+    /* the boundary of b minus the union: every piece of every edge, cut where other edges cross it,
+     * that has the visible region on exactly one side */
+    for (size_t q = 0; q < V.np; q++)
+        for (size_t k = 0; k < V.poly[q].n; k++) {
+            double ts[2 + 2 * (1 + BN__VIS_OCC_MAX) * BN__VIS_CORNERS];
+            size_t nt;
+            if (!(V.poly[q].len[k] > tol))
                 continue;
-            for (int cc = 0; cc < 2; cc++) {
-                elo[cc] = fmin(p0[cc], p0[cc] + d[cc]) - tol;
-                ehi[cc] = fmax(p0[cc], p0[cc] + d[cc]) + tol;
-            }
-            ts[nt++] = 0;
-            ts[nt++] = 1;
-            for (size_t s = 0; s < np; s++) {
-                if (s == q || poly[s].lo[0] > ehi[0] || poly[s].hi[0] < elo[0] || poly[s].lo[1] > ehi[1] ||
-                    poly[s].hi[1] < elo[1])
-                    continue;
-                for (size_t e = 0; e < poly[s].n; e++) {
-                    const double *c0 = poly[s].p + 2 * e, *f = poly[s].d + 2 * e;
-                    double w[2], den;
-                    if ((c0[0] > ehi[0] && c0[0] + f[0] > ehi[0]) || (c0[0] < elo[0] && c0[0] + f[0] < elo[0]) ||
-                        (c0[1] > ehi[1] && c0[1] + f[1] > ehi[1]) || (c0[1] < elo[1] && c0[1] + f[1] < elo[1]))
-                        continue;   /* apart */
-                    w[0] = c0[0] - p0[0];
-                    w[1] = c0[1] - p0[1];
-                    den = bn__cross2(d, f);
-                    if (fabs(den) > 1e-12 * dlen * poly[s].len[e]) {
-                        /* t = tn / den on this edge, u = un / den on the other: divide only a crossing */
-                        double sg = den > 0 ? 1 : -1, tn = sg * bn__cross2(w, f), un = sg * bn__cross2(w, d), ad = fabs(den);
-                        if (tn > 0 && tn < ad && un >= -1e-9 * ad && un <= (1 + 1e-9) * ad)
-                            ts[nt++] = tn / ad;
-                    } else if (fabs(bn__cross2(d, w)) <= tol * dlen) {
-                        /* collinear: the other edge's ends */
-                        double t0 = (w[0] * d[0] + w[1] * d[1]) / (dlen * dlen);
-                        double t1 = ((w[0] + f[0]) * d[0] + (w[1] + f[1]) * d[1]) / (dlen * dlen);
-                        if (t0 > 0 && t0 < 1)
-                            ts[nt++] = t0;
-                        if (t1 > 0 && t1 < 1)
-                            ts[nt++] = t1;
-                    }
-                }
-            }
-            bn__sort(ts, nt);
-            for (size_t a = 0; a + 1 < nt; a++) {
-                double m[2], A[3], B[3], pa[2], pb[2];
-                int dup = 0, in_l, in_r;
-                if (!((ts[a + 1] - ts[a]) * dlen > tol))
-                    continue;
-                m[0] = p0[0] + 0.5 * (ts[a] + ts[a + 1]) * d[0];
-                m[1] = p0[1] + 0.5 * (ts[a] + ts[a + 1]) * d[1];
-                pa[0] = p0[0] + ts[a] * d[0];
-                pa[1] = p0[1] + ts[a] * d[1];
-                pb[0] = p0[0] + ts[a + 1] * d[0];
-                pb[1] = p0[1] + ts[a + 1] * d[1];
-                for (size_t s = 0; s < q && !dup; s++)
-                    dup = bn__collinear_edge(&poly[s], pa, pb, m, tol);
-                if (dup)
-                    continue;
-                /* b (q = 0) has itself on its left; an occluder has itself on its left and so never
-                 * the visible region there */
-                in_l = q == 0;
-                in_r = q != 0 && bn__inside_moved(&poly[0], m, right, tol);
-                for (size_t s = 1; s < np && (in_l || in_r); s++) {
-                    if (s == q)
-                        continue;
-                    if (in_l && bn__inside_moved(&poly[s], m, left, tol))
-                        in_l = 0;
-                    if (in_r && bn__inside_moved(&poly[s], m, right, tol))
-                        in_r = 0;
-                }
-                if (in_l == in_r)
-                    continue;
-                bn__lift(&fr, pa, A);
-                bn__lift(&fr, pb, B);
-                /* the visible region on the left: counter-clockwise */
-                sum += in_l ? bn__edge_term(x, n, A, B) : bn__edge_term(x, n, B, A);
-            }
+            nt = bn__vis_cuts(&V, q, k, tol, ts);
+            bn__vis_edge(&V, q, k, ts, nt, x, n, tol, &sum);
         }
-    }
     return fmax(-sum / (2 * BN_PI), 0);
 }
