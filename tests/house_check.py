@@ -21,7 +21,6 @@ KNOWN_LONG = {}
 # circles between files (and between src/ directories, "dir NAME") not yet removed, from what each
 # object file calls (nm); and calls from src/transport up into src/formfactor
 KNOWN_CIRCLES = {
-    ("dir adapters", "dir scene"),
     ("dir bake", "dir gather", "dir image"),
 }
 KNOWN_UPHILL = set()

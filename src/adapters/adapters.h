@@ -29,6 +29,18 @@ bn_status bn__oiio_write_rgb8(const char *path, int w, int h, const unsigned cha
                               size_t nlabels, const char *font, const bn_attr *attrs, size_t nattrs, int *labels_ok,
                               bn_error *err);
 
+/* Where a reader puts the mesh it reads: vertices in order, then polygons of vertex indices; each
+ * returns 0 when out of memory. (The scene module passes its soup in; the adapter calls back, so
+ * that src/adapters depends on nothing above it.) */
+typedef struct bn__mesh_sink {
+    void *user;
+    int (*vertex)(void *user, const double p[3]);
+    int (*polygon)(void *user, const size_t *idx, unsigned n);
+} bn__mesh_sink;
+/* Binary OFF through OpenMesh, after a check of the header's counts and every face's corner
+ * count against the file (src/adapters/openmesh_io.cpp). Colours are not read (said once). */
+bn_status bn__read_off_binary(const char *path, const bn__mesh_sink *sink, const bn_log *log, bn_error *err);
+
 /* A baked mesh handed to OpenMesh for writing. */
 typedef struct bn__bake_mesh {
     size_t nverts;

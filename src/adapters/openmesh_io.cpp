@@ -5,7 +5,6 @@
 // their own templates (DEPENDENCIES.md gotcha 7); a middle-end warning, so a file-wide pragma.
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include "adapters/adapters.h"
-#include "scene/scene_internal.h"
 
 #include <OpenMesh/Core/IO/MeshIO.hh>
 #include <OpenMesh/Core/Mesh/PolyMesh_ArrayKernelT.hh>
@@ -205,36 +204,31 @@ static bn_status off_check_binary(const char *path, bn_error *err)
     return BN_OK;
 }
 
-// OpenMesh's mesh into the soup: vertices and faces, grey 0.5 (binary OFF colours are not read).
-static bn_status off_to_soup(const char *path, FloatMesh &mesh, bn__soup *out, const bn_log *log, bn_error *err)
+// OpenMesh's mesh into the sink: vertices and faces (binary OFF colours are not read).
+static bn_status off_to_sink(const char *path, FloatMesh &mesh, const bn__mesh_sink *out, const bn_log *log,
+                             bn_error *err)
 {
-    bn_material grey;
-    std::memset(&grey, 0, sizeof grey);
-    std::snprintf(grey.name, sizeof grey.name, "off0");
-    grey.rho[0] = grey.rho[1] = grey.rho[2] = 0.5;
-    if (!bn__soup_add_material(out, &grey))
-        return bn_error_set(err, BN_ENOMEM, "out of memory");
     for (auto v : mesh.vertices()) {
         const auto &p = mesh.point(v);
         double q[3] = {p[0], p[1], p[2]};
         for (int c = 0; c < 3; c++)
             if (!std::isfinite(q[c]))
                 return bn_error_set(err, BN_EINPUT, "%s: vertex %d has a non-finite coordinate", path, v.idx());
-        if (!bn__soup_add_vertex(out, q))
+        if (!out->vertex(out->user, q))
             return bn_error_set(err, BN_ENOMEM, "out of memory");
     }
     for (auto fh : mesh.faces()) {
         std::vector<size_t> idx;
         for (auto v : mesh.fv_range(fh))
             idx.push_back((size_t)v.idx());
-        if (!bn__soup_add_polygon(out, idx.data(), (unsigned)idx.size(), 0, 0))
+        if (!out->polygon(out->user, idx.data(), (unsigned)idx.size()))
             return bn_error_set(err, BN_ENOMEM, "out of memory");
     }
     bn_logf(log, BN_LOG_WARN, "%s: binary OFF: colours are not read; every face has reflectance 0.5", path);
     return BN_OK;
 }
 
-static bn_status read_off_binary(const char *path, bn__soup *out, const bn_log *log, bn_error *err)
+static bn_status read_off_binary(const char *path, const bn__mesh_sink *out, const bn_log *log, bn_error *err)
 {
     bn_status st = off_check_binary(path, err);
     if (st != BN_OK)
@@ -248,12 +242,12 @@ static bn_status read_off_binary(const char *path, bn__soup *out, const bn_log *
     }
     if (mesh.n_faces() == 0)
         return bn_error_set(err, BN_EINPUT, "%s: the OFF file has no faces", path);
-    return off_to_soup(path, mesh, out, log, err);
+    return off_to_sink(path, mesh, out, log, err);
 }
 
 }   // namespace
 
-extern "C" bn_status bn__read_off_binary(const char *path, bn__soup *out, const bn_log *log, bn_error *err)
+extern "C" bn_status bn__read_off_binary(const char *path, const bn__mesh_sink *out, const bn_log *log, bn_error *err)
 {
     try {
         return read_off_binary(path, out, log, err);

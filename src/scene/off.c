@@ -10,6 +10,7 @@
  * comments, and the fuzzer found it looping on malformed records and reserving whatever count a
  * header announces. Format: Geomview's OFF (http://www.geomview.org/docs/html/OFF.html). */
 #include "scene/scene_internal.h"
+#include "adapters/adapters.h"
 
 #include <ctype.h>
 #include <math.h>
@@ -278,6 +279,25 @@ static int bn__off_is_binary(const char *path, char *head, size_t cap, size_t *g
     return strstr(head, "BINARY") != NULL;   /* a NUL earlier on the line ends the search: not binary */
 }
 
+static int bn__sink_vertex(void *user, const double p[3]) { return bn__soup_add_vertex(user, p); }
+static int bn__sink_polygon(void *user, const size_t *idx, unsigned n)
+{
+    return bn__soup_add_polygon(user, idx, n, 0, 0);
+}
+
+/* Binary OFF through OpenMesh into the soup, every face grey 0.5 (material "off0"). */
+static bn_status bn__read_off_bin(const char *path, bn__soup *out, const bn_log *log, bn_error *err)
+{
+    bn__mesh_sink sink = {out, bn__sink_vertex, bn__sink_polygon};
+    bn_material grey;
+    memset(&grey, 0, sizeof grey);
+    snprintf(grey.name, sizeof grey.name, "off0");
+    grey.rho[0] = grey.rho[1] = grey.rho[2] = 0.5;
+    if (!bn__soup_add_material(out, &grey))
+        return bn_error_set(err, BN_ENOMEM, "out of memory");
+    return bn__read_off_binary(path, &sink, log, err);
+}
+
 bn_status bn__read_off(const char *path, bn__soup *out, const bn_log *log, bn_error *err)
 {
     bn__off O;
@@ -286,7 +306,7 @@ bn_status bn__read_off(const char *path, bn__soup *out, const bn_log *log, bn_er
     bn_status st;
     /* the keyword line decides: binary OFF is OpenMesh's to read, from the path */
     if (bn__off_is_binary(path, head, sizeof head, &got))
-        return bn__read_off_binary(path, out, log, err);
+        return bn__read_off_bin(path, out, log, err);
     memset(&O, 0, sizeof O);
     O.path = path;
     st = bn__read_file(path, &O.text, &size, err);

@@ -38,10 +38,10 @@ bn_status bn__read_obj(const char *path, bn__soup *out, const bn_log *log, bn_er
 bn_status bn__read_obj_stream(FILE *fp, const char *path, bn__soup *out, const bn_log *log, bn_error *err);
 /* PLY: our own reader (src/scene/ply.c), the file read once. */
 bn_status bn__read_ply(const char *path, bn__soup *out, const bn_log *log, bn_error *err);
-/* OFF: ASCII by our own reader (src/scene/off.c); binary OFF through OpenMesh (src/adapters),
- * which reads it from its path after a check of the header's counts against the file's size. */
+/* OFF: ASCII by our own reader (src/scene/off.c); binary OFF through OpenMesh (src/adapters,
+ * bn__read_off_binary into a sink over the soup), which reads it from its path after a check of
+ * the header's counts against the file's size. */
 bn_status bn__read_off(const char *path, bn__soup *out, const bn_log *log, bn_error *err);
-bn_status bn__read_off_binary(const char *path, bn__soup *out, const bn_log *log, bn_error *err);
 
 /* Grows *p (capacity *cap elements of elem bytes) to hold need; 0 when out of memory (soup.c). */
 int bn__grow(void **p, size_t *cap, size_t need, size_t elem);
