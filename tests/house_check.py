@@ -20,9 +20,7 @@ KNOWN_LONG = {}
 
 # circles between files (and between src/ directories, "dir NAME") not yet removed, from what each
 # object file calls (nm); and calls from src/transport up into src/formfactor
-KNOWN_CIRCLES = {
-    ("dir bake", "dir gather", "dir image"),
-}
+KNOWN_CIRCLES = set()
 KNOWN_UPHILL = set()
 
 # library files whose strings still name command-line flags, and how many

@@ -89,41 +89,6 @@ bn_status bn_png_write(const char *path, const bn_image *img, double ev, const b
 bn_status bn_contact_sheet_write(const char *path, const bn_layer *layers, size_t nlayers, double ev, int tile,
                                  const bn_attr *attrs, size_t nattrs, const bn_log *log, bn_error *err);
 
-/* ---- the per-bounce images of a solution ---- */
-
-typedef struct bn_bounces_opts {
-    const char *output;        /* FILE.exr; previews FILE.<layer>.png and FILE.sheet.png beside it */
-    int    half;               /* EXR in half floats */
-    int    previews;           /* write the PNGs and the contact sheet (default 1) */
-    int    tile;               /* contact sheet tile width, pixels (default 320) */
-    int    smooth;             /* interpolate baked vertex values (default 0: flat patches) */
-    double crease;             /* smooth: faces whose normals differ by more are not blended (degrees) */
-    int    auto_exposure;      /* preview exposure from L's 99th percentile (default 1); else `ev` */
-    double ev;
-    uint64_t seed;             /* pixel jitter, and the gather's samples */
-    int    threads;            /* 0 = the caller's (all cores by default) */
-    int    gather;             /* 1: a final gather per pixel (bounce/gather.h; needs bounces >= 1); 0: patch values */
-    int    light_samples;      /* gather: shadow rays per emitting face per pixel sample */
-    int    gather_samples;     /* gather: hemisphere rays per pixel sample */
-    int    gather_filter;      /* gather: same-face filter radius of the gathered terms, pixels */
-    int    quiet;              /* no progress bar */
-    const bn_attr *attrs;      /* provenance for every file (borrowed); the first 4 go into PNG text */
-    size_t nattrs;
-    bn_log log;                /* one note per file written */
-} bn_bounces_opts;
-void bn_bounces_opts_default(bn_bounces_opts *o);
-
-/* Renders every layer of a solution keeping terms E .. K^bounces E (layers[l], N*3 each, as
- * bn_layers_stack orders them: the terms, rest, L) through `cam` and writes the multi-layer EXR,
- * with the shading and the preview exposure added to `attrs`, then the previews and the contact
- * sheet. *ev_used (may be NULL) receives the preview exposure. Atomic per file. */
-/* The images' memory of bn_bounces_write for a width x height camera and `bounces` terms (every
- * layer in float RGB), checked before any work: BN_ENOMEM naming the size, the layers and the limit
- * (max_memory; 0: 80% of physical memory) when above it, or when the product overflows. */
-bn_status bn_bounces_check_memory(int width, int height, int bounces, size_t max_memory, bn_error *err);
-bn_status bn_bounces_write(const bn_scene *scene, const bn_rt *rt, const bn_camera *cam, const double *const *layers,
-                           int bounces, const bn_bounces_opts *o, double *ev_used, bn_error *err);
-
 #ifdef __cplusplus
 }
 #endif

@@ -294,7 +294,7 @@ static bn_status bn__job_ldr(bn__bake_job *j, double exposure_ev, bn_error *err)
     if (!(j->c8 = bn__malloc_array(j->nv, 3)))
         return bn__bake_oom(j->nv, err);
     for (size_t i = 0; i < 3 * j->nv; i++)
-        j->c8[i] = bn_tonemap_srgb8(j->vals[0][i], exposure_ev);
+        j->c8[i] = bn__srgb8(j->vals[0][i], exposure_ev);
     return BN_OK;
 }
 

@@ -1,5 +1,6 @@
-/* The automatic exposure shared by images and bakes: the 99th percentile of the luminance of n RGB
- * values (Rec. 709 weights, positive finite ones only) placed at 0.9. */
+/* What images and bakes share for display: the automatic exposure (the 99th percentile of the
+ * luminance of n RGB values, Rec. 709 weights, positive finite ones only, placed at 0.9) and the
+ * 8-bit sRGB encoding of an exposed linear value. */
 #include "base/internal.h"
 
 #include <math.h>
@@ -31,4 +32,15 @@ double bn__auto_exposure(const float *rgb, size_t n)
     }
     free(lum);
     return ev;
+}
+
+unsigned char bn__srgb8(double v, double ev)
+{
+    double x = v * exp2(ev), s;
+    if (!(x > 0))
+        return 0;   /* also NaN */
+    if (x >= 1)
+        return 255;
+    s = x <= 0.0031308 ? 12.92 * x : 1.055 * pow(x, 1 / 2.4) - 0.055;
+    return (unsigned char)floor(s * 255 + 0.5);
 }

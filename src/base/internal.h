@@ -56,6 +56,9 @@ void bn__threads_end(int prev);
 size_t bn__physical_memory(void);
 /* Images' and bakes' automatic exposure (EV): the 99th percentile luminance of n RGB values at 0.9. */
 double bn__auto_exposure(const float *rgb, size_t n);
+/* value x 2^ev, clamped to [0, 1] (NaN: 0), sRGB-encoded to 8 bits (base/exposure.c; public as
+ * bn_tonemap_srgb8). */
+unsigned char bn__srgb8(double value, double ev);
 
 /* Monotonic wall clock in seconds. */
 double bn__now(void);

@@ -11,16 +11,7 @@
 #define BN_FONT_DIR "/usr/share/fonts/truetype/dejavu"
 #endif
 
-unsigned char bn_tonemap_srgb8(double v, double ev)
-{
-    double x = v * exp2(ev), s;
-    if (!(x > 0))
-        return 0;   /* also NaN */
-    if (x >= 1)
-        return 255;
-    s = x <= 0.0031308 ? 12.92 * x : 1.055 * pow(x, 1 / 2.4) - 0.055;
-    return (unsigned char)floor(s * 255 + 0.5);
-}
+unsigned char bn_tonemap_srgb8(double v, double ev) { return bn__srgb8(v, ev); }
 
 double bn_image_auto_exposure(const bn_image *img)
 {

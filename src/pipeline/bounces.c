@@ -1,7 +1,7 @@
-/* The per-bounce images of a solution (include/bounce/image.h): every layer E, KE, K2E, ...,
+/* The per-bounce images of a solution (include/bounce/pipeline.h): every layer E, KE, K2E, ...,
  * rest, L rendered through one camera, written as one multi-layer EXR, an sRGB PNG per layer and
  * a labelled contact sheet. */
-#include "bounce/image.h"
+#include "bounce/pipeline.h"
 #include "bounce/bake.h"
 #include "bounce/gather.h"
 #include "base/internal.h"
