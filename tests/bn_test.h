@@ -103,6 +103,17 @@ char *bn_test_read_file(const char *path, size_t *size);
 int bn_test_file_exists(const char *path);
 
 /* F_ij of an operator with entries; fails the test if the operator cannot give it. */
+/* Perpendicular rectangles with a common edge of length l: the form factor from the w x l one to
+ * the h x l one (Howell's catalogue, C-14): the independent answer of several tests. */
+static inline double bn_test_F_perpendicular(double w, double h, double l)
+{
+    double W = w / l, H = h / l, w2 = W * W, h2 = H * H, q = sqrt(w2 + h2);
+    double a = (1 + w2) * (1 + h2) / (1 + w2 + h2), b = w2 * (1 + w2 + h2) / ((1 + w2) * (w2 + h2)),
+           c = h2 * (1 + h2 + w2) / ((1 + h2) * (h2 + w2));
+    return (W * atan(1 / W) + H * atan(1 / H) - q * atan(1 / q) + 0.25 * (log(a) + w2 * log(b) + h2 * log(c))) /
+           (3.14159265358979323846 * W);
+}
+
 static inline double bn_test_F(const bn_transport *k, size_t i, size_t j)
 {
     double v = NAN;

@@ -37,16 +37,6 @@ static double pub_parallel(double a, double b, double c)
             Y * sqrt(1 + x2) * atan(Y / sqrt(1 + x2)) - X * atan(X) - Y * atan(Y));
 }
 
-/* Perpendicular rectangles with a common edge of length l: from the w x l one to the h x l one (C-14). */
-static double pub_perpendicular(double w, double h, double l)
-{
-    double W = w / l, H = h / l, w2 = W * W, h2 = H * H, s = sqrt(w2 + h2);
-    double a = (1 + w2) * (1 + h2) / (1 + w2 + h2), b = w2 * (1 + w2 + h2) / ((1 + w2) * (w2 + h2)),
-           c = h2 * (1 + h2 + w2) / ((1 + h2) * (h2 + w2));
-    return (W * atan(1 / W) + H * atan(1 / H) - s * atan(1 / s) + 0.25 * (log(a) + w2 * log(b) + h2 * log(c))) /
-           (BN_PI_T * W);
-}
-
 /* Coaxial parallel disks of radii r1 (emitter) and r2 at distance h (C-41). */
 static double pub_disks(double r1, double r2, double h)
 {
@@ -210,7 +200,7 @@ BN_TEST(perpendicular_common_edge_published)
             double w = r[a], h = r[b];
             double fl[12] = {0, 0, 0, 0, 0, 1, w, 0, 1, w, 0, 0};   /* y = 0, facing +y, width w along x */
             double wa[12] = {0, 0, 0, 0, h, 0, 0, h, 1, 0, 0, 1};   /* x = 0, facing +x, height h */
-            BN_ASSERT_REL(bn_ff_polygon_pair(fl, 4, wa, 4, 0), pub_perpendicular(w, h, 1), BN_TOL_PUBLISHED);
+            BN_ASSERT_REL(bn_ff_polygon_pair(fl, 4, wa, 4, 0), bn_test_F_perpendicular(w, h, 1), BN_TOL_PUBLISHED);
         }
 }
 

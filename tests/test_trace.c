@@ -210,19 +210,8 @@ BN_TEST(plates_all_strategies)
     bn_scene_destroy(s);
 }
 
-/* Perpendicular rectangles with a common edge of length l: from the w x l one to the h x l one
- * (Howell C-14). */
-static double F_perpendicular(double w, double h, double l)
-{
-    double W = w / l, H = h / l, w2 = W * W, h2 = H * H, q = sqrt(w2 + h2);
-    double a = (1 + w2) * (1 + h2) / (1 + w2 + h2), b = w2 * (1 + w2 + h2) / ((1 + w2) * (w2 + h2)),
-           c = h2 * (1 + h2 + w2) / ((1 + h2) * (h2 + w2));
-    return (W * atan(1 / W) + H * atan(1 / H) - q * atan(1 / q) + 0.25 * (log(a) + w2 * log(b) + h2 * log(c))) /
-           (BN_PI * W);
-}
-
 /* A floor and a wall, unit squares meeting at a right angle, one patch each; the wall emits 1
- * and both reflect 0.9. With F = F_perpendicular(1, 1, 1) = 0.20004 both ways, the patch-constant
+ * and both reflect 0.9. With F = bn_test_F_perpendicular(1, 1, 1) = 0.20004 both ways, the patch-constant
  * transport radiosity solves gives KE(floor) = 0.9 F, K2E(wall) = 0.81 F^2, K3E(floor) =
  * 0.729 F^3 exactly. The patch model must estimate those (Sidak over 3 layers, normal bound at
  * 2^18 samples, resolving 2%); light transport itself (the continuous model) has the same KE but a K2E above
@@ -235,7 +224,7 @@ BN_TEST(patch_model_is_the_patch_constant_transport)
                                0, 0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1};   /* wall x = 0, normal +x */
     unsigned polys[10] = {4, 0, 1, 2, 3, 4, 4, 5, 6, 7}, mat[2] = {0, 1};
     bn_material m[2] = {{"floor", {0.9, 0.9, 0.9}, {0, 0, 0}}, {"wall", {0.9, 0.9, 0.9}, {1, 1, 1}}};
-    double F = F_perpendicular(1, 1, 1), exact[4] = {0, 0.9 * F, 0.81 * F * F, 0.729 * F * F * F};
+    double F = bn_test_F_perpendicular(1, 1, 1), exact[4] = {0, 0.9 * F, 0.81 * F * F, 0.729 * F * F * F};
     double crit = bn_normal_quantile_upper(-expm1(log1p(-ALPHA) / 3.0) / 2);
     bn_trace_patches r[2];
     bn_load_opts lo;
