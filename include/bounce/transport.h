@@ -106,6 +106,7 @@ bn_status bn_transport_to_dense(const bn_transport *k, double *F, bn_error *err)
  * it is kept; a new storage plugs in as one more table in src/transport (see storage.h there). */
 typedef enum bn_precision { BN_PRECISION_FLOAT, BN_PRECISION_DOUBLE } bn_precision;
 const char *bn_precision_name(bn_precision p);            /* "float", "double" */
+const char *bn_precision_names(void);                     /* "float|double" */
 int         bn_precision_parse(const char *s, bn_precision *out);   /* 0 on success */
 /* Relative rounding of one stored value: 2^-24 (float), 2^-53 (double). */
 double      bn_precision_epsilon(bn_precision p);

@@ -83,7 +83,7 @@ void bn_cli_pipeline_opts(const bn_cli_scene *so, const bn_cli_ff *ff, const bn_
     out->mesh_auto = !(so->patch_size > 0) && !so->patches && !so->no_subdivide;
     if (ff) {
         bn_cli_ff_opts(ff, c, &out->ff);
-        out->auto_precision = ff->precision == 0;
+        out->auto_precision = !ff->precision || strcmp(ff->precision, "auto") == 0;
         out->transport = !ff->transport && ff->storage ? ff->storage : ff->transport ? ff->transport : "auto";
         bn_cli_hier_opts(ff, &out->hier);
     }

@@ -103,7 +103,7 @@ extern const char bn_cli_exit_codes[];
 typedef struct bn_cli_ff {
     const char *method;       /* one of bn_ff_method_names(); NULL = analytic */
     int    samples;           /* 0 = the method's default */
-    int    precision;         /* index into "auto|float|double" */
+    const char *precision;    /* "auto" (or NULL) or one of bn_precision_names() */
     const char *storage;      /* a storage name (bn_storage_names()); NULL = the default */
     double sparse_threshold;
     size_t max_memory;        /* bytes, 0 = 80% of physical memory */

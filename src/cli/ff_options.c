@@ -43,8 +43,8 @@ void bn_cli_add_ff(bn_optset *s, bn_cli_ff *o)
     bn_optset_add(s, (bn_opt){"samples", 0, BN_OPT_INT, &o->samples, NULL, 1, 1 << 24, "N",
                               "analytic: shadow rays per pair an occluder may block (default 32); montecarlo: "
                               "point pairs per pair (64); hemisphere: rays per patch (4096)"});
-    bn_optset_add(s, (bn_opt){"precision", 0, BN_OPT_CHOICE, &o->precision, "auto|float|double", 0, 0,
-                              "auto|float|double",
+    bn_optset_add(s, (bn_opt){"precision", 0, BN_OPT_NAME, &o->precision, bn_cli_auto_or(bn_precision_names()), 0, 0,
+                              bn_cli_auto_or(bn_precision_names()),
                               "storage precision of F (default auto: float, or double when float's rounding times "
                               "1/(1 - rho_max) would exceed --tol; sums are always double)"});
     bn_optset_add(s, (bn_opt){"storage", 0, BN_OPT_NAME, &o->storage, bn_storage_names(), 0, 0, bn_storage_names(),
@@ -71,7 +71,9 @@ void bn_cli_ff_opts(const bn_cli_ff *o, const bn_cli_common *c, bn_formfactor_op
     if (o->method)
         bn_ff_method_parse(o->method, &out->method);   /* checked against the names when parsed */
     out->samples = o->samples;
-    out->precision = o->precision == 2 ? BN_PRECISION_DOUBLE : BN_PRECISION_FLOAT;   /* auto starts from float */
+    out->precision = BN_PRECISION_FLOAT;   /* auto starts from float */
+    if (o->precision && strcmp(o->precision, "auto") != 0)
+        bn_precision_parse(o->precision, &out->precision);   /* checked against the names when parsed */
     if (o->storage)
         out->storage = o->storage;
     out->sparse_threshold = o->sparse_threshold;

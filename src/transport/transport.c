@@ -304,18 +304,25 @@ bn_status bn_transport_to_dense(const bn_transport *k, double *F, bn_error *err)
     return st;
 }
 
-/* ---- precisions ---- */
+/* ---- precisions: one table (the enum's order) ---- */
 
-const char *bn_precision_name(bn_precision p) { return p == BN_PRECISION_DOUBLE ? "double" : "float"; }
+#define BN__PRECISIONS(X) X("float") X("double")
+static const char *const bn__precision_names[] = {BN__PRECISIONS(BN__NAME_ITEM)};
+static const char bn__precision_list[] = BN__PRECISIONS(BN__NAME_BAR);
+
+const char *bn_precision_names(void) { return bn__precision_list + 1; }
+
+const char *bn_precision_name(bn_precision p)
+{
+    return (unsigned)p < sizeof bn__precision_names / sizeof *bn__precision_names ? bn__precision_names[p] : "?";
+}
 
 int bn_precision_parse(const char *s, bn_precision *out)
 {
-    if (strcmp(s, "float") == 0)
-        *out = BN_PRECISION_FLOAT;
-    else if (strcmp(s, "double") == 0)
-        *out = BN_PRECISION_DOUBLE;
-    else
+    int i = bn__name_find(bn__precision_names, sizeof bn__precision_names / sizeof *bn__precision_names, s);
+    if (i < 0)
         return -1;
+    *out = (bn_precision)i;
     return 0;
 }
 
