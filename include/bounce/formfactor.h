@@ -21,6 +21,11 @@ typedef enum bn_ff_method {
 const char *bn_ff_method_name(bn_ff_method m);   /* "analytic", "montecarlo", "hemisphere" */
 const char *bn_ff_method_names(void);            /* "analytic|montecarlo|hemisphere" */
 int bn_ff_method_parse(const char *name, bn_ff_method *m);   /* 0, or -1 for no such method */
+/* The analytic method's visibility of partly occluded pairs (bn_formfactor_opts.exact_visibility):
+ * "exact" (1) or "rays" (0). */
+const char *bn_ff_visibility_name(int exact);
+const char *bn_ff_visibility_names(void);        /* "exact|rays" */
+int bn_ff_visibility_parse(const char *name, int *exact);    /* 0, or -1 for no such name */
 
 /* The analytic method's relative tolerance per pair by default. Every unoccluded pair goes by the
  * double contour integral, whose Gauss-Kronrod panels converge geometrically: 1e-9 costs the

@@ -109,7 +109,7 @@ typedef struct bn_cli_ff {
     size_t max_memory;        /* bytes, 0 = 80% of physical memory */
     double tolerance;         /* 0 = default */
     int    quadrature_only;
-    int    visibility;        /* index into "exact|rays" (default exact) */
+    const char *visibility;   /* one of bn_ff_visibility_names() (NULL: exact) */
     const char *cache;        /* NULL: no cache */
     const char *transport;    /* one of bn_pipeline_transports(); NULL = auto */
     double eps;               /* hierarchy: link tolerance (< 0: the default) */

@@ -57,7 +57,8 @@ void bn_cli_add_ff(bn_optset *s, bn_cli_ff *o)
                               "analytic: relative tolerance per pair (default 1e-9; every pair by the closed form, whose cost hardly depends on it)"});
     bn_optset_add(s, (bn_opt){"ff-quadrature-only", 0, BN_OPT_FLAG, &o->quadrature_only, NULL, 0, 0, NULL,
                               "analytic: every pair by the point kernel's quadrature instead of the closed form (the path before it; for comparisons)"});
-    bn_optset_add(s, (bn_opt){"ff-visibility", 0, BN_OPT_CHOICE, &o->visibility, "exact|rays", 0, 0, "exact|rays",
+    bn_optset_add(s, (bn_opt){"ff-visibility", 0, BN_OPT_NAME, &o->visibility, bn_ff_visibility_names(), 0, 0,
+                              bn_ff_visibility_names(),
                               "analytic, partly occluded pairs: exact (default), the visible part exactly at each "
                               "point of one patch, integrated (rows of closed scenes within 1e-4), or rays, 32 shadow "
                               "rays per pair (--samples; rows off by a few 1e-3, about a third of the time)"});
@@ -81,7 +82,8 @@ void bn_cli_ff_opts(const bn_cli_ff *o, const bn_cli_common *c, bn_formfactor_op
     if (o->tolerance > 0)
         out->tolerance = o->tolerance;
     out->quadrature_only = o->quadrature_only;
-    out->exact_visibility = o->visibility == 0;
+    if (o->visibility)
+        bn_ff_visibility_parse(o->visibility, &out->exact_visibility);   /* checked when parsed */
     out->seed = c->seed;
     out->quiet = c->quiet;
     out->cache_path = o->cache;

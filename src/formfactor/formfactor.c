@@ -49,6 +49,22 @@ int bn_ff_method_parse(const char *name, bn_ff_method *m)
     return i >= 0 ? 0 : -1;
 }
 
+/* The analytic method's visibility of partly occluded pairs: the exact visible part, or rays. */
+#define BN__FF_VISIBILITIES(X) X("exact") X("rays")
+static const char *const bn__ff_visibility_names[] = {BN__FF_VISIBILITIES(BN__NAME_ITEM)};
+static const char bn__ff_visibility_list[] = BN__FF_VISIBILITIES(BN__NAME_BAR);
+
+const char *bn_ff_visibility_name(int exact) { return bn__ff_visibility_names[exact ? 0 : 1]; }
+const char *bn_ff_visibility_names(void) { return bn__ff_visibility_list + 1; }
+
+int bn_ff_visibility_parse(const char *name, int *exact)
+{
+    int i = bn__name_find(bn__ff_visibility_names, 2, name);
+    if (i >= 0)
+        *exact = i == 0;
+    return i >= 0 ? 0 : -1;
+}
+
 int bn_formfactor_default_samples(bn_ff_method m)
 {
     return m == BN_FF_ANALYTIC ? 32 : m == BN_FF_MONTECARLO ? 64 : 4096;
@@ -75,12 +91,12 @@ static int bn__samples(const bn_formfactor_opts *o)
 
 void bn_formfactor_opts_describe(const bn_formfactor_opts *o, char *buf, size_t size)
 {
-    snprintf(buf, size, "method=%s samples=%d seed=%llu precision=%s storage=%s sparse_threshold=%.17g tolerance=%.17g%s%s",
+    snprintf(buf, size, "method=%s samples=%d seed=%llu precision=%s storage=%s sparse_threshold=%.17g tolerance=%.17g%s%s%s",
              bn_ff_method_name(o->method), bn__samples(o), (unsigned long long)o->seed,
              bn_precision_name(o->precision), o->storage ? o->storage : BN_STORAGE_DEFAULT, o->sparse_threshold,
              o->method == BN_FF_ANALYTIC ? (o->tolerance > 0 ? o->tolerance : BN_FF_TOLERANCE_DEFAULT) : 0.0,
              o->method == BN_FF_ANALYTIC && o->quadrature_only ? " quadrature_only=1" : "",
-             o->method != BN_FF_ANALYTIC ? "" : o->exact_visibility ? " visibility=exact" : " visibility=rays");
+             o->method != BN_FF_ANALYTIC ? "" : " visibility=", o->method != BN_FF_ANALYTIC ? "" : bn_ff_visibility_name(o->exact_visibility));
 }
 
 /* ---- geometry shared by every pair ---- */

@@ -128,13 +128,11 @@ static bn_status bn__flat_popts(const bn_flat_opts *o, bn_flat *f, char *msg, si
         snprintf(f->transport_opt, sizeof f->transport_opt, "%s", o->transport);
         po->transport = f->transport_opt;
     }
-    if (o->visibility) {
-        if (strcmp(o->visibility, "exact") != 0 && strcmp(o->visibility, "rays") != 0) {
-            char t[160];
-            snprintf(t, sizeof t, "visibility '%.64s' is not one of exact, rays", o->visibility);
-            return bn__flat_fail(BN_EUSAGE, t, msg, msglen);
-        }
-        po->ff.exact_visibility = strcmp(o->visibility, "exact") == 0;   /* the hierarchy's ff is copied from it */
+    /* the hierarchy's ff is copied from po->ff */
+    if (o->visibility && bn_ff_visibility_parse(o->visibility, &po->ff.exact_visibility) != 0) {
+        char t[160];
+        snprintf(t, sizeof t, "visibility '%.64s' is not one of %s", o->visibility, bn_ff_visibility_names());
+        return bn__flat_fail(BN_EUSAGE, t, msg, msglen);
     }
     if (bn__flat_ranges(o, msg, msglen) != BN_OK)
         return BN_EUSAGE;
