@@ -579,6 +579,42 @@ BN_TEST(cli_outputs_cache_and_limits)
     BN_ASSERT_EQ(bn_test_bounce(cmd, &out), 0);
     BN_ASSERT(strstr(out, "read from the cache") == NULL);
     free(out);
+    /* other colours and lights, the same geometry: F is reused, and K takes the new reflectance */
+    {
+        const char *obj = bn_test_tmp("recolour.obj"), *mtl = bn_test_tmp("plates.mtl"), *csv2 = bn_test_tmp("K.csv");
+        char *src = bn_test_read_file(scene, NULL), *k;
+        FILE *fp = fopen(obj, "w");
+        BN_ASSERT(src && fp);
+        fputs(src, fp);
+        fclose(fp);
+        free(src);
+        fp = fopen(mtl, "w");
+        BN_ASSERT(fp != NULL);
+        fputs("newmtl emitter\nKd 0 0 0\nKe 2 2 2\nnewmtl receiver\nKd 0.25 0.25 0.25\n", fp);
+        fclose(fp);
+        snprintf(cmd, sizeof cmd, "solve %s --no-subdivide --cache %s --samples 8 -n 1 -o %s", obj, cache, csv2);
+        BN_ASSERT_EQ(bn_test_bounce(cmd, &out), 0);
+        BN_ASSERT(strstr(out, "form factors read from cache") != NULL);
+        free(out);
+        k = bn_test_read_file(csv2, NULL);
+        BN_ASSERT(k != NULL);
+        /* the receiver's KE_R (the 11th column: patch,face,material,area,L_RGB,E_RGB,KE_R) is
+         * rho Le F = 0.25 x 2 x 0.199824 with the cached F and the new materials */
+        {
+            const char *row = strstr(k, "\n1,1,receiver,");
+            double ke = NAN;
+            BN_ASSERT(row != NULL);
+            row++;
+            for (int field = 0; field < 10 && row; field++) {
+                row = strchr(row, ',');
+                row = row ? row + 1 : NULL;
+            }
+            BN_ASSERT(row != NULL);
+            ke = strtod(row, NULL);
+            BN_ASSERT_REL(ke, 0.25 * 2 * 0.199824, 1e-5);
+        }
+        free(k);
+    }
     /* Monte Carlo pairs draw on the seed: the same seed hits, another one misses */
     snprintf(cmd, sizeof cmd, "formfactors %s --no-subdivide --ff montecarlo --cache %s", scene, cache);
     BN_ASSERT_EQ(bn_test_bounce(cmd, &out), 0);

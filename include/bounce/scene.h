@@ -125,6 +125,9 @@ bn_scene_stats     bn_scene_stats_get(const bn_scene *s);
 void               bn_scene_bounds(const bn_scene *s, double lo[3], double hi[3]);
 /* A digest of geometry, materials and patches (FNV-1a 64), for cache keys. */
 unsigned long long bn_scene_digest(const bn_scene *s);
+/* The same over the geometry alone (unit, vertices, polygons, patches), not the materials: what
+ * form factors depend on, so the form-factor cache is hit by a relit or recoloured scene. */
+unsigned long long bn_scene_geometry_digest(const bn_scene *s);
 
 /* Per-patch material helpers (borrowed scene). */
 const bn_material *bn_patch_material(const bn_scene *s, size_t patch);

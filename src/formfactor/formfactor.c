@@ -1061,7 +1061,9 @@ static double bn__rowsum_tol(const bn_formfactor_opts *o)
 
 /* ---- the stages of the assembly ---- */
 
-/* The cache key: everything that changes F (scene, meshing through its digest, options). The seed
+/* The cache key: everything that changes F (the scene's geometry and meshing through their digest,
+ * not its materials: the file holds F, and K = diag(rho) F is made with the scene's rho on reading;
+ * the options). The seed
  * is part of it only when the assembly drew random samples (Monte Carlo pairs, hemisphere rays, the
  * closed form's shadow rays): `seeded` 0 writes "seed=unused", which any seed's lookup accepts. */
 static void bn__cache_key(const bn_scene *scene, const bn_formfactor_opts *o, size_t n, int seeded, char *key,
@@ -1076,8 +1078,8 @@ static void bn__cache_key(const bn_scene *scene, const bn_formfactor_opts *o, si
         snprintf(rest, sizeof rest, "%s", after ? after : "");
         snprintf(at, sizeof desc - (size_t)(at - desc), " seed=unused%s", rest);
     }
-    snprintf(key, size, "bounce-ff-cache v2 bounce=%s scene=%016llx patches=%zu %s", bn_version(),
-             (unsigned long long)bn_scene_digest(scene), n, desc);
+    snprintf(key, size, "bounce-ff-cache v3 bounce=%s geometry=%016llx patches=%zu %s", bn_version(),
+             (unsigned long long)bn_scene_geometry_digest(scene), n, desc);
 }
 
 /* The storage's builder, refused with the remedies when F and the work buffers exceed the limit. */

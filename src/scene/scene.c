@@ -643,6 +643,24 @@ void bn_scene_emitted_power(const bn_scene *s, double watts[3])
             watts[c] += BN_PI * s->faces[f].area * m * m * s->mats[s->faces[f].material].Le[c];
 }
 
+/* The geometry alone: unit, vertices, polygons, patches (what F depends on). */
+static uint64_t bn__geometry_digest(const bn_scene *s, uint64_t h)
+{
+    int u = (int)s->unit;
+    h = bn__fnv1a(h, &u, sizeof u);
+    h = bn__fnv1a(h, s->verts, s->nverts * 3 * sizeof(double));
+    h = bn__fnv1a(h, s->fidx, s->nfidx * sizeof(size_t));
+    h = bn__fnv1a(h, s->pverts, s->npverts * 3 * sizeof(double));
+    for (size_t p = 0; p < s->npatches; p++)
+        h = bn__fnv1a(h, s->patches[p].corner, sizeof s->patches[p].corner);
+    return h;
+}
+
+unsigned long long bn_scene_geometry_digest(const bn_scene *s)
+{
+    return (unsigned long long)bn__geometry_digest(s, BN__FNV_INIT);
+}
+
 unsigned long long bn_scene_digest(const bn_scene *s)
 {
     uint64_t h = BN__FNV_INIT;
