@@ -3,10 +3,60 @@
  * errors, the monitor's history. */
 #include "bn_test.h"
 #include "bounce/flat.h"
+#include "bounce/bake.h"
+#include "bounce/gather.h"
+#include "bounce/pipeline.h"
+#include "bounce/study.h"
 
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+
+/* One vocabulary: names() lists `count` names (the enum's size, counted from the header), each
+ * parses to its position and names itself; `anchor` parses to the enumerator `value` the header
+ * gives it; a made-up name does not parse; a value past the end is "?". */
+#define CHECK_VOCABULARY(P, T, count, anchor, value)                                                \
+    do {                                                                                            \
+        char list[256], *save = NULL;                                                               \
+        int i = 0;                                                                                  \
+        T v;                                                                                        \
+        snprintf(list, sizeof list, "%s", P##_names());                                             \
+        for (char *t = strtok_r(list, "|", &save); t; t = strtok_r(NULL, "|", &save), i++) {        \
+            BN_ASSERT_EQ(P##_parse(t, &v), 0);                                                      \
+            BN_ASSERT_EQ((int)v, i);                                                                \
+            BN_ASSERT(strcmp(P##_name(v), t) == 0);                                                 \
+        }                                                                                           \
+        BN_ASSERT_EQ(i, (int)(count));                                                              \
+        BN_ASSERT_EQ(P##_parse(anchor, &v), 0);                                                     \
+        BN_ASSERT_EQ((int)v, (int)(value));                                                         \
+        BN_ASSERT_EQ(P##_parse("no-such-name", &v), -1);                                            \
+        BN_ASSERT_EQ(P##_parse(NULL, &v), -1);                                                      \
+        BN_ASSERT(strcmp(P##_name((T)(count)), "?") == 0);                                          \
+    } while (0)
+
+/* Every vocabulary is one table: its list, its parse and its names agree, and the flat API hands
+ * bindings the same lists. */
+BN_TEST(vocabularies_list_parse_and_name_agree)
+{
+    CHECK_VOCABULARY(bn_solve_method, bn_solve_method, BN_SOLVE_DIRECT + 1, "gauss-seidel", BN_SOLVE_GAUSS_SEIDEL);
+    CHECK_VOCABULARY(bn_solve_stop, bn_solve_stop, BN_SOLVE_STOP_PATCH + 1, "bound", BN_SOLVE_STOP_BOUND);
+    CHECK_VOCABULARY(bn_ff_method, bn_ff_method, BN_FF_HEMISPHERE + 1, "hemisphere", BN_FF_HEMISPHERE);
+    CHECK_VOCABULARY(bn_precision, bn_precision, BN_PRECISION_DOUBLE + 1, "double", BN_PRECISION_DOUBLE);
+    CHECK_VOCABULARY(bn_unit, bn_unit, BN_UNIT_MM + 1, "mm", BN_UNIT_MM);
+    CHECK_VOCABULARY(bn_trace_strategy, bn_trace_strategy, BN_TRACE_NEE + 1, "nee", BN_TRACE_NEE);
+    CHECK_VOCABULARY(bn_trace_model, bn_trace_model, BN_TRACE_PATCH + 1, "patch", BN_TRACE_PATCH);
+    CHECK_VOCABULARY(bn_disc, bn_disc, BN_DISC_NONE + 1, "fine", BN_DISC_FINE);
+    CHECK_VOCABULARY(bn_gather_mode, bn_gather_mode, BN_GATHER_NONE + 1, "none", BN_GATHER_NONE);
+    CHECK_VOCABULARY(bn_bake_mesh, bn_bake_mesh, BN_BAKE_INPUT + 1, "input", BN_BAKE_INPUT);
+    CHECK_VOCABULARY(bn_study_param, bn_study_param, BN_STUDY_PARAM_COUNT, "eps", BN_STUDY_EPS);
+    CHECK_VOCABULARY(bn_study_ref, bn_study_ref, BN_STUDY_REF_TRACE + 1, "trace", BN_STUDY_REF_TRACE);
+    CHECK_VOCABULARY(bn_study_metric, bn_study_metric, BN_STUDY_METRIC_PATCH + 1, "patch", BN_STUDY_METRIC_PATCH);
+    BN_ASSERT(strcmp(bn_flat_names("method"), bn_solve_method_names()) == 0);
+    BN_ASSERT(strcmp(bn_flat_names("gather"), bn_gather_mode_names()) == 0);
+    BN_ASSERT(strcmp(bn_flat_names("transport"), "auto|dense|sparse|hierarchical") == 0);
+    BN_ASSERT(strcmp(bn_flat_names("storage"), "dense|sparse") == 0);
+    BN_ASSERT(bn_flat_names("colour") == NULL && bn_flat_names(NULL) == NULL);
+}
 
 static const char *furnace(void) { return bn_test_path("meshes/furnace-box.obj"); }
 

@@ -58,8 +58,14 @@ typedef struct bn_bake_layer {
     const double *patch_values;   /* N*3 (borrowed) */
 } bn_bake_layer;
 
+/* The mesh a bake is written on (bn_bake_write_opts.input_mesh is one of these). */
+typedef enum bn_bake_mesh { BN_BAKE_ELEMENTS, BN_BAKE_INPUT } bn_bake_mesh;
+const char *bn_bake_mesh_name(bn_bake_mesh v);
+const char *bn_bake_mesh_names(void);   /* "elements|input" */
+int bn_bake_mesh_parse(const char *s, bn_bake_mesh *out);   /* 0, or -1 for no such name */
+
 typedef struct bn_bake_write_opts {
-    int    input_mesh;   /* 1: the faces are the scene's input polygons (after triangulation of
+    int    input_mesh;   /* BN_BAKE_INPUT (1): the faces are the scene's input polygons (after triangulation of
                             non-planar quads), each corner taking the value of the output vertex at
                             that point (the patches around it on its smooth surface); 0: the
                             faces are the patches (the element mesh) */

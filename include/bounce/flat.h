@@ -39,6 +39,10 @@ void bn_flat_opts_default(bn_flat_opts *o);
 /* sizeof(bn_flat_opts) in this library: a binding that lays the struct out itself (Python's ctypes)
  * compares it with its own before the first call, so a field added on one side fails loudly. */
 size_t bn_flat_opts_size(void);
+/* The names of a vocabulary, "|"-separated, by the parameter that takes them: "method", "transport",
+ * "storage", "precision", "ff", "visibility", "unit", "stop", "mesh", "gather", "strategy", "model";
+ * NULL for another word. Bindings offer these, not copies of their own. */
+const char *bn_flat_names(const char *vocabulary);
 
 /* Loads, meshes, builds K and solves `path`. On failure *out is NULL, the status is returned and
  * msg (msglen bytes) holds bounce's message. BN_ENOTCONV keeps the unconverged answer in *out. */
@@ -81,20 +85,21 @@ void bn_flat_ff_diagnostics(const bn_flat *f, double out[12]);
 bn_status bn_flat_form_factors(const bn_flat *f, double *F, char *msg, size_t msglen);
 
 /* Bakes the solution to vertex colours as `bounce bake` does: out by extension (.ply, .om, .obj,
- * .glb, .gltf); per_bounce adds every term; input_mesh: the scene's polygons instead of the patches;
+ * .glb, .gltf); per_bounce adds every term; mesh: a bn_flat_names("mesh") name, "elements" (NULL,
+ * the default: the patches) or "input" (the scene's polygons);
  * ldr: 8-bit sRGB colours (glTF: the COLOR_1 set beside); exposure_ev: NAN or inf for automatic;
  * crease_deg <= 0: the default 30. Provenance names the caller ("python" for the package). */
-bn_status bn_flat_bake(const bn_flat *f, const char *out, int per_bounce, int input_mesh, int ldr, double exposure_ev,
+bn_status bn_flat_bake(const bn_flat *f, const char *out, int per_bounce, const char *mesh, int ldr, double exposure_ev,
                        double crease_deg, const char *caller, char *msg, size_t msglen);
 
 /* Camera images of every layer as `bounce bounces` writes them: out (FILE.exr, one layer per term,
  * rest and L) and, with previews, FILE.<layer>.png and the contact sheet. The camera is the scene's
  * NAME.camera sidecar, else the default in front of the box; eye, look (3 each) and fov_deg > 0
- * override it; width, height, spp > 0 override its size and supersampling. gather: 1 for the final
- * gather per pixel (bounce/gather.h; `bounce bounces`' default; needs a solve keeping KE), 0 for the
- * value of the patch each pixel sees (`--gather none`). */
+ * override it; width, height, spp > 0 override its size and supersampling. gather: a
+ * bn_flat_names("gather") name, "final" (NULL, the default: the final gather per pixel,
+ * bounce/gather.h; needs a solve keeping KE) or "none" (the value of the patch each pixel sees). */
 bn_status bn_flat_images(const bn_flat *f, const char *out, int width, int height, int spp, const double *eye,
-                         const double *look, double fov_deg, int previews, int smooth, int half, int gather,
+                         const double *look, double fov_deg, int previews, int smooth, int half, const char *gather,
                          const char *caller, char *msg, size_t msglen);
 
 /* A caller's own operator: apply(user, x, y) sets y = K x for N x 3 interleaved x (no aliasing)

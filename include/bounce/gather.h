@@ -34,6 +34,14 @@ extern "C" {
  * leave the penumbrae, which the median does not weigh, visibly noisy). */
 #define BN_GATHER_PATCHES 300
 
+/* How images (and bakes) get their values: FINAL, a gather at each pixel's point (closed-form
+ * direct light with visibility, a hemisphere gather of the solved terms for k >= 2); NONE, the value
+ * of the patch each pixel sees. */
+typedef enum bn_gather_mode { BN_GATHER_FINAL, BN_GATHER_NONE } bn_gather_mode;
+const char *bn_gather_mode_name(bn_gather_mode v);
+const char *bn_gather_mode_names(void);   /* "final|none" */
+int bn_gather_mode_parse(const char *s, bn_gather_mode *out);   /* 0, or -1 for no such name */
+
 typedef struct bn_gather_opts {
     int light_samples;               /* >= 1; rounded up to a stratified grid */
     int hemi_samples;                /* >= 1; rounded up to a stratified grid */

@@ -157,6 +157,9 @@ bn_status bn_bounces_write(const bn_scene *scene, const bn_rt *rt, const bn_came
  * second level underestimates the error where the solution is singular (concave corners, contacts):
  * the continuous check states no false-alarm rate there. */
 typedef enum bn_disc { BN_DISC_AUTO, BN_DISC_COARSE, BN_DISC_FINE, BN_DISC_NONE } bn_disc;
+const char *bn_disc_name(bn_disc v);
+const char *bn_disc_names(void);   /* "auto|coarse|fine|none" */
+int bn_disc_parse(const char *s, bn_disc *out);   /* 0, or -1 for no such name */
 
 typedef struct bn_crosscheck_opts {
     bn_pipeline_opts pipeline;   /* scene, meshing, form factors; its solve's tol and bounces are set here */

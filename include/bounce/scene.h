@@ -13,9 +13,10 @@ typedef struct bn_scene bn_scene;   /* opaque */
 
 /* Length unit of the scene file; areas and powers are reported in SI from it. */
 typedef enum bn_unit { BN_UNIT_M, BN_UNIT_CM, BN_UNIT_MM } bn_unit;
-const char *bn_unit_name(bn_unit u);            /* "m", "cm", "mm" */
-double bn_unit_to_metres(bn_unit u);            /* 1, 0.01, 0.001 */
-int bn_unit_parse(const char *s, bn_unit *out); /* 0 on success */
+const char *bn_unit_name(bn_unit v);
+const char *bn_unit_names(void);   /* "m|cm|mm" */
+int bn_unit_parse(const char *s, bn_unit *out);   /* 0, or -1 for no such name */
+double bn_unit_to_metres(bn_unit u);   /* 1, 0.01, 0.001 */
 
 #define BN_NAME_MAX 64
 /* A Lambertian material. rho: diffuse reflectance per channel in [0, 1] (OBJ Kd);

@@ -41,7 +41,9 @@ typedef enum bn_solve_stop {
                                  magnitude: a dim light's region is solved to tol of its own
                                  radiance, where tol ||E||_inf may exceed that radiance itself */
 } bn_solve_stop;
-const char *bn_solve_stop_name(bn_solve_stop s);   /* "default", "residual", "bound", "patch" */
+const char *bn_solve_stop_name(bn_solve_stop v);
+const char *bn_solve_stop_names(void);   /* "default|residual|bound|patch" */
+int bn_solve_stop_parse(const char *s, bn_solve_stop *out);   /* 0, or -1 for no such name */
 
 /* One row of the convergence table, handed to the monitor after every iteration (row 0 is the
  * initial guess L0 = E, before any sweep). Norms are infinity norms over patches. */

@@ -36,8 +36,9 @@ typedef enum bn_study_param {
     BN_STUDY_EPS          /* the hierarchy's link tolerance (K_H on the fixed mesh against dense K) */
 } bn_study_param;
 #define BN_STUDY_PARAM_COUNT 10
-const char *bn_study_param_name(bn_study_param p);        /* "bounces", "max-iter", ... */
-int bn_study_param_parse(const char *s, bn_study_param *out);   /* 0 on success */
+const char *bn_study_param_name(bn_study_param v);
+const char *bn_study_param_names(void);   /* "bounces|max-iter|tol|..." */
+int bn_study_param_parse(const char *s, bn_study_param *out);   /* 0, or -1 for no such name */
 
 /* What the patches, patch-size and spp studies compare with. */
 typedef enum bn_study_ref {
@@ -46,7 +47,18 @@ typedef enum bn_study_ref {
     BN_STUDY_REF_TRACE       /* the path tracer at ref_spp with an independent seed: unbiased for the
                                 per-surface means, its error = 2 standard errors (~95%) */
 } bn_study_ref;
-const char *bn_study_ref_name(bn_study_ref r);   /* "auto", "radiosity", "trace" */
+const char *bn_study_ref_name(bn_study_ref v);
+const char *bn_study_ref_names(void);   /* "auto|radiosity|trace" */
+int bn_study_ref_parse(const char *s, bn_study_ref *out);   /* 0, or -1 for no such name */
+
+/* The equal-error target's metric (bn_study_opts.metric_patch is one of these). */
+typedef enum bn_study_metric {
+    BN_STUDY_METRIC_SURFACE,   /* per-surface relative error, err_surface_max */
+    BN_STUDY_METRIC_PATCH      /* RMS relative error per patch, err_rms_rel */
+} bn_study_metric;
+const char *bn_study_metric_name(bn_study_metric v);
+const char *bn_study_metric_names(void);   /* "surface|patch" */
+int bn_study_metric_parse(const char *s, bn_study_metric *out);   /* 0, or -1 for no such name */
 
 /* Method bits for the solver comparisons (bit = 1 << bn_solve_method). */
 #define BN_STUDY_ALL_METHODS 0xF

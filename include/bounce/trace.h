@@ -27,7 +27,9 @@ extern "C" {
  * cosine (BSDF) sampling combined by the power heuristic; the other two are single strategies,
  * kept because all three must agree in expectation (the suite checks it). */
 typedef enum bn_trace_strategy { BN_TRACE_MIS, BN_TRACE_BSDF, BN_TRACE_NEE } bn_trace_strategy;
-const char *bn_trace_strategy_name(bn_trace_strategy s);   /* "mis", "bsdf", "nee" */
+const char *bn_trace_strategy_name(bn_trace_strategy v);
+const char *bn_trace_strategy_names(void);   /* "mis|bsdf|nee" */
+int bn_trace_strategy_parse(const char *s, bn_trace_strategy *out);   /* 0, or -1 for no such name */
 
 /* What transport the tracer estimates. CONTINUOUS is light transport itself on the scene's
  * surfaces: the physical answer, which radiosity approaches as its patches shrink. PATCH restarts
@@ -37,7 +39,9 @@ const char *bn_trace_strategy_name(bn_trace_strategy s);   /* "mis", "bsdf", "ne
  * a disagreement is an error of the form factors, K or the solver, never of the mesh. Both draw
  * only on the scene and the ray caster. */
 typedef enum bn_trace_model { BN_TRACE_CONTINUOUS, BN_TRACE_PATCH } bn_trace_model;
-const char *bn_trace_model_name(bn_trace_model m);   /* "continuous", "patch" */
+const char *bn_trace_model_name(bn_trace_model v);
+const char *bn_trace_model_names(void);   /* "continuous|patch" */
+int bn_trace_model_parse(const char *s, bn_trace_model *out);   /* 0, or -1 for no such name */
 
 typedef struct bn_trace_opts {
     size_t   spp;          /* independent samples per pixel or per patch (default 64) */

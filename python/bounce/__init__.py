@@ -17,7 +17,7 @@ import re
 
 import numpy as np
 
-__all__ = ["Scene", "solve", "Result", "Operator", "BounceError", "library_path", "library_version"]
+__all__ = ["Scene", "solve", "Result", "Operator", "BounceError", "library_path", "library_version", "names"]
 
 
 class BounceError(RuntimeError):
@@ -68,6 +68,16 @@ def _check_layout(lib, path):
                           "package and the library are from different versions" % (path, version, theirs, ours))
 
 
+def names(vocabulary):
+    """The names a parameter takes, as the library has them (its one table per vocabulary):
+    names("method") == ["jacobi", "gauss-seidel", "neumann", "direct"]; "transport", "storage",
+    "precision", "ff", "visibility", "unit", "stop", "mesh", "gather", "strategy", "model"."""
+    text = _load().bn_flat_names(_name("vocabulary", vocabulary))
+    if text is None:
+        raise BounceError("EUSAGE", "no vocabulary named %r" % (vocabulary,))
+    return text.decode().split("|")
+
+
 def library_version():
     """The version of the libbounce.so in use."""
     return _load().bn_version().decode()
@@ -100,10 +110,13 @@ def _load():
     lib.bn_flat_patch_data.argtypes = [P, D, D, D, D, ctypes.POINTER(ctypes.c_size_t)]
     lib.bn_status_name.argtypes = [I]
     lib.bn_status_name.restype = ctypes.c_char_p
-    lib.bn_flat_bake.argtypes = [P, ctypes.c_char_p, I, I, I, ctypes.c_double, ctypes.c_double, ctypes.c_char_p,
+    lib.bn_flat_names.argtypes = [ctypes.c_char_p]
+    lib.bn_flat_names.restype = ctypes.c_char_p
+    lib.bn_flat_bake.argtypes = [P, ctypes.c_char_p, I, ctypes.c_char_p, I, ctypes.c_double, ctypes.c_double, ctypes.c_char_p,
                                  ctypes.c_char_p, S]
     lib.bn_flat_bake.restype = I
-    lib.bn_flat_images.argtypes = [P, ctypes.c_char_p, I, I, I, D, D, ctypes.c_double, I, I, I, I, ctypes.c_char_p,
+    lib.bn_flat_images.argtypes = [P, ctypes.c_char_p, I, I, I, D, D, ctypes.c_double, I, I, I, ctypes.c_char_p,
+                                   ctypes.c_char_p,
                                    ctypes.c_char_p, S]
     lib.bn_flat_images.restype = I
     lib.bn_flat_history.argtypes = [P, ctypes.POINTER(D)]
@@ -197,11 +210,9 @@ class Result:
         (.ply, .om, .obj, .glb, .gltf): per_bounce adds every term; mesh="input" bakes the scene's
         own polygons; ldr writes 8-bit sRGB (glTF: a COLOR_1 set beside the float ones) at
         `exposure` EV (None: automatic). Atomic, as every bounce output."""
-        if mesh not in ("elements", "input"):
-            raise BounceError("EUSAGE", "mesh must be 'elements' or 'input', not %r" % (mesh,))
         msg = ctypes.create_string_buffer(2048)
         ev = float("nan") if exposure is None else float(exposure)
-        st = self._lib.bn_flat_bake(self._h, os.fsencode(path), int(per_bounce), int(mesh == "input"), int(ldr), ev,
+        st = self._lib.bn_flat_bake(self._h, os.fsencode(path), int(per_bounce), _name("mesh", mesh), int(ldr), ev,
                                     float(crease), b"python bounce package", msg, len(msg))
         if st != 0:
             _raise(self._lib, st, msg)
@@ -211,9 +222,11 @@ class Result:
         """Camera images of every layer as `bounce bounces` writes them: path (FILE.exr, a layer per
         term, rest and L) and with previews FILE.<layer>.png and the contact sheet. The camera is the
         scene's NAME.camera sidecar, else in front of the box; size=(w, h), spp, eye, look (scene
-        units) and fov (degrees) override it. gather=True: the final gather per pixel (as `bounce
-        bounces` by default; the solve must keep KE, bounces >= 1); False: each pixel the value of
-        the patch it sees (`--gather none`)."""
+        units) and fov (degrees) override it. gather: a names("gather") name, "final" (or True) the
+        final gather per pixel (as `bounce bounces` by default; the solve must keep KE, bounces >= 1),
+        "none" (or False) each pixel the value of the patch it sees."""
+        if isinstance(gather, bool):
+            gather = names("gather")[0 if gather else 1]
         Dp = ctypes.POINTER(ctypes.c_double)
         vec = lambda v: None if v is None else (ctypes.c_double * 3)(*[float(x) for x in v])
         e, lk = vec(eye), vec(look)
@@ -221,7 +234,7 @@ class Result:
         msg = ctypes.create_string_buffer(2048)
         st = self._lib.bn_flat_images(self._h, os.fsencode(path), int(w), int(h), int(spp or 0),
                                       ctypes.cast(e, Dp) if e else None, ctypes.cast(lk, Dp) if lk else None,
-                                      float(fov or 0), int(previews), int(smooth), int(half), int(bool(gather)),
+                                      float(fov or 0), int(previews), int(smooth), int(half), _name("gather", gather),
                                       b"python bounce package", msg, len(msg))
         if st != 0:
             _raise(self._lib, st, msg)

@@ -11,6 +11,10 @@
 #include <string.h>
 #include <strings.h>
 
+/* The meshes in enum order (bn_bake_mesh). */
+#define BN__BAKE_MESHES(X) X("elements") X("input")
+BN__VOCABULARY(bn_bake_mesh, bn_bake_mesh, BN__BAKE_MESHES)
+
 static const char *bn__ext(const char *path)
 {
     const char *slash = strrchr(path, '/'), *dot = strrchr(path, '.');

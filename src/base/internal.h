@@ -128,4 +128,23 @@ uint64_t bn__fnv1a(uint64_t h, const void *data, size_t n);
 #define BN__NAME_BAR(s) "|" s
 int bn__name_find(const char *const *names, size_t n, const char *s);
 
+/* A vocabulary's three public functions from its X-list (in the enum's order):
+ *   const char *P_name(T v);  const char *P_names(void);  int P_parse(const char *s, T *out);
+ * e.g. BN__VOCABULARY(bn_trace_model, bn_trace_model, BN__TRACE_MODELS). */
+#define BN__VOCABULARY(P, T, LIST)                                                                  \
+    static const char *const P##__table[] = {LIST(BN__NAME_ITEM)};                                  \
+    static const char P##__bar[] = LIST(BN__NAME_BAR);                                              \
+    const char *P##_names(void) { return P##__bar + 1; }                                            \
+    const char *P##_name(T v)                                                                       \
+    {                                                                                               \
+        return (unsigned)v < sizeof P##__table / sizeof *P##__table ? P##__table[v] : "?";          \
+    }                                                                                               \
+    int P##_parse(const char *s, T *out)                                                            \
+    {                                                                                               \
+        int i = bn__name_find(P##__table, sizeof P##__table / sizeof *P##__table, s);               \
+        if (i >= 0)                                                                                 \
+            *out = (T)i;                                                                            \
+        return i >= 0 ? 0 : -1;                                                                     \
+    }
+
 #endif

@@ -26,7 +26,9 @@ typedef struct bn_opt {
     char        short_name;
     bn_opt_type type;
     void       *dest;
-    const char *choices;   /* BN_OPT_CHOICE, BN_OPT_NAME */
+    const char *choices;   /* BN_OPT_CHOICE, BN_OPT_NAME: a library vocabulary's names() ("a|b|c"); a
+                              CHOICE's index is then the enum's value (the library's tables are in
+                              enum order: BN__VOCABULARY in base/internal.h) */
     double      min, max;  /* numeric range (inclusive) */
     const char *metavar;
     const char *help;      /* with the default, e.g. "(default 1e-6)" */

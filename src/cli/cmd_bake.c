@@ -51,7 +51,7 @@ static void bn__bake_options(bn_optset *set, bn__bake_cli *a, bn_cli_common *c)
                                  "also write each term E .. K^K E and rest as float vertex properties (PLY, OM, glTF)"});
     bn_optset_add(set, (bn_opt){"bounces", 'n', BN_OPT_INT, &a->n, NULL, 0, 64, "K",
                                  "--per-bounce: terms E .. K^K E (default 3)"});
-    bn_optset_add(set, (bn_opt){"mesh", 0, BN_OPT_CHOICE, &a->mesh, "elements|input", 0, 0, "elements|input",
+    bn_optset_add(set, (bn_opt){"mesh", 0, BN_OPT_CHOICE, &a->mesh, bn_bake_mesh_names(), 0, 0, bn_bake_mesh_names(),
                                  "faces written: every patch, the element mesh the solution lives on, whose vertices "
                                  "include every input vertex (default); or the scene's input polygons alone, each "
                                  "corner the mean of the patches around it"});
@@ -112,7 +112,7 @@ static bn_status bn__bake_write(const bn__bake_cli *a, const bn_cli_common *c, c
                                 bn_error *err)
 {
     char ffdesc[256], patches[32], evbuf[160], creasebuf[32], verts[32], tolbuf[64];
-    int elements = a->mesh == 0;
+    int elements = a->mesh == BN_BAKE_ELEMENTS;
     bn_formfactor_opts fo;
     bn_bake_write_opts wo;
     bn_cli_ff_opts(&a->ff, c, &fo);
@@ -150,7 +150,7 @@ static void bn__bake_summary(const bn__bake_cli *a, const bn_pipeline *p, const 
     size_t nf;
     bn_scene_faces(p->scene, &nf);
     bn__bake_colours(a, evbuf, sizeof evbuf);
-    if (a->mesh == 0)
+    if (a->mesh == BN_BAKE_ELEMENTS)
         printf("wrote %s (the element mesh: %zu vertices, %zu patches; %s%s)\n", a->out, bn_bake_vertex_count(bake),
                p->n, evbuf, a->per_bounce ? "; per-bounce properties E .. rest" : "");
     else

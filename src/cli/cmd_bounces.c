@@ -110,7 +110,7 @@ static void bn__bounces_options(bn_optset *set, bn__bounces_cli *a, bn_cli_commo
                                 "--smooth: faces whose normals differ by more are not blended (default 30)"});
     bn_optset_add(set, (bn_opt){"no-previews", 0, BN_OPT_FLAG, &a->no_previews, NULL, 0, 0, NULL,
                                 "write the EXR only"});
-    bn_optset_add(set, (bn_opt){"gather", 0, BN_OPT_CHOICE, &a->gather, "final|none", 0, 0, "final|none",
+    bn_optset_add(set, (bn_opt){"gather", 0, BN_OPT_CHOICE, &a->gather, bn_gather_mode_names(), 0, 0, bn_gather_mode_names(),
                                 "final (default): each pixel computed at the point it sees: E there, KE from every "
                                 "emitting face in closed form with shadow rays, K^k E (k >= 2), rest and L gathered "
                                 "from the solution over the hemisphere; none: each pixel the value of the patch it "
@@ -150,7 +150,7 @@ static void bn__bounces_opts(const bn_optset *set, const bn__bounces_cli *a, con
     bo->ev = a->ev;
     bo->seed = c->seed;
     bo->threads = c->threads;
-    bo->gather = a->gather == 0;
+    bo->gather = a->gather == BN_GATHER_FINAL;
     bo->light_samples = a->light_samples;
     bo->gather_samples = a->gather_samples;
     bo->gather_filter = a->gather_filter;
@@ -187,9 +187,9 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
     bn_error_clear(&err);
     if (!bn_cli_parse_scene_command(&set, argc, argv, pos, &prc))
         return prc;
-    if (a.gather == 0)
+    if (a.gather == BN_GATHER_FINAL)
         a.so.default_patches = BN_GATHER_PATCHES;   /* the gather's default mesh (bench/results.md) */
-    if (a.gather == 0 && (a.n < 1 || a.n > 20)) {
+    if (a.gather == BN_GATHER_FINAL && (a.n < 1 || a.n > 20)) {
         bn_error_set(&err, BN_EUSAGE, "--gather final needs -n between 1 (KE is computed per pixel) and 20, not %d; or "
                      "--gather none", a.n);
         return bn_cli_fail(&err);

@@ -47,11 +47,11 @@ static void bn__xcheck_options(bn_optset *set, bn__xcheck_cli *a, bn_cli_common 
                                  "terms E .. K{K}E compared one by one, then rest and L (default 3)"});
     bn_optset_add(set, (bn_opt){"alpha", 0, BN_OPT_DOUBLE, &a->alpha, NULL, 1e-12, 0.5, "A",
                                  "family-wise false-failure rate of the verdict (default 0.01)"});
-    bn_optset_add(set, (bn_opt){"model", 0, BN_OPT_CHOICE, &a->model, "continuous|patch", 0, 0, "continuous|patch",
+    bn_optset_add(set, (bn_opt){"model", 0, BN_OPT_CHOICE, &a->model, bn_trace_model_names(), 0, 0, bn_trace_model_names(),
                                  "what the tracer estimates: the patch-constant transport radiosity solves, or light "
                                  "transport itself (default patch)"});
-    bn_optset_add(set, (bn_opt){"disc", 0, BN_OPT_CHOICE, &a->disc, "auto|coarse|fine|none", 0, 0,
-                                 "auto|coarse|fine|none",
+    bn_optset_add(set, (bn_opt){"disc", 0, BN_OPT_CHOICE, &a->disc, bn_disc_names(), 0, 0,
+                                 bn_disc_names(),
                                  "allowance levels: a second mesh level at patch size x ratio or / ratio (and the "
                                  "hierarchy's eps x or / ratio^2), or none; auto: the mesh level only with --model "
                                  "continuous, the eps level under the hierarchy (default auto)"});
@@ -63,7 +63,7 @@ static void bn__xcheck_options(bn_optset *set, bn__xcheck_cli *a, bn_cli_common 
                                  "a further relative allowance, rtol |radiosity| (default 0)"});
     bn_optset_add(set, (bn_opt){"worst", 0, BN_OPT_INT, &a->worst, NULL, 0, 100000, "N",
                                  "worst entries listed (default 10)"});
-    bn_optset_add(set, (bn_opt){"strategy", 0, BN_OPT_CHOICE, &a->strategy, "mis|bsdf|nee", 0, 0, "mis|bsdf|nee",
+    bn_optset_add(set, (bn_opt){"strategy", 0, BN_OPT_CHOICE, &a->strategy, bn_trace_strategy_names(), 0, 0, bn_trace_strategy_names(),
                                  "path-tracer strategy (default mis)"});
     bn_optset_add(set, (bn_opt){"solve-tol", 0, BN_OPT_DOUBLE, &a->solve_tol, NULL, 1e-15, 1e-2, "T",
                                  "radiosity solver tolerance, relative (default 1e-10: far below MC noise)"});

@@ -60,7 +60,7 @@ static int bn__solve_parse(int argc, char **argv, bn_cli_common *c, bn__solve_cl
                                 "write the terms K^0 E .. K^N E as columns (default: none; 3 kept internally)"});
     bn_optset_add(set, (bn_opt){"symmetric", 0, BN_OPT_FLAG, &a->symmetric, NULL, 0, 0, NULL,
                                 "gauss-seidel: a forward then a backward sweep per iteration"});
-    bn_optset_add(set, (bn_opt){"stop", 0, BN_OPT_CHOICE, &a->stop, "default|residual|bound|patch", 0, 0, "S",
+    bn_optset_add(set, (bn_opt){"stop", 0, BN_OPT_CHOICE, &a->stop, bn_solve_stop_names(), 0, 0, "S",
                                 "what tol bounds: residual, the error bound ||r||/(1-||K||), or patch: every patch's "
                                 "residual relative to its own radiance, for lights orders of magnitude apart (default: "
                                 "bound for neumann, residual otherwise)"});

@@ -125,7 +125,7 @@ static void bn__study_ref_options(bn_optset *set, bn__study_cli *a)
 {
     bn_optset_add(set, (bn_opt){"ref-patches", 0, BN_OPT_SIZE, &a->ref_patches, NULL, 1, 1e9, "N",
                                  "patches of the reference mesh (default 4x the finest setting, or 4x --patches)"});
-    bn_optset_add(set, (bn_opt){"ref", 0, BN_OPT_CHOICE, &a->refkind, "auto|radiosity|trace", 0, 0, "KIND",
+    bn_optset_add(set, (bn_opt){"ref", 0, BN_OPT_CHOICE, &a->refkind, bn_study_ref_names(), 0, 0, "KIND",
                                  "patches, patch-size, spp: the reference: radiosity on a finer mesh, or the path "
                                  "tracer at --ref-spp (default auto: trace with --against-spp, else radiosity)"});
     bn_optset_add(set, (bn_opt){"ref-spp", 0, BN_OPT_SIZE, &a->ref_spp, NULL, 1, 1e9, "N",
@@ -140,7 +140,7 @@ static void bn__study_ref_options(bn_optset *set, bn__study_cli *a)
                                  "patches/patch-size/eps: also run the path tracer at these spp (equal-error comparison)"});
     bn_optset_add(set, (bn_opt){"target", 0, BN_OPT_DOUBLE, &a->target, NULL, 1e-9, 1, "E",
                                  "equal-error target, per-surface relative error (default 0.01)"});
-    bn_optset_add(set, (bn_opt){"metric", 0, BN_OPT_CHOICE, &a->metric, "surface|patch", 0, 0, "surface|patch",
+    bn_optset_add(set, (bn_opt){"metric", 0, BN_OPT_CHOICE, &a->metric, bn_study_metric_names(), 0, 0, bn_study_metric_names(),
                                  "what --target bounds: the largest per-surface error (default), or the RMS error "
                                  "per patch on the reference's patches (the tracer then runs on the reference's mesh: "
                                  "give --ref-patches)"});
@@ -228,7 +228,7 @@ static void bn__study_refs(const bn__study_cli *a, const bn_cli_common *c, bn_st
     o->against_spp = a->na ? a->against_spp : NULL;
     o->nagainst = (size_t)a->na;
     o->target = a->target;
-    o->metric_patch = a->metric == 1;
+    o->metric_patch = a->metric == BN_STUDY_METRIC_PATCH;
 }
 
 /* The CSV with its provenance, the plots and the report. */

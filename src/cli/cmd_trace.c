@@ -34,9 +34,9 @@ static void bn__trace_options(bn_optset *set, bn__trace_cli *a, bn_cli_common *c
                                  "multi-layer OpenEXR of the camera image"});
     bn_optset_add(set, (bn_opt){"patches-out", 0, BN_OPT_STRING, &a->patches_out, NULL, 0, 0, "FILE.csv",
                                  "per-patch estimates and standard errors (CSV)"});
-    bn_optset_add(set, (bn_opt){"strategy", 0, BN_OPT_CHOICE, &a->strategy, "mis|bsdf|nee", 0, 0, "mis|bsdf|nee",
+    bn_optset_add(set, (bn_opt){"strategy", 0, BN_OPT_CHOICE, &a->strategy, bn_trace_strategy_names(), 0, 0, bn_trace_strategy_names(),
                                  "how reflections gather emission (default mis: NEE + cosine sampling)"});
-    bn_optset_add(set, (bn_opt){"model", 0, BN_OPT_CHOICE, &a->model, "continuous|patch", 0, 0, "continuous|patch",
+    bn_optset_add(set, (bn_opt){"model", 0, BN_OPT_CHOICE, &a->model, bn_trace_model_names(), 0, 0, bn_trace_model_names(),
                                  "light transport itself, or the patch-constant transport of radiosity on these "
                                  "patches (default continuous)"});
     bn_optset_add(set, (bn_opt){"rr-depth", 0, BN_OPT_INT, &a->rr_depth, NULL, 1, 1000000, "D",

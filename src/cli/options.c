@@ -269,7 +269,7 @@ void bn_cli_add_common(bn_optset *s, bn_cli_common *c)
 
 void bn_cli_add_scene(bn_optset *s, bn_cli_scene *o)
 {
-    bn_optset_add(s, (bn_opt){"unit", 0, BN_OPT_CHOICE, &o->unit, "m|cm|mm", 0, 0, "m|cm|mm",
+    bn_optset_add(s, (bn_opt){"unit", 0, BN_OPT_CHOICE, &o->unit, bn_unit_names(), 0, 0, bn_unit_names(),
                               "length unit of the scene file, for SI areas and powers (default m)"});
     bn_optset_add(s, (bn_opt){"patch-size", 0, BN_OPT_DOUBLE, &o->patch_size, NULL, 1e-300, 1e300, "S",
                               "largest patch edge, scene units (default: from --patches)"});

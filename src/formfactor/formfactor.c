@@ -34,20 +34,7 @@ static double bn__rowsum_error(int samples)
 
 /* The form-factor methods in enum order (bn_ff_method). */
 #define BN__FF_METHODS(X) X("analytic") X("montecarlo") X("hemisphere")
-static const char *const bn__ff_method_names[] = {BN__FF_METHODS(BN__NAME_ITEM)};
-static const char bn__ff_method_list[] = BN__FF_METHODS(BN__NAME_BAR);
-#define BN__NFF (sizeof bn__ff_method_names / sizeof bn__ff_method_names[0])
-
-const char *bn_ff_method_name(bn_ff_method m) { return (unsigned)m < BN__NFF ? bn__ff_method_names[m] : "?"; }
-const char *bn_ff_method_names(void) { return bn__ff_method_list + 1; }
-
-int bn_ff_method_parse(const char *name, bn_ff_method *m)
-{
-    int i = bn__name_find(bn__ff_method_names, BN__NFF, name);
-    if (i >= 0)
-        *m = (bn_ff_method)i;
-    return i >= 0 ? 0 : -1;
-}
+BN__VOCABULARY(bn_ff_method, bn_ff_method, BN__FF_METHODS)
 
 /* The analytic method's visibility of partly occluded pairs: the exact visible part, or rays. */
 #define BN__FF_VISIBILITIES(X) X("exact") X("rays")

@@ -12,6 +12,10 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* The modes in enum order (bn_gather_mode). */
+#define BN__GATHER_MODES(X) X("final") X("none")
+BN__VOCABULARY(bn_gather_mode, bn_gather_mode, BN__GATHER_MODES)
+
 void bn_gather_opts_default(bn_gather_opts *o)
 {
     memset(o, 0, sizeof *o);

@@ -7,6 +7,10 @@
 #include <math.h>
 #include <string.h>
 
+/* The allowances in enum order (bn_disc). */
+#define BN__DISCS(X) X("auto") X("coarse") X("fine") X("none")
+BN__VOCABULARY(bn_disc, bn_disc, BN__DISCS)
+
 void bn_crosscheck_opts_default(bn_crosscheck_opts *o)
 {
     memset(o, 0, sizeof *o);

@@ -3,6 +3,7 @@
 #include "bounce/pipeline.h"
 #include "bounce/bake.h"
 #include "bounce/image.h"
+#include "bounce/gather.h"
 #include "base/internal.h"
 
 #include <math.h>
@@ -75,6 +76,52 @@ static bn_status bn__flat_fail(bn_status st, const char *text, char *msg, size_t
     if (msg && msglen)
         snprintf(msg, msglen, "%s", text);
     return st;
+}
+
+/* A name of a vocabulary (NULL: the first, the default) to its enum value, or BN_EUSAGE naming the
+ * parameter, the value and the choices. */
+static bn_status bn__flat_name(const char *what, const char *name, const char *names, int (*index)(const char *),
+                               int *out, char *msg, size_t msglen)
+{
+    char t[200];
+    *out = name ? index(name) : 0;
+    if (*out >= 0)
+        return BN_OK;
+    snprintf(t, sizeof t, "%s '%s' is not one of %s", what, name, names);
+    return bn__flat_fail(BN_EUSAGE, t, msg, msglen);
+}
+
+static int bn__bake_mesh_index(const char *s)
+{
+    bn_bake_mesh m;
+    return bn_bake_mesh_parse(s, &m) == 0 ? (int)m : -1;
+}
+
+static int bn__gather_index(const char *s)
+{
+    bn_gather_mode m;
+    return bn_gather_mode_parse(s, &m) == 0 ? (int)m : -1;
+}
+
+/* The vocabularies a binding offers, by the names of their parameters. */
+#define BN__FLAT_VOCABULARIES(X)                                                                         \
+    X("method", bn_solve_method_names) X("transport", bn_pipeline_transports)                            \
+    X("storage", bn_storage_names) X("precision", bn_precision_names) X("ff", bn_ff_method_names)        \
+    X("visibility", bn_ff_visibility_names) X("unit", bn_unit_names) X("stop", bn_solve_stop_names)      \
+    X("mesh", bn_bake_mesh_names) X("gather", bn_gather_mode_names) X("strategy", bn_trace_strategy_names) \
+    X("model", bn_trace_model_names)
+#define BN__FLAT_VOCAB(k, f) {k, f},
+
+const char *bn_flat_names(const char *vocabulary)
+{
+    static const struct {
+        const char *key;
+        const char *(*names)(void);
+    } table[] = {BN__FLAT_VOCABULARIES(BN__FLAT_VOCAB)};
+    for (size_t i = 0; vocabulary && i < sizeof table / sizeof *table; i++)
+        if (strcmp(vocabulary, table[i].key) == 0)
+            return table[i].names();
+    return NULL;
 }
 
 /* The flat options' own ranges (those with no counterpart in the library's structs); the rest is
@@ -484,7 +531,7 @@ bn_status bn_flat_solve_operator(size_t n, const double *E, bn_flat_apply_fn app
     return st;
 }
 
-bn_status bn_flat_bake(const bn_flat *f, const char *out, int per_bounce, int input_mesh, int ldr, double exposure_ev,
+bn_status bn_flat_bake(const bn_flat *f, const char *out, int per_bounce, const char *mesh, int ldr, double exposure_ev,
                        double crease_deg, const char *caller, char *msg, size_t msglen)
 {
     int nb = f->p.res.nterms - 1;
@@ -499,6 +546,10 @@ bn_status bn_flat_bake(const bn_flat *f, const char *out, int per_bounce, int in
         return bn__flat_fail(BN_EUSAGE, "bake: this result has no scene (a caller's operator)", msg, msglen);
     if (nl > 72)
         return bn__flat_fail(BN_EUSAGE, "bake: too many terms", msg, msglen);
+    int input_mesh;
+    st = bn__flat_name("bake: mesh", mesh, bn_bake_mesh_names(), bn__bake_mesh_index, &input_mesh, msg, msglen);
+    if (st != BN_OK)
+        return st;
     layers[0] = (bn_bake_layer){"L", f->p.res.L};
     for (size_t l = 1; l < nl; l++) {
         int layer = (int)l - 1;
@@ -533,7 +584,7 @@ bn_status bn_flat_bake(const bn_flat *f, const char *out, int per_bounce, int in
 }
 
 bn_status bn_flat_images(const bn_flat *f, const char *out, int width, int height, int spp, const double *eye,
-                         const double *look, double fov_deg, int previews, int smooth, int half, int gather,
+                         const double *look, double fov_deg, int previews, int smooth, int half, const char *gather,
                          const char *caller, char *msg, size_t msglen)
 {
     int nb = f->p.res.nterms - 1;
@@ -547,6 +598,9 @@ bn_status bn_flat_images(const bn_flat *f, const char *out, int width, int heigh
         return bn__flat_fail(BN_EUSAGE, "images: this result has no scene (a caller's operator)", msg, msglen);
     if (nb < 0 || bn_layer_count(nb) > 72)
         return bn__flat_fail(BN_EUSAGE, "images: the solve kept no terms (bounces >= 0 needed)", msg, msglen);
+    int mode;
+    if ((st = bn__flat_name("images: gather", gather, bn_gather_mode_names(), bn__gather_index, &mode, msg, msglen)))
+        return st;
     bn_error_clear(&err);
     bn_camera_default(f->p.scene, &cam);
     if ((st = bn_camera_load_sidecar(bn_scene_path(f->p.scene), &cam, NULL, &err)) != BN_OK)
@@ -586,7 +640,7 @@ bn_status bn_flat_images(const bn_flat *f, const char *out, int width, int heigh
         bo.previews = previews;
         bo.smooth = smooth;
         bo.half = half;
-        bo.gather = gather;
+        bo.gather = mode == BN_GATHER_FINAL;
         bo.attrs = attrs;
         bo.nattrs = sizeof attrs / sizeof attrs[0];
         bo.log.quiet = 1;

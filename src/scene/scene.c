@@ -11,16 +11,10 @@
 /* Non-planarity, relative to a polygon's size, above which its split is a warning, not a note. */
 #define BN_NONPLANAR_WARN 1e-2
 
-const char *bn_unit_name(bn_unit u) { return u == BN_UNIT_MM ? "mm" : u == BN_UNIT_CM ? "cm" : "m"; }
+/* The units in enum order (bn_unit). */
+#define BN__UNITS(X) X("m") X("cm") X("mm")
+BN__VOCABULARY(bn_unit, bn_unit, BN__UNITS)
 double bn_unit_to_metres(bn_unit u) { return u == BN_UNIT_MM ? 1e-3 : u == BN_UNIT_CM ? 1e-2 : 1.0; }
-int bn_unit_parse(const char *s, bn_unit *out)
-{
-    if (strcmp(s, "m") == 0) *out = BN_UNIT_M;
-    else if (strcmp(s, "cm") == 0) *out = BN_UNIT_CM;
-    else if (strcmp(s, "mm") == 0) *out = BN_UNIT_MM;
-    else return -1;
-    return 0;
-}
 
 void bn_load_opts_default(bn_load_opts *o)
 {

@@ -15,24 +15,11 @@
 
 /* The methods in enum order (bn_solve_method). */
 #define BN__METHODS(X) X("jacobi") X("gauss-seidel") X("neumann") X("direct")
-static const char *const bn__method_names[] = {BN__METHODS(BN__NAME_ITEM)};
-static const char bn__method_list[] = BN__METHODS(BN__NAME_BAR);
-#define BN__NMETHODS (sizeof bn__method_names / sizeof bn__method_names[0])
+BN__VOCABULARY(bn_solve_method, bn_solve_method, BN__METHODS)
 
-const char *bn_solve_method_name(bn_solve_method m)
-{
-    return (unsigned)m < BN__NMETHODS ? bn__method_names[m] : "?";
-}
-
-const char *bn_solve_method_names(void) { return bn__method_list + 1; }
-
-int bn_solve_method_parse(const char *name, bn_solve_method *m)
-{
-    int i = bn__name_find(bn__method_names, BN__NMETHODS, name);
-    if (i >= 0)
-        *m = (bn_solve_method)i;
-    return i >= 0 ? 0 : -1;
-}
+/* The stopping tests in enum order (bn_solve_stop). */
+#define BN__STOPS(X) X("default") X("residual") X("bound") X("patch")
+BN__VOCABULARY(bn_solve_stop, bn_solve_stop, BN__STOPS)
 
 const char *bn_stop_reason_name(bn_stop_reason r)
 {
@@ -45,17 +32,6 @@ const char *bn_stop_reason_name(bn_stop_reason r)
     case BN_STOP_DIVERGED_NAN: return "diverged-nan";
     case BN_STOP_DIVERGED_GROWTH: return "diverged-growth";
     case BN_STOP_SINGULAR: return "singular";
-    }
-    return "?";
-}
-
-const char *bn_solve_stop_name(bn_solve_stop s)
-{
-    switch (s) {
-    case BN_SOLVE_STOP_DEFAULT: return "default";
-    case BN_SOLVE_STOP_RESIDUAL: return "residual";
-    case BN_SOLVE_STOP_BOUND: return "bound";
-    case BN_SOLVE_STOP_PATCH: return "patch";
     }
     return "?";
 }

@@ -16,28 +16,15 @@
 #include <string.h>
 #include <strings.h>
 
-static const char *const bn__param_names[BN_STUDY_PARAM_COUNT] = {
-    "bounces", "max-iter", "tol", "patches", "patch-size", "samples", "ff", "spp", "precision", "eps"};
-
-const char *bn_study_param_name(bn_study_param p)
-{
-    return (unsigned)p < BN_STUDY_PARAM_COUNT ? bn__param_names[p] : "?";
-}
-
-int bn_study_param_parse(const char *s, bn_study_param *out)
-{
-    for (int i = 0; i < BN_STUDY_PARAM_COUNT; i++)
-        if (strcmp(s, bn__param_names[i]) == 0) {
-            *out = (bn_study_param)i;
-            return 0;
-        }
-    return -1;
-}
-
-const char *bn_study_ref_name(bn_study_ref r)
-{
-    return r == BN_STUDY_REF_RADIOSITY ? "radiosity" : r == BN_STUDY_REF_TRACE ? "trace" : "auto";
-}
+/* The swept parameters, references and error metrics, each in its enum's order. */
+#define BN__PARAMS(X)                                                                                  \
+    X("bounces") X("max-iter") X("tol") X("patches") X("patch-size") X("samples") X("ff") X("spp")     \
+    X("precision") X("eps")
+BN__VOCABULARY(bn_study_param, bn_study_param, BN__PARAMS)
+#define BN__REFS(X) X("auto") X("radiosity") X("trace")
+BN__VOCABULARY(bn_study_ref, bn_study_ref, BN__REFS)
+#define BN__METRICS(X) X("surface") X("patch")
+BN__VOCABULARY(bn_study_metric, bn_study_metric, BN__METRICS)
 
 void bn_study_opts_default(bn_study_opts *o)
 {

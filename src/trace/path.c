@@ -14,20 +14,11 @@
 #include <math.h>
 #include <string.h>
 
-const char *bn_trace_model_name(bn_trace_model m)
-{
-    return m == BN_TRACE_PATCH ? "patch" : m == BN_TRACE_CONTINUOUS ? "continuous" : "?";
-}
-
-const char *bn_trace_strategy_name(bn_trace_strategy s)
-{
-    switch (s) {
-    case BN_TRACE_MIS: return "mis";
-    case BN_TRACE_BSDF: return "bsdf";
-    case BN_TRACE_NEE: return "nee";
-    }
-    return "?";
-}
+/* The models and strategies in their enums' order. */
+#define BN__MODELS(X) X("continuous") X("patch")
+BN__VOCABULARY(bn_trace_model, bn_trace_model, BN__MODELS)
+#define BN__STRATEGIES(X) X("mis") X("bsdf") X("nee")
+BN__VOCABULARY(bn_trace_strategy, bn_trace_strategy, BN__STRATEGIES)
 
 void bn_trace_opts_default(bn_trace_opts *o)
 {

@@ -307,24 +307,7 @@ bn_status bn_transport_to_dense(const bn_transport *k, double *F, bn_error *err)
 /* ---- precisions: one table (the enum's order) ---- */
 
 #define BN__PRECISIONS(X) X("float") X("double")
-static const char *const bn__precision_names[] = {BN__PRECISIONS(BN__NAME_ITEM)};
-static const char bn__precision_list[] = BN__PRECISIONS(BN__NAME_BAR);
-
-const char *bn_precision_names(void) { return bn__precision_list + 1; }
-
-const char *bn_precision_name(bn_precision p)
-{
-    return (unsigned)p < sizeof bn__precision_names / sizeof *bn__precision_names ? bn__precision_names[p] : "?";
-}
-
-int bn_precision_parse(const char *s, bn_precision *out)
-{
-    int i = bn__name_find(bn__precision_names, sizeof bn__precision_names / sizeof *bn__precision_names, s);
-    if (i < 0)
-        return -1;
-    *out = (bn_precision)i;
-    return 0;
-}
+BN__VOCABULARY(bn_precision, bn_precision, BN__PRECISIONS)
 
 double bn_precision_epsilon(bn_precision p) { return p == BN_PRECISION_DOUBLE ? 0x1p-53 : 0x1p-24; }
 unsigned bn_precision_bytes(bn_precision p) { return p == BN_PRECISION_DOUBLE ? 8 : 4; }

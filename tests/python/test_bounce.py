@@ -220,6 +220,26 @@ def test_bake_from_python_equals_the_cli(tmp_path):
     with pytest.raises(bounce.BounceError) as e:
         r.bake(str(tmp_path / "x.stl"))
     assert e.value.status == "EUSAGE" and ".stl" in str(e.value)
+    with pytest.raises(bounce.BounceError) as e:   # the mesh's names come from the library
+        r.bake(str(tmp_path / "y.glb"), mesh="faces")
+    assert e.value.status == "EUSAGE" and "'faces'" in str(e.value) and "elements|input" in str(e.value)
+    assert not (tmp_path / "y.glb").exists()
+
+
+def test_names_are_the_librarys_and_the_cli_takes_them():
+    """bounce.names hands out the library's tables; the CLI refuses a made-up value
+    listing the same names."""
+    assert bounce.names("method") == ["jacobi", "gauss-seidel", "neumann", "direct"]
+    assert bounce.names("gather") == ["final", "none"]
+    assert bounce.names("mesh") == ["elements", "input"]
+    assert "hierarchical" in bounce.names("transport")
+    with pytest.raises(bounce.BounceError):
+        bounce.names("colour")
+    for cmd, flag, vocabulary in (("solve", "--method", "method"), ("solve", "--stop", "stop"),
+                                  ("trace", "--strategy", "strategy"), ("crosscheck", "--model", "model"),
+                                  ("bake", "--mesh", "mesh"), ("bounces", "--gather", "gather")):
+        r = subprocess.run([EXE, cmd, CORNELL, flag, "bogus"], capture_output=True, text=True)
+        assert r.returncode == 2 and "|".join(bounce.names(vocabulary)) in r.stderr, (cmd, flag, r.stderr)
 
 
 def test_images_from_python_equal_the_cli(tmp_path):
