@@ -2,7 +2,7 @@
 """The house's rules, checked on the source tree (issue 39): every function under src/ at most
 LIMIT lines, no circle between src/'s files or directories (who calls whom, from the object
 files), nothing under src/transport calling into src/formfactor, and no library message (a string outside
-src/cli) naming a command-line flag ("--name").
+src/cli) naming a command-line flag ("--name"), and every warning with its code (bn_warnf).
 
 Functions and messages not yet brought under the rules are listed in KNOWN with their size when
 listed: the check fails when a new one appears or a listed one grows, and says so when a listed one
@@ -171,6 +171,18 @@ def check_messages(src, report):
     print("library strings naming a flag: %d (listed: %d)" % (sum(count.values()), sum(KNOWN_FLAGS.values())))
 
 
+def check_warnings(src, report):
+    """Every warning carries a code: the library warns through bn_warnf, never bn_logf at BN_LOG_WARN."""
+    n = 0
+    for p in sorted(glob.glob(os.path.join(src, "**", "*.c*"), recursive=True)):
+        text = open(p, errors="replace").read()
+        for m in re.finditer(r"bn_logf\([^;]*?BN_LOG_WARN", text):
+            report(False, "%s:%d: a warning without a code (bn_logf at BN_LOG_WARN; use bn_warnf)"
+                   % (os.path.relpath(p, src), text.count("\n", 0, m.start()) + 1))
+        n += len(re.findall(r"\bbn_warnf\(", text))
+    print("warnings with a code: %d calls" % n)
+
+
 def main():
     src = os.path.join(sys.argv[1], "src")
     failures = []
@@ -182,6 +194,7 @@ def main():
     check_functions(src, report)
     check_links(sys.argv[2], src, report)
     check_messages(src, report)
+    check_warnings(src, report)
     sys.exit(1 if failures else 0)
 
 

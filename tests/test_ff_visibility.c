@@ -91,11 +91,10 @@ static bn_scene *sb_scene(const sb *s, double patch_size)
 }
 
 /* Row-sum warnings are expected at these sample counts: drop them. */
-static void log_drop(void *user, bn_log_level level, const char *msg)
+static void log_drop(void *user, const bn_message *m)
 {
     (void)user;
-    (void)level;
-    (void)msg;
+    (void)m;
 }
 
 /* sampled: the shadow-ray estimator (--ff-visibility rays); else the exact visible part (the

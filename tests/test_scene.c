@@ -532,7 +532,53 @@ BN_TEST(quiet_cornell_prints_nothing_and_large_bends_warn)
     snprintf(args, sizeof args, "'%s' info '%s' -q 2>&1 >/dev/null | cat", exe, bn_test_tmp("bent.obj"));
     BN_ASSERT_EQ(bn_test_run(args, &out), 0);
     BN_ASSERT(strstr(out, "warning:") && strstr(out, "bent.obj:6: quad is non-planar"));
+    BN_ASSERT(strstr(out, "[nonplanar]\n") && strstr(out, "[no-emitter]\n"));   /* each with its code */
     free(out);
+}
+
+typedef struct heard {
+    int count[BN_WARNING_COUNT], notes;
+    double value[BN_WARNING_COUNT];
+} heard;
+
+static void hear(void *user, const bn_message *m)
+{
+    heard *h = user;
+    if (m->level != BN_LOG_WARN) {
+        h->notes += m->code == BN_W_NONE;
+        return;
+    }
+    BN_ASSERT((unsigned)m->code < BN_WARNING_COUNT && m->code != BN_W_NONE);
+    h->count[m->code]++;
+    h->value[m->code] = m->value;
+}
+
+/* A sink gets each warning's code and measure, not only its text: a unit quad with one corner
+ * lifted 0.2 (each vertex 0.2 / 4 = 0.05 off the mean plane, over a size of about 1.43: 0.035), no
+ * emitter, no material, a duplicate face (dropped) and a degenerate one. */
+BN_TEST(warnings_carry_codes_and_measures)
+{
+    bn_load_opts lo;
+    bn_scene *s = NULL;
+    bn_error err;
+    heard h;
+    FILE *fp = fopen(bn_test_tmp("coded.obj"), "w");
+    fprintf(fp, "v 0 0 0\nv 1 0 0\nv 1 1 0.2\nv 0 1 0\nv 0 0 -1\nv 2 0 0\n"
+                "f 1 2 3 4\nf 1 4 5\nf 1 4 5\nf 1 2 6\n");
+    fclose(fp);
+    memset(&h, 0, sizeof h);
+    bn_load_opts_default(&lo);
+    lo.log = (bn_log){hear, &h, 0};
+    bn_error_clear(&err);
+    BN_ASSERT_EQ(bn_scene_load(bn_test_tmp("coded.obj"), &lo, &s, &err), BN_OK);
+    BN_ASSERT_EQ(h.count[BN_W_NONPLANAR], 1);
+    BN_ASSERT_NEAR(h.value[BN_W_NONPLANAR], 0.05 / sqrt(2.04), 2e-3);
+    BN_ASSERT_EQ(h.count[BN_W_MATERIAL], 1);
+    BN_ASSERT_EQ(h.count[BN_W_NO_EMITTER], 1);
+    BN_ASSERT_EQ(h.count[BN_W_FACE_DROPPED], 2);   /* the duplicate, then the degenerate count */
+    BN_ASSERT(strcmp(bn_warning_name(BN_W_FACE_DROPPED), "face-dropped") == 0);
+    BN_ASSERT(strcmp(bn_warning_name(BN_WARNING_COUNT), "?") == 0);
+    bn_scene_destroy(s);
 }
 
 /* A plain binary OFF ("OFF BINARY", int32 counts, float positions, int32 faces) reads through

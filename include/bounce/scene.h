@@ -134,6 +134,9 @@ unsigned long long bn_scene_geometry_digest(const bn_scene *s);
 const bn_material *bn_patch_material(const bn_scene *s, size_t patch);
 /* Emitted power of the scene, watts per channel: pi * sum_i A_i Le_i with A in m^2. */
 void bn_scene_emitted_power(const bn_scene *s, double watts[3]);
+/* Power leaving the patches with radiance `radiance` (patches x 3, W m^-2 sr^-1), watts per
+ * channel: pi * sum_i A_i x_i with A in m^2 (a term K^k E gives that bounce's power). */
+void bn_scene_power(const bn_scene *s, const double *radiance, double watts[3]);
 size_t bn_scene_emitter_count(const bn_scene *s);   /* faces with Le > 0 in any channel */
 
 /* Per-patch emission E (= Le, W m^-2 sr^-1) and reflectance rho, written into caller-allocated

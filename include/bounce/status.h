@@ -55,16 +55,59 @@ bn_status bn_error_set(bn_error *err, bn_status s, const char *fmt, ...)
 
 /* Log levels for the warnings and notes a library call may emit. */
 typedef enum bn_log_level { BN_LOG_DEBUG, BN_LOG_INFO, BN_LOG_WARN } bn_log_level;
-/* A sink for messages; `user` is passed through. NULL means "print warnings to stderr". */
-typedef void (*bn_log_fn)(void *user, bn_log_level level, const char *msg);
+
+/* What a warning is about, so that a caller can count, gather or silence warnings without reading
+ * their text (a study says each kind once, with its worst). One list makes the enum and
+ * bn_warning_name(): BN_W_<ID>, "name". Notes carry BN_W_NONE. */
+#define BN_WARNING_MAP(X)                                                                          \
+    X(NONE, "none")                 /* not a warning: a note */                                   \
+    X(FACE_DROPPED, "face-dropped") /* degenerate, repeated-vertex or duplicate faces dropped */  \
+    X(BACK_TO_BACK, "back-to-back") /* faces back to back (a two-sided panel), both kept */       \
+    X(NONPLANAR, "nonplanar")       /* a polygon bent enough that its triangulation shows */      \
+    X(NO_COLOURS, "no-colours")     /* a mesh file without colours: reflectance 0.5 */            \
+    X(MATERIAL, "material")         /* a material defined twice, or faces without one */          \
+    X(NO_EMITTER, "no-emitter")     /* nothing emits: the result is black */                      \
+    X(ROW_SUM, "row-sum")           /* rows of F above 1 + their tolerance */                     \
+    X(PATTERN, "pattern")           /* hemisphere hits outside the sparse pattern */              \
+    X(CACHE, "cache")               /* the form-factor cache could not be written */              \
+    X(BOUNDS, "bounds")             /* ||K||_inf >= 1: the a priori bounds do not apply */        \
+    X(ITERATIONS, "iterations")     /* the predicted iterations exceed max_iter */                \
+    X(METHOD, "method")             /* a method the operator cannot run, replaced */              \
+    X(LINKS, "links")               /* the hierarchy's links still splitting when frozen */       \
+    X(REFERENCE, "reference")       /* a study's reference not well below the errors measured */  \
+    X(CLAMPED, "clamped")           /* values clamped on output (half floats) */                  \
+    X(FONT, "font")                 /* a contact sheet without labels */                          \
+    X(NON_MANIFOLD, "non-manifold") /* bake vertices duplicated for OpenMesh */
+#define BN__WARNING_ENUM(id, name) BN_W_##id,
+typedef enum bn_warning { BN_WARNING_MAP(BN__WARNING_ENUM) BN_WARNING_COUNT } bn_warning;
+#undef BN__WARNING_ENUM
+const char *bn_warning_name(bn_warning w);   /* "row-sum"; "?" for no such code */
+
+/* One message as a sink gets it. */
+typedef struct bn_message {
+    bn_log_level level;
+    bn_warning   code;    /* BN_W_NONE for notes */
+    double       value;   /* a warning's measure, larger is worse (a count, the largest row sum), by
+                             which a gatherer keeps the worst; NAN when it has none */
+    const char  *text;    /* the whole message, without "warning:" or the code */
+} bn_message;
+/* The one sink type of the library; `user` is passed through. */
+typedef void (*bn_log_fn)(void *user, const bn_message *m);
 typedef struct bn_log {
-    bn_log_fn fn;    /* NULL: warnings to stderr, info and debug dropped */
+    bn_log_fn fn;    /* NULL: warnings to stderr ("bounce: warning: TEXT [code]"), info and debug dropped */
     void *user;
     int quiet;       /* nonzero: drop everything but warnings */
 } bn_log;
+/* A note (level INFO or DEBUG; code BN_W_NONE). */
 void bn_logf(const bn_log *log, bn_log_level level, const char *fmt, ...)
 #if defined(__GNUC__)
     __attribute__((format(printf, 3, 4)))
+#endif
+    ;
+/* A warning with its code and measure (NAN: none). */
+void bn_warnf(const bn_log *log, bn_warning code, double value, const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 4, 5)))
 #endif
     ;
 

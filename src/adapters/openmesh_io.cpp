@@ -224,7 +224,7 @@ static bn_status off_to_sink(const char *path, FloatMesh &mesh, const bn__mesh_s
         if (!out->polygon(out->user, idx.data(), (unsigned)idx.size()))
             return bn_error_set(err, BN_ENOMEM, "out of memory");
     }
-    bn_logf(log, BN_LOG_WARN, "%s: binary OFF: colours are not read; every face has reflectance 0.5", path);
+    bn_warnf(log, BN_W_NO_COLOURS, NAN, "%s: binary OFF: colours are not read; every face has reflectance 0.5", path);
     return BN_OK;
 }
 

@@ -312,15 +312,13 @@ static bn_status bn__bake_gltf(const bn_bake *b, const char *path, int is_glb, c
     const bn_face *faces = bn_scene_faces(s, &(size_t){0});
     unsigned *fm = bn__malloc_array(j->nf + 1, sizeof *fm);
     const char **lnames = bn__malloc_array(nl, sizeof *lnames);
-    double *power = bn__calloc(3 * nl, sizeof(double)), m2 = bn_unit_to_metres(bn_scene_unit(s));
+    double *power = bn__calloc(3 * nl, sizeof(double));
     bn_status st = fm && lnames && power ? BN_OK : bn__bake_oom(j->nv, err);
     for (size_t k = 0; st == BN_OK && k < j->nf; k++)
         fm[k] = o->input_mesh ? faces[k].material : patches[k].material;
     for (size_t l = 0; st == BN_OK && l < nl; l++) {
         lnames[l] = layers[l].name;
-        for (size_t p = 0; p < np; p++)
-            for (int c = 0; c < 3; c++)
-                power[3 * l + (size_t)c] += BN_PI * patches[p].area * m2 * m2 * layers[l].patch_values[3 * p + (size_t)c];
+        bn_scene_power(s, layers[l].patch_values, power + 3 * l);
     }
     if (st == BN_OK) {
         bn__bake_out g = {j->nv,  j->pos, j->nf,          j->face_n, j->face_idx, fm,
@@ -421,7 +419,7 @@ static bn_status bn__bake_openmesh(const char *path, int is_ply, const bn_bake_l
     bn__extra_free(names, extra, 3 * j->nlayers);
     free(prov);
     if (st == BN_OK && dup)
-        bn_logf(o->log, BN_LOG_WARN,
+        bn_warnf(o->log, BN_W_NON_MANIFOLD, (double)dup,
                 "%s: %zu vertices were duplicated for faces OpenMesh's half-edge mesh cannot share (non-manifold)",
                 path, dup);
     if (st == BN_OK && (st = bn__bake_poll(path, err)) == BN_OK && is_ply)

@@ -2,6 +2,7 @@
 #include "bounce/status.h"
 #include "base/internal.h"
 
+#include <math.h>
 #include <signal.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -59,6 +60,21 @@ bn_status bn_error_set(bn_error *err, bn_status s, const char *fmt, ...)
     return s;
 }
 
+#define BN__WARNING_NAME(id, name) name,
+static const char *const bn__warning_names[] = {BN_WARNING_MAP(BN__WARNING_NAME)};
+
+const char *bn_warning_name(bn_warning w) { return (unsigned)w < BN_WARNING_COUNT ? bn__warning_names[w] : "?"; }
+
+static void bn__log_emit(const bn_log *log, const bn_message *m)
+{
+    if (log && log->fn)
+        log->fn(log->user, m);
+    else if (m->level == BN_LOG_WARN)
+        fprintf(stderr, "bounce: warning: %s [%s]\n", m->text, bn_warning_name(m->code));
+    else if (m->level == BN_LOG_INFO && log)
+        fprintf(stderr, "bounce: %s\n", m->text);
+}
+
 void bn_logf(const bn_log *log, bn_log_level level, const char *fmt, ...)
 {
     char buf[2048];
@@ -68,14 +84,17 @@ void bn_logf(const bn_log *log, bn_log_level level, const char *fmt, ...)
     va_start(ap, fmt);
     vsnprintf(buf, sizeof buf, fmt, ap);
     va_end(ap);
-    if (log && log->fn) {
-        log->fn(log->user, level, buf);
-        return;
-    }
-    if (level == BN_LOG_WARN)
-        fprintf(stderr, "bounce: warning: %s\n", buf);
-    else if (level == BN_LOG_INFO && log)
-        fprintf(stderr, "bounce: %s\n", buf);
+    bn__log_emit(log, &(bn_message){level, BN_W_NONE, NAN, buf});
+}
+
+void bn_warnf(const bn_log *log, bn_warning code, double value, const char *fmt, ...)
+{
+    char buf[2048];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(buf, sizeof buf, fmt, ap);
+    va_end(ap);
+    bn__log_emit(log, &(bn_message){BN_LOG_WARN, code, value, buf});
 }
 
 const char *bn_version(void) { return BN_VERSION_STRING; }

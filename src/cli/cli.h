@@ -79,10 +79,10 @@ void bn_cli_add_scene(bn_optset *s, bn_cli_scene *o);
 /* Loads and meshes (the pipeline's first stage); prints the error and returns its status on failure. */
 bn_status bn_cli_load_scene(const char *path, const bn_cli_scene *o, const bn_cli_common *c, bn_scene **out);
 /* Log sink for library notes and warnings: warnings always, notes unless --quiet (user: the bn_cli_common). */
-void bn_cli_log(void *user, bn_log_level level, const char *msg);
+void bn_cli_log(void *user, const bn_message *m);
 /* The same with notes on stdout without a prefix ("wrote FILE ..."), for commands whose notes are
  * their output. */
-void bn_cli_stdout_log(void *user, bn_log_level level, const char *msg);
+void bn_cli_stdout_log(void *user, const bn_message *m);
 
 /* Prints "bounce: <message>" and returns the exit code of the status. */
 int bn_cli_fail(const bn_error *err);

@@ -317,14 +317,21 @@ const char *bn_cli_translate(const char *msg, char *out, size_t n)
     return out;
 }
 
-void bn_cli_log(void *user, bn_log_level level, const char *msg)
+/* A warning as the compilers write theirs: the text, then its code in brackets. */
+static void bn__cli_warning(const bn_message *m)
+{
+    char t[2304];
+    fprintf(stderr, "bounce: warning: %s [%s]\n", bn_cli_translate(m->text, t, sizeof t), bn_warning_name(m->code));
+}
+
+void bn_cli_log(void *user, const bn_message *m)
 {
     const bn_cli_common *c = user;
     char t[2304];
-    if (level == BN_LOG_WARN)
-        fprintf(stderr, "bounce: warning: %s\n", bn_cli_translate(msg, t, sizeof t));
-    else if (level == BN_LOG_INFO && !c->quiet)
-        fprintf(stderr, "bounce: %s\n", bn_cli_translate(msg, t, sizeof t));
+    if (m->level == BN_LOG_WARN)
+        bn__cli_warning(m);
+    else if (m->level == BN_LOG_INFO && !c->quiet)
+        fprintf(stderr, "bounce: %s\n", bn_cli_translate(m->text, t, sizeof t));
 }
 
 bn_status bn_cli_load_scene(const char *path, const bn_cli_scene *o, const bn_cli_common *c, bn_scene **out)
@@ -342,14 +349,14 @@ bn_status bn_cli_load_scene(const char *path, const bn_cli_scene *o, const bn_cl
     return st;
 }
 
-void bn_cli_stdout_log(void *user, bn_log_level level, const char *msg)
+void bn_cli_stdout_log(void *user, const bn_message *m)
 {
     const bn_cli_common *c = user;
     char t[2304];
-    if (level == BN_LOG_WARN)
-        fprintf(stderr, "bounce: warning: %s\n", bn_cli_translate(msg, t, sizeof t));
-    else if (level == BN_LOG_INFO && !c->quiet)
-        printf("%s\n", bn_cli_translate(msg, t, sizeof t));
+    if (m->level == BN_LOG_WARN)
+        bn__cli_warning(m);
+    else if (m->level == BN_LOG_INFO && !c->quiet)
+        printf("%s\n", bn_cli_translate(m->text, t, sizeof t));
 }
 
 int bn_cli_fail(const bn_error *err)

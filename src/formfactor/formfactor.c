@@ -1173,7 +1173,7 @@ static bn_status bn__finish(const bn_scene *scene, size_t n, bn__sink *sink, con
     d->quad_evals = tot->evals;
     d->occluded_fraction = tot->pairs_nonzero ? (double)tot->pairs_blocked / (double)tot->pairs_nonzero : 0;
     if (rep.lost_puts)
-        bn_logf(&o->log, BN_LOG_WARN, "%zu hemisphere hits landed on patches outside the sparse pattern (grazing)",
+        bn_warnf(&o->log, BN_W_PATTERN, (double)rep.lost_puts, "%zu hemisphere hits landed on patches outside the sparse pattern (grazing)",
                 rep.lost_puts);
     return BN_OK;
 }
@@ -1181,7 +1181,7 @@ static bn_status bn__finish(const bn_scene *scene, size_t n, bn__sink *sink, con
 static void bn__warn_rows(const bn_formfactor_opts *o, const bn_ff_diagnostics *d)
 {
     if (d->rows_above_one)
-        bn_logf(&o->log, BN_LOG_WARN, "%zu rows of F sum to more than 1 + %.3g (largest %.9g; method %s)%s",
+        bn_warnf(&o->log, BN_W_ROW_SUM, d->row_sum_max, "%zu rows of F sum to more than 1 + %.3g (largest %.9g; method %s)%s",
                 d->rows_above_one, d->row_sum_tol, d->row_sum_max, bn_ff_method_name(o->method),
                 o->method == BN_FF_HEMISPHERE ? ""
                 : o->method == BN_FF_ANALYTIC && o->exact_visibility && d->pairs_exact == d->pairs_tested
@@ -1313,7 +1313,7 @@ static bn_status bn__formfactor_build_body(const bn_scene *scene, const bn_rt *r
         int seeded = o.method != BN_FF_ANALYTIC || d->rays > 0;   /* the closed form with exact visibility: no draws */
         if (bn__ff_write_file(*out, scene, o.cache_path, seeded ? key : unseeded, NULL, o.precision, o.storage,
                               &cerr) != BN_OK)
-            bn_logf(&o.log, BN_LOG_WARN, "cannot write the form-factor cache: %s", cerr.msg);
+            bn_warnf(&o.log, BN_W_CACHE, NAN, "cannot write the form-factor cache: %s", cerr.msg);
     }
     return BN_OK;
 }

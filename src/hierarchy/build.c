@@ -231,7 +231,7 @@ static bn_status bn__passes(bn__build *B, bn_hierarchy_report *rep, bn_error *er
     if (st == BN_OK && B->R.force)
         rep->settled = 1;
     if (st == BN_OK && !rep->settled)
-        bn_logf(&o->log, BN_LOG_WARN, "hierarchy: links still splitting after %d passes; frozen as they are",
+        bn_warnf(&o->log, BN_W_LINKS, NAN, "hierarchy: links still splitting after %d passes; frozen as they are",
                 o->max_passes);
     return st;
 }

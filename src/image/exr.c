@@ -64,7 +64,7 @@ static bn_status bn__exr_sources(const char *path, const bn_layer *layers, size_
         for (size_t i = 0; i < n; i++)
             clamped[l][i] = fmaxf(-BN__HALF_MAX, fminf(BN__HALF_MAX, im->rgb[i]));
         src[l] = clamped[l];
-        bn_logf(log, BN_LOG_WARN, "%s: layer %s: %zu values above half's largest value 65504 were clamped", path,
+        bn_warnf(log, BN_W_CLAMPED, (double)over, "%s: layer %s: %zu values above half's largest value 65504 were clamped", path,
                 layers[l].name, over);
     }
     return BN_OK;

@@ -150,7 +150,7 @@ bn_status bn_contact_sheet_write(const char *path, const bn_layer *layers, size_
     }
     st = bn__write_rgb8(path, sw, sh, sheet, labels, nl, attrs, nattrs, &ok, err);
     if (st == BN_OK && !ok)
-        bn_logf(log, BN_LOG_WARN, "%s: labels could not be drawn (font %s/DejaVuSans.ttf missing?); the sheet is "
+        bn_warnf(log, BN_W_FONT, NAN, "%s: labels could not be drawn (font %s/DejaVuSans.ttf missing?); the sheet is "
                 "unlabelled", path, BN_FONT_DIR);
 done:
     free(sheet);

@@ -152,7 +152,7 @@ static bn_status bn__read_mtl(const char *path, const char *objpath, unsigned ob
                 break;
             }
             if (bn__find_material(s, name) >= 0) {
-                bn_logf(log, BN_LOG_WARN, "%s:%u: material '%s' defined again; the later definition wins", path,
+                bn_warnf(log, BN_W_MATERIAL, NAN, "%s:%u: material '%s' defined again; the later definition wins", path,
                         line, name);
                 cur = bn__find_material(s, name);
                 continue;
@@ -321,7 +321,7 @@ static bn_status bn__obj_face(bn__objr *R, char *c, bn_error *err)
             memset(&m, 0, sizeof m);
             snprintf(m.name, sizeof m.name, "(default)");
             m.rho[0] = m.rho[1] = m.rho[2] = 0.5;
-            bn_logf(R->log, BN_LOG_WARN, "%s:%u: faces without usemtl get the default material (grey, rho 0.5)",
+            bn_warnf(R->log, BN_W_MATERIAL, NAN, "%s:%u: faces without usemtl get the default material (grey, rho 0.5)",
                     R->path, R->line);
             if (!bn__soup_add_material(R->s, &m))
                 return bn_error_set(err, BN_ENOMEM, "out of memory");

@@ -213,7 +213,7 @@ static bn_status bn__off_materials(bn__off *O, bn__off_read *R, const bn_log *lo
         first += out->counts[f];
     }
     if (!R->face_colours && !O->colours)
-        bn_logf(log, BN_LOG_WARN, "%s: no colours: every face has reflectance 0.5", O->path);
+        bn_warnf(log, BN_W_NO_COLOURS, NAN, "%s: no colours: every face has reflectance 0.5", O->path);
     if (!bn__soup_materials_from_keys(out, R->keys, "off"))
         return bn_error_set(err, BN_ENOMEM, "out of memory");
     return BN_OK;
@@ -256,7 +256,7 @@ static bn_status bn__read_off_ascii(bn__off *O, const bn_log *log, bn__soup *out
     if (st == BN_OK)
         st = bn__off_materials(O, &R, log, out, err);
     if (st == BN_OK && R.dropped)
-        bn_logf(log, BN_LOG_WARN, "%s: %zu faces with a repeated vertex were dropped", O->path, R.dropped);
+        bn_warnf(log, BN_W_FACE_DROPPED, (double)R.dropped, "%s: %zu faces with a repeated vertex were dropped", O->path, R.dropped);
     free(R.vrgb);
     free(R.keys);
     return st;

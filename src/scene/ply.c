@@ -646,9 +646,9 @@ bn_status bn__read_ply(const char *path, bn__soup *out, const bn_log *log, bn_er
     if (st == BN_OK)
         st = bn__ply_materials(&P, &S, out, err);
     if (st == BN_OK && S.dropped)
-        bn_logf(log, BN_LOG_WARN, "%s: %zu faces with a repeated vertex were dropped", path, S.dropped);
+        bn_warnf(log, BN_W_FACE_DROPPED, (double)S.dropped, "%s: %zu faces with a repeated vertex were dropped", path, S.dropped);
     if (st == BN_OK && !S.F.has_refl && !S.F.has_rgb && !S.vertex_colour)
-        bn_logf(log, BN_LOG_WARN, "%s: no colours or reflectance properties: every face has reflectance 0.5", path);
+        bn_warnf(log, BN_W_NO_COLOURS, NAN, "%s: no colours or reflectance properties: every face has reflectance 0.5", path);
     free(S.F.line);
     free(S.F.props);
     free(S.F.rgb);

@@ -232,11 +232,11 @@ static bn_status bn__drop_duplicates(bn_scene *sc, const char *path, const bn_lo
             if (bn_v3_dot(a->normal, b->normal) > 0) {
                 drop[keys[k].face] = 1;
                 sc->stats.duplicates_dropped++;
-                bn_logf(log, BN_LOG_WARN, "%s:%u: face duplicates the face at line %u; dropped", path, b->line,
+                bn_warnf(log, BN_W_FACE_DROPPED, 1, "%s:%u: face duplicates the face at line %u; dropped", path, b->line,
                         a->line);
             } else {
                 sc->stats.back_to_back++;
-                bn_logf(log, BN_LOG_WARN,
+                bn_warnf(log, BN_W_BACK_TO_BACK, NAN,
                         "%s:%u: face lies back to back with the face at line %u (a two-sided panel); both kept",
                         path, b->line, a->line);
             }
@@ -407,20 +407,25 @@ static bn_status bn__build_polygon(bn__builder *b, const bn__soup *s, bn__polys 
     if (pl.dev > P->o->planar_tol * pl.diam) {
         /* A split is exact geometry, not a loss: a note, and a warning only where the bend is large
          * enough (1% of the polygon) that the choice of diagonal shows in the light. */
-        bn_log_level lv = pl.dev > BN_NONPLANAR_WARN * pl.diam ? BN_LOG_WARN : BN_LOG_INFO;
+        char msg[512];
         b->sc->stats.nonplanar_split++;
+        if (n == 4)
+            snprintf(msg, sizeof msg,
+                     "%s:%u: quad is non-planar (a vertex is %.3g off its mean plane, %.2g of its size); split into two "
+                     "triangles along the diagonal from its 1st to its 3rd vertex",
+                     P->path, line, pl.dev, pl.dev / pl.diam);
+        else
+            snprintf(msg, sizeof msg, "%s:%u: polygon of %u vertices is non-planar by %.3g; triangulated", P->path,
+                     line, n, pl.dev);
+        if (pl.dev > BN_NONPLANAR_WARN * pl.diam)
+            bn_warnf(&P->o->log, BN_W_NONPLANAR, pl.dev / pl.diam, "%s", msg);
+        else
+            bn_logf(&P->o->log, BN_LOG_INFO, "%s", msg);
         if (n == 4) {
-            bn_status st;
-            bn_logf(&P->o->log, lv,
-                    "%s:%u: quad is non-planar (a vertex is %.3g off its mean plane, %.2g of its size); split into two "
-                    "triangles along the diagonal from its 1st to its 3rd vertex",
-                    P->path, line, pl.dev, pl.dev / pl.diam);
-            st = bn__emit_triangle(b, s, v[0], v[1], v[2], mat, p, line, P->area_eps, &P->degenerate);
+            bn_status st = bn__emit_triangle(b, s, v[0], v[1], v[2], mat, p, line, P->area_eps, &P->degenerate);
             return st == BN_OK ? bn__emit_triangle(b, s, v[0], v[2], v[3], mat, p, line, P->area_eps, &P->degenerate)
                                : st;
         }
-        bn_logf(&P->o->log, lv, "%s:%u: polygon of %u vertices is non-planar by %.3g; triangulated", P->path,
-                line, n, pl.dev);
     } else if (n == 4 && bn__quad_convex(s, v, &pl)) {
         return bn__emit_face(b, s, v, 4, mat, p, line, pl.nrm, pl.area);
     }
@@ -450,12 +455,12 @@ static bn_status bn__scene_finish(bn_scene *sc, const char *path, const bn_load_
         return bn_error_set(err, st, "out of memory building faces of %s", path);
     sc->stats.degenerate_dropped = degenerate;
     if (degenerate)
-        bn_logf(&o->log, BN_LOG_WARN, "%s: %zu degenerate (zero-area) face%s dropped", path, degenerate,
+        bn_warnf(&o->log, BN_W_FACE_DROPPED, (double)degenerate, "%s: %zu degenerate (zero-area) face%s dropped", path, degenerate,
                 degenerate == 1 ? "" : "s");
     if (sc->nfaces == 0)
         return bn_error_set(err, BN_EINPUT, "%s: no face with a non-zero area", path);
     if (bn_scene_emitter_count(sc) == 0)
-        bn_logf(&o->log, BN_LOG_WARN, "%s: no emitter (no material with Ke > 0): the result will be black", path);
+        bn_warnf(&o->log, BN_W_NO_EMITTER, NAN, "%s: no emitter (no material with Ke > 0): the result will be black", path);
     return BN_OK;
 }
 
@@ -635,6 +640,15 @@ void bn_scene_emitted_power(const bn_scene *s, double watts[3])
     for (size_t f = 0; f < s->nfaces; f++)
         for (int c = 0; c < 3; c++)
             watts[c] += BN_PI * s->faces[f].area * m * m * s->mats[s->faces[f].material].Le[c];
+}
+
+void bn_scene_power(const bn_scene *s, const double *radiance, double watts[3])
+{
+    double m = bn_unit_to_metres(s->unit);
+    watts[0] = watts[1] = watts[2] = 0;
+    for (size_t p = 0; p < s->npatches; p++)
+        for (int c = 0; c < 3; c++)
+            watts[c] += BN_PI * s->patches[p].area * m * m * radiance[3 * p + (size_t)c];
 }
 
 /* The geometry alone: unit, vertices, polygons, patches (what F depends on). */

@@ -423,7 +423,7 @@ static bn_status bn__solve_singular(bn__solve *S)
                             S->knorm, res->spectral_radius, res->spectral_radius_lower, thr);
     }
     if (S->knorm >= 1)
-        bn__note(S->o, BN_LOG_WARN,
+        bn_warnf(&S->o->log_sink, BN_W_BOUNDS, S->knorm,
                  "||K||_inf = %.9g >= 1 but the spectral radius is %.9g < 1: the iterations converge, but the a "
                  "priori bounds (bound, error_bound columns) do not apply",
                  S->knorm, res->spectral_radius);
@@ -462,7 +462,7 @@ static bn_status bn__solve_start(bn__solve *S)
                  res->predicted_iterations, o->method == BN_SOLVE_NEUMANN ? "bounces" : "iterations", o->tol,
                  o->method == BN_SOLVE_GAUSS_SEIDEL ? "; Gauss-Seidel needs at most this, often about half" : "");
     if (res->predicted_iterations != SIZE_MAX && res->predicted_iterations > o->max_iter && S->type->solve == NULL)
-        bn__note(o, BN_LOG_WARN, "the predicted %zu iterations exceed `max_iter` %zu: expect the iteration limit",
+        bn_warnf(&o->log_sink, BN_W_ITERATIONS, (double)res->predicted_iterations, "the predicted %zu iterations exceed `max_iter` %zu: expect the iteration limit",
                  res->predicted_iterations, o->max_iter);
     return BN_OK;
 }

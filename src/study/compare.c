@@ -57,15 +57,11 @@ void bn__study_surface_means(const bn_scene *s, const double *L, size_t nsurf, d
 
 void bn__study_reflected_power(const bn_scene *s, const double *L, const double *E, double out[3])
 {
-    size_t n;
-    const bn_patch *p = bn_scene_patches(s, &n);
-    double u = bn_unit_to_metres(bn_scene_unit(s));
-    out[0] = out[1] = out[2] = 0;
-    for (size_t i = 0; i < n; i++)
-        for (int c = 0; c < 3; c++)
-            out[c] += p[i].area * u * u * (L[3 * i + (size_t)c] - E[3 * i + (size_t)c]);
+    double e[3];
+    bn_scene_power(s, L, out);   /* P = pi sum_i A_i (L_i - E_i) */
+    bn_scene_power(s, E, e);
     for (int c = 0; c < 3; c++)
-        out[c] *= 3.14159265358979323846;   /* P = pi sum_i A_i (L_i - E_i) */
+        out[c] -= e[c];
 }
 
 bn_status bn__study_ref_init(bn__study_ref *r, const bn_scene *s, const double *L, size_t nsurf, bn_error *err)

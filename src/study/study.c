@@ -70,11 +70,10 @@ static void bn__note(const bn__study *S, const char *fmt, ...)
     bn_logf(&S->o->log, BN_LOG_INFO, "%s", buf);
 }
 
-static void bn__drop_log(void *user, bn_log_level level, const char *msg)
+static void bn__drop_log(void *user, const bn_message *m)
 {
     (void)user;
-    (void)level;
-    (void)msg;
+    (void)m;
 }
 
 static bn_study_row *bn__row_new(bn__study *S, const char *method, const char *value, double x, bn_error *err)
@@ -199,7 +198,7 @@ static bn_status bn__solve(const bn_transport *K, const double *E, const bn_solv
     if ((o.method == BN_SOLVE_DIRECT && !(bn_transport_caps(K) & BN_OP_ENTRIES)) ||
         (o.method == BN_SOLVE_GAUSS_SEIDEL && !(bn_transport_caps(K) & BN_OP_ROWS))) {
         /* K_H: apply only; converged far below any error measured. Said, never silent. */
-        bn_logf(&so->log_sink, BN_LOG_WARN,
+        bn_warnf(&so->log_sink, BN_W_METHOD, NAN,
                 "%s needs %s of K, which the %s operator does not offer: jacobi to tol %g ran in its place, and "
                 "its rows are labelled %s", bn_solve_method_name(o.method),
                 o.method == BN_SOLVE_DIRECT ? "entries" : "rows", bn_transport_name(K), fmin(o.tol, 1e-10),
@@ -1299,7 +1298,7 @@ static void bn__warn_reference(const bn__study *S)
         if (isfinite(R->rows[i].err_surface_max))
             best = fmin(best, R->rows[i].err_surface_max);
     if (isfinite(best) && R->ref_error > best / 3)
-        bn_logf(&S->o->log, BN_LOG_WARN,
+        bn_warnf(&S->o->log, BN_W_REFERENCE, R->ref_error,
                 "the reference's estimated error (%.3g per surface) is not well below the smallest error measured "
                 "(%.3g): errors near it are uncertain; use a finer reference (`ref_patches`, `ref_samples`, `ref_spp`)",
                 R->ref_error, best);
@@ -1384,82 +1383,47 @@ static bn_status bn__study_settings(bn__study *S, bn_error *err)
     return st;
 }
 
-/* ---- warnings gathered: each kind said once per study, with its count and worst occurrence ----
+/* ---- warnings gathered: each kind (code) said once per study, with its count and worst ----
  * A study assembles form factors and solves once per setting, and each would repeat the same
- * warning (rows of F above 1, ...). A kind is the message with its numbers masked; the worst
- * occurrence is the one with the largest value after "largest", else the largest first number. */
-#define BN__WARN_KINDS 16
+ * warning (rows of F above 1, ...). The worst occurrence is the one with the largest measure. */
 typedef struct bn__warn_kind {
-    char key[192], worst[768];
+    char worst[2048];
     double value;
     size_t count;
 } bn__warn_kind;
 typedef struct bn__warnings {
     bn_log out;   /* where they go in the end */
-    size_t nkinds;
-    bn__warn_kind kind[BN__WARN_KINDS];
+    bn__warn_kind kind[BN_WARNING_COUNT];
 } bn__warnings;
 
-static void bn__warn_key(const char *msg, char *key, size_t n)
-{
-    size_t k = 0;
-    for (const char *p = msg; *p && k + 1 < n;) {
-        if (isdigit((unsigned char)*p)) {
-            key[k++] = '#';
-            while (*p && (isdigit((unsigned char)*p) || *p == '.' || *p == 'e' || *p == '-' || *p == '+'))
-                p++;
-        } else {
-            key[k++] = *p++;
-        }
-    }
-    key[k] = '\0';
-}
-
-static double bn__warn_value(const char *msg)
-{
-    const char *p = strstr(msg, "largest ");
-    p = p ? p + 8 : msg;
-    while (*p && !isdigit((unsigned char)*p))
-        p++;
-    return *p ? strtod(p, NULL) : 0;
-}
-
-static void bn__gather(void *user, bn_log_level level, const char *msg)
+static void bn__gather(void *user, const bn_message *m)
 {
     bn__warnings *W = user;
-    char key[192];
-    size_t k;
-    if (level != BN_LOG_WARN) {
-        bn_logf(&W->out, level, "%s", msg);
+    bn__warn_kind *k;
+    if (m->level != BN_LOG_WARN) {
+        bn_logf(&W->out, m->level, "%s", m->text);
         return;
     }
-    bn__warn_key(msg, key, sizeof key);
-    for (k = 0; k < W->nkinds && strcmp(W->kind[k].key, key) != 0; k++)
-        ;
-    if (k == W->nkinds) {
-        if (k == BN__WARN_KINDS) {   /* no room: say it now */
-            bn_logf(&W->out, level, "%s", msg);
-            return;
-        }
-        W->nkinds++;
-        snprintf(W->kind[k].key, sizeof W->kind[k].key, "%s", key);
-        W->kind[k].value = -INFINITY;
+    if ((unsigned)m->code >= BN_WARNING_COUNT) {   /* not a code of this library: said now */
+        bn_warnf(&W->out, m->code, m->value, "%s", m->text);
+        return;
     }
-    W->kind[k].count++;
-    if (bn__warn_value(msg) > W->kind[k].value) {
-        W->kind[k].value = bn__warn_value(msg);
-        snprintf(W->kind[k].worst, sizeof W->kind[k].worst, "%s", msg);
+    k = &W->kind[m->code];
+    if (k->count++ == 0 || (isfinite(m->value) && !(m->value <= k->value))) {
+        k->value = m->value;
+        snprintf(k->worst, sizeof k->worst, "%s", m->text);
     }
 }
 
 static void bn__warnings_flush(const bn__warnings *W)
 {
-    for (size_t k = 0; k < W->nkinds; k++) {
-        if (W->kind[k].count == 1)
-            bn_logf(&W->out, BN_LOG_WARN, "%s", W->kind[k].worst);
-        else
-            bn_logf(&W->out, BN_LOG_WARN, "%s [%zu times in this study; the worst shown]", W->kind[k].worst,
-                    W->kind[k].count);
+    for (int c = 0; c < BN_WARNING_COUNT; c++) {
+        const bn__warn_kind *k = &W->kind[c];
+        if (k->count == 1)
+            bn_warnf(&W->out, (bn_warning)c, k->value, "%s", k->worst);
+        else if (k->count > 1)
+            bn_warnf(&W->out, (bn_warning)c, k->value, "%s [%zu times in this study; the worst shown]", k->worst,
+                     k->count);
     }
 }
 

@@ -59,14 +59,31 @@ static void bn__trace_pixel(const bn__tracer *t, const bn_rt *rt, const bn_camer
         }
 }
 
+typedef struct bn__trace_rows_ctx {
+    const bn__tracer *t;
+    const bn_rt *rt;
+    const bn_camera *cam;
+    const bn_trace_opts *o;
+    size_t npx, nl;
+    bn_trace_image *out;
+} bn__trace_rows_ctx;
+
+/* One row of pixels. */
+static void bn__trace_row(void *ctx, size_t row, double *sample, double *mean, double *m2, unsigned long long *rays)
+{
+    const bn__trace_rows_ctx *c = ctx;
+    for (int col = 0; col < c->cam->width; col++)
+        bn__trace_pixel(c->t, c->rt, c->cam, c->o, (int)row, col, c->npx, c->nl, sample, mean, m2, c->out, rays);
+}
+
 static bn_status bn__trace_image_run_body(const bn_rt *rt, const bn_camera *cam, const bn_trace_opts *o, bn_trace_image *out,
                              bn_error *err)
 {
     bn__tracer t;
     bn_status st;
-    size_t npx, nl, bytes, done = 0;
+    size_t npx, nl, bytes;
     unsigned long long rays = 0;
-    int no_buffers = 0;   /* a thread could not allocate its sample buffers */
+    int no_buffers;   /* a thread could not allocate its sample buffers */
     bn__progress prog;
     double t0 = bn__now();
     const int W = cam->width, H = cam->height;
@@ -98,45 +115,17 @@ static bn_status bn__trace_image_run_body(const bn_rt *rt, const bn_camera *cam,
     }
     bn__progress_begin(&prog, "path tracing", (size_t)H, o->quiet);
 
-#pragma omp parallel reduction(+ : rays)
-    {
-        size_t m = nl * 3;
-        double *sample = malloc(m * sizeof(double)), *mean = malloc(m * sizeof(double)),
-               *m2 = malloc(m * sizeof(double));
-        if (!sample || !mean || !m2) {
-#pragma omp atomic write
-            no_buffers = 1;
-        }
-#pragma omp for schedule(dynamic, 1)
-        for (int row = 0; row < H; row++) {
-            /* after an interrupt (or without buffers) the remaining iterations do nothing; under
-             * mpirun each rank traces its own rows (bn_dist_mine), whole, as one process would */
-            if (!sample || !mean || !m2 || bn_interrupted() != BN_OK || !bn_dist_mine((size_t)row))
-                continue;
-            for (int col = 0; col < W; col++) {
-                bn__trace_pixel(&t, rt, cam, o, row, col, npx, nl, sample, mean, m2, out, &rays);
-            }
-            bn__progress_step(&prog, &done, 1);
-        }
-        free(sample);
-        free(mean);
-        free(m2);
-    }
+    bn__trace_rows_ctx ctx = {&t, rt, cam, o, npx, nl, out};
+    no_buffers = bn__trace_parallel((size_t)H, nl * 3, 1, bn__trace_row, &ctx, &prog, &rays);
     bn__progress_end(&prog);
     bn__tracer_free(&t);
-    if ((st = bn__trace_combine(no_buffers, out->mean, out->var, NULL, 0, npx * nl * 3, &rays, err)) != BN_OK) {
+    if ((st = bn__trace_combine(no_buffers, out->mean, out->var, NULL, 0, npx * nl * 3, &rays, err)) != BN_OK ||
+        (st = bn__trace_stopped(no_buffers, err)) != BN_OK) {
         bn_trace_image_free(out);
         return st;
     }
     out->rays = rays;
     out->seconds = bn__now() - t0;
-    if (no_buffers || bn_interrupted() != BN_OK) {
-        bn_status s = bn_interrupted();
-        bn_trace_image_free(out);
-        if (s != BN_OK)
-            return bn_error_set(err, s, "trace: interrupted");
-        return bn_error_set(err, BN_ENOMEM, "trace: out of memory for per-thread sample buffers");
-    }
     for (size_t k = 0; k < npx * nl * 3; k++)
         if (!isfinite(out->mean[k]) || !isfinite(out->var[k])) {
             size_t l = k / (npx * 3), px = (k / 3) % npx;

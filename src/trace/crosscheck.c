@@ -44,19 +44,6 @@ static int bn__inside(const bn_patch *p, const double *pv, const double x[3], do
     return 1;
 }
 
-static void bn__layer_power(const bn_scene *s, const double *layers, size_t n, size_t l, double w[3])
-{
-    size_t np;
-    const bn_patch *p = bn_scene_patches(s, &np);
-    double m = bn_unit_to_metres(bn_scene_unit(s));
-    w[0] = w[1] = w[2] = 0;
-    for (size_t i = 0; i < n; i++)
-        for (int c = 0; c < 3; c++)
-            w[c] += p[i].area * m * m * layers[(l * n + i) * 3 + (size_t)c];
-    for (int c = 0; c < 3; c++)
-        w[c] *= BN_PI;
-}
-
 /* Per compared item (patch, or region of in->part): area (m^2) and material. */
 static void bn__item(const bn_crosscheck_input *in, size_t i, double *area_m2, unsigned *mat)
 {
@@ -167,8 +154,8 @@ bn_status bn_crosscheck_mesh_tolerance(const bn_scene *fine, const double *fine_
     if (power_tol)
         for (size_t l = 0; l < nl; l++) {
             double a[3], b[3];
-            bn__layer_power(fine, fine_layers, n, l, a);
-            bn__layer_power(other, other_layers, n2, l, b);
+            bn_scene_power(fine, fine_layers + l * n * 3, a);   /* n, n2: the scenes' patch counts */
+            bn_scene_power(other, other_layers + l * n2 * 3, b);
             for (int c = 0; c < 3; c++)
                 power_tol[3 * l + (size_t)c] = fabs(a[c] - b[c]);
         }

@@ -62,6 +62,20 @@ static void bn__trace_item(const bn__tracer *t, const bn_partition *part, const 
         }
 }
 
+typedef struct bn__trace_items_ctx {
+    const bn__tracer *t;
+    const bn_partition *part;
+    const bn_trace_opts *o;
+    size_t n, nl;
+    bn_trace_patches *out;
+} bn__trace_items_ctx;
+
+static void bn__trace_item_run(void *ctx, size_t i, double *sample, double *mean, double *m2, unsigned long long *rays)
+{
+    const bn__trace_items_ctx *c = ctx;
+    bn__trace_item(c->t, c->part, c->o, i, c->n, c->nl, sample, mean, m2, c->out, rays);
+}
+
 /* part NULL: one item per patch; else one per region, its points uniform in area over the region. */
 static bn_status bn__trace_items_run_body(const bn_rt *rt, const bn_partition *part, const bn_trace_opts *o,
                                           bn_trace_patches *out, bn_error *err)
@@ -70,8 +84,7 @@ static bn_status bn__trace_items_run_body(const bn_rt *rt, const bn_partition *p
     bn_status st;
     size_t n, nl, bytes;
     unsigned long long rays = 0;
-    size_t done = 0;
-    int no_buffers = 0;   /* a thread could not allocate its sample buffers */
+    int no_buffers;   /* a thread could not allocate its sample buffers */
     bn__progress prog;
     double t0 = bn__now();
 
@@ -103,43 +116,17 @@ static bn_status bn__trace_items_run_body(const bn_rt *rt, const bn_partition *p
     }
     bn__progress_begin(&prog, part ? "path tracing regions" : "path tracing", n, o->quiet);
 
-#pragma omp parallel reduction(+ : rays)
-    {
-        size_t m = nl * 3;
-        double *sample = malloc(m * sizeof(double)), *mean = malloc(m * sizeof(double)),
-               *m2 = malloc(2 * m * sizeof(double));   /* M2, then M3 */
-        if (!sample || !mean || !m2) {
-#pragma omp atomic write
-            no_buffers = 1;
-        }
-#pragma omp for schedule(dynamic, 1)
-        for (size_t i = 0; i < n; i++) {
-            /* after an interrupt (or without buffers) the remaining iterations do nothing; under
-             * mpirun each rank traces its own items (bn_dist_mine), whole, as one process would */
-            if (!sample || !mean || !m2 || bn_interrupted() != BN_OK || !bn_dist_mine(i))
-                continue;
-            bn__trace_item(&t, part, o, i, n, nl, sample, mean, m2, out, &rays);
-            bn__progress_step(&prog, &done, 1);
-        }
-        free(sample);
-        free(mean);
-        free(m2);
-    }
+    bn__trace_items_ctx ctx = {&t, part, o, n, nl, out};
+    no_buffers = bn__trace_parallel(n, nl * 3, 3, bn__trace_item_run, &ctx, &prog, &rays);
     bn__progress_end(&prog);
     bn__tracer_free(&t);
-    if ((st = bn__trace_combine(no_buffers, out->mean, out->se, out->skew, 1, n * nl * 3, &rays, err)) != BN_OK) {
+    if ((st = bn__trace_combine(no_buffers, out->mean, out->se, out->skew, 1, n * nl * 3, &rays, err)) != BN_OK ||
+        (st = bn__trace_stopped(no_buffers, err)) != BN_OK) {
         bn_trace_patches_free(out);
         return st;
     }
     out->rays = rays;
     out->seconds = bn__now() - t0;
-    if (no_buffers || bn_interrupted() != BN_OK) {
-        bn_status s = bn_interrupted();
-        bn_trace_patches_free(out);
-        if (s != BN_OK)
-            return bn_error_set(err, s, "trace: interrupted");
-        return bn_error_set(err, BN_ENOMEM, "trace: out of memory for per-thread sample buffers");
-    }
     for (size_t l = 0; l < nl; l++)
         for (size_t i = 0; i < n; i++)
             for (int c = 0; c < 3; c++) {
@@ -203,20 +190,3 @@ void bn_trace_patches_power(const bn_scene *s, const bn_trace_patches *r, int la
     }
 }
 
-bn_status bn__trace_combine(int no_buffers, void *mean, void *spread, double *third, int dbl, size_t n,
-                            unsigned long long *rays, bn_error *err)
-{
-    bn_status here = no_buffers ? BN_ENOMEM : bn_interrupted(), all = bn_dist_agree(here), st;
-    if (all != BN_OK && here == BN_OK)
-        return bn_error_set(err, all, "trace: another MPI process failed (%s)", bn_status_str(all));
-    if (all != BN_OK)
-        return BN_OK;   /* this rank's own failure: reported by the caller */
-    st = dbl ? bn_dist_sum(mean, n, err) : bn_dist_sum_float(mean, n, err);
-    if (st == BN_OK)
-        st = dbl ? bn_dist_sum(spread, n, err) : bn_dist_sum_float(spread, n, err);
-    if (st == BN_OK && third)
-        st = bn_dist_sum(third, n, err);
-    if (st == BN_OK)
-        st = bn_dist_sum_u64(rays, 1, err);
-    return st;
-}

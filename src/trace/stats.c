@@ -6,34 +6,32 @@
 #include <float.h>
 #include <math.h>
 
-static double bn__betacf(double a, double b, double x)
+/* One step of the modified Lentz recurrence with coefficient aa: updates c and d, returns d c. */
+static double bn__lentz_step(double aa, double *c, double *d)
 {
     const double tiny = 1e-300;
+    *d = 1 + aa * *d;
+    if (fabs(*d) < tiny)
+        *d = tiny;
+    *c = 1 + aa / *c;
+    if (fabs(*c) < tiny)
+        *c = tiny;
+    *d = 1 / *d;
+    return *d * *c;
+}
+
+static double bn__betacf(double a, double b, double x)
+{
     double qab = a + b, qap = a + 1, qam = a - 1, c = 1, d = 1 - qab * x / qap, h;
-    if (fabs(d) < tiny)
-        d = tiny;
+    if (fabs(d) < 1e-300)
+        d = 1e-300;
     d = 1 / d;
     h = d;
     for (int m = 1; m <= 10000; m++) {
         int m2 = 2 * m;
-        double aa = m * (b - m) * x / ((qam + m2) * (a + m2)), del;
-        d = 1 + aa * d;
-        if (fabs(d) < tiny)
-            d = tiny;
-        c = 1 + aa / c;
-        if (fabs(c) < tiny)
-            c = tiny;
-        d = 1 / d;
-        h *= d * c;
-        aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2));
-        d = 1 + aa * d;
-        if (fabs(d) < tiny)
-            d = tiny;
-        c = 1 + aa / c;
-        if (fabs(c) < tiny)
-            c = tiny;
-        d = 1 / d;
-        del = d * c;
+        double del;
+        h *= bn__lentz_step(m * (b - m) * x / ((qam + m2) * (a + m2)), &c, &d);   /* the even step */
+        del = bn__lentz_step(-(a + m) * (qab + m) * x / ((a + m2) * (qap + m2)), &c, &d);   /* the odd step */
         h *= del;
         if (fabs(del - 1) < 4 * DBL_EPSILON)
             break;

@@ -32,6 +32,19 @@ void bn__tracer_free(bn__tracer *t);
 bn_status bn__trace_combine(int no_buffers, void *mean, void *spread, double *third, int dbl, size_t n,
                             unsigned long long *rays, bn_error *err);
 
+/* One item's samples (a pixel row, a patch, a region) with the thread's buffers: sample and mean
+ * of m doubles, m2 of moments x m. */
+typedef void (*bn__trace_item_fn)(void *ctx, size_t i, double *sample, double *mean, double *m2,
+                                  unsigned long long *rays);
+/* Runs item(ctx, i) for i < n over the threads (dynamic, one at a time; each thread with its own
+ * buffers), under mpirun only this rank's items (bn_dist_mine), none after an interrupt; adds the
+ * rays cast to *rays and steps prog once per item. Returns 1 when a thread had no buffers. */
+int bn__trace_parallel(size_t n, size_t m, size_t moments, bn__trace_item_fn item, void *ctx, bn__progress *prog,
+                       unsigned long long *rays);
+/* After a run (and bn__trace_combine): BN_OK, or the interrupt's status, or BN_ENOMEM for a
+ * thread without buffers, in err. */
+bn_status bn__trace_stopped(int no_buffers, bn_error *err);
+
 /* A uniform point on patch p from two uniforms. */
 void bn__tracer_patch_point(const bn__tracer *t, size_t p, double u1, double u2, double u3, double x[3]);
 
