@@ -1,11 +1,15 @@
 #!/usr/bin/env python3
-"""The manual's links and the README's cheap tour lines. Every relative link in README.md and
-doc/*.md names a file that exists; the README's five-minute tour runs its `info` and `solve` lines
-as written (with B and S as the tour sets them; the other lines are each a command other tests run
-at length). usage: docs_check.py SOURCE_DIR BOUNCE"""
+"""The manual's links, the README's cheap tour lines and the manual's examples. Every relative link
+in README.md and doc/*.md names a file that exists; the README's five-minute tour runs its `info`
+and `solve` lines as written (with B and S as the tour sets them; the other lines are each a
+command other tests run at length); every ```sh block of doc/*.md runs as written, as doctests do,
+from a scratch directory holding the repository's meshes/ with `bounce` on PATH, and must exit 0
+(a block fenced ```sh no-test is a long one, said and skipped; one with mpirun needs mpirun).
+usage: docs_check.py SOURCE_DIR BOUNCE"""
 import glob
 import os
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -49,4 +53,38 @@ with tempfile.TemporaryDirectory() as work:
         ok = all(k in header for k in ("L_R", "E_R", "KE_R", "K2E_R", "K3E_R")) and len(rows) > 100
         print("%s patches.csv has L, E, KE, K2E, K3E and %d patches" % ("ok  " if ok else "FAIL", len(rows) - 1))
         fails += not ok
+
+def run_examples(src, exe):
+    """Each page's ```sh blocks, in order, in one scratch directory per page."""
+    bad = ran = 0
+    with tempfile.TemporaryDirectory() as work:
+        os.mkdir(os.path.join(work, "bin"))
+        os.symlink(exe, os.path.join(work, "bin", "bounce"))
+        env = dict(os.environ, PATH=os.path.join(work, "bin") + os.pathsep + os.environ.get("PATH", ""),
+                   OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+        for page in sorted(glob.glob(os.path.join(src, "doc", "*.md"))):
+            name = os.path.relpath(page, src)
+            here = os.path.join(work, os.path.basename(page)[:-3])
+            os.mkdir(here)
+            os.symlink(os.path.join(src, "meshes"), os.path.join(here, "meshes"))
+            for m in re.finditer(r"^```sh([^\n]*)\n(.*?)^```", open(page).read(), re.M | re.S):
+                block, tags = m.group(2), m.group(1).split()
+                first = block.strip().splitlines()[0] if block.strip() else ""
+                if "no-test" in tags:
+                    print("skip %s: %s (fenced no-test: a long run)" % (name, first))
+                    continue
+                if "mpirun" in block and not shutil.which("mpirun"):
+                    print("skip %s: %s (no mpirun here)" % (name, first))
+                    continue
+                r = subprocess.run(["bash", "-e", "-c", block], cwd=here, env=env, capture_output=True, text=True)
+                ran += 1
+                print("%s %s: %s (exit %d)" % ("ok  " if r.returncode == 0 else "FAIL", name, first, r.returncode))
+                if r.returncode != 0:
+                    bad += 1
+                    print(r.stdout[-2000:] + r.stderr[-2000:])
+    print("examples run: %d, failed: %d" % (ran, bad))
+    return bad
+
+
+fails += run_examples(src, exe)
 sys.exit(1 if fails else 0)

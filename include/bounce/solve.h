@@ -15,6 +15,9 @@ typedef enum bn_solve_method { BN_SOLVE_JACOBI, BN_SOLVE_GAUSS_SEIDEL, BN_SOLVE_
 const char *bn_solve_method_name(bn_solve_method m);   /* "jacobi", "gauss-seidel", "neumann", "direct" */
 const char *bn_solve_method_names(void);               /* "jacobi|gauss-seidel|neumann|direct" */
 int bn_solve_method_parse(const char *name, bn_solve_method *m);   /* 0, or -1 for no such method */
+/* 1 when operator k offers what the method needs (Gauss-Seidel rows, the direct solve entries):
+ * the one rule by which a front end replaces a method the operator cannot run (with Jacobi). */
+int bn_solve_method_runs_on(bn_solve_method m, const bn_transport *k);
 
 /* Why a solve stopped. Stopping is a reason, not an error (PETSc's KSPConvergedReason). */
 typedef enum bn_stop_reason {

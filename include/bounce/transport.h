@@ -95,8 +95,10 @@ bn_status bn_transport_row_entries(const bn_transport *k, size_t i, size_t *cols
 /* d[i] = F_ii (BN_OP_DIAG, else from entries; BN_ENOTSUP when the operator has neither). */
 bn_status bn_transport_diag(const bn_transport *k, double *d, bn_error *err);
 /* ||K||_inf per channel and overall: max_i rho_ic sum_j F_ij, F >= 0 (the contraction factor that
- * bounds the Neumann series). per_channel may be NULL. */
-bn_status bn_transport_norm_inf(const bn_transport *k, double *norm, double per_channel[3], bn_error *err);
+ * bounds the Neumann series), from K applied to ones. A row that is not finite or sums below 0 is
+ * BN_ENUMERIC naming it (its patch in *bad_patch). per_channel and bad_patch may be NULL. */
+bn_status bn_transport_norm_inf(const bn_transport *k, double *norm, double per_channel[3], size_t *bad_patch,
+                                bn_error *err);
 /* F as a row-major N*N double array (needs BN_OP_ENTRIES; caller allocates N*N). */
 bn_status bn_transport_to_dense(const bn_transport *k, double *F, bn_error *err);
 

@@ -169,7 +169,7 @@ static bn_status bn__one_pass(bn__build *B, int pass, size_t limit, bn_hierarchy
     st = bn__pass(&B->R, B->W, B->nt, &B->work, &splits, &rep->rays, label, err);
     if (st == BN_OK && B->work.n * sizeof(bn__link) + bn__tree_bytes(&B->t) > limit)
         st = bn_error_set(err, BN_ENOMEM, "the hierarchy needs %zu links (%.3g GiB) at eps %g, above the memory "
-                          "limit (max_memory): raise eps", B->work.n,
+                          "limit (`max_memory`): raise `eps`", B->work.n,
                           (double)(B->work.n * sizeof(bn__link)) / (1 << 30), o->eps);
     all = bn_dist_agree(st);
     if (all != BN_OK && st == BN_OK)

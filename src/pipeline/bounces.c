@@ -112,7 +112,7 @@ bn_status bn_bounces_check_memory(int width, int height, int bounces, size_t max
     if (width < 1 || height < 1 || nl < 1 || !bn__mul_size((size_t)width, (size_t)height, &px) ||
         !bn__mul_size(px, (size_t)nl * 3 * (sizeof(float) + sizeof(double)), &need) || need > limit)
         return bn_error_set(err, BN_ENOMEM, "images of %dx%d pixels in %d layers need %.3g GiB, above the limit of "
-                            "%.3g GiB (max_memory): a smaller size or fewer bounces", width, height, nl,
+                            "%.3g GiB (`max_memory`): a smaller `size` or fewer `bounces`", width, height, nl,
                             (double)width * height * nl * 3 * (sizeof(float) + sizeof(double)) / (1 << 30),
                             (double)limit / (1 << 30));
     return BN_OK;

@@ -63,7 +63,7 @@ static bn_status bn__check_terms_memory(const bn_pipeline_opts *o, size_t n, bn_
     size_t nvec = (size_t)(o->solve.bounces < 0 ? 0 : o->solve.bounces) + 4;
     if (!bn__mul_size(n, 3 * sizeof(double), &vec) || !bn__mul_size(vec, nvec, &need) || need > limit)
         return bn_error_set(err, BN_ENOMEM, "%zu bounce terms of %zu patches need %.3g GiB, above the limit of %.3g "
-                            "GiB (max_memory): keep fewer bounces (the rest is summed in rest) or fewer patches",
+                            "GiB (`max_memory`): keep fewer `bounces` (the rest is summed in rest) or fewer patches",
                             nvec - 3, n, (double)nvec * (double)n * 24 / (1 << 30), (double)limit / (1 << 30));
     return BN_OK;
 }
@@ -295,8 +295,8 @@ bn_status bn_pipeline_operator(const bn_pipeline_opts *o, bn_pipeline *p, bn_err
 
 bn_solve_method bn_pipeline_method(const bn_pipeline_opts *o, const bn_pipeline *p)
 {
-    if (o->method_auto && o->solve.method == BN_SOLVE_GAUSS_SEIDEL && p->k && !(bn_transport_caps(p->k) & BN_OP_ROWS))
-        return BN_SOLVE_JACOBI;
+    if (o->method_auto && p->k && !bn_solve_method_runs_on(o->solve.method, p->k))
+        return BN_SOLVE_JACOBI;   /* auto's Gauss-Seidel on an operator without rows (the hierarchy) */
     return o->solve.method;
 }
 

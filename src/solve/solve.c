@@ -207,6 +207,13 @@ static const bn_solver_type *bn__solver_for(const bn_solve_opts *o)
     return NULL;
 }
 
+int bn_solve_method_runs_on(bn_solve_method m, const bn_transport *k)
+{
+    bn_solve_opts o = {.method = m};
+    const bn_solver_type *t = bn__solver_for(&o);
+    return t && (t->needs & ~bn_transport_caps(k)) == 0;
+}
+
 static void bn__note(const bn_solve_opts *o, bn_log_level lv, const char *fmt, ...)
 #if defined(__GNUC__)
     __attribute__((format(printf, 3, 4)))
@@ -360,25 +367,10 @@ static bn_status bn__solve_check(bn__solve *S)
 /* ||K||_inf (K applied to ones, F >= 0): finite and nonnegative rows, or a failure naming one. */
 static bn_status bn__solve_norm(bn__solve *S)
 {
-    double *ones = S->Lprev, *rs = S->y;   /* scratch until the iterations start */
-    bn_status st;
-    for (size_t i = 0; i < S->m; i++)
-        ones[i] = 1.0;
-    st = bn_transport_apply(S->k, ones, rs, S->err);
-    if (st != BN_OK)
-        return st;
-    S->knorm = 0;
-    for (size_t i = 0; i < S->m; i++) {
-        if (!isfinite(rs[i]) || rs[i] < 0) {
-            S->res->bad_patch = i / 3;
-            return bn_error_set(S->err, BN_ENUMERIC,
-                                "K is not finite and nonnegative: row of patch %zu (channel %c) sums to %g", i / 3,
-                                "RGB"[i % 3], rs[i]);
-        }
-        S->knorm = fmax(S->knorm, rs[i]);
-    }
-    S->res->k_norm_inf = S->knorm;
-    return BN_OK;
+    bn_status st = bn_transport_norm_inf(S->k, &S->knorm, NULL, &S->res->bad_patch, S->err);
+    if (st == BN_OK)
+        S->res->k_norm_inf = S->knorm;
+    return st;
 }
 
 /* K_ii = rho_ic F_ii where the operator knows F_ii; NULL diag when all are 0 or it cannot say. */

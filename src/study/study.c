@@ -195,8 +195,7 @@ static bn_status bn__solve(const bn_transport *K, const double *E, const bn_solv
     o.quiet = 1;
     o.log = NULL;
     o.log_sink.fn = bn__drop_log;
-    if ((o.method == BN_SOLVE_DIRECT && !(bn_transport_caps(K) & BN_OP_ENTRIES)) ||
-        (o.method == BN_SOLVE_GAUSS_SEIDEL && !(bn_transport_caps(K) & BN_OP_ROWS))) {
+    if (!bn_solve_method_runs_on(o.method, K)) {
         /* K_H: apply only; converged far below any error measured. Said, never silent. */
         bn_warnf(&so->log_sink, BN_W_METHOD, NAN,
                 "%s needs %s of K, which the %s operator does not offer: jacobi to tol %g ran in its place, and "

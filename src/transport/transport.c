@@ -260,7 +260,8 @@ bn_status bn_transport_diag(const bn_transport *k, double *d, bn_error *err)
     return BN_OK;
 }
 
-bn_status bn_transport_norm_inf(const bn_transport *k, double *norm, double per_channel[3], bn_error *err)
+bn_status bn_transport_norm_inf(const bn_transport *k, double *norm, double per_channel[3], size_t *bad_patch,
+                                bn_error *err)
 {
     /* ||K||_inf = max_i rho_ic sum_j |F_ij| (F >= 0): the row sums are F applied to ones. */
     size_t m = 3 * k->n;
@@ -276,9 +277,16 @@ bn_status bn_transport_norm_inf(const bn_transport *k, double *norm, double per_
     for (size_t i = 0; i < m; i++)
         ones[i] = 1.0;
     st = bn_transport_apply(k, ones, rs, err);
+    for (size_t i = 0; st == BN_OK && i < m; i++) {
+        if (!isfinite(rs[i]) || rs[i] < 0) {
+            if (bad_patch)
+                *bad_patch = i / 3;
+            st = bn_error_set(err, BN_ENUMERIC, "K is not finite and nonnegative: row of patch %zu (channel %c) sums to %g",
+                              i / 3, "RGB"[i % 3], rs[i]);
+        }
+        pc[i % 3] = fmax(pc[i % 3], rs[i]);
+    }
     if (st == BN_OK) {
-        for (size_t i = 0; i < m; i++)
-            pc[i % 3] = fmax(pc[i % 3], rs[i]);
         *norm = fmax(pc[0], fmax(pc[1], pc[2]));
         if (per_channel)
             memcpy(per_channel, pc, sizeof pc);
