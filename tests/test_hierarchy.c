@@ -325,17 +325,42 @@ static void cut_coplanar(double **v, size_t *nv, unsigned **polys, size_t *np)
     *np = (*np - 6) * 4 + 6;
 }
 
-static void furnace_cut(int levels, double eps, double wall_patch, int flat, int cut)
+/* The furnace: a closed 4 x 4 x 4 box (walls in patches of wall_patch, inward) around a unit
+ * icosphere of 20 x 4^levels triangles (outward), every face grey (rho 0.9, Le 1): L = 10 exactly,
+ * and every row of F sums to 1. With cut, every sphere triangle cut into 4 in its own plane. With
+ * lit, only the wall z = -2 emits (Le 1) and every face has rho 0.5: the light varies, so the
+ * hierarchy's links coarsen where it is dim, and every row of F still sums to 1. */
+typedef struct furnace_scene {
+    bn_scene *s;
+    bn_rt *rt;
+    size_t polys, planes;   /* input polygons, and the planes they form (the uncut polygons) */
+    double tri_max;         /* the largest uncut sphere triangle */
+} furnace_scene;
+
+static double tri_area(const double *a, const double *b, const double *d)
+{
+    double e1[3], e2[3], c[3];
+    for (int k = 0; k < 3; k++) {
+        e1[k] = b[k] - a[k];
+        e2[k] = d[k] - a[k];
+    }
+    c[0] = e1[1] * e2[2] - e1[2] * e2[1];
+    c[1] = e1[2] * e2[0] - e1[0] * e2[2];
+    c[2] = e1[0] * e2[1] - e1[1] * e2[0];
+    return 0.5 * sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
+}
+
+static void furnace_make(int levels, double wall_patch, int cut, int lit, furnace_scene *f)
 {
     ico m = {0};
     icosphere(&m, levels);
-    size_t nv = 8 + m.nv, np = 6 + m.nt, np0 = np;
+    size_t nv = 8 + m.nv, np = 6 + m.nt, w = 0;
     double *v = malloc(3 * nv * sizeof(double));
     unsigned *polys = malloc((6 * 5 + m.nt * 4) * sizeof(unsigned)), *pm;
     const double box[8][3] = {{-2, -2, -2}, {2, -2, -2}, {2, 2, -2}, {-2, 2, -2},
                               {-2, -2, 2},  {2, -2, 2},  {2, 2, 2},  {-2, 2, 2}};
     const unsigned quads[6][4] = {{0, 1, 2, 3}, {4, 7, 6, 5}, {0, 4, 5, 1}, {1, 5, 6, 2}, {2, 6, 7, 3}, {3, 7, 4, 0}};
-    size_t w = 0;
+    memset(f, 0, sizeof *f);
     memcpy(v, box, sizeof box);
     memcpy(v + 24, m.v, 3 * m.nv * sizeof(double));
     for (int q = 0; q < 6; q++) {   /* inward: counter-clockwise seen from inside */
@@ -343,61 +368,70 @@ static void furnace_cut(int levels, double eps, double wall_patch, int flat, int
         for (int k = 0; k < 4; k++)
             polys[w++] = quads[q][k];
     }
-    for (size_t f = 0; f < m.nt; f++) {
+    for (size_t t = 0; t < m.nt; t++) {
         polys[w++] = 3;
         for (int k = 0; k < 3; k++)
-            polys[w++] = 8 + m.tri[3 * f + k];
+            polys[w++] = 8 + m.tri[3 * t + k];
+        f->tri_max = fmax(f->tri_max, tri_area(m.v + 3 * m.tri[3 * t], m.v + 3 * m.tri[3 * t + 1],
+                                               m.v + 3 * m.tri[3 * t + 2]));
     }
-    double tri_max = 0;   /* the largest uncut sphere triangle */
-    for (size_t f = 0; f < m.nt; f++) {
-        double e1[3], e2[3], c[3];
-        const double *a = m.v + 3 * m.tri[3 * f], *b = m.v + 3 * m.tri[3 * f + 1], *d = m.v + 3 * m.tri[3 * f + 2];
-        for (int k = 0; k < 3; k++) {
-            e1[k] = b[k] - a[k];
-            e2[k] = d[k] - a[k];
-        }
-        c[0] = e1[1] * e2[2] - e1[2] * e2[1];
-        c[1] = e1[2] * e2[0] - e1[0] * e2[2];
-        c[2] = e1[0] * e2[1] - e1[1] * e2[0];
-        tri_max = fmax(tri_max, 0.5 * sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]));
-    }
-    if (cut) {
+    f->planes = np;
+    if (cut)
         cut_coplanar(&v, &nv, &polys, &np);
-        np0 = 6 + m.nt;   /* the planes: the walls and the uncut triangles */
-    }
+    f->polys = np;
     pm = calloc(np, sizeof(unsigned));
-    bn_material mat = {"grey", {0.9, 0.9, 0.9}, {1, 1, 1}};
+    bn_material mats[2] = {{"grey", {0.9, 0.9, 0.9}, {1, 1, 1}}, {"light", {0.5, 0.5, 0.5}, {1, 1, 1}}};
+    if (lit) {
+        mats[0] = (bn_material){"grey", {0.5, 0.5, 0.5}, {0, 0, 0}};
+        pm[0] = 1;   /* the wall z = -2 */
+    }
     bn_load_opts lo;
     bn_mesh_opts mo;
-    bn_scene *s = NULL;
-    bn_rt *rt = NULL;
     bn_error err;
     bn_load_opts_default(&lo);
     lo.log.quiet = 1;
-    BN_ASSERT_STATUS(bn_scene_from_arrays("furnace", v, nv, polys, np, pm, &mat, 1, &lo, &s, &err), BN_OK);
+    BN_ASSERT_STATUS(bn_scene_from_arrays("furnace", v, nv, polys, np, pm, mats, lit ? 2 : 1, &lo, &f->s, &err), BN_OK);
     bn_mesh_opts_default(&mo);
     mo.target_patches = 0;
     mo.patch_size = wall_patch;
-    BN_ASSERT_STATUS(bn_scene_mesh(s, &mo, &err), BN_OK);
-    BN_ASSERT_STATUS(bn_rt_create(s, 0, &rt, &err), BN_OK);
+    BN_ASSERT_STATUS(bn_scene_mesh(f->s, &mo, &err), BN_OK);
+    BN_ASSERT_STATUS(bn_rt_create(f->s, 0, &f->rt, &err), BN_OK);
+    free(v);
+    free(polys);
+    free(pm);
+    free(m.v);
+    free(m.tri);
+}
+
+static void furnace_free(furnace_scene *f)
+{
+    bn_rt_destroy(f->rt);
+    bn_scene_destroy(f->s);
+}
+
+static void furnace_cut(int levels, double eps, double wall_patch, int flat, int cut)
+{
+    furnace_scene fs;
+    furnace_make(levels, wall_patch, cut, 0, &fs);
+    bn_scene *s = fs.s;
     size_t n;
     bn_scene_patches(s, &n);
-
     bn_hierarchy_opts ho;
     bn_hierarchy_report rep;
     bn_transport *k = NULL;
+    bn_error err;
     bn_hierarchy_opts_default(&ho);
     ho.eps = eps;
     ho.flat_clusters = flat;
     ho.quiet = 1;
     if (cut)   /* the smallest element: an uncut triangle, as for the uncut sphere */
-        ho.min_area = 1.01 * tri_max;
-    BN_ASSERT_STATUS(bn_hierarchy_build(s, rt, &ho, &k, &rep, &err), BN_OK);
+        ho.min_area = 1.01 * fs.tri_max;
+    BN_ASSERT_STATUS(bn_hierarchy_build(s, fs.rt, &ho, &k, &rep, &err), BN_OK);
     printf("furnace: %zu patches, %zu nodes (%zu clusters), %zu links (%zu between patches, %zu with a cluster), "
            "%zu passes\n", n, rep.nodes, rep.clusters, rep.links, rep.leaf_links, rep.cluster_links, rep.passes);
     BN_ASSERT(rep.cluster_links > 0);
-    BN_ASSERT_EQ(rep.polygons, np);
-    BN_ASSERT_EQ(rep.planes, np0);   /* cut or not, the planes are the uncut polygons */
+    BN_ASSERT_EQ(rep.polygons, fs.polys);
+    BN_ASSERT_EQ(rep.planes, fs.planes);   /* cut or not, the planes are the uncut polygons */
     double *L = solve(k, s), worst = 0, mean = 0, area = 0;
     const bn_patch *pa = bn_scene_patches(s, &n);
     for (size_t i = 0; i < n; i++) {
@@ -414,13 +448,96 @@ static void furnace_cut(int levels, double eps, double wall_patch, int flat, int
     BN_ASSERT_LE(worst, 0.1);
     free(L);
     bn_transport_destroy(k);
-    bn_rt_destroy(rt);
-    bn_scene_destroy(s);
-    free(v);
-    free(polys);
-    free(pm);
-    free(m.v);
-    free(m.tri);
+    furnace_free(&fs);
+}
+
+/* F_H 1 per leaf (n values, malloc'd). */
+static double *row_sums(bn_transport *k, size_t n)
+{
+    double *one = calloc(3 * n + 1, sizeof(double)), *y = calloc(3 * n + 1, sizeof(double)), *rs = calloc(n + 1, sizeof(double));
+    bn_error err;
+    for (size_t i = 0; i < 3 * n; i++)
+        one[i] = 1;
+    BN_ASSERT_STATUS(bn_transport_apply_F(k, one, y, &err), BN_OK);
+    for (size_t i = 0; i < n; i++)
+        rs[i] = y[3 * i];
+    free(one);
+    free(y);
+    return rs;
+}
+
+/* Conservation you can see (issue 35), in the lit furnace (closed: every row of F sums to 1 exactly,
+ * and every ray of the estimate reaches a front face). The hierarchy's report of its raw rows is
+ * F_H 1 itself: with normalize_rows 0, its share within 1%, count above +5% and extremes are those of
+ * F_H 1 - 1 computed here. */
+BN_TEST(row_report_is_f_h_applied_to_ones)
+{
+    furnace_scene fs;
+    furnace_make(3, 0.5, 0, 1, &fs);
+    size_t n, within = 0, above = 0;
+    bn_scene_patches(fs.s, &n);
+    bn_hierarchy_opts ho;
+    bn_hierarchy_report rep;
+    bn_transport *k = NULL;
+    bn_error err;
+    bn_hierarchy_opts_default(&ho);
+    ho.quiet = 1;
+    BN_ASSERT_STATUS(bn_hierarchy_build(fs.s, fs.rt, &ho, &k, &rep, &err), BN_OK);
+    double *rs = row_sums(k, n), lo = INFINITY, hi = -INFINITY;
+    for (size_t i = 0; i < n; i++) {
+        within += fabs(rs[i] - 1) <= 0.01;
+        above += rs[i] > 1.05;
+        lo = fmin(lo, rs[i] - 1);
+        hi = fmax(hi, rs[i] - 1);
+    }
+    printf("raw rows: %zu leaves, within 1%%: %.2f%%, above +5%%: %zu, from %+.4f to %+.4f\n", n,
+           100.0 * (double)within / (double)n, above, lo, hi);
+    BN_ASSERT(!rep.normalized);
+    BN_ASSERT_NEAR(rep.rows_within_1pct, (double)within / (double)n, 1e-12);
+    BN_ASSERT_EQ(rep.rows_above_5pct, above);
+    BN_ASSERT_NEAR(rep.row_dev_min, lo, 1e-12);
+    BN_ASSERT_NEAR(rep.row_dev_max, hi, 1e-12);
+    BN_ASSERT_EQ(rep.rows_unscalable, 0);
+    free(rs);
+    bn_transport_destroy(k);
+    furnace_free(&fs);
+}
+
+/* With normalize_rows, every leaf's row is its exact sum: in the closed lit furnace 1 on every leaf
+ * (within float rounding), at the default eps on 5,120 sphere triangles; the row-sum check, from rays
+ * of its own, finds every checked row closed and within 1%. */
+BN_TEST(normalized_rows_sum_to_one) /* BN_SLOW */
+{
+    BN_SKIP_IF_SLOW_RUN();
+    furnace_scene fs;
+    furnace_make(4, 0.25, 0, 1, &fs);
+    size_t n, off = 0;
+    bn_scene_patches(fs.s, &n);
+    bn_hierarchy_opts ho;
+    bn_hierarchy_report rep;
+    bn_transport *k = NULL;
+    bn_row_sum_check rc;
+    bn_error err;
+    bn_hierarchy_opts_default(&ho);
+    ho.quiet = 1;
+    ho.normalize_rows = 1;
+    BN_ASSERT_STATUS(bn_hierarchy_build(fs.s, fs.rt, &ho, &k, &rep, &err), BN_OK);
+    double *rs = row_sums(k, n);
+    for (size_t i = 0; i < n; i++)
+        off += fabs(rs[i] - 1) > 1e-6;
+    printf("normalized: %zu leaves, %zu links (%zu with a cluster); raw within 1%%: %.2f%%, %+.4f .. %+.4f; "
+           "factors %.4f .. %.4f; rows off 1 by > 1e-6: %zu\n", n, rep.links, rep.cluster_links,
+           100 * rep.rows_within_1pct, rep.row_dev_min, rep.row_dev_max, rep.row_scale_min, rep.row_scale_max, off);
+    BN_ASSERT(rep.normalized);
+    BN_ASSERT_GT(rep.cluster_links, 0);
+    BN_ASSERT_EQ(off, 0);
+    BN_ASSERT_STATUS(bn_ff_row_sum_check(fs.s, fs.rt, rs, 1024, 64, 7, 0, &rc, NULL, &err), BN_OK);
+    BN_ASSERT_EQ(rc.closed, rc.rows);
+    BN_ASSERT_GE(rc.within_1pct, 0.99);
+    BN_ASSERT_EQ(rc.above_5pct, 0);
+    free(rs);
+    bn_transport_destroy(k);
+    furnace_free(&fs);
 }
 
 static void furnace(int levels, double eps, double wall_patch, int flat)

@@ -39,9 +39,8 @@ void bn_bake_vertex_values(const bn_bake *b, const double *patch_values, double 
 size_t bn_bake_tjunction_count(const bn_bake *b);   /* T-junctions found (0 for a flat bake) */
 /* Patches inside a closed object (the floor under a block standing on it: no light reaches them and no
  * eye sees them) are left out of the vertex averages wherever a vertex also has patches outside, so
- * the darkness under the block does not bleed into the floor around it. A patch is enclosed when at
- * least 90% of 16 fixed rays from its centroid over its hemisphere meet a back face (rt: the ray scene
- * of the bake's scene). Returns how many patches were found so. */
+ * the darkness under the block does not bleed into the floor around it (bn_rt_enclosed_patches says
+ * which; rt: the ray scene of the bake's scene). Returns how many patches were found so. */
 struct bn_rt;
 size_t bn_bake_exclude_enclosed(bn_bake *b, const struct bn_rt *rt);
 /* The value at point p on patch `patch` interpolated from its corners' vertex values:

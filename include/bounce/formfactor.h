@@ -94,6 +94,31 @@ typedef struct bn_ff_diagnostics {
                                      the exact path, or hidden wholly by one face in their shaft */
 } bn_ff_diagnostics;
 
+/* F's row sums against the exact ones, for any transport (dense, sparse, the hierarchy's F_H).
+ * The exact row sum of patch i is the share of its cosine-weighted hemisphere whose first hit is a
+ * front face (1 in a closed scene), estimated by `rays` stratified rays (standard error at most
+ * sqrt(p (1 - p) / rays), 0 where every ray hits a front). dev = sum_j F_ij - that share. */
+typedef struct bn_row_sum_check {
+    size_t rows;          /* rows checked: every row up to max_rows, else an even stride */
+    size_t stride;        /* row k of the check is patch k x stride */
+    int    rays;          /* per row */
+    size_t closed;        /* rows whose every ray reached a front face (exact row sum 1) */
+    double dev_min, dev_p01, dev_p50, dev_p99, dev_max;   /* over the rows checked */
+    double within_1pct;   /* share of rows with |dev| <= 0.01 + 2 standard errors of a difference of
+                             two such estimates (2.83 of this one's: a row may have been normalised
+                             to another, as the hierarchy's are) */
+    size_t above_5pct;    /* rows with dev > 0.05 + the same allowance */
+    size_t worst_row;     /* the patch of dev_max */
+} bn_row_sum_check;
+/* The exact row sum of patch i by min_rays stratified rays, and max_rays afresh when some of them
+ * reach a front face and some do not; *se (may be NULL): its standard error. Deterministic in seed. */
+double bn_ff_row_sum_exact(const bn_scene *s, const bn_rt *rt, size_t i, int min_rays, int max_rays, uint64_t seed,
+                           double *se);
+/* row_sums: sum_j F_ij per patch (F applied to ones). exact (may be NULL; max_rows values): each
+ * checked row's exact estimate, in the check's order. Deterministic in seed, for any thread count. */
+bn_status bn_ff_row_sum_check(const bn_scene *s, const bn_rt *rt, const double *row_sums, size_t max_rows, int rays,
+                              uint64_t seed, int threads, bn_row_sum_check *out, double *exact, bn_error *err);
+
 /* Bytes the assembly of `scene` with `o` will need (checked against max_memory before any work). */
 size_t bn_formfactor_bytes_needed(const bn_scene *scene, const bn_formfactor_opts *o);
 /* The same check before meshing, for a storage whose size follows from the patch count alone

@@ -50,7 +50,10 @@ typedef struct bn_pipeline_opts {
                                   (default 1: no row of F can sum above 1, so the excess is a
                                   measured part of F's error, and 1 - ||K|| below it leaves no
                                   accuracy) */
+    int row_sum_rays;          /* the row-sum check after K is built (bn_ff_row_sum_check): rays per row
+                                  (default 256) on at most BN_PIPELINE_ROW_SUM_ROWS rows; 0: none */
 } bn_pipeline_opts;
+#define BN_PIPELINE_ROW_SUM_ROWS 4096
 void bn_pipeline_opts_default(bn_pipeline_opts *o);
 /* Every option in range, before any work: threads, patch size and count, eps, transport and the
  * solver's (bn_solve_opts_check). BN_EUSAGE naming the option by its field name and its value.
@@ -76,6 +79,15 @@ typedef struct bn_pipeline {
                                   k_norm_inf, nonzeros (links), rays, bytes, seconds */
     int hierarchical;          /* K is the hierarchy; hier is its report */
     bn_hierarchy_report hier;
+    bn_row_sum_check rows;     /* F's row sums against the exact ones (rows.rows 0: not checked) */
+    double *row_exact;         /* rows.rows values: the checked rows' exact sums (the balance's escape) */
+    size_t nemit, *emit_patch; /* the emitting patches, and their exact row sums by many rays */
+    double *emit_exact;
+    /* The energy balance after the solve (rows checked): pi sum_i A_i (F L)_i, the power arriving
+     * at surfaces, against pi sum_j A_j e_j L_j, the power leaving them towards surfaces (e_j: row j's
+     * exact sum); equal for any exact F (reciprocity). Per channel, W; balance: their difference
+     * over the emitted power (+: the operator makes light, -: it loses it). */
+    double power_arriving[3], power_towards[3], power_emitted[3], balance[3];
     double *E;                 /* N*3 emitted radiance */
     bn_solve_result res;       /* L and the terms K^0 E .. K^b E (b = solve.bounces) */
     bn_solve_method method_used;  /* the solver that ran (method_auto may have chosen it) */

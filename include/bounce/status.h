@@ -67,7 +67,8 @@ typedef enum bn_log_level { BN_LOG_DEBUG, BN_LOG_INFO, BN_LOG_WARN } bn_log_leve
     X(NO_COLOURS, "no-colours")     /* a mesh file without colours: reflectance 0.5 */            \
     X(MATERIAL, "material")         /* a material defined twice, or faces without one */          \
     X(NO_EMITTER, "no-emitter")     /* nothing emits: the result is black */                      \
-    X(ROW_SUM, "row-sum")           /* rows of F above 1 + their tolerance */                     \
+    X(ROW_SUM, "row-sum")           /* rows of F off their exact sums (dense, sparse F) */        \
+    X(BALANCE, "balance")           /* the operator makes or loses more than 1% of the light */   \
     X(PATTERN, "pattern")           /* hemisphere hits outside the sparse pattern */              \
     X(CACHE, "cache")               /* the form-factor cache could not be written */              \
     X(BOUNDS, "bounds")             /* ||K||_inf >= 1: the a priori bounds do not apply */        \

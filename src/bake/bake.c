@@ -299,40 +299,14 @@ size_t bn_bake_vertex_count(const bn_bake *b) { return b->nverts; }
 const double *bn_bake_vertex_positions(const bn_bake *b) { return b->pos; }
 size_t bn_bake_corner_vertex(const bn_bake *b, size_t patch, unsigned corner) { return b->corner_v[4 * patch + corner]; }
 
-/* Rays per patch for bn_bake_exclude_enclosed, and the share of them that must meet a back face. */
-#define BN__ENCLOSED_RAYS 16
-#define BN__ENCLOSED_SHARE 0.9
-
 size_t bn_bake_exclude_enclosed(bn_bake *b, const bn_rt *rt)
 {
-    size_t np, count = 0;
-    const bn_patch *patches = bn_scene_patches(b->scene, &np);
-    double eps = bn_rt_epsilon(rt);
-    long ln = (long)np;
+    size_t np;
+    bn_scene_patches(b->scene, &np);
     free(b->enclosed);
     if (!(b->enclosed = calloc(np ? np : 1, 1)))
         return 0;
-#pragma omp parallel for schedule(dynamic, 256) reduction(+ : count)
-    for (long lp = 0; lp < ln; lp++) {
-        const bn_patch *p = &patches[lp];
-        double s[3], t[3], o[3];
-        int back = 0;
-        bn_v3_basis(p->normal, s, t);
-        for (int k = 0; k < 3; k++)
-            o[k] = p->centroid[k] + eps * p->normal[k];
-        for (int r = 0; r < BN__ENCLOSED_RAYS; r++) {   /* a fixed spiral of directions: deterministic */
-            double u = (r + 0.5) / BN__ENCLOSED_RAYS, ph = 2.399963229728653 * r, rr = sqrt(u), d[3];
-            bn_hit h;
-            for (int k = 0; k < 3; k++)
-                d[k] = rr * cos(ph) * s[k] + rr * sin(ph) * t[k] + sqrt(1 - u) * p->normal[k];
-            back += bn_rt_intersect(rt, o, d, 0, INFINITY, &h) && !h.front;
-        }
-        if (back >= BN__ENCLOSED_SHARE * BN__ENCLOSED_RAYS) {
-            b->enclosed[lp] = 1;
-            count++;
-        }
-    }
-    return count;
+    return bn_rt_enclosed_patches(rt, b->enclosed);
 }
 
 void bn_bake_vertex_values(const bn_bake *b, const double *x, double *out)

@@ -237,6 +237,8 @@ static bn_status bn__passes(bn__build *B, bn_hierarchy_report *rep, bn_error *er
 }
 
 /* The links with F > 0 frozen into the operator; the report's counts and sizes. */
+
+
 static bn_status bn__freeze(bn__build *B, bn_hierarchy_report *rep, bn_transport **out, bn_error *err)
 {
     const bn__tree *t = &B->t;
@@ -248,6 +250,16 @@ static bn_status bn__freeze(bn__build *B, bn_hierarchy_report *rep, bn_transport
         return st;
     if ((st = bn__hop_make(&shape, B->work.a, B->work.n, B->R.bound, &h, err)) != BN_OK)
         return st;
+    if ((st = bn__rows_normalize(&B->R, h, rep, err)) != BN_OK) {
+        bn__hop_destroy(h);
+        return st;
+    }
+    bn_logf(&B->R.o->log, BN_LOG_INFO,
+            "hierarchy: F_H's rows against their exact sums: %.1f%% of %zu leaves within 1%%, %zu above +5%%, from "
+            "%+.3g to %+.3g; %s (factors %.3g .. %.3g)%s",
+            100 * rep->rows_within_1pct, B->np, rep->rows_above_5pct, rep->row_dev_min, rep->row_dev_max,
+            rep->normalized ? "each scaled to its exact sum" : "left as they are (normalize_rows 0)",
+            rep->row_scale_min, rep->row_scale_max, rep->rows_unscalable ? "; some leaves have no links" : "");
     rep->patches = B->np;
     rep->nodes = t->n;
     bn_scene_faces(B->R.scene, &rep->polygons);
@@ -297,8 +309,18 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
         return st;
     if (!rt || bn_rt_scene(rt) != scene)
         return bn_error_set(err, BN_EINTERNAL, "bn_hierarchy_build: rt was built for another scene");
-    if ((st = bn__tree_build(scene, !(o->eps == 0 || o->exact_leaf_links), &B.t, err)) != BN_OK)
-        return st;
+    {   /* covered patches (under a block) kept apart from open ones in the tree */
+        size_t np;
+        bn_scene_patches(scene, &np);
+        unsigned char *enclosed = bn__calloc(np ? np : 1, 1);
+        if (!enclosed)
+            return bn_error_set(err, BN_ENOMEM, "out of memory for %zu patches", np);
+        bn_rt_enclosed_patches(rt, enclosed);
+        st = bn__tree_build(scene, !(o->eps == 0 || o->exact_leaf_links), enclosed, &B.t, err);
+        free(enclosed);
+        if (st != BN_OK)
+            return st;
+    }
     rep->seconds_tree = bn__now() - B.t0;
     B.t0 = bn__now();
     if ((st = bn__ref_init(&B, scene, rt, o, err)) == BN_OK && (st = bn__build_buffers(&B, err)) == BN_OK) {

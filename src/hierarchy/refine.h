@@ -65,6 +65,10 @@ size_t bn__compact(bn__vec *v);
 bn_status bn__estimate(const bn__tree *t, bn__vec *links, const size_t *bound, const double *E, const double *rho,
                        double eps_abs, double *L, bn_error *err);
 
+/* rows.c: F_H 1 against every leaf's exact row sum (bn_ff_row_sum_exact) into rep, and with
+ * o->normalize_rows each leaf's row scaled to it (h->rowscale). A collective under mpirun. */
+bn_status bn__rows_normalize(const bn__ref *R, bn__hop *h, bn_hierarchy_report *rep, bn_error *err);
+
 /* balance.c: the first split of the leaves among processes (rank k's equal share) */
 void bn__dist_leaves_of(size_t npatch, size_t k, size_t *lo, size_t *hi);
 /* A split is redone when the most loaded process holds more than this times the mean. */

@@ -29,6 +29,7 @@ typedef struct bn__tb {
     double *pc;               /* patch centroids */
     double *fc;               /* plane centroids (area-weighted), per plane */
     const uint32_t *plane_of; /* per input face: its plane */
+    const unsigned char *enclosed;   /* per patch: inside a closed object (NULL: none known) */
     uint32_t *face_first, *face_count, *byface;   /* per plane */
     size_t cursor;            /* next free slot in order */
     bn__key *keys;
@@ -119,22 +120,57 @@ static void bn__median_sort(bn__tb *b, uint32_t *ids, size_t m, const double *ce
         ids[k] = b->keys[k].id;
 }
 
-/* Planar nodes over order[lo..hi) (patches of one plane). */
-static void bn__build_patches(bn__tb *b, uint32_t v, size_t lo, size_t hi)
+static void bn__build_patches(bn__tb *b, uint32_t v, size_t lo, size_t hi);
+
+/* Node v over order[lo..hi), its two children over [lo, mid) and [mid, hi). */
+static void bn__build_split(bn__tb *b, uint32_t v, size_t lo, size_t mid, size_t hi)
 {
     bn__tree *t = b->t;
     t->lo[v] = (uint32_t)lo;
     t->hi[v] = (uint32_t)hi;
-    if (hi - lo > 1) {
-        size_t mid = lo + (hi - lo) / 2;
-        bn__median_sort(b, t->order + lo, hi - lo, b->pc);
-        uint32_t a = bn__node_new(t, v);
-        bn__node_new(t, v);
-        t->child[v] = a;
-        bn__build_patches(b, a, lo, mid);
-        bn__build_patches(b, a + 1, mid, hi);
-    }
+    uint32_t a = bn__node_new(t, v);
+    bn__node_new(t, v);
+    t->child[v] = a;
+    bn__build_patches(b, a, lo, mid);
+    bn__build_patches(b, a + 1, mid, hi);
     bn__node_finish(b, v);
+}
+
+/* Planar nodes over order[lo..hi) (patches of one plane). */
+static void bn__build_patches(bn__tb *b, uint32_t v, size_t lo, size_t hi)
+{
+    bn__tree *t = b->t;
+    if (hi - lo > 1) {
+        bn__median_sort(b, t->order + lo, hi - lo, b->pc);
+        bn__build_split(b, v, lo, lo + (hi - lo) / 2, hi);
+        return;
+    }
+    t->lo[v] = (uint32_t)lo;
+    t->hi[v] = (uint32_t)hi;
+    bn__node_finish(b, v);
+}
+
+/* A plane's planar nodes over order[lo..hi): the patches inside a closed object (the floor under a
+ * block) and the others first split apart, so that no node holds both: the covered ones receive
+ * nothing, and a node's mean F would hand them the light their uncovered neighbours see. */
+static void bn__build_plane(bn__tb *b, uint32_t v, size_t lo, size_t hi)
+{
+    bn__tree *t = b->t;
+    size_t mid = lo, e = 0;
+    uint32_t *covered = b->enclosed ? bn__malloc_array(hi - lo, sizeof(uint32_t)) : NULL;
+    if (covered) {   /* stable partition: the open patches first, then the covered ones */
+        for (size_t k = lo; k < hi; k++)
+            if (b->enclosed[t->order[k]])
+                covered[e++] = t->order[k];
+            else
+                t->order[mid++] = t->order[k];
+        memcpy(t->order + mid, covered, e * sizeof(uint32_t));
+        free(covered);
+    }
+    if (mid == lo || mid == hi)
+        bn__build_patches(b, v, lo, hi);
+    else
+        bn__build_split(b, v, lo, mid, hi);
 }
 
 /* Clusters over planes[0..m). */
@@ -146,7 +182,7 @@ static void bn__build_faces(bn__tb *b, uint32_t v, uint32_t *faces, size_t m)
         size_t lo = b->cursor;
         memcpy(t->order + lo, b->byface + b->face_first[f], b->face_count[f] * sizeof(uint32_t));
         b->cursor += b->face_count[f];
-        bn__build_patches(b, v, lo, b->cursor);
+        bn__build_plane(b, v, lo, b->cursor);
         return;
     }
     size_t mid = m / 2;
@@ -403,7 +439,7 @@ static bn_status bn__by_plane(bn__tb *b, size_t np, size_t nf, uint32_t *faces, 
     return BN_OK;
 }
 
-bn_status bn__tree_build(const bn_scene *s, int merge, bn__tree *t, bn_error *err)
+bn_status bn__tree_build(const bn_scene *s, int merge, const unsigned char *enclosed, bn__tree *t, bn_error *err)
 {
     size_t np, nf, nm, npv, nfaces = 0;
     bn__tb b;
@@ -415,6 +451,7 @@ bn_status bn__tree_build(const bn_scene *s, int merge, bn__tree *t, bn_error *er
     bn_scene_faces(s, &nf);
     b.mat = bn_scene_materials(s, &nm);
     b.pverts = bn_scene_patch_vertices(s, &npv);
+    b.enclosed = enclosed;
     if (np == 0)
         return bn_error_set(err, BN_EINPUT, "%s: no patches (mesh the scene first)", bn_scene_path(s));
     if (np >= (size_t)UINT32_MAX / 2)

@@ -58,6 +58,7 @@ void bn__hop_destroy(void *ctx)
     free(h->xchg);
     free(h->G);
     free(h->Gv);
+    free(h->rowscale);
     free(h);
 }
 
@@ -72,7 +73,8 @@ size_t bn__hop_bytes(const void *ctx)
     const bn__hop *h = ctx;
     return h->n * (4 * sizeof(uint32_t) + sizeof(double) + 3 * sizeof(float) + sizeof(size_t) + 6 * sizeof(double)) +
            h->nclusters * 9 * sizeof(double) + bn__hop_link_bytes(h) +
-           (h->distributed ? h->npatch * (sizeof(uint32_t) + 3 * sizeof(double)) : 0);
+           (h->distributed ? h->npatch * (sizeof(uint32_t) + 3 * sizeof(double)) : 0) +
+           (h->rowscale ? h->npatch * sizeof(double) : 0);
 }
 
 
@@ -218,8 +220,12 @@ bn_status bn__hop_apply(void *ctx, const double *x, double *y, bn_error *err)
         }
     }
     for (size_t v = 0; v < n; v++)
-        if (h->leaf_patch[v] != BN__NONE)
-            memcpy(y + 3 * (size_t)h->leaf_patch[v], G + 3 * v, 3 * sizeof(double));
+        if (h->leaf_patch[v] != BN__NONE) {
+            size_t p = h->leaf_patch[v];
+            double sc = h->rowscale ? h->rowscale[p] : 1;
+            for (int c = 0; c < 3; c++)
+                y[3 * p + (size_t)c] = sc * G[3 * v + (size_t)c];
+        }
     {   /* every rank's status first (a rank that stops alone would leave the others in the collective) */
         bn_status st = bn_dist_agree(bn_interrupted());
         if (st != BN_OK)

@@ -46,6 +46,8 @@ typedef struct bn__hop {
     uint32_t *src;
     float *F;                 /* cluster receivers: F per unit cosine */
     uint16_t *dir;            /* per link: the direction to the source (cluster receivers) */
+    double *rowscale;         /* npatch: each leaf's row scaled to its exact sum (NULL: none; set by
+                                 src/hierarchy after freezing, owned) */
     double *Bn, *G;           /* 3n each: scratch of apply */
     double *Gv;               /* 9 per cluster: what it gathers, per channel as a vector */
     /* under mpirun (P > 1): rank q's leaves are [bound[q], bound[q + 1]) in the tree's leaf order; a rank
