@@ -621,8 +621,8 @@ if [ "$rates" -gt 0 ]; then
     cp "$work/rates.md" "$root/bench/rates.md.tmp.$$" && mv "$root/bench/rates.md.tmp.$$" "$root/bench/rates.md"
 fi
 # figures measured by longer runs than this one, kept in their own files: the crosscheck's rate
-# (--rates) and the fuzzers' depth run (FUZZ_RUNS=10000000 scripts/fuzz.sh 3600)
-for f in rates.md fuzz.md; do
+# (--rates), the fuzzers' depth run (FUZZ_RUNS=10000000 scripts/fuzz.sh 3600), an A/B of builds
+for f in rates.md fuzz.md house-ab.md; do
     [ -f "$root/bench/$f" ] && { cat "$root/bench/$f"; echo; } >>"$report"
 done
 
