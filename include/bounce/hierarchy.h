@@ -48,8 +48,7 @@ typedef struct bn_hierarchy_opts {
                             visible links get 4x as many) */
     int    flat_clusters;    /* 1 (default): nearly flat clusters facing a source may receive as one
                                 node, handing each polygon its cosine's share; 0: receivers are
-                                polygons' nodes only (bunny box: 22.7 M links and 140 s against
-                                19.3 M and 118 s) */
+                                polygons' nodes only (more links and time: bench/results.md) */
     int    max_passes;   /* refine-gather passes before the link set is frozen (default 12) */
     double min_area;     /* planar nodes smaller than this (scene units^2) are not split: the
                             smallest element refinement makes; 0 (default): 2^-20 (about a millionth)
@@ -66,8 +65,7 @@ typedef struct bn_hierarchy_opts {
                                 (bn_ff_row_sum_exact: 1 in a closed scene); 0 (default): F_H as the
                                 links make it. The rows are reported either way. Scaling makes every
                                 row's total right but moves the dim links' errors onto the bright ones
-                                (the Cornell box's KE +1.7% against the tracer's patch model, from
-                                -0.4% raw): doc/hierarchy.md */
+                                (doc/hierarchy.md measures it) */
     size_t max_memory;   /* bytes for links and nodes; 0 = 80% of physical memory */
     int    threads;      /* 0 = the caller's; results do not depend on it */
     int    quiet;        /* no progress bars */
