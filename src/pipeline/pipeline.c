@@ -395,13 +395,13 @@ bn_status bn_pipeline_operator(const bn_pipeline_opts *o, bn_pipeline *p, bn_err
     } else if (st == BN_OK) {
         st = bn_formfactor_build(p->scene, p->rt, &fo, &p->k, &p->ff, err);
     }
+    p->seconds_operator = bn__now() - t0;   /* K itself: the checks below are not its time */
     if (st == BN_OK)
         st = bn__operator_checks(o, p, err);
     if (st != BN_OK || !o->keep_rt) {
         bn_rt_destroy(p->rt);
         p->rt = NULL;
     }
-    p->seconds_operator = bn__now() - t0;
     return st;
 }
 

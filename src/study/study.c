@@ -166,6 +166,7 @@ static bn_status bn__build_k(const bn_scene *s, const bn_formfactor_opts *ffo, c
     bn_pipeline_opts_default(&po);
     po.ff = *ffo;
     po.transport = transport;
+    po.row_sum_rays = 0;   /* the study times K's assembly; conservation is the pipeline runs' to say */
     if (hier) {
         po.hier = *hier;
         po.hier.quiet = 1;
@@ -174,6 +175,9 @@ static bn_status bn__build_k(const bn_scene *s, const bn_formfactor_opts *ffo, c
     p.scene = (bn_scene *)s;   /* borrowed: taken back below */
     bn_scene_patches(s, &p.n);
     st = bn_pipeline_operator(&po, &p, err);
+    free(p.row_exact);   /* what the pipeline made beside K (none with row_sum_rays 0) */
+    free(p.emit_patch);
+    free(p.emit_exact);
     *K = p.k;
     if (links)
         *links = p.hierarchical ? p.hier.links : p.ff.nonzeros;
