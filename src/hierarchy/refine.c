@@ -170,18 +170,77 @@ static void bn__node_point(const bn__ref *R, uint32_t v, double u1, double u2, d
     *n = p->normal;
 }
 
+/* Is the segment from x (on a surface of normal nx) to y (normal ny) blocked? Both ends lifted by the
+ * ray offset; one shadow ray, counted in w. */
+static int bn__blocked(const bn__ref *R, const double x[3], const double nx[3], const double y[3], const double ny[3],
+                       bn__worker *w)
+{
+    double o[3], e[3], d[3], len;
+    bn_v3_madd(x, R->ray_eps, nx, o);
+    bn_v3_madd(y, R->ray_eps, ny, e);
+    bn_v3_sub(e, o, d);
+    len = bn_v3_len(d);
+    w->rays++;
+    return len > 4 * R->ray_eps && bn_rt_occluded(R->rt, o, d, 0, 1.0 - R->ray_eps / len);
+}
+
+/* Leaves of a source node the exact kernel takes one by one (bn__F_kernel). */
+#define BN__KERNEL_LEAVES 64
+
+/* Area-averaged F from planar node r to the leaves of planar node s by the exact point-to-polygon
+ * kernel (Lambert's contour integral) at S stratified points of r, each leaf clipped to the point's
+ * front half-space and seen only from its own front, with one shadow ray per (point, leaf) pair to a
+ * uniform point of the clipped leaf. For nodes too close for point pairs (their bounding spheres
+ * overlap) that cannot be split (below min_area: a finely cut surface's original triangles), where
+ * point pairs with Wallace's disk would bias F low by about a / (pi r^2). */
+static double bn__F_kernel(const bn__ref *R, uint32_t r, uint32_t s, bn__worker *w, int *partial)
+{
+    const bn__tree *t = R->t;
+    int S = 4 * (R->o->samples > 0 ? R->o->samples : 8), seen = 0, blocked = 0;
+    bn__rng g = bn__rng_make(R->o->ff.seed ^ 0x6b65726e656cULL, ((uint64_t)r << 32) | s, 0);
+    double sum = 0;
+    for (int k = 0; k < S; k++) {
+        double x[3];
+        const double *nx;
+        bn__node_point(R, r, (k + bn__rng_uniform(&g)) / S, bn__rng_uniform(&g), bn__rng_uniform(&g), x, &nx);
+        for (size_t q = t->lo[s]; q < t->hi[s]; q++) {
+            const bn_patch *pj = &R->patch[t->order[q]];
+            double v[12], vc[3 * BN__FF_POLY_MAX], d[3], y[3], f;
+            for (unsigned c = 0; c < pj->ncorners; c++)
+                memcpy(v + 3 * c, R->pverts + 3 * pj->corner[c], 3 * sizeof(double));
+            bn_v3_sub(x, v, d);
+            if (bn_v3_dot(pj->normal, d) <= R->tol)
+                continue;   /* x behind the leaf */
+            size_t nc = bn__poly_clip(v, pj->ncorners, nx, x, R->tol, vc);
+            if (nc < 3 || !((f = bn__ff_point_polygon(x, nx, vc, nc)) > 0))
+                continue;
+            bn__poly_sample(vc, nc, bn__rng_uniform(&g), bn__rng_uniform(&g), y);
+            seen++;
+            if (bn__blocked(R, x, nx, y, pj->normal, w)) {
+                blocked++;
+                continue;
+            }
+            sum += f;
+        }
+    }
+    *partial = blocked > 0 && blocked < seen;
+    return sum / S;
+}
+
 /* Area-averaged F from r to s (per unit cosine when r is a cluster) by S stratified point pairs with
  * one shadow ray each; S x 4 when the first S find partial visibility, and for nodes whose bounding
  * spheres overlap (then Wallace's disk regulariser keeps every term bounded). */
 static double bn__F_sampled(const bn__ref *R, uint32_t r, uint32_t s, bn__worker *w, int *partial)
 {
     int sep = bn__separated(R->t, r, s), S = (R->o->samples > 0 ? R->o->samples : 8) * (sep ? 1 : 4);
+    if (!sep && R->t->plane[r] >= 0 && R->t->plane[s] >= 0 && R->t->hi[s] - R->t->lo[s] <= BN__KERNEL_LEAVES)
+        return bn__F_kernel(R, r, s, w, partial);
     for (int round = 0; round < 2; round++) {
         bn__rng g = bn__rng_make(R->o->ff.seed ^ 0x6869657261726368ull, ((uint64_t)r << 32) | s, (uint64_t)round);
         double a = R->t->area[s] / S, sum = 0, inv = 1.0 / S, cos_sum = 0;
         int seen = 0, blocked = 0;
         for (int k = 0; k < S; k++) {
-            double x[3], y[3], d[3], o[3], e[3], r2, len, cr, cs;
+            double x[3], y[3], d[3], r2, len, cr, cs;
             const double *nx, *ny;
             bn__node_point(R, r, (k + bn__rng_uniform(&g)) * inv, bn__rng_uniform(&g), bn__rng_uniform(&g), x, &nx);
             bn__node_point(R, s, (((k * 7 + 3) % S) + bn__rng_uniform(&g)) * inv, bn__rng_uniform(&g),
@@ -197,13 +256,8 @@ static double bn__F_sampled(const bn__ref *R, uint32_t r, uint32_t s, bn__worker
                 cos_sum += cr;
             if (!(cr > 0 && cs > 0))
                 continue;
-            bn_v3_madd(x, R->ray_eps, nx, o);
-            bn_v3_madd(y, R->ray_eps, ny, e);
-            bn_v3_sub(e, o, d);
-            len = bn_v3_len(d);
             seen++;
-            w->rays++;
-            if (len > 4 * R->ray_eps && bn_rt_occluded(R->rt, o, d, 0, 1.0 - R->ray_eps / len)) {
+            if (bn__blocked(R, x, nx, y, ny, w)) {
                 blocked++;
                 continue;
             }
