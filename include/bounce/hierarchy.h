@@ -92,7 +92,8 @@ typedef struct bn_hierarchy_report {
     double bytes_per_link;                          /* link storage alone / links */
     double eps_abs;                                 /* eps x the largest emitted radiance: the bound of
                                                        a link's error the oracle used */
-    /* F_H's rows against their exact sums (every leaf; before normalize_rows scales them) */
+    /* F_H's rows against their exact sums (before normalize_rows scales them): every leaf with
+       normalize_rows or up to 16,384 leaves, else an even stride of 16,384 of them */
     double rows_within_1pct;                        /* share of leaves with |sum_j F_ij - exact| <= 0.01 */
     size_t rows_above_5pct;                         /* leaves with sum_j F_ij > exact + 0.05 */
     double row_dev_min, row_dev_max;                /* sum_j F_ij - exact, over the leaves */

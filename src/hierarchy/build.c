@@ -255,7 +255,8 @@ static bn_status bn__freeze(bn__build *B, bn_hierarchy_report *rep, bn_transport
         return st;
     }
     bn_logf(&B->R.o->log, BN_LOG_INFO,
-            "hierarchy: F_H's rows against their exact sums: %.1f%% of %zu leaves within 1%%, %zu above +5%%, from "
+            "hierarchy: F_H's rows against their exact sums: %.1f%% of %zu leaves (at most 16384 measured) within 1%%, "
+            "%zu above +5%%, from "
             "%+.3g to %+.3g; %s (factors %.3g .. %.3g)%s",
             100 * rep->rows_within_1pct, B->np, rep->rows_above_5pct, rep->row_dev_min, rep->row_dev_max,
             rep->normalized ? "each scaled to its exact sum" : "left as they are (normalize_rows 0)",

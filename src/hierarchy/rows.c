@@ -25,10 +25,14 @@
  * hemisphere). */
 #define BN__ROWS_MIN_RAYS 64
 #define BN__ROWS_MAX_RAYS 256
+/* Leaves measured for the report alone (no normalisation): every leaf up to this many, else an
+ * even stride of the leaf order (a million leaves would cost hundreds of millions of rays). */
+#define BN__ROWS_REPORT 16384
 
 /* dev[i] = sum_j F_ij - exact and scale[i] = exact / sum for this rank's leaves (0 elsewhere); the
  * ones with no links where light arrives counted in *unscalable. */
-static void bn__rows_measure(const bn__ref *R, const double *y, double *dev, double *scale, size_t *unscalable)
+static void bn__rows_measure(const bn__ref *R, const double *y, size_t stride, double *dev, double *scale,
+                             size_t *unscalable)
 {
     const bn__tree *t = R->t;
     long lo = (long)R->plo, hi = (long)R->phi;
@@ -36,6 +40,11 @@ static void bn__rows_measure(const bn__ref *R, const double *y, double *dev, dou
 #pragma omp parallel for schedule(dynamic, 64) reduction(+ : bad)
     for (long q = lo; q < hi; q++) {
         size_t i = t->order[q];
+        if ((size_t)q % stride != 0) {   /* not measured: NaN (0 on the other ranks, summed) */
+            dev[i] = NAN;
+            scale[i] = 1;
+            continue;
+        }
         double e = bn_ff_row_sum_exact(R->scene, R->rt, i, BN__ROWS_MIN_RAYS, BN__ROWS_MAX_RAYS,
                                        R->o->ff.seed ^ BN__ROWS_TAG, NULL);
         double r = y[3 * i];
@@ -49,10 +58,13 @@ static void bn__rows_measure(const bn__ref *R, const double *y, double *dev, dou
 /* The report's figures from every leaf's dev and scale. */
 static void bn__rows_report(const double *dev, const double *scale, size_t np, bn_hierarchy_report *rep)
 {
-    size_t within = 0;
+    size_t within = 0, m = 0;
     rep->row_dev_min = rep->row_scale_min = INFINITY;
     rep->row_dev_max = rep->row_scale_max = -INFINITY;
     for (size_t i = 0; i < np; i++) {
+        if (isnan(dev[i]))
+            continue;   /* a leaf the report did not measure */
+        m++;
         within += fabs(dev[i]) <= 0.01;
         rep->rows_above_5pct += dev[i] > 0.05;
         rep->row_dev_min = fmin(rep->row_dev_min, dev[i]);
@@ -60,7 +72,7 @@ static void bn__rows_report(const double *dev, const double *scale, size_t np, b
         rep->row_scale_min = fmin(rep->row_scale_min, scale[i]);
         rep->row_scale_max = fmax(rep->row_scale_max, scale[i]);
     }
-    rep->rows_within_1pct = np ? (double)within / (double)np : 1;
+    rep->rows_within_1pct = m ? (double)within / (double)m : 1;
 }
 
 bn_status bn__rows_normalize(const bn__ref *R, bn__hop *h, bn_hierarchy_report *rep, bn_error *err)
@@ -75,8 +87,8 @@ bn_status bn__rows_normalize(const bn__ref *R, bn__hop *h, bn_hierarchy_report *
     if (st == BN_OK)
         st = bn__hop_apply(h, one, y, err);   /* F_H 1 (a collective under mpirun) */
     if (st == BN_OK) {
-        size_t u;
-        bn__rows_measure(R, y, dev, scale, &u);
+        size_t u, stride = R->o->normalize_rows || np <= BN__ROWS_REPORT ? 1 : (np + BN__ROWS_REPORT - 1) / BN__ROWS_REPORT;
+        bn__rows_measure(R, y, stride, dev, scale, &u);
         unscalable = u;
         /* each leaf is one rank's: the sums are every rank's values, copied */
         if ((st = bn_dist_sum(dev, np, err)) == BN_OK && (st = bn_dist_sum(scale, np, err)) == BN_OK)
