@@ -184,6 +184,12 @@ BN_TEST(error_falls_with_eps)
         BN_ASSERT_LE(rep.bytes_per_link, 16);
         BN_ASSERT_GE(rep.bytes_per_link, 4);
         BN_ASSERT_LE(rep.bytes_per_link * (double)rep.links, (double)rep.bytes);
+        /* refinement's peak (issue 35: at most 32 B per link): at least the kept links (12 B) beside the
+         * operator made from them (10 B), at most 32 B per link refinement ended with */
+        printf("eps %g: refinement's peak %zu B of links, %.1f B per link\n", eps[e], rep.peak_link_bytes,
+               rep.peak_bytes_per_link);
+        BN_ASSERT_GE((double)rep.peak_link_bytes, 22.0 * (double)rep.links);
+        BN_ASSERT_LE(rep.peak_bytes_per_link, 32);
         prev = d;
         prev_links = rep.links;
         free(L);
@@ -562,3 +568,4 @@ BN_TEST(furnace_without_cluster_receivers) { furnace(3, 0.03, 0.25, 0); }
  * polygons): the planes are the uncut polygons again, and with the smallest element an uncut
  * triangle (min_area) L = 10 still holds on every patch. */
 BN_TEST(furnace_with_coplanar_cuts) { furnace_cut(3, 0.03, 0.25, 1, 1); }
+

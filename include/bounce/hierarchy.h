@@ -90,6 +90,11 @@ typedef struct bn_hierarchy_report {
     size_t rays;                                    /* traced by this process */
     size_t bytes;                                   /* the frozen operator: nodes and links (this process's) */
     double bytes_per_link;                          /* link storage alone / links */
+    size_t peak_link_bytes;                         /* the most bytes of links refinement held at once (as
+                                                       allocated: the pass's input, its output and every
+                                                       thread's, or the links beside the frozen operator) */
+    double peak_bytes_per_link;                     /* peak_link_bytes / the links refinement ended with (with
+                                                       those of F = 0 it keeps to refine them later) */
     double eps_abs;                                 /* eps x the largest emitted radiance: the bound of
                                                        a link's error the oracle used */
     /* F_H's rows against their exact sums (before normalize_rows scales them): every leaf with

@@ -43,10 +43,10 @@ void bn_cli_provenance_run(char *buf, size_t n, const bn_cli_common *c, const bn
                  "# hierarchy_links=%zu\n# hierarchy_leaf_links=%zu\n# hierarchy_cluster_links=%zu\n"
                  "# hierarchy_passes=%zu\n# hierarchy_settled=%d\n# hierarchy_rays=%zu\n# hierarchy_bytes=%zu\n"
                  "# hierarchy_seconds=%.3f\n# hierarchy_polygons=%zu\n# hierarchy_planes=%zu\n"
-                 "# hierarchy_min_area=%.9g\n",
+                 "# hierarchy_min_area=%.9g\n# hierarchy_peak_link_bytes=%zu\n",
                  po->hier.eps, h->eps_abs, po->hier.clusters, h->nodes, h->links, h->leaf_links, h->cluster_links,
                  h->passes, h->settled, h->rays, h->bytes, h->seconds_tree + h->seconds_refine, h->polygons,
-                 h->planes, h->min_area);
+                 h->planes, h->min_area, h->peak_link_bytes);
     }
 }
 

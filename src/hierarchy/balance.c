@@ -190,7 +190,7 @@ bn_status bn__count_links(const bn__ref *R, const bn__vec *work, bn_hierarchy_re
     unsigned long long cnt[3] = {0, 0, 0};
     bn_status st;
     for (size_t l = 0; l < work->n; l++) {
-        uint32_t r = work->a[l].r, s = work->a[l].s;
+        uint32_t r = work->a[l].r, s = bn__link_s(&work->a[l]);
         if (!bn__receiver_counted(R, r))
             continue;
         cnt[0]++;

@@ -44,6 +44,7 @@ typedef struct bn__build {
     bn__tree t;
     bn__ref R;
     bn__vec work;             /* the links */
+    bn__pass_stats ps;        /* splits of the last pass; rays and the peak of link bytes so far */
     bn__worker *W;
     int nt;
     size_t np;
@@ -162,11 +163,11 @@ static bn_status bn__one_pass(bn__build *B, int pass, size_t limit, bn_hierarchy
                               bn_error *err)
 {
     const bn_hierarchy_opts *o = B->R.o;
-    size_t splits = 0;
     char label[64];
     bn_status st, all;
     snprintf(label, sizeof label, "hierarchy pass %d", pass + 1);
-    st = bn__pass(&B->R, B->W, B->nt, &B->work, &splits, &rep->rays, label, err);
+    st = bn__pass(&B->R, B->W, B->nt, &B->work, &B->ps, label, err);
+    rep->rays = B->ps.rays;
     if (st == BN_OK && B->work.n * sizeof(bn__link) + bn__tree_bytes(&B->t) > limit)
         st = bn_error_set(err, BN_ENOMEM, "the hierarchy needs %zu links (%.3g GiB) at eps %g, above the memory "
                           "limit (`max_memory`): raise `eps`", B->work.n,
@@ -181,9 +182,9 @@ static bn_status bn__one_pass(bn__build *B, int pass, size_t limit, bn_hierarchy
     for (size_t l = 0; l < B->work.n; l++)
         if (bn__receiver_counted(&B->R, B->work.a[l].r)) {
             cnt[0]++;
-            cnt[1] += bn__tree_is_leaf(&B->t, B->work.a[l].r) && bn__tree_is_leaf(&B->t, B->work.a[l].s);
+            cnt[1] += bn__tree_is_leaf(&B->t, B->work.a[l].r) && bn__tree_is_leaf(&B->t, bn__link_s(&B->work.a[l]));
         }
-    cnt[2] = splits;
+    cnt[2] = B->ps.splits;
     if ((st = bn_dist_sum_u64(cnt, 3, err)) != BN_OK)
         return st;
     bn_logf(&o->log, BN_LOG_INFO, "hierarchy pass %d: %llu links (%llu between patches), %llu split, %.1f s",
@@ -245,7 +246,15 @@ static bn_status bn__freeze(bn__build *B, bn_hierarchy_report *rep, bn_transport
     bn__hop *h = NULL;
     bn__hop_shape shape = bn__tree_shape(t);
     bn_status st;
+    size_t held_links = B->work.n;   /* refinement's, those with F = 0 included */
     B->work.n = bn__compact(&B->work);
+    if (B->work.n && B->work.n < B->work.cap) {   /* beside the operator made from them, only what is kept */
+        bn__link *a = bn__realloc_array(B->work.a, B->work.n, sizeof *a);
+        if (a) {
+            B->work.a = a;
+            B->work.cap = B->work.n;
+        }
+    }
     if ((st = bn__count_links(&B->R, &B->work, rep, &B->R.o->log, err)) != BN_OK)
         return st;
     if ((st = bn__hop_make(&shape, B->work.a, B->work.n, B->R.bound, &h, err)) != BN_OK)
@@ -272,6 +281,15 @@ static bn_status bn__freeze(bn__build *B, bn_hierarchy_report *rep, bn_transport
     }
     rep->bytes = bn__hop_bytes(h);
     rep->bytes_per_link = h->nlinks ? (double)bn__hop_link_bytes(h) / (double)h->nlinks : 0;
+    {   /* the links with the operator made from them (as every estimate between passes, with fewer) */
+        size_t held = B->work.cap * sizeof(bn__link) + bn__hop_link_bytes(h);
+        rep->peak_link_bytes = held > B->ps.peak_bytes ? held : B->ps.peak_bytes;
+        rep->peak_bytes_per_link = held_links ? (double)rep->peak_link_bytes / (double)held_links : 0;
+    }
+    bn_logf(&B->R.o->log, BN_LOG_INFO, "hierarchy: refinement held at most %.1f MiB of links, %.1f B per link of the "
+            "%zu it ended with (%.1f B per link of the %zu with F > 0 kept); the frozen operator %.1f B per link",
+            (double)rep->peak_link_bytes / 1048576.0, rep->peak_bytes_per_link, held_links,
+            h->nlinks ? (double)rep->peak_link_bytes / (double)h->nlinks : 0.0, h->nlinks, rep->bytes_per_link);
     rep->seconds_refine = bn__now() - B->t0;
     return bn_transport_create(B->np, B->rho, &bn__hop_ops, h, out, err);   /* h owned by *out, or destroyed */
 }
@@ -322,6 +340,10 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
         if (st != BN_OK)
             return st;
     }
+    if (B.t.n >= BN__LINK_PARTIAL) {   /* a link's source takes 31 bits */
+        bn__tree_free(&B.t);
+        return bn_error_set(err, BN_ENOMEM, "the hierarchy of %zu patches needs %zu nodes, above 2^31", B.t.npatch, B.t.n);
+    }
     rep->seconds_tree = bn__now() - B.t0;
     B.t0 = bn__now();
     if ((st = bn__ref_init(&B, scene, rt, o, err)) == BN_OK && (st = bn__build_buffers(&B, err)) == BN_OK) {
@@ -351,8 +373,10 @@ void bn_hierarchy_report_print(const bn_hierarchy_report *r, FILE *fp)
     fprintf(fp, "polygons %zu\nplanes %zu\nmin_area %.6g\n", r->polygons, r->planes, r->min_area);
     fprintf(fp, "patches %zu\nnodes %zu\nclusters %zu\nplanar_nodes %zu\nlinks %zu\nleaf_links %zu\n"
                 "cluster_links %zu\nlinks_per_patch %.3g\npasses %zu\nsettled %d\nrays %zu\nbytes %zu\n"
-                "bytes_per_link %.3g\neps_abs %.6g\nseconds_tree %.3f\nseconds_refine %.3f\n",
+                "bytes_per_link %.3g\npeak_link_bytes %zu\npeak_bytes_per_link %.3g\neps_abs %.6g\nseconds_tree %.3f\n"
+                "seconds_refine %.3f\n",
             r->patches, r->nodes, r->clusters, r->planar_nodes, r->links, r->leaf_links, r->cluster_links,
             r->patches ? (double)r->links / (double)r->patches : 0.0, r->passes, r->settled, r->rays, r->bytes,
-            r->bytes_per_link, r->eps_abs, r->seconds_tree, r->seconds_refine);
+            r->bytes_per_link, r->peak_link_bytes, r->peak_bytes_per_link, r->eps_abs, r->seconds_tree,
+            r->seconds_refine);
 }

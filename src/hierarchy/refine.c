@@ -24,8 +24,8 @@
 
 void bn__vec_push(bn__vec *v, uint32_t r, uint32_t s, float F, int partial)
 {
-    if (v->n == v->cap) {
-        size_t cap = v->cap ? 2 * v->cap : 256;
+    if (v->n == v->cap) {   /* x1.25: large blocks grow by mremap, without a copy; the slack is small */
+        size_t cap = v->cap ? v->cap + v->cap / 4 : 256;
         bn__link *a = bn__realloc_array(v->a, cap, sizeof *a);
         if (!a) {
             v->oom = 1;
@@ -35,8 +35,7 @@ void bn__vec_push(bn__vec *v, uint32_t r, uint32_t s, float F, int partial)
         v->cap = cap;
     }
     v->a[v->n].r = r;
-    v->a[v->n].s = s;
-    v->a[v->n].partial = (uint8_t)partial;
+    v->a[v->n].s_bits = s | (partial ? BN__LINK_PARTIAL : 0);
     v->a[v->n++].F = F;
 }
 
@@ -351,7 +350,72 @@ static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int par
     }
     if (F < 0)
         F = bn__link_F(R, r, s, w, &partial);
+    if (!(F > 0) && lr && bn__tree_is_leaf(t, s))
+        return;   /* two patches that do not see each other: no link (nothing below them to refine later) */
     bn__vec_push(&w->links, r, s, F, partial);
+}
+
+/* Appends src's links to dst and frees src: a million links at a time from src's end, src shrunk
+ * after each, so the two never hold the same links twice over (large blocks move by mremap). The
+ * order is not kept: the pass sorts its output. 0 when out of memory (src then keeps the rest). */
+#define BN__MOVE_CHUNK ((size_t)1 << 20)
+static int bn__vec_move(bn__vec *dst, bn__vec *src)
+{
+    while (src->n) {
+        size_t m = src->n < BN__MOVE_CHUNK ? src->n : BN__MOVE_CHUNK;
+        if (dst->n + m > dst->cap) {   /* exactly: a few dozen reallocs, each an mremap */
+            size_t cap = dst->n + m;
+            bn__link *a = bn__realloc_array(dst->a, cap, sizeof *a);
+            if (!a)
+                return 0;
+            dst->a = a;
+            dst->cap = cap;
+        }
+        memcpy(dst->a + dst->n, src->a + src->n - m, m * sizeof *src->a);
+        dst->n += m;
+        src->n -= m;
+        if (src->n) {
+            bn__link *a = bn__realloc_array(src->a, src->n, sizeof *a);
+            src->a = a ? a : src->a;
+            src->cap = a ? src->n : src->cap;
+        }
+    }
+    free(src->a);
+    src->a = NULL;
+    src->cap = 0;
+    return 1;
+}
+
+/* Link bytes held now: the pass's input, its output so far and every worker's, as allocated. */
+static size_t bn__held(const bn__vec *work, const bn__vec *out, const bn__worker *W, int nt)
+{
+    size_t b = (work->cap + out->cap) * sizeof(bn__link);
+    for (int k = 0; k < nt; k++)
+        b += (W[k].links.cap + W[k].pending.cap) * sizeof(bn__link);
+    return b;
+}
+
+/* After a round: the workers' accepted links appended to out, their deeper work to *work (whose items
+ * are refined), their splits counted; the peak of link bytes noted first. 0 when out of memory. */
+static int bn__round_collect(bn__worker *W, int nt, bn__vec *work, bn__vec *out, bn__pass_stats *st)
+{
+    size_t held = bn__held(work, out, W, nt);
+    st->peak_bytes = held > st->peak_bytes ? held : st->peak_bytes;
+    work->n = 0;
+    for (int k = 0; k < nt; k++) {
+        if (!bn__vec_move(out, &W[k].links) || !bn__vec_move(work, &W[k].pending))
+            return 0;
+        st->splits += W[k].splits;
+        W[k].splits = 0;
+    }
+    if (work->n < work->cap / 2) {   /* keep only what the next round needs */
+        bn__link *a = bn__realloc_array(work->a, work->n ? work->n : 1, sizeof *a);
+        if (a) {
+            work->a = a;
+            work->cap = work->n ? work->n : 1;
+        }
+    }
+    return 1;
 }
 
 int bn__link_cmp(const void *a, const void *b)
@@ -359,18 +423,19 @@ int bn__link_cmp(const void *a, const void *b)
     const bn__link *x = a, *y = b;
     if (x->r != y->r)
         return x->r < y->r ? -1 : 1;
-    return x->s < y->s ? -1 : x->s > y->s;
+    uint32_t xs = bn__link_s(x), ys = bn__link_s(y);
+    return xs < ys ? -1 : xs > ys;
 }
 
 /* One pass: every item of *work refined (rounds of BN__DEPTH_PER_ROUND levels); the accepted
  * links replace *work, sorted. *splits: existing links that were split. */
-bn_status bn__pass(const bn__ref *R, bn__worker *W, int nt, bn__vec *work, size_t *splits, size_t *rays,
-                          const char *label, bn_error *err)
+bn_status bn__pass(const bn__ref *R, bn__worker *W, int nt, bn__vec *work, bn__pass_stats *st, const char *label,
+                   bn_error *err)
 {
     bn__vec out = {0};
     bn__progress prog;
     size_t done = 0, round = 0;
-    *splits = 0;
+    st->splits = 0;
     while (work->n) {
         volatile int oom = 0;
         long ln = (long)work->n;
@@ -385,7 +450,7 @@ bn_status bn__pass(const bn__ref *R, bn__worker *W, int nt, bn__vec *work, size_
                 if (oom || bn_interrupted() != BN_OK)
                     continue;
                 bn__link it = work->a[l];
-                bn__visit(R, it.r, it.s, it.F, it.partial, BN__DEPTH_PER_ROUND, w);
+                bn__visit(R, it.r, bn__link_s(&it), it.F, bn__link_partial(&it), BN__DEPTH_PER_ROUND, w);
                 if (w->links.oom || w->pending.oom)
                     oom = 1;
                 if (++mine == 4096) {
@@ -400,29 +465,8 @@ bn_status bn__pass(const bn__ref *R, bn__worker *W, int nt, bn__vec *work, size_
             free(out.a);
             return bn_error_set(err, bn_interrupted(), "hierarchy refinement interrupted");
         }
-        work->n = 0;
-        for (int k = 0; k < nt && !oom; k++) {
-            bn__vec *v[2] = {&W[k].links, &W[k].pending};
-            bn__vec *dst[2] = {&out, work};
-            for (int q = 0; q < 2; q++) {
-                if (dst[q]->n + v[q]->n > dst[q]->cap) {
-                    size_t cap = (dst[q]->n + v[q]->n) * 3 / 2 + 256;
-                    bn__link *a = bn__realloc_array(dst[q]->a, cap, sizeof *a);
-                    if (!a) {
-                        oom = 1;
-                        break;
-                    }
-                    dst[q]->a = a;
-                    dst[q]->cap = cap;
-                }
-                if (v[q]->n)
-                    memcpy(dst[q]->a + dst[q]->n, v[q]->a, v[q]->n * sizeof *v[q]->a);
-                dst[q]->n += v[q]->n;
-                v[q]->n = 0;
-            }
-            *splits += W[k].splits;
-            W[k].splits = 0;
-        }
+        if (!oom)
+            oom = !bn__round_collect(W, nt, work, &out, st);
         if (oom) {
             free(out.a);
             return bn_error_set(err, BN_ENOMEM, "out of memory for the hierarchy's links (%zu so far): raise eps",
@@ -431,7 +475,7 @@ bn_status bn__pass(const bn__ref *R, bn__worker *W, int nt, bn__vec *work, size_
         round++;
     }
     for (int k = 0; k < nt; k++) {
-        *rays += W[k].rays + bn__ff_worker_rays(W[k].ff);
+        st->rays += W[k].rays + bn__ff_worker_rays(W[k].ff);
         W[k].rays = 0;
     }
     qsort(out.a, out.n, sizeof *out.a, bn__link_cmp);
@@ -469,23 +513,14 @@ size_t bn__compact(bn__vec *v)
 bn_status bn__estimate(const bn__tree *t, bn__vec *links, const size_t *bound, const double *E,
                               const double *rho, double eps_abs, double *L, bn_error *err)
 {
-    bn__vec live = *links;
     bn__hop *h = NULL;
     size_t n3 = 3 * t->npatch;
-    bn__link *copy = bn__malloc_array(links->n ? links->n : 1, sizeof *copy);
     double *y = bn__malloc_array(n3, sizeof(double));
     bn_status st = BN_OK;
-    if (!copy || !y) {
-        free(copy);
-        free(y);
+    if (!y)
         return bn_error_set(err, BN_ENOMEM, "out of memory for the hierarchy's gather");
-    }
-    if (links->n)
-        memcpy(copy, links->a, links->n * sizeof *copy);
-    live.a = copy;
-    live.n = bn__compact(&live);
     bn__hop_shape shape = bn__tree_shape(t);
-    st = bn__hop_make(&shape, live.a, live.n, bound, &h, err);
+    st = bn__hop_make(&shape, links->a, links->n, bound, &h, err);   /* those with F > 0 */
     for (int it = 0; st == BN_OK && it < 200; it++) {
         double change = 0;
         st = bn__hop_apply(h, L, y, err);
@@ -498,7 +533,6 @@ bn_status bn__estimate(const bn__tree *t, bn__vec *links, const size_t *bound, c
             break;
     }
     bn__hop_destroy(h);
-    free(copy);
     free(y);
     return st;
 }

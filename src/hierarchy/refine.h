@@ -53,10 +53,15 @@ typedef struct bn__worker {
 
 /* Links ordered by receiver, then source (qsort). */
 int bn__link_cmp(const void *a, const void *b);
+/* What a pass counts: existing links split (this pass), shadow rays and the most bytes of links held
+ * at once (added to / raised across passes). */
+typedef struct bn__pass_stats {
+    size_t splits, rays, peak_bytes;
+} bn__pass_stats;
 /* One pass: every item of *work refined (rounds of a few levels); the accepted links replace *work,
- * sorted. *splits: existing links that were split; *rays: shadow rays added. */
-bn_status bn__pass(const bn__ref *R, bn__worker *W, int nt, bn__vec *work, size_t *splits, size_t *rays,
-                   const char *label, bn_error *err);
+ * sorted. */
+bn_status bn__pass(const bn__ref *R, bn__worker *W, int nt, bn__vec *work, bn__pass_stats *st, const char *label,
+                   bn_error *err);
 /* Bmax from per-patch radiances L (N*3): the largest below each node. */
 void bn__bmax(const bn__tree *t, const double *L, double *Bmax);
 /* Keeps the links with F > 0, in place; returns their count. */

@@ -82,13 +82,15 @@ bn_status bn__hop_make(const bn__hop_shape *t, const bn__link *links, size_t nli
                        bn_error *err)
 {
     bn__hop *h = bn__calloc(1, sizeof *h);
-    size_t n = t->n;
+    size_t n = t->n, kept = 0;
     *out = NULL;
     if (!h)
         return bn_error_set(err, BN_ENOMEM, "out of memory for the hierarchy");
+    for (size_t l = 0; l < nlinks; l++)
+        kept += links[l].F > 0;
     h->n = n;
     h->npatch = t->npatch;
-    h->nlinks = nlinks;
+    h->nlinks = kept;
     h->child = bn__malloc_array(n, sizeof(uint32_t));
     h->parent = bn__malloc_array(n, sizeof(uint32_t));
     h->leaf_patch = bn__malloc_array(n, sizeof(uint32_t));
@@ -96,9 +98,9 @@ bn_status bn__hop_make(const bn__hop_shape *t, const bn__link *links, size_t nli
     h->area = bn__malloc_array(n, sizeof(double));
     h->normal = bn__malloc_array(3 * n, sizeof(float));
     h->start = bn__calloc(n + 1, sizeof(size_t));
-    h->src = bn__malloc_array(nlinks ? nlinks : 1, sizeof *h->src);
-    h->F = bn__malloc_array(nlinks ? nlinks : 1, sizeof *h->F);
-    h->dir = bn__calloc(nlinks ? nlinks : 1, sizeof *h->dir);
+    h->src = bn__malloc_array(kept ? kept : 1, sizeof *h->src);
+    h->F = bn__malloc_array(kept ? kept : 1, sizeof *h->F);
+    h->dir = bn__calloc(kept ? kept : 1, sizeof *h->dir);
     h->Bn = bn__malloc_array(3 * n, sizeof(double));
     h->distributed = bn_dist_size() > 1;
     if (h->distributed) {
@@ -129,16 +131,19 @@ bn_status bn__hop_make(const bn__hop_shape *t, const bn__link *links, size_t nli
     h->Gv = bn__malloc_array(h->nclusters ? 9 * h->nclusters : 1, sizeof(double));
     if (!h->Gv)
         goto oom;
-    for (size_t l = 0; l < nlinks; l++) {
+    for (size_t l = 0, k = 0; l < nlinks; l++) {
         uint32_t r = links[l].r;
+        if (!(links[l].F > 0))
+            continue;
         h->start[r + 1]++;
-        h->src[l] = links[l].s;
-        h->F[l] = links[l].F;
+        h->src[k] = bn__link_s(&links[l]);
+        h->F[k] = links[l].F;
         if (h->cl[r] != BN__NONE) {
             double u[3];
-            t->dir(t->dir_ctx, r, links[l].s, u);
-            h->dir[l] = bn__oct_encode(u);   /* F is per unit cosine (src/hierarchy/refine.c) */
+            t->dir(t->dir_ctx, r, h->src[k], u);
+            h->dir[k] = bn__oct_encode(u);   /* F is per unit cosine (src/hierarchy/refine.c) */
         }
+        k++;
     }
     for (size_t v = 0; v < n; v++)
         h->start[v + 1] += h->start[v];
@@ -146,7 +151,7 @@ bn_status bn__hop_make(const bn__hop_shape *t, const bn__link *links, size_t nli
     return BN_OK;
 oom:
     bn__hop_destroy(h);
-    return bn_error_set(err, BN_ENOMEM, "out of memory for %zu links of the hierarchy", nlinks);
+    return bn_error_set(err, BN_ENOMEM, "out of memory for %zu links of the hierarchy", kept);
 }
 
 bn_status bn__hop_apply(void *ctx, const double *x, double *y, bn_error *err)

@@ -10,12 +10,17 @@
 
 #define BN__NONE UINT32_MAX
 
-/* A link: receiver r gathers F x (the area mean of the values below s). */
+/* A link: receiver r gathers F x (the area mean of the values below s). 12 bytes, as refinement holds
+ * tens of millions of them: the top bit of s_bits marks a link whose shadow rays found partial
+ * visibility (refinement's business; nodes number below 2^31). */
 typedef struct bn__link {
-    uint32_t r, s;
+    uint32_t r;
+    uint32_t s_bits;          /* the source node, | BN__LINK_PARTIAL */
     float F;                  /* < 0: not computed yet */
-    uint8_t partial;          /* its shadow rays found partial visibility */
 } bn__link;
+#define BN__LINK_PARTIAL 0x80000000u
+static inline uint32_t bn__link_s(const bn__link *l) { return l->s_bits & ~BN__LINK_PARTIAL; }
+static inline int bn__link_partial(const bn__link *l) { return (l->s_bits & BN__LINK_PARTIAL) != 0; }
 
 /* Octahedral encoding of a unit vector in 8 + 8 bits (Meyer et al. 2010): ~1 degree. */
 uint16_t bn__oct_encode(const double u[3]);
@@ -59,8 +64,8 @@ typedef struct bn__hop {
     double *xchg;             /* 3 npatch: the leaves' values in leaf order (P > 1) */
 } bn__hop;
 
-/* Takes links (sorted by r then s; F > 0 only) and the tree's shape (copied); bound: P + 1, every
- * rank's first leaf in leaf order, then npatch (copied). */
+/* Takes the links with F > 0 of `links` (sorted by r then s; the rest skipped) and the tree's shape
+ * (copied); bound: P + 1, every rank's first leaf in leaf order, then npatch (copied). */
 size_t bn__hop_link_bytes(const bn__hop *h);
 bn_status bn__hop_make(const bn__hop_shape *t, const bn__link *links, size_t nlinks, const size_t *bound, bn__hop **out,
                        bn_error *err);
