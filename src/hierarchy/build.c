@@ -52,13 +52,14 @@ typedef struct bn__build {
     double t0;
 } bn__build;
 
-/* Per patch: the share of a quad's area in its first fan triangle (0, 1, 2); 1 for a triangle. */
-static bn_status bn__fan_shares(bn__ref *R, size_t np, bn_error *err)
+/* Every leaf's corners, normal and fan share, in leaf order (bn__leaf_geom). */
+static bn_status bn__leaf_geoms(bn__ref *R, size_t np, bn_error *err)
 {
-    if (!(R->fan0 = bn__malloc_array(np + 1, sizeof(double))))
+    if (!(R->leaf = bn__calloc(np + 1, sizeof *R->leaf)))
         return bn_error_set(err, BN_ENOMEM, "out of memory for the hierarchy of %zu patches", np);
-    for (size_t i = 0; i < np; i++) {
-        const bn_patch *p = &R->patch[i];
+    for (size_t q = 0; q < np; q++) {
+        const bn_patch *p = &R->patch[R->t->order[q]];
+        bn__leaf_geom *g = &R->leaf[q];
         const double *v0 = R->pverts + 3 * p->corner[0], *v2 = R->pverts + 3 * p->corner[2];
         double a0 = 0, a1 = 0;
         if (p->ncorners == 4) {
@@ -71,7 +72,11 @@ static bn_status bn__fan_shares(bn__ref *R, size_t np, bn_error *err)
             bn_v3_cross(e2, e3, c);
             a1 = 0.5 * bn_v3_len(c);
         }
-        R->fan0[i] = a0 + a1 > 0 ? a0 / (a0 + a1) : 1;
+        g->fan0 = a0 + a1 > 0 ? a0 / (a0 + a1) : 1;
+        g->nc = p->ncorners;
+        for (unsigned c = 0; c < p->ncorners; c++)
+            memcpy(g->v[c], R->pverts + 3 * p->corner[c], sizeof g->v[c]);
+        memcpy(g->n, p->normal, sizeof g->n);
     }
     return BN_OK;
 }
@@ -101,7 +106,7 @@ static bn_status bn__ref_init(bn__build *B, const bn_scene *scene, const bn_rt *
         bn__dist_leaves_of(B->np, (size_t)q, &R->bound[q], &R->bound[q + 1]);
     R->plo = R->bound[bn_dist_rank()];
     R->phi = R->bound[bn_dist_rank() + 1];
-    return bn__fan_shares(R, B->np, err);
+    return bn__leaf_geoms(R, B->np, err);
 }
 
 /* E, rho, L = E, the oracle's Bmax, eps in radiance, the per-thread workers. */
@@ -305,7 +310,7 @@ static void bn__build_free(bn__build *B)
     free(B->W);
     bn__ff_pairs_destroy(B->R.pairs);
     free(B->R.Bmax);
-    free(B->R.fan0);
+    free(B->R.leaf);
     free(B->R.bound);
     free(B->work.a);
     free(B->E);

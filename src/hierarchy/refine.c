@@ -145,17 +145,15 @@ static void bn__node_point(const bn__ref *R, uint32_t v, double u1, double u2, d
         else
             hi = mid;
     }
-    size_t i = t->order[lo];
-    const bn_patch *p = &R->patch[i];
-    const double *pa = R->pverts + 3 * p->corner[0], *pb = R->pverts + 3 * p->corner[1];
-    const double *pc = R->pverts + 3 * p->corner[2];
-    double f = R->fan0[i], s, b0, b1, b2;
-    if (p->ncorners == 4) {   /* the fan triangle by area, as bn__poly_sample chooses it, its share precomputed */
+    const bn__leaf_geom *g = &R->leaf[lo];
+    const double *pa = g->v[0], *pb = g->v[1], *pc = g->v[2];
+    double f = g->fan0, s, b0, b1, b2;
+    if (g->nc == 4) {   /* the fan triangle by area, as bn__poly_sample chooses it, its share precomputed */
         if (u2 < f)
             u2 = f > 0 ? u2 / f : 0.5;
         else {
             pb = pc;
-            pc = R->pverts + 3 * p->corner[3];
+            pc = g->v[3];
             u2 = f < 1 ? (u2 - f) / (1 - f) : 0.5;
         }
         u2 = bn_clamp(u2, 0, 1);
@@ -166,7 +164,7 @@ static void bn__node_point(const bn__ref *R, uint32_t v, double u1, double u2, d
     b2 = s * u3;
     for (int k = 0; k < 3; k++)
         x[k] = b0 * pa[k] + b1 * pb[k] + b2 * pc[k];
-    *n = p->normal;
+    *n = g->n;
 }
 
 /* Is the segment from x (on a surface of normal nx) to y (normal ny) blocked? Both ends lifted by the
@@ -203,19 +201,18 @@ static double bn__F_kernel(const bn__ref *R, uint32_t r, uint32_t s, bn__worker 
         const double *nx;
         bn__node_point(R, r, (k + bn__rng_uniform(&g)) / S, bn__rng_uniform(&g), bn__rng_uniform(&g), x, &nx);
         for (size_t q = t->lo[s]; q < t->hi[s]; q++) {
-            const bn_patch *pj = &R->patch[t->order[q]];
+            const bn__leaf_geom *pj = &R->leaf[q];
             double v[12], vc[3 * BN__FF_POLY_MAX], d[3], y[3], f;
-            for (unsigned c = 0; c < pj->ncorners; c++)
-                memcpy(v + 3 * c, R->pverts + 3 * pj->corner[c], 3 * sizeof(double));
+            memcpy(v, pj->v, sizeof v);
             bn_v3_sub(x, v, d);
-            if (bn_v3_dot(pj->normal, d) <= R->tol)
+            if (bn_v3_dot(pj->n, d) <= R->tol)
                 continue;   /* x behind the leaf */
-            size_t nc = bn__poly_clip(v, pj->ncorners, nx, x, R->tol, vc);
+            size_t nc = bn__poly_clip(v, pj->nc, nx, x, R->tol, vc);
             if (nc < 3 || !((f = bn__ff_point_polygon(x, nx, vc, nc)) > 0))
                 continue;
             bn__poly_sample(vc, nc, bn__rng_uniform(&g), bn__rng_uniform(&g), y);
             seen++;
-            if (bn__blocked(R, x, nx, y, pj->normal, w)) {
+            if (bn__blocked(R, x, nx, y, pj->n, w)) {
                 blocked++;
                 continue;
             }

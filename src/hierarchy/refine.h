@@ -7,6 +7,16 @@
 #include "hierarchy/hierarchy_internal.h"
 #include "formfactor/ff_pair.h"
 
+/* A leaf's geometry where sampling reads it: in the tree's leaf order (node v's leaves are
+ * leaf[lo[v] .. hi[v]), beside cum_area), one record each instead of a patch, its corner indices and
+ * the corners (three cache misses per sampled point on scenes of a million patches). */
+typedef struct bn__leaf_geom {
+    double v[4][3];           /* corners, counter-clockwise from the front (v[3]: quads only) */
+    double n[3];              /* unit normal */
+    double fan0;              /* the share of a quad's area in its first fan triangle (0, 1, 2); 1 for a triangle */
+    uint32_t nc;              /* 3 or 4 */
+} bn__leaf_geom;
+
 typedef struct bn__ref {
     const bn__tree *t;
     const bn_scene *scene;
@@ -14,7 +24,7 @@ typedef struct bn__ref {
     const bn_hierarchy_opts *o;
     const bn_patch *patch;
     const double *pverts;
-    double *fan0;             /* per patch: the share of a quad's area in its first fan triangle (0, 1, 2) */
+    bn__leaf_geom *leaf;      /* npatch, in leaf order */
     double *Bmax;             /* 3 per node: the largest radiance estimate below (oracle) */
     double eps_abs;
     double min_area;          /* planar nodes below this area are not split */
