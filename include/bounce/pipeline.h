@@ -81,13 +81,16 @@ typedef struct bn_pipeline {
     bn_hierarchy_report hier;
     bn_row_sum_check rows;     /* F's row sums against the exact ones (rows.rows 0: not checked) */
     double *row_exact;         /* rows.rows values: the checked rows' exact sums (the balance's escape) */
-    size_t nemit, *emit_patch; /* the emitting patches, and their exact row sums by many rays */
+    size_t nemit, *emit_patch; /* the emitting patches, and their exact row sums by many rays (emit_rays each) */
     double *emit_exact;
+    int emit_rays;
     /* The energy balance after the solve (rows checked): pi sum_i A_i (F L)_i, the power arriving
      * at surfaces, against pi sum_j A_j e_j L_j, the power leaving them towards surfaces (e_j: row j's
      * exact sum); equal for any exact F (reciprocity). Per channel, W; balance: their difference
-     * over the emitted power (+: the operator makes light, -: it loses it). */
-    double power_arriving[3], power_towards[3], power_emitted[3], balance[3];
+     * over the emitted power (+: the operator makes light, -: it loses it). balance_se: its standard
+     * error from the rays that estimate the escaping light (binomial per row, and the rows between
+     * the checked ones); an exact F's balance is within a few of it. */
+    double power_arriving[3], power_towards[3], power_emitted[3], balance[3], balance_se[3];
     double *E;                 /* N*3 emitted radiance */
     bn_solve_result res;       /* L and the terms K^0 E .. K^b E (b = solve.bounces) */
     bn_solve_method method_used;  /* the solver that ran (method_auto may have chosen it) */

@@ -34,7 +34,8 @@ static int bn__row_hits(const bn_rt *rt, const bn_scene *s, size_t i, int rays, 
         double v2 = ((double)((k / side) % side) + bn__rng_uniform(&r)) / side;
         double x[3], d[3], st = sqrt(u2), ct = sqrt(1 - u2), ph = 2 * BN_PI * v2;
         bn_hit h;
-        bn__poly_sample(corners, pa->ncorners, bn__rng_uniform(&r), bn__rng_uniform(&r), x);
+        double p1 = bn__rng_uniform(&r), p2 = bn__rng_uniform(&r);   /* in this order on every compiler */
+        bn__poly_sample(corners, pa->ncorners, p1, p2, x);
         for (int c = 0; c < 3; c++)
             d[c] = st * cos(ph) * t[c] + st * sin(ph) * b[c] + ct * pa->normal[c];
         bn_v3_madd(x, eps, pa->normal, x);

@@ -132,20 +132,40 @@ static double bn__link_error(const bn__ref *R, uint32_t r, uint32_t s)
     return m > 0 ? m * bn__F_bound(R->t, r, s) : 0;
 }
 
-/* A point of node v, uniform in area, from (u1, u2, u3) in [0,1)^3; its patch's normal. */
-static void bn__node_point(const bn__ref *R, uint32_t v, double u1, double u2, double u3, double x[3], const double **n)
+/* The leaves of m nodes v[j] (m <= 2) where the area fractions u1[j] fall: the last leaf k of each
+ * with cum_area[k] <= its target. The searches advance in step, so that two nodes' cache misses
+ * overlap (a sampled point pair: most of refinement's time at a million leaves). */
+static void bn__find_leaves(const bn__tree *t, int m, const uint32_t *v, const double *u1, size_t *leaf)
 {
-    const bn__tree *t = R->t;
-    size_t lo = t->lo[v], hi = t->hi[v];
-    double a = t->cum_area[lo] + u1 * (t->cum_area[hi] - t->cum_area[lo]);
-    while (hi - lo > 1) {   /* the last k with cum_area[k] <= a */
-        size_t mid = lo + (hi - lo) / 2;
-        if (t->cum_area[mid] <= a)
-            lo = mid;
-        else
-            hi = mid;
+    size_t lo[2], hi[2];
+    double a[2];
+    int open = 0;
+    for (int j = 0; j < m; j++) {
+        lo[j] = t->lo[v[j]];
+        hi[j] = t->hi[v[j]];
+        a[j] = t->cum_area[lo[j]] + u1[j] * (t->cum_area[hi[j]] - t->cum_area[lo[j]]);
+        open += hi[j] - lo[j] > 1;
     }
-    const bn__leaf_geom *g = &R->leaf[lo];
+    while (open) {
+        open = 0;
+        for (int j = 0; j < m; j++)
+            if (hi[j] - lo[j] > 1) {
+                size_t mid = lo[j] + (hi[j] - lo[j]) / 2;
+                if (t->cum_area[mid] <= a[j])
+                    lo[j] = mid;
+                else
+                    hi[j] = mid;
+                open += hi[j] - lo[j] > 1;
+            }
+    }
+    for (int j = 0; j < m; j++)
+        leaf[j] = lo[j];
+}
+
+/* The point of leaf q (in leaf order) at (u2, u3) in [0,1)^2, uniform in area; its normal. */
+static void bn__leaf_point(const bn__ref *R, size_t q, double u2, double u3, double x[3], const double **n)
+{
+    const bn__leaf_geom *g = &R->leaf[q];
     const double *pa = g->v[0], *pb = g->v[1], *pc = g->v[2];
     double f = g->fan0, s, b0, b1, b2;
     if (g->nc == 4) {   /* the fan triangle by area, as bn__poly_sample chooses it, its share precomputed */
@@ -165,6 +185,14 @@ static void bn__node_point(const bn__ref *R, uint32_t v, double u1, double u2, d
     for (int k = 0; k < 3; k++)
         x[k] = b0 * pa[k] + b1 * pb[k] + b2 * pc[k];
     *n = g->n;
+}
+
+/* A point of node v, uniform in area, from (u1, u2, u3) in [0,1)^3; its patch's normal. */
+static void bn__node_point(const bn__ref *R, uint32_t v, double u1, double u2, double u3, double x[3], const double **n)
+{
+    size_t q;
+    bn__find_leaves(R->t, 1, &v, &u1, &q);
+    bn__leaf_point(R, q, u2, u3, x, n);
 }
 
 /* Is the segment from x (on a surface of normal nx) to y (normal ny) blocked? Both ends lifted by the
@@ -199,7 +227,8 @@ static double bn__F_kernel(const bn__ref *R, uint32_t r, uint32_t s, bn__worker 
     for (int k = 0; k < S; k++) {
         double x[3];
         const double *nx;
-        bn__node_point(R, r, (k + bn__rng_uniform(&g)) / S, bn__rng_uniform(&g), bn__rng_uniform(&g), x, &nx);
+        double u1 = (k + bn__rng_uniform(&g)) / S, u2 = bn__rng_uniform(&g), u3 = bn__rng_uniform(&g);
+        bn__node_point(R, r, u1, u2, u3, x, &nx);
         for (size_t q = t->lo[s]; q < t->hi[s]; q++) {
             const bn__leaf_geom *pj = &R->leaf[q];
             double v[12], vc[3 * BN__FF_POLY_MAX], d[3], y[3], f;
@@ -210,7 +239,8 @@ static double bn__F_kernel(const bn__ref *R, uint32_t r, uint32_t s, bn__worker 
             size_t nc = bn__poly_clip(v, pj->nc, nx, x, R->tol, vc);
             if (nc < 3 || !((f = bn__ff_point_polygon(x, nx, vc, nc)) > 0))
                 continue;
-            bn__poly_sample(vc, nc, bn__rng_uniform(&g), bn__rng_uniform(&g), y);
+            double w1 = bn__rng_uniform(&g), w2 = bn__rng_uniform(&g);
+            bn__poly_sample(vc, nc, w1, w2, y);
             seen++;
             if (bn__blocked(R, x, nx, y, pj->n, w)) {
                 blocked++;
@@ -238,9 +268,16 @@ static double bn__F_sampled(const bn__ref *R, uint32_t r, uint32_t s, bn__worker
         for (int k = 0; k < S; k++) {
             double x[3], y[3], d[3], r2, len, cr, cs;
             const double *nx, *ny;
-            bn__node_point(R, r, (k + bn__rng_uniform(&g)) * inv, bn__rng_uniform(&g), bn__rng_uniform(&g), x, &nx);
-            bn__node_point(R, s, (((k * 7 + 3) % S) + bn__rng_uniform(&g)) * inv, bn__rng_uniform(&g),
-                           bn__rng_uniform(&g), y, &ny);
+            const uint32_t v[2] = {r, s};
+            double u[6], u1[2];
+            size_t q[2];
+            for (int i = 0; i < 6; i++)   /* in order: r's three, then s's three */
+                u[i] = bn__rng_uniform(&g);
+            u1[0] = (k + u[0]) * inv;
+            u1[1] = (((k * 7 + 3) % S) + u[3]) * inv;
+            bn__find_leaves(R->t, 2, v, u1, q);
+            bn__leaf_point(R, q[0], u[1], u[2], x, &nx);
+            bn__leaf_point(R, q[1], u[4], u[5], y, &ny);
             bn_v3_sub(y, x, d);
             r2 = bn_v3_dot(d, d);
             len = sqrt(r2);

@@ -250,25 +250,47 @@ static void bn__hierarchy_diag(bn_pipeline *p, const double *y)
     d->rays_per_second = d->seconds > 0 ? (double)d->rays / d->seconds : 0;
 }
 
+/* The variance of an escape term w (1 - e) estimated from `rays` rays: binomial, p (1 - p) / rays
+ * (stratified rays do better: an upper bound). */
+static double bn__escape_var(double w, double e, int rays)
+{
+    double q = fmin(fmax(1 - e, 0.0), 1.0);
+    return rays > 0 ? w * w * q * (1 - q) / rays : 0;
+}
+
 /* sum_j A_j (1 - e_j) L_j, the light leaving the patches that does not reach a surface (escaping, or
  * meeting a back): the emitters' own (they dominate it) from their exact sums by many rays, and the
- * rest from the checked rows (every stride-th patch), scaled by the stride. Per channel, scene units. */
-static void bn__escaping(const bn_pipeline *p, double esc[3])
+ * rest from the checked rows (every stride-th patch), scaled by the stride. Per channel, scene units;
+ * var: its variance (the rays', and with a stride > 1 the unchecked rows', as a random sample's). */
+static void bn__escaping(const bn_pipeline *p, double esc[3], double var[3])
 {
     const bn_patch *pa = bn_scene_patches(p->scene, &(size_t){0});
-    esc[0] = esc[1] = esc[2] = 0;
+    double s = (double)p->rows.stride, sum[3] = {0, 0, 0}, sq[3] = {0, 0, 0};
+    size_t m = 0;
+    for (int c = 0; c < 3; c++)
+        esc[c] = var[c] = 0;
     for (size_t k = 0; k < p->nemit; k++) {
         size_t j = p->emit_patch[k];
-        for (int c = 0; c < 3; c++)
+        for (int c = 0; c < 3; c++) {
             esc[c] += pa[j].area * (1 - p->emit_exact[k]) * p->res.L[3 * j + c];
+            var[c] += bn__escape_var(pa[j].area * p->res.L[3 * j + c], p->emit_exact[k], p->emit_rays);
+        }
     }
     for (size_t k = 0; k < p->rows.rows; k++) {
         size_t j = k * p->rows.stride;
         if (p->E[3 * j] + p->E[3 * j + 1] + p->E[3 * j + 2] > 0 && p->emit_exact)
             continue;
-        for (int c = 0; c < 3; c++)
-            esc[c] += (double)p->rows.stride * pa[j].area * (1 - p->row_exact[k]) * p->res.L[3 * j + c];
+        m++;
+        for (int c = 0; c < 3; c++) {
+            double x = pa[j].area * (1 - p->row_exact[k]) * p->res.L[3 * j + c];
+            esc[c] += s * x;
+            var[c] += bn__escape_var(s * pa[j].area * p->res.L[3 * j + c], p->row_exact[k], p->rows.rays);
+            sum[c] += x;
+            sq[c] += x * x;
+        }
     }
+    for (int c = 0; c < 3 && s > 1 && m > 1; c++)   /* N^2 (1 - n/N) s^2 / n with N = stride n */
+        var[c] += s * s * (double)m * (1 - 1 / s) * fmax(0.0, sq[c] - sum[c] * sum[c] / (double)m) / (double)(m - 1);
 }
 
 /* The emitting patches' exact row sums, by rays enough that their noise does not show in the
@@ -288,6 +310,7 @@ static bn_status bn__emitters_exact(const bn_pipeline_opts *o, bn_pipeline *p, b
     if (!p->emit_patch || !p->emit_exact)
         return bn_error_set(err, BN_ENOMEM, "out of memory for %zu emitting patches", p->nemit);
     int rays = p->nemit ? (int)fmin(16384, fmax(256, 4e6 / (double)p->nemit)) : 0;
+    p->emit_rays = rays;
     size_t k = 0;
     for (size_t j = 0; j < p->n; j++)
         if (mat[pa[j].material].Le[0] + mat[pa[j].material].Le[1] + mat[pa[j].material].Le[2] > 0)
@@ -418,7 +441,7 @@ static bn_status bn__energy_balance(const bn_pipeline_opts *o, bn_pipeline *p, b
 {
     const bn_patch *pa = bn_scene_patches(p->scene, &(size_t){0});
     double m = bn_unit_to_metres(bn_scene_unit(p->scene)), *y = bn__malloc_array(3 * p->n + 1, sizeof(double));
-    double towards[3] = {0, 0, 0}, arriving[3] = {0, 0, 0}, escape[3] = {0, 0, 0};
+    double towards[3] = {0, 0, 0}, arriving[3] = {0, 0, 0}, escape[3] = {0, 0, 0}, var[3] = {0, 0, 0};
     bn_status st = y ? bn_transport_apply_F(p->k, p->res.L, y, err) : bn_error_set(err, BN_ENOMEM, "out of memory");
     for (size_t i = 0; st == BN_OK && i < p->n; i++)
         for (int c = 0; c < 3; c++) {
@@ -426,9 +449,11 @@ static bn_status bn__energy_balance(const bn_pipeline_opts *o, bn_pipeline *p, b
             towards[c] += BN_PI * pa[i].area * m * m * p->res.L[3 * i + c];
         }
     if (st == BN_OK) {
-        bn__escaping(p, escape);
-        for (int c = 0; c < 3; c++)
+        bn__escaping(p, escape, var);
+        for (int c = 0; c < 3; c++) {
             escape[c] *= BN_PI * m * m;
+            var[c] *= (BN_PI * m * m) * (BN_PI * m * m);
+        }
     }
     free(y);
     if (st != BN_OK)
@@ -438,12 +463,17 @@ static bn_status bn__energy_balance(const bn_pipeline_opts *o, bn_pipeline *p, b
         p->power_arriving[c] = arriving[c];
         p->power_towards[c] = towards[c] - escape[c];
         p->balance[c] = p->power_emitted[c] > 0 ? (arriving[c] - p->power_towards[c]) / p->power_emitted[c] : 0;
+        p->balance_se[c] = p->power_emitted[c] > 0 ? sqrt(var[c]) / p->power_emitted[c] : 0;
     }
     bn_logf(&o->solve.log_sink, BN_LOG_INFO,
             "energy balance: light arriving at surfaces %+.2g%% %+.2g%% %+.2g%% of the emitted power against what leaves "
-            "them towards surfaces (0 for any exact F; + the %s operator makes light, - it loses it)",
-            100 * p->balance[0], 100 * p->balance[1], 100 * p->balance[2], bn_transport_name(p->k));
-    double worst = fmax(fabs(p->balance[0]), fmax(fabs(p->balance[1]), fabs(p->balance[2])));
+            "them towards surfaces, +- %.2g%% (the escape rays' standard error; 0 for any exact F; + the %s operator "
+            "makes light, - it loses it)", 100 * p->balance[0], 100 * p->balance[1], 100 * p->balance[2],
+            100 * fmax(p->balance_se[0], fmax(p->balance_se[1], p->balance_se[2])), bn_transport_name(p->k));
+    double worst = 0;   /* beyond its noise: by more than 1% and more than 3 standard errors */
+    for (int c = 0; c < 3; c++)
+        if (fabs(p->balance[c]) > 3 * p->balance_se[c])
+            worst = fmax(worst, fabs(p->balance[c]));
     if (worst > 0.01)
         bn_warnf(&o->solve.log_sink, BN_W_BALANCE, worst,
                  "the %s operator %s %.2g%% of the emitted light (energy balance; doc/hierarchy.md)",
