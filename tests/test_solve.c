@@ -126,6 +126,25 @@ static double max_abs(const double *a, size_t m)
 
 static const bn_solve_method all_methods[] = {BN_SOLVE_JACOBI, BN_SOLVE_GAUSS_SEIDEL, BN_SOLVE_NEUMANN, BN_SOLVE_DIRECT};
 
+/* Two facing plates and nothing else (a cavity): K = [[0, a], [b, 0]] has the eigenvalues
+ * +-sqrt(ab), so a power iteration's one-step ratio alternates between a and b for ever; the
+ * estimate is the two-step ratio, sqrt(ab), with its lower bound below it. */
+BN_TEST(spectral_radius_of_a_cavity)
+{
+    const double F[4] = {0, 0.9, 0.5, 0}, rho_v = 0.8, want = rho_v * sqrt(0.9 * 0.5);
+    double *rho = fill(6, rho_v), est, low;
+    size_t steps;
+    bn_error err;
+    bn_transport *k = make_k(2, F, rho, BN_PRECISION_DOUBLE);
+    BN_ASSERT_STATUS(bn_solve_spectral_radius(k, 100, &est, &low, &steps, &err), BN_OK);
+    printf("cavity: estimate %.12g (exact %.12g) after %zu steps, lower bound %.6g\n", est, want, steps, low);
+    BN_ASSERT_NEAR(est, want, 1e-12);
+    BN_ASSERT_LE(low, want + 1e-12);
+    BN_ASSERT_LT(steps, 10);
+    bn_transport_destroy(k);
+    free(rho);
+}
+
 /* The furnace: closed (row-stochastic F), uniform rho and Le: L = Le / (1 - rho), K^k E = rho^k E. */
 static void furnace(double rho_v, bn_precision prec, int use_cube)
 {

@@ -138,9 +138,11 @@ void bn_solve_result_free(bn_solve_result *res);
 /* Bytes the direct solve needs for its dense double copy of I - K (N^2 * 8 + pivots). */
 size_t bn_solve_direct_bytes(size_t n);
 
-/* Power iteration on each channel's K_c = diag(rho_c) F from x = 1: *estimate = the largest
- * ||K_c x||/||x|| once it settles (|change| <= 1e-3 (1 - estimate)) or after max_steps, *lower
- * = the Collatz-Wielandt bound max_c min_i (K_c x)_i / x_i <= spectral radius (x >= 0). */
+/* Power iteration on each channel's K_c = diag(rho_c) F from x = 1: *estimate = the largest over
+ * channels of sqrt(||K_c^2 x|| / ||x||) (the geometric mean of the last two steps' ratios: the one-step
+ * ratio alternates when an eigenvalue near -rho exists, as in a cavity between facing surfaces) once
+ * it settles (within 1e-3 (1 - estimate) of its values one and two steps before) or after max_steps;
+ * *lower = the Collatz-Wielandt bound max_c min_i (K_c x)_i / x_i <= spectral radius (x >= 0). */
 bn_status bn_solve_spectral_radius(const bn_transport *k, size_t max_steps, double *estimate, double *lower,
                                    size_t *steps, bn_error *err);
 

@@ -80,12 +80,44 @@ bn_status bn_solve_terms(const bn_transport *k, const double *E, int nterms, dou
     return BN_OK;
 }
 
+/* One power step per channel: y = K x, then x = y / ||y_c||_inf. ratio[c]: ||K_c x||_inf / ||x_c||_inf
+ * (x_c normalised: ||y_c||_inf); low: max_c min_i y_i / x_i (Collatz-Wielandt). */
+static bn_status bn__power_step(const bn_transport *k, double *x, double *y, double ratio[3], double *low,
+                                bn_error *err)
+{
+    size_t n = bn_transport_size(k);
+    double xmax[3] = {0, 0, 0}, ymax[3] = {0, 0, 0}, lo[3] = {INFINITY, INFINITY, INFINITY};
+    bn_status st = bn_transport_apply(k, x, y, err);   /* y <- K x */
+    if (st != BN_OK)
+        return st;
+    for (size_t i = 0; i < n; i++)
+        for (int c = 0; c < 3; c++) {
+            size_t q = 3 * i + (size_t)c;
+            xmax[c] = fmax(xmax[c], x[q]);
+            ymax[c] = fmax(ymax[c], y[q]);
+            if (x[q] > 0)
+                lo[c] = fmin(lo[c], y[q] / x[q]);   /* K x >= lo x  =>  rho(K) >= lo */
+        }
+    *low = 0;
+    for (int c = 0; c < 3; c++) {
+        ratio[c] = xmax[c] > 0 ? ymax[c] / xmax[c] : 0;
+        if (xmax[c] > 0)
+            *low = fmax(*low, isfinite(lo[c]) ? lo[c] : 0);
+        if (!isfinite(ratio[c]))
+            return bn_error_set(err, BN_ENUMERIC, "power iteration: K applied to ones is not finite");
+    }
+    for (size_t i = 0; i < n; i++)
+        for (int c = 0; c < 3; c++)
+            x[3 * i + (size_t)c] = ymax[c] > 0 ? y[3 * i + (size_t)c] / ymax[c] : 0;
+    return BN_OK;
+}
+
 bn_status bn_solve_spectral_radius(const bn_transport *k, size_t max_steps, double *estimate, double *lower,
                                    size_t *steps, bn_error *err)
 {
     size_t n = bn_transport_size(k), m = 3 * n, s;
     double *x = bn__malloc_array(m ? m : 1, sizeof(double)), *y = bn__malloc_array(m ? m : 1, sizeof(double));
-    double prev = -1, est = 0, low = 0;
+    double est = 0, low = 0, hist[3] = {-1, -1, -1}, prev_ratio[3] = {0, 0, 0};
     bn_status st = BN_OK;
     *estimate = *lower = 0;
     *steps = 0;
@@ -99,36 +131,20 @@ bn_status bn_solve_spectral_radius(const bn_transport *k, size_t max_steps, doub
     if (max_steps == 0)
         max_steps = 1;
     for (s = 1; s <= max_steps; s++) {
-        double xmax[3] = {0, 0, 0}, ymax[3] = {0, 0, 0}, lo[3] = {INFINITY, INFINITY, INFINITY};
-        st = bn_transport_apply(k, x, y, err);   /* y <- K x */
-        if (st != BN_OK)
+        double ratio[3];
+        if ((st = bn__power_step(k, x, y, ratio, &low, err)) != BN_OK)
             break;
-        for (size_t i = 0; i < n; i++)
-            for (int c = 0; c < 3; c++) {
-                size_t q = 3 * i + (size_t)c;
-                xmax[c] = fmax(xmax[c], x[q]);
-                ymax[c] = fmax(ymax[c], y[q]);
-                if (x[q] > 0)
-                    lo[c] = fmin(lo[c], y[q] / x[q]);   /* K x >= lo x  =>  rho(K) >= lo */
-            }
-        est = low = 0;
-        for (int c = 0; c < 3; c++) {
-            if (xmax[c] > 0) {
-                est = fmax(est, ymax[c] / xmax[c]);
-                low = fmax(low, isfinite(lo[c]) ? lo[c] : 0);
-            }
-        }
-        if (!isfinite(est)) {
-            st = bn_error_set(err, BN_ENUMERIC, "power iteration: K applied to ones is not finite");
-            break;
-        }
-        /* x <- y / ||y_c||_inf per channel */
-        for (size_t i = 0; i < n; i++)
-            for (int c = 0; c < 3; c++)
-                x[3 * i + (size_t)c] = ymax[c] > 0 ? y[3 * i + (size_t)c] / ymax[c] : 0;
-        if (est == 0 || fabs(est - prev) <= 1e-3 * fmax(1.0 - est, 1e-9))
-            break;
-        prev = est;
+        /* two steps at once: sqrt(||K^2 x|| / ||x||), as an eigenvalue -lambda near the dominant one (a
+         * cavity between two facing surfaces) makes the one-step ratio alternate */
+        est = 0;
+        for (int c = 0; c < 3; c++)
+            est = fmax(est, s > 1 ? sqrt(ratio[c] * prev_ratio[c]) : ratio[c]);
+        memcpy(prev_ratio, ratio, sizeof ratio);
+        if (est == 0 || (s > 2 && fabs(est - hist[1]) <= 1e-3 * fmax(1.0 - est, 1e-9) &&
+                         fabs(est - hist[0]) <= 1e-3 * fmax(1.0 - est, 1e-9)))
+            break;   /* settled over the last two steps */
+        hist[1] = hist[0];
+        hist[0] = est;
     }
     if (st == BN_OK) {
         *estimate = est;
