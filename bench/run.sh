@@ -156,11 +156,34 @@ else
     run_prog gather_bench "Final gather: time to 1% median per-pixel error against the path tracer" \
         --ref-cache "$build/bench/gather-ref-256-4096.bin"
 fi
+# ---- the per-pixel race (issue 35): the default `bounces` image against the kept 65,536-spp reference ----
+raceref="$root/bench/data/cornell-trace-256-65536.exr"
+{
+    echo "## The per-pixel race: \`bounce bounces\` with its defaults against a 65,536-spp path-traced reference (\`race_bench\`)"
+    echo
+    if [ -f "$raceref" ] && [ -x "$build/bench/race_bench" ]; then
+        note "race_bench"
+        echo "The Cornell box at 256x256, each run a whole process as a user starts it (loading, form factors,"
+        echo "solve, gather, the EXR written; best of 3). Error: the median over pixels of |L - L_ref| / L_ref in"
+        echo "luminance with the reference's own variance taken out; raw: without that. The reference is"
+        echo "bench/data/cornell-trace-256-65536.exr, made once (bench/data/README.md). Target: 0.5% in at most 6 s."
+        echo
+        echo "| run | wall s | median error | raw | the reference's own median standard error | target |"
+        echo "|---|---|---|---|---|---|"
+        for opts in "" "--spp 4" "--gather-samples 256" "--spp 4 --gather-samples 256"; do
+            timeout "$timeout_s" "$build/bench/race_bench" "$bounce" "$raceref" ${opts:+--} ${opts:+"$opts"} ||
+                echo "| $opts | failed | | | | |"
+        done
+    else
+        echo "_not run: $raceref or $build/bench/race_bench missing._"
+    fi
+    echo
+} >>"$report"
 # any other bench program someone adds later
 for src in "$root"/bench/*.c; do
     [ -e "$src" ] || continue
     name=$(basename "$src" .c)
-    case "$name" in ff_bench|solve_bench|trace_bench|gather_bench) continue ;; esac
+    case "$name" in ff_bench|solve_bench|trace_bench|gather_bench|race_bench) continue ;; esac
     run_prog "$name" "$name"
 done
 
