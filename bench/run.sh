@@ -170,7 +170,8 @@ raceref="$root/bench/data/cornell-trace-256-65536.exr"
         echo
         echo "| run | wall s | median error | raw | the reference's own median standard error | target |"
         echo "|---|---|---|---|---|---|"
-        for opts in "" "--spp 4" "--gather-samples 256" "--spp 4 --gather-samples 256"; do
+        for opts in "" "--spp 4" "--gather-samples 256" "--patches 600 --spp 4" "--patches 1200 --spp 4" \
+            "--patches 1200 --spp 4 --ff-visibility rays"; do
             timeout "$timeout_s" "$build/bench/race_bench" "$bounce" "$raceref" ${opts:+--} ${opts:+"$opts"} ||
                 echo "| $opts | failed | | | | |"
         done
