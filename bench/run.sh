@@ -485,7 +485,8 @@ layer_means() {
 big_scene() {
     local sc=$1 ref=$2 name t0 t1 rc peak links bpl rho polys means diff
     name=$(basename "$sc" .obj)
-    [ -f "$sc" ] || { echo "| $name | | not made | | | | | | |" >>"$report"; return; }
+    local dest=${big_report:-$report}
+    [ -f "$sc" ] || { echo "| $name | | not made | | | | | | |" >>"$dest"; return; }
     t0=$(date +%s.%N)
     local timer=/usr/bin/time
     [ -x "$timer" ] || timer=""   # without it, no peak memory
@@ -499,7 +500,7 @@ big_scene() {
     rho=$(sed -n 's/.*spectral radius ~ \([0-9.]*\) .*/\1/p' "$work/$name.err" | tail -1)
     polys=$(grep -c '^f ' "$sc")
     if [ "$rc" != 0 ]; then
-        echo "| $name | $polys | failed (exit $rc: $(tail -1 "$work/$name.err")) | ${peak:-} | | | | | |" >>"$report"
+        echo "| $name | $polys | failed (exit $rc: $(tail -1 "$work/$name.err")) | ${peak:-} | | | | | |" >>"$dest"
         return
     fi
     means=$(layer_means "$work/$name.exr")
@@ -511,14 +512,16 @@ big_scene() {
               for (i = 1; i <= n; i++) { split(r[o[i]], x, " "); split(m[o[i]], y, " "); d = 0
                   for (c = 1; c <= 3; c++) if (x[c] > 0) { e = (y[c] - x[c]) / x[c]; if (e * e > d * d) d = e }
                   printf "%s%+.2f%%", (i > 1 ? ", " : ""), 100 * d } }')
-    echo "| $name | $polys | $(awk -v a="$t0" -v b="$t1" 'BEGIN { printf "%.1f", b - a }') | ${peak:-n/a} | ${links:-n/a} | ${bpl:-n/a} | ${rho:-n/a} | $diff | $means |" >>"$report"
+    echo "| $name | $polys | $(awk -v a="$t0" -v b="$t1" 'BEGIN { printf "%.1f", b - a }') | ${peak:-n/a} | ${links:-n/a} | ${bpl:-n/a} | ${rho:-n/a} | $diff | $means |" >>"$dest"
 }
 
 # ---- large scenes (--big): wall time, peak memory and image means of whole runs ----
 if [ "$big" = 1 ]; then
+    big_report="$work/big.md"   # kept as bench/big.md between runs (a --big run takes ~40 minutes)
+    : >"$big_report"
     shared="$root/../shared/data"
     if [ ! -f "$shared/scenes/bunny-box.obj" ] || [ ! -f "$shared/external/stanford-bunny/stanford-bunny.obj" ]; then
-        echo "_large scenes skipped: $shared (the bunny box, the Stanford bunny) is not beside this checkout_" >>"$report"
+        echo "_large scenes skipped: $shared (the bunny box, the Stanford bunny) is not beside this checkout_" >>"$big_report"
     else
         note "large scenes: the bunny box at 69k, 139k, 1.1M and 4.4M polygons"
         mk="$shared/scenes/make-model-box.py"
@@ -543,11 +546,11 @@ if [ "$big" = 1 ]; then
             echo
             echo "| scene | polygons | wall s | peak MiB | links | B per link at the peak | spectral radius | largest difference from 69k: E, KE, K2E, L | mean per layer (R G B, oiiotool --stats) |"
             echo "|---|---|---|---|---|---|---|---|---|"
-        } >>"$report"
+        } >>"$big_report"
         for name in bunny-box bunny-box-2x bunny-box-16x bunny-box-64x; do
             big_scene "$work/$name.obj" "$work/bunny-box.means"
         done
-        echo >>"$report"
+        echo >>"$big_report"
         # the MPI identity checks on the bunny box (tests/mpi_check.sh with BN_TEST_BIG=1: out of the
         # suite's budget, a big scene)
         if command -v mpirun >/dev/null 2>&1 && grep -q "BOUNCE_MPI:BOOL=ON" "$build/CMakeCache.txt" 2>/dev/null; then
@@ -562,11 +565,12 @@ if [ "$big" = 1 ]; then
                 echo "$(grep -c '^ok' "$work/mpi_check.txt") checks ok, $(grep -c '^FAIL' "$work/mpi_check.txt") failed, $(awk -v a="$t0" -v b="$t1" 'BEGIN { printf "%.0f", b - a }') s."
                 grep '^FAIL' "$work/mpi_check.txt" | sed 's/^/- /'
                 echo
-            } >>"$report"
+            } >>"$big_report"
         fi
     fi
+    cp "$big_report" "$root/bench/big.md.tmp.$$" && mv "$root/bench/big.md.tmp.$$" "$root/bench/big.md"
+    unset big_report
 fi
-
 # ---- MPI: the hierarchical solve over P processes (links and memory per rank, time, communication) ----
 if command -v mpirun >/dev/null 2>&1 && grep -q "BOUNCE_MPI:BOOL=ON" "$build/CMakeCache.txt" 2>/dev/null; then
     note "MPI: the hierarchical solve at P = 1, 2, 4"
@@ -677,8 +681,8 @@ if [ "$rates" -gt 0 ]; then
     cp "$work/rates.md" "$root/bench/rates.md.tmp.$$" && mv "$root/bench/rates.md.tmp.$$" "$root/bench/rates.md"
 fi
 # figures measured by longer runs than this one, kept in their own files: the crosscheck's rate
-# (--rates), the fuzzers' depth run (FUZZ_RUNS=10000000 scripts/fuzz.sh 3600), an A/B of builds
-for f in rates.md fuzz.md house-ab.md; do
+# (--rates), the large scenes (--big), the fuzzers' depth run (FUZZ_RUNS=10000000 scripts/fuzz.sh 3600), an A/B of builds
+for f in big.md rates.md fuzz.md house-ab.md; do
     [ -f "$root/bench/$f" ] && { cat "$root/bench/$f"; echo; } >>"$report"
 done
 
