@@ -170,8 +170,11 @@ raceref="$root/bench/data/cornell-trace-256-65536.exr"
         echo
         echo "| run | wall s | median error | raw | the reference's own median standard error | target |"
         echo "|---|---|---|---|---|---|"
-        for opts in "" "--spp 4" "--gather-samples 256" "--patches 600 --spp 4" "--patches 1200 --spp 4" \
-            "--patches 1200 --spp 4 --ff-visibility rays"; do
+        # the defaults; without the emitters at K2E's hits; the defaults before (300 patches, 64 rays,
+        # 2 px, no emitters at the hits); finer settings
+        for opts in "" "--hit-emitters 0" "--patches 300 --gather-samples 64 --gather-filter 2 --hit-emitters 0" \
+            "--patches 300 --gather-samples 64 --gather-filter 2" "--gather-samples 256" "--spp 4" \
+            "--patches 1200 --ff-visibility rays"; do
             timeout "$timeout_s" "$build/bench/race_bench" "$bounce" "$raceref" ${opts:+--} ${opts:+"$opts"} ||
                 echo "| $opts | failed | | | | |"
         done

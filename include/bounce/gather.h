@@ -8,7 +8,9 @@
  *           wholly hidden, and sharp to the pixel at a shadow's edge;
  *   K^k E(x), k >= 2: rho(x) times the cosine-weighted mean of the solved K^(k-1) E over the
  *           hemisphere (stratified rays; the value at each hit read from its patch, or interpolated
- *           across patches with `smooth`);
+ *           across patches with `smooth`); for K^2 E, KE at each hit is the hit's own direct light
+ *           (one shadow ray per emitting face, Omega cos V / pi) while the scene has at most
+ *           hit_emitters emitting faces;
  *   rest(x) rho(x) times the mean of K^n E + rest at the hits, and L(x) the sum of the layers.
  * The gathered (indirect) means are smooth inside a face, so each pixel's is averaged with those of
  * the pixels around it (filter radius) that see the same face, never across a face's edge.
@@ -26,13 +28,16 @@ extern "C" {
 #endif
 
 #define BN_GATHER_LIGHT_SAMPLES 16   /* shadow rays per emitting face per pixel sample */
-#define BN_GATHER_HEMI_SAMPLES 64    /* gather rays per pixel sample */
-#define BN_GATHER_FILTER 2           /* pixels */
-/* The defaults win on the Cornell box (bench/gather_bench.c, 256x256): the median per-pixel error of L
- * reaches 1% fastest with a coarse solution (about 300 patches: the gather reads it only for the
- * indirect light), 64 gather rays and the filter; 16 shadow rays (4 reach the median as fast, but
- * leave the penumbrae, which the median does not weigh, visibly noisy). */
-#define BN_GATHER_PATCHES 300
+#define BN_GATHER_HEMI_SAMPLES 144   /* gather rays per pixel sample */
+#define BN_GATHER_FILTER 3           /* pixels */
+#define BN_GATHER_HIT_EMITTERS 64    /* the hits' KE from the emitters up to this many emitting faces */
+/* The defaults meet the per-pixel race on the Cornell box (bench/race_bench.c, 256x256: the median
+ * per-pixel error of L against a 65,536-spp path-traced reference at most 0.5% in at most 6 s,
+ * measured 0.45% in about 4 s). With K^2 E's hits lit by the emitters themselves, what is left is
+ * the gather's noise (144 rays and the 3 px filter) and the coarse solution's error in K^3 E and
+ * beyond (600 patches: the gather reads the solution only for those). 16 shadow rays: 4 reach the
+ * median as fast, but leave the penumbrae, which the median does not weigh, visibly noisy. */
+#define BN_GATHER_PATCHES 600
 
 /* How images (and bakes) get their values: FINAL, a gather at each pixel's point (closed-form
  * direct light with visibility, a hemisphere gather of the solved terms for k >= 2); NONE, the value
@@ -49,6 +54,9 @@ typedef struct bn_gather_opts {
     uint64_t seed;
     int filter;                      /* the gathered (indirect) terms averaged over the pixels within this
                                         radius that see the same face (0: none; default BN_GATHER_FILTER) */
+    int hit_emitters;                /* K^2 E gathers, at each hit, KE from the emitting faces (one shadow
+                                        ray each) when the scene has at most this many, else the hit
+                                        patch's KE (0: always the patch's; default BN_GATHER_HIT_EMITTERS) */
     int threads;                     /* 0: the caller's */
     int quiet;                       /* no progress bar */
 } bn_gather_opts;
@@ -58,6 +66,7 @@ void bn_gather_opts_default(bn_gather_opts *o);
 typedef struct bn_gather_stats {
     double shadow_rays, gather_rays, camera_rays;
     size_t emitters;                 /* emitting faces */
+    int hit_direct;                  /* 1: K^2 E's hits took KE from the emitters (hit_emitters) */
     double seconds;
 } bn_gather_stats;
 

@@ -140,6 +140,7 @@ typedef struct bn_bounces_opts {
     int    light_samples;      /* gather: shadow rays per emitting face per pixel sample */
     int    gather_samples;     /* gather: hemisphere rays per pixel sample */
     int    gather_filter;      /* gather: same-face filter radius of the gathered terms, pixels */
+    int    hit_emitters;       /* gather: K^2 E's hits take KE from the emitters up to this many (bn_gather_opts) */
     int    quiet;              /* no progress bar */
     const bn_attr *attrs;      /* provenance for every file (borrowed); the first 4 go into PNG text */
     size_t nattrs;

@@ -124,6 +124,9 @@ uint64_t bn__fnv1a(uint64_t h, const void *data, size_t n);
  *   static const char *const names[] = {BN__METHODS(BN__NAME_ITEM)};      the table, by value
  *   static const char list[] = BN__METHODS(BN__NAME_BAR);                 "|jacobi|gauss-seidel"
  * and parsed by bn__name_find (the index, or -1). */
+/* A macro's value as a string literal (option help: "default " BN__STR(BN_GATHER_FILTER)). */
+#define BN__STR_(x) #x
+#define BN__STR(x) BN__STR_(x)
 #define BN__NAME_ITEM(s) s,
 #define BN__NAME_BAR(s) "|" s
 int bn__name_find(const char *const *names, size_t n, const char *s);

@@ -20,6 +20,7 @@ void bn_bounces_opts_default(bn_bounces_opts *o)
     o->light_samples = BN_GATHER_LIGHT_SAMPLES;
     o->gather_samples = BN_GATHER_HEMI_SAMPLES;
     o->gather_filter = BN_GATHER_FILTER;
+    o->hit_emitters = BN_GATHER_HIT_EMITTERS;
 }
 
 /* "dir/out.exr" + ".KE.png" -> "dir/out.KE.png" (the extension of `path` replaced). */
@@ -57,6 +58,7 @@ static bn_status bn__bounces_render(const bn_scene *scene, const bn_rt *rt, cons
         go.light_samples = o->light_samples;
         go.hemi_samples = o->gather_samples;
         go.filter = o->gather_filter;
+        go.hit_emitters = o->hit_emitters;
         go.smooth = bake;
         go.seed = o->seed;
         go.threads = o->threads;
@@ -64,8 +66,11 @@ static bn_status bn__bounces_render(const bn_scene *scene, const bn_rt *rt, cons
         st = bn_gather_render(rt, cam, layers, n, layers[n + 1], &go, imgs, &gs, err);
         if (st == BN_OK)
             bn_logf(&o->log, BN_LOG_INFO,
-                    "gather: %dx%d x %d spp, %zu emitting face%s; %.3g shadow rays, %.3g gather rays, %.2f s (%.3g rays/s)",
-                    cam->width, cam->height, cam->spp, gs.emitters, gs.emitters == 1 ? "" : "s", gs.shadow_rays,
+                    "gather: %dx%d x %d spp, %zu emitting face%s (K2E's hits: KE %s); %.3g shadow rays, %.3g gather "
+                    "rays, %.2f s (%.3g rays/s)",
+                    cam->width, cam->height, cam->spp, gs.emitters, gs.emitters == 1 ? "" : "s",
+                    gs.hit_direct ? "from the emitters" : "of the patches (more emitting faces than the limit)",
+                    gs.shadow_rays,
                     gs.gather_rays, gs.seconds,
                     (gs.shadow_rays + gs.gather_rays + gs.camera_rays) / (gs.seconds > 0 ? gs.seconds : 1e-9));
     } else if (st == BN_OK) {
@@ -126,7 +131,7 @@ bn_status bn_bounces_write(const bn_scene *scene, const bn_rt *rt, const bn_came
     bn_layer *named = bn__calloc(nl, sizeof *named);
     char (*names)[16] = bn__calloc(nl, sizeof *names);
     bn_attr *attrs = bn__calloc(na, sizeof *attrs);
-    char evbuf[32], shading[192];
+    char evbuf[32], shading[320];
     double ev = o->ev;
     bn_status st = imgs && named && names && attrs ? BN_OK : bn_error_set(err, BN_ENOMEM, "out of memory");
     if (st == BN_OK)
@@ -144,8 +149,10 @@ bn_status bn_bounces_write(const bn_scene *scene, const bn_rt *rt, const bn_came
         snprintf(evbuf, sizeof evbuf, "%.4f", ev);
         if (o->gather)
             snprintf(shading, sizeof shading, "final gather: %d shadow rays per emitting face, %d gather rays per "
-                     "pixel sample, same-face filter radius %d px; hits read %s", o->light_samples, o->gather_samples,
-                     o->gather_filter, o->smooth ? "smooth (baked vertex values)" : "flat (patch values)");
+                     "pixel sample, same-face filter radius %d px; hits read %s; KE at K2E's hits from the emitters up "
+                     "to %d emitting faces", o->light_samples, o->gather_samples,
+                     o->gather_filter, o->smooth ? "smooth (baked vertex values)" : "flat (patch values)",
+                     o->hit_emitters);
         else if (o->smooth)
             snprintf(shading, sizeof shading, "smooth (baked vertex values), crease %g degrees", o->crease);
         else
