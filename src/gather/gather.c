@@ -500,57 +500,40 @@ static bn_status bn__gather_share(int stop, bn_image *out, const bn_camera *cam,
     return st;
 }
 
-static bn_status bn__gather_body(const bn_rt *rt, const bn_camera *cam, const double *const *terms, int n,
-                                 const double *rest, const bn_gather_opts *o, bn_image *out, bn_gather_stats *stats,
-                                 bn_error *err)
+/* Every row of this rank: E and KE into out[0..1], the faces and gathered means into aux (stride
+ * values per pixel); c[3] += camera, shadow and gather rays. Returns 0, 1 interrupted, 2 out of memory. */
+static int bn__gather_rows(const bn__gather *G, const bn_camera *cam, const bn_gather_opts *o, bn_image *out,
+                           double *aux, size_t stride, double c[3])
 {
-    bn__gather G;
-    size_t npix = (size_t)cam->width * (size_t)cam->height, stride = 1 + 3 * ((size_t)n + 1), done = 0;
-    bn_status st;
     int sx, sy;
     volatile int stop = 0;
-    double t0 = bn__now(), cr = 0, sr = 0, gr = 0, *aux = NULL;
+    double cr = 0, sr = 0, gr = 0;
+    size_t done = 0, nl3 = stride - 1, rowv = (size_t)cam->width * stride, row3 = (size_t)3 * (size_t)cam->width;
     bn__progress prog;
-
-    memset(&G, 0, sizeof G);
-    if ((st = bn__gather_check(cam, n, o, out, err)) != BN_OK)
-        return st;
-    if ((st = bn__gather_init(&G, rt, terms, n, rest, o, err)) != BN_OK)
-        goto done;
     for (sx = (int)floor(sqrt((double)cam->spp)); sx > 1 && cam->spp % sx != 0;)
         sx--;
     sy = cam->spp / sx;
-    if (!(aux = bn__malloc_array(npix, stride * sizeof(double)))) {
-        st = bn_error_set(err, BN_ENOMEM, "out of memory for the gather's %zu x %zu values", npix, stride);
-        goto done;
-    }
     bn__progress_begin(&prog, "gather", (size_t)cam->height, o->quiet);
 #pragma omp parallel reduction(+ : cr, sr, gr)
     {
-        size_t nl3 = 3 * ((size_t)n + 1);
         bn__pixbuf B = {malloc(6 * sizeof(double)), malloc(nl3 * sizeof(double)), malloc(nl3 * sizeof(double)),
                         malloc(nl3 * sizeof(double))};
 #pragma omp for schedule(dynamic, 1)
         for (int y = 0; y < cam->height; y++) {
             if (stop || !bn_dist_mine((size_t)y)) {
-                /* another rank's row: zero here (summed exactly below) */
+                /* another rank's row: zero here (summed exactly afterwards) */
                 for (size_t l = 0; l < 2; l++)
-                    memset(out[l].rgb + (size_t)3 * (size_t)y * (size_t)cam->width, 0,
-                           (size_t)3 * (size_t)cam->width * sizeof(float));
-                memset(aux + (size_t)y * (size_t)cam->width * stride, 0, (size_t)cam->width * stride * sizeof(double));
+                    memset(out[l].rgb + (size_t)y * row3, 0, row3 * sizeof(float));
+                memset(aux + (size_t)y * rowv, 0, rowv * sizeof(double));
                 continue;
             }
-            if (!B.acc || !B.hv || !B.gp || !B.gr) {
-                stop = 2;
-                continue;
-            }
-            if (bn_interrupted() != BN_OK) {
-                stop = 1;
+            if (!B.acc || !B.hv || !B.gp || !B.gr || bn_interrupted() != BN_OK) {
+                stop = !B.acc || !B.hv || !B.gp || !B.gr ? 2 : 1;
                 continue;
             }
             for (int x = 0; x < cam->width; x++) {
                 bn_gather_stats ls = {0};
-                bn__gather_pixel(&G, cam, o, x, y, sx, sy, &B, out, aux, &ls);
+                bn__gather_pixel(G, cam, o, x, y, sx, sy, &B, out, aux, &ls);
                 cr += ls.camera_rays;
                 sr += ls.shadow_rays;
                 gr += ls.gather_rays;
@@ -563,27 +546,58 @@ static bn_status bn__gather_body(const bn_rt *rt, const bn_camera *cam, const do
         free(B.gr);
     }
     bn__progress_end(&prog);
-    if ((st = bn__gather_share(stop, out, cam, aux, npix * stride, err)) != BN_OK)
-        goto done;
-    bn__compose(&G, cam, aux, o->filter, out);
-    for (size_t l = 0; l < (size_t)n + 3; l++)
+    c[0] += cr;
+    c[1] += sr;
+    c[2] += gr;
+    return stop;
+}
+
+/* The layers composed, checked finite, and the counts (summed over ranks) into stats. */
+static bn_status bn__gather_finish(const bn__gather *G, const bn_camera *cam, const double *aux, int filter,
+                                   double c[3], double t0, bn_image *out, bn_gather_stats *stats, bn_error *err)
+{
+    size_t npix = (size_t)cam->width * (size_t)cam->height;
+    bn_status st;
+    bn__compose(G, cam, aux, filter, out);
+    for (size_t l = 0; l < (size_t)G->n + 3; l++)
         for (size_t k = 0; k < (size_t)3 * npix; k++)
-            if (!isfinite(out[l].rgb[k])) {
-                st = bn_error_set(err, BN_ENUMERIC, "gather: a non-finite value in layer %zu at pixel %zu", l, k / 3);
-                goto done;
-            }
-    if (stats) {
-        double c[3] = {cr, sr, gr};
-        if (bn_dist_size() > 1 && (st = bn_dist_sum(c, 3, err)) != BN_OK)
-            goto done;
-        stats->camera_rays = c[0];
-        stats->shadow_rays = c[1];
-        stats->gather_rays = c[2];
-        stats->emitters = G.nem;
-        stats->hit_direct = G.hit_direct;
-        stats->seconds = bn__now() - t0;
+            if (!isfinite(out[l].rgb[k]))
+                return bn_error_set(err, BN_ENUMERIC, "gather: a non-finite value in layer %zu at pixel %zu", l, k / 3);
+    if (!stats)
+        return BN_OK;
+    if (bn_dist_size() > 1 && (st = bn_dist_sum(c, 3, err)) != BN_OK)
+        return st;
+    stats->camera_rays = c[0];
+    stats->shadow_rays = c[1];
+    stats->gather_rays = c[2];
+    stats->emitters = G->nem;
+    stats->hit_direct = G->hit_direct;
+    stats->seconds = bn__now() - t0;
+    return BN_OK;
+}
+
+static bn_status bn__gather_body(const bn_rt *rt, const bn_camera *cam, const double *const *terms, int n,
+                                 const double *rest, const bn_gather_opts *o, bn_image *out, bn_gather_stats *stats,
+                                 bn_error *err)
+{
+    bn__gather G;
+    size_t npix = (size_t)cam->width * (size_t)cam->height, stride = 1 + 3 * ((size_t)n + 1);
+    bn_status st;
+    double t0 = bn__now(), c[3] = {0, 0, 0}, *aux = NULL;
+
+    memset(&G, 0, sizeof G);
+    if ((st = bn__gather_check(cam, n, o, out, err)) != BN_OK)
+        return st;
+    if ((st = bn__gather_init(&G, rt, terms, n, rest, o, err)) != BN_OK)
+        goto done;
+    if (!(aux = bn__malloc_array(npix, stride * sizeof(double)))) {
+        st = bn_error_set(err, BN_ENOMEM, "out of memory for the gather's %zu x %zu values", npix, stride);
+        goto done;
     }
-    st = BN_OK;
+    if ((st = bn__gather_share(bn__gather_rows(&G, cam, o, out, aux, stride, c), out, cam, aux, npix * stride,
+                               err)) != BN_OK)
+        goto done;
+    st = bn__gather_finish(&G, cam, aux, o->filter, c, t0, out, stats, err);
 done:
     if (G.vv)
         for (int l = 0; l <= n; l++)

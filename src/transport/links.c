@@ -154,13 +154,11 @@ oom:
     return bn_error_set(err, BN_ENOMEM, "out of memory for %zu links of the hierarchy", kept);
 }
 
-bn_status bn__hop_apply(void *ctx, const double *x, double *y, bn_error *err)
+/* Pull: each node's B, the area-weighted mean of its children's, children before parents. */
+static void bn__hop_pull(bn__hop *h, const double *x)
 {
-    bn__hop *h = ctx;
-    size_t n = h->n;
-    double *B = h->Bn, *G = h->G, *Gv = h->Gv;
-    /* pull: area-weighted means, children before parents */
-    for (size_t v = n; v-- > 0;) {
+    double *B = h->Bn;
+    for (size_t v = h->n; v-- > 0;) {
         uint32_t c = h->child[v];
         if (c == BN__NONE) {
             const double *xp = x + 3 * (size_t)h->leaf_patch[v];
@@ -173,40 +171,55 @@ bn_status bn__hop_apply(void *ctx, const double *x, double *y, bn_error *err)
                 B[3 * v + k] = (a0 * B[3 * (size_t)c + k] + a1 * B[3 * ((size_t)c + 1) + k]) * inv;
         }
     }
-    /* gather along each receiver's links (each sum in link order: the same for any thread count) */
-    long ln = (long)n;
+}
+
+/* A cluster receiver's links into its 3 x 3 vector accumulator (per colour, a direction). */
+static void bn__hop_gather_cluster(const bn__hop *h, size_t v)
+{
+    double *gv = h->Gv + (size_t)9 * h->cl[v];
+    memset(gv, 0, 9 * sizeof(double));
+    h->G[3 * v] = h->G[3 * v + 1] = h->G[3 * v + 2] = 0;
+    for (size_t l = h->start[v]; l < h->start[v + 1]; l++) {
+        const double *b = h->Bn + 3 * (size_t)h->src[l];
+        double f = h->F[l], u[3];
+        bn__oct_decode(h->dir[l], u);
+        for (int c = 0; c < 3; c++)
+            for (int k = 0; k < 3; k++)
+                gv[3 * c + k] += f * b[c] * u[k];
+    }
+}
+
+/* Gather along each receiver's links (each sum in link order: the same for any thread count). */
+static void bn__hop_gather(bn__hop *h)
+{
+    long ln = (long)h->n;
 #pragma omp parallel for schedule(dynamic, 1024)
     for (long lv = 0; lv < ln; lv++) {
         size_t v = (size_t)lv;
-        if (h->cl[v] == BN__NONE) {
-            double g0 = 0, g1 = 0, g2 = 0;
-            for (size_t l = h->start[v]; l < h->start[v + 1]; l++) {
-                const double *b = B + 3 * (size_t)h->src[l];
-                double f = h->F[l];
-                g0 += f * b[0];
-                g1 += f * b[1];
-                g2 += f * b[2];
-            }
-            G[3 * v] = g0;
-            G[3 * v + 1] = g1;
-            G[3 * v + 2] = g2;
-        } else {
-            double *gv = Gv + (size_t)9 * h->cl[v];
-            memset(gv, 0, 9 * sizeof(double));
-            G[3 * v] = G[3 * v + 1] = G[3 * v + 2] = 0;
-            for (size_t l = h->start[v]; l < h->start[v + 1]; l++) {
-                const double *b = B + 3 * (size_t)h->src[l];
-                double f = h->F[l], u[3];
-                bn__oct_decode(h->dir[l], u);
-                for (int c = 0; c < 3; c++)
-                    for (int k = 0; k < 3; k++)
-                        gv[3 * c + k] += f * b[c] * u[k];
-            }
+        double g0 = 0, g1 = 0, g2 = 0;
+        if (h->cl[v] != BN__NONE) {
+            bn__hop_gather_cluster(h, v);
+            continue;
         }
+        for (size_t l = h->start[v]; l < h->start[v + 1]; l++) {
+            const double *b = h->Bn + 3 * (size_t)h->src[l];
+            double f = h->F[l];
+            g0 += f * b[0];
+            g1 += f * b[1];
+            g2 += f * b[2];
+        }
+        h->G[3 * v] = g0;
+        h->G[3 * v + 1] = g1;
+        h->G[3 * v + 2] = g2;
     }
-    /* push: clusters pass their vectors down to clusters; a polygon's topmost node dots its cluster
-     * parent's vectors with its normal; planar nodes pass values down */
-    for (size_t v = 1; v < n; v++) {
+}
+
+/* Push: clusters pass their vectors down to clusters; a polygon's topmost node dots its cluster
+ * parent's vectors with its normal; planar nodes pass values down. Then the leaves into y. */
+static void bn__hop_push(bn__hop *h, double *y)
+{
+    double *G = h->G, *Gv = h->Gv;
+    for (size_t v = 1; v < h->n; v++) {
         size_t p = h->parent[v];
         if (h->cl[v] != BN__NONE) {
             double *gv = Gv + (size_t)9 * h->cl[v];
@@ -219,25 +232,30 @@ bn_status bn__hop_apply(void *ctx, const double *x, double *y, bn_error *err)
             for (int c = 0; c < 3; c++)
                 G[3 * v + c] += nv[0] * gp[3 * c] + nv[1] * gp[3 * c + 1] + nv[2] * gp[3 * c + 2];
         } else {
-            G[3 * v] += G[3 * p];
-            G[3 * v + 1] += G[3 * p + 1];
-            G[3 * v + 2] += G[3 * p + 2];
+            for (int c = 0; c < 3; c++)
+                G[3 * v + c] += G[3 * p + c];
         }
     }
-    for (size_t v = 0; v < n; v++)
+    for (size_t v = 0; v < h->n; v++)
         if (h->leaf_patch[v] != BN__NONE) {
             size_t p = h->leaf_patch[v];
             double sc = h->rowscale ? h->rowscale[p] : 1;
             for (int c = 0; c < 3; c++)
                 y[3 * p + (size_t)c] = sc * G[3 * v + (size_t)c];
         }
-    {   /* every rank's status first (a rank that stops alone would leave the others in the collective) */
-        bn_status st = bn_dist_agree(bn_interrupted());
-        if (st != BN_OK)
-            return bn_error_set(err, st, "interrupted");
-    }
+}
+
+bn_status bn__hop_apply(void *ctx, const double *x, double *y, bn_error *err)
+{
+    bn__hop *h = ctx;
+    bn_status st;
+    bn__hop_pull(h, x);
+    bn__hop_gather(h);
+    bn__hop_push(h, y);
+    /* every rank's status first (a rank that stops alone would leave the others in the collective) */
+    if ((st = bn_dist_agree(bn_interrupted())) != BN_OK)
+        return bn_error_set(err, st, "interrupted");
     if (h->distributed) {   /* this rank's leaves (exact here) in leaf order, every rank's gathered */
-        bn_status st;
         for (size_t i = h->plo; i < h->phi; i++)
             memcpy(h->xchg + 3 * i, y + 3 * (size_t)h->order[i], 3 * sizeof(double));
         if ((st = bn_dist_allgather(h->xchg, h->bound, 3, err)) != BN_OK)
