@@ -562,20 +562,61 @@ typedef struct bn__opctx {
 /* The truncated series S_n = E + KE + ... + K^n E at each n asked, by repeated application timed
  * cumulatively (row n costs n applications of K), with both a priori bounds and the spectral
  * estimate of its error; then the methods table at the given tolerances. */
+/* Row k of the truncated series (a study row when k is one of the values asked, else a scratch one
+ * that feeds only the curve): S_k = Sn against the reference, the bounds, the tail estimate from
+ * x = K^k E; t_apply: the applications so far; norm_ke = ||KE||_inf. */
+static bn_status bn__series_row(bn__study *S, const bn__opctx *C, int k, double t_apply, double norm_ke,
+                                const double *x, const double *Sn, bn_study_curve *curve, bn_error *err)
+{
+    const bn_study_result *R = S->res;
+    bn_study_row tmp, *row = NULL;
+    size_t m = 3 * C->n;
+    double tn = 0, q = R->spectral_radius;
+    bn_status st;
+    for (size_t v = 0; v < S->o->nvalues && !row; v++)
+        if ((int)S->o->values[v] == k) {
+            char val[32];
+            snprintf(val, sizeof val, "%d", k);
+            if (!(row = bn__row_new(S, "truncated", val, k, err)))
+                return err ? err->status : BN_ENOMEM;
+        }
+    memset(&tmp, 0, sizeof tmp);
+    if (!row)
+        row = &tmp;
+    row->patches = C->n;
+    row->iterations = (size_t)k;
+    row->k_norm = R->k_norm;
+    row->t_mesh = C->tm;
+    row->t_ff = C->tf;
+    row->t_solve = t_apply;
+    row->t_iterate = t_apply;
+    row->bound = bn__geom(R->k_norm, k, R->norm_E);
+    /* L - S_n = sum_{j>=0} K^j (K^(n+1) E) = sum_{j>=n} K^j (KE): <= ||K||^n / (1 - ||K||) ||KE||. */
+    row->bound_ke = bn__geom(R->k_norm, k - 1, norm_ke);
+    /* the tail ~ K^n E (rho + rho^2 + ...) once K^n E is along the dominant eigenvector */
+    for (size_t i = 0; i < m; i++)
+        tn = fmax(tn, fabs(x[i]));
+    row->estimate = q < 1 ? tn * q / (1 - q) : INFINITY;
+    st = bn__study_compare(C->ref, C->sc, Sn, row, err);
+    if (row != &tmp) {
+        row->t_output = bn__output_time(C->sc, Sn);
+        row->peak_mb = bn__study_peak_mb();
+        bn__row_total(row);
+    }
+    curve->t[curve->n] = fmax(t_apply, 1e-7);   /* S_0 = E costs nothing: drawn at 0.1 us */
+    curve->err[curve->n] = row->err_inf_rel;
+    curve->n++;
+    return st;
+}
+
 static bn_status bn__study_series(bn__study *S, const bn__opctx *C, bn_error *err)
 {
     const bn_study_opts *o = S->o;
-    bn_study_result *R = S->res;
     const bn_transport *K = C->K;
-    const double *E = C->E;
-    const bn__study_ref *refp = C->ref;
-    bn_scene *sc = C->sc;
-    size_t n = C->n;
-    double tm = C->tm, tf = C->tf, tdir = C->tdir;
     bn_status st = BN_OK;
     /* S_n by repeated application, timed cumulatively: row n costs n applications of K. */
     int nmax = 0;
-    size_t m = 3 * n;
+    size_t m = 3 * C->n;
     double *x = bn__malloc_array(m + 1, sizeof(double)), *y = bn__malloc_array(m + 1, sizeof(double));
     double *Sn = bn__malloc_array(m + 1, sizeof(double)), t_apply = 0, norm_ke = 0;
     bn_study_curve *curve;
@@ -583,77 +624,35 @@ static bn_status bn__study_series(bn__study *S, const bn__opctx *C, bn_error *er
         nmax = (int)fmax(nmax, o->values[v]);
     curve = bn__curve_new(S, "truncated series", (size_t)nmax + 1, err);
     if (!x || !y || !Sn || !curve) {
-        free(x);
-        free(y);
-        free(Sn);
-        return bn_error_set(err, BN_ENOMEM, "study: out of memory for the series");
+        st = bn_error_set(err, BN_ENOMEM, "study: out of memory for the series");
+        goto done;
     }
     /* ||KE||_inf for the second bound (one application, not timed). */
-    st = bn_transport_apply(K, E, y, err);
+    st = bn_transport_apply(K, C->E, y, err);
     for (size_t q = 0; q < m; q++)
         norm_ke = fmax(norm_ke, fabs(y[q]));
-    memcpy(x, E, m * sizeof(double));
-    memcpy(Sn, E, m * sizeof(double));
+    memcpy(x, C->E, m * sizeof(double));
+    memcpy(Sn, C->E, m * sizeof(double));
     for (int k = 0; k <= nmax && st == BN_OK; k++) {
-        bn_study_row tmp, *row = NULL;
-        double t0;
         if (k > 0) {
-            t0 = bn__now();
-            st = bn_transport_apply(K, x, y, err);   /* K^k E <- K (K^(k-1) E) */
-            if (st != BN_OK)
+            double t0 = bn__now();
+            if ((st = bn_transport_apply(K, x, y, err)) != BN_OK)   /* K^k E <- K (K^(k-1) E) */
                 break;
             for (size_t q = 0; q < m; q++)
-                Sn[q] += y[q];             /* S_k <- S_(k-1) + K^k E */
+                Sn[q] += y[q];   /* S_k <- S_(k-1) + K^k E */
             t_apply += bn__now() - t0;
             memcpy(x, y, m * sizeof(double));
         }
-        for (size_t v = 0; v < o->nvalues; v++)
-            if ((int)o->values[v] == k) {
-                char val[32];
-                snprintf(val, sizeof val, "%d", k);
-                if (!(row = bn__row_new(S, "truncated", val, k, err))) {
-                    st = err ? err->status : BN_ENOMEM;
-                    break;
-                }
-                break;
-            }
-        if (st != BN_OK)
-            break;
-        memset(&tmp, 0, sizeof tmp);
-        if (!row)
-            row = &tmp;
-        row->patches = n;
-        row->iterations = (size_t)k;
-        row->k_norm = R->k_norm;
-        row->t_mesh = tm;
-        row->t_ff = tf;
-        row->t_solve = t_apply;
-        row->t_iterate = t_apply;
-        row->bound = bn__geom(R->k_norm, k, R->norm_E);
-        /* L - S_n = sum_{j>=0} K^j (K^(n+1) E) = sum_{j>=n} K^j (KE): <= ||K||^n / (1 - ||K||) ||KE||. */
-        row->bound_ke = bn__geom(R->k_norm, k - 1, norm_ke);
-        {   /* the tail ~ K^n E (rho + rho^2 + ...) once K^n E is along the dominant eigenvector */
-            double tn = 0, q = R->spectral_radius;
-            for (size_t i = 0; i < m; i++)
-                tn = fmax(tn, fabs(x[i]));
-            row->estimate = q < 1 ? tn * q / (1 - q) : INFINITY;
-        }
-        st = bn__study_compare(refp, sc, Sn, row, err);
-        if (row != &tmp) {
-            row->t_output = bn__output_time(sc, Sn);
-            row->peak_mb = bn__study_peak_mb();
-            bn__row_total(row);
-        }
-        curve->t[curve->n] = fmax(t_apply, 1e-7);   /* S_0 = E costs nothing: drawn at 0.1 us */
-        curve->err[curve->n] = row->err_inf_rel;
-        curve->n++;
+        st = bn__series_row(S, C, k, t_apply, norm_ke, x, Sn, curve, err);
     }
+done:
     free(x);
     free(y);
     free(Sn);
     if (st == BN_OK && o->methods) {
         static const double deftols[] = {1e-2, 1e-4, 1e-6, 1e-8};
-        st = bn__methods(S, refp, K, E, o->ntols ? o->tols : deftols, o->ntols ? o->ntols : 4, tm, tf, tdir, err);
+        st = bn__methods(S, C->ref, K, C->E, o->ntols ? o->tols : deftols, o->ntols ? o->ntols : 4, C->tm, C->tf,
+                         C->tdir, err);
     }
     return st;
 }
@@ -990,89 +989,91 @@ typedef struct bn__ref_plan {
     int mesh_study, use_trace;
 } bn__ref_plan;
 
-static void bn__ref_levels(const bn_study_opts *o, bn__ref_plan *P)
+/* The reference's and the coarser level's meshes for a mesh (or spp) study: 4x the finest setting's
+ * patches (or half the smallest patch size), and a quarter of that. */
+static void bn__ref_mesh_levels(const bn_study_opts *o, bn__ref_plan *P)
 {
-    bn_mesh_opts mref = o->mesh, mcoarse;
-    bn_formfactor_opts fref = o->ff, fcoarse;
-    int mesh_study = o->param == BN_STUDY_PATCHES || o->param == BN_STUDY_PATCH_SIZE, use_trace = 0;
     if (o->param == BN_STUDY_PATCHES || o->param == BN_STUDY_SPP) {
         size_t top = o->mesh.target_patches;
         if (o->param == BN_STUDY_PATCHES)
             for (size_t v = 0; v < o->nvalues; v++)
                 top = v == 0 ? (size_t)o->values[v] : (size_t)fmax((double)top, o->values[v]);
-        mref.patch_size = 0;
-        mref.no_subdivide = 0;
-        mref.target_patches = o->ref_patches ? o->ref_patches : 4 * top;
-        mcoarse = mref;
-        mcoarse.target_patches = mref.target_patches / 4 > 0 ? mref.target_patches / 4 : 1;
-        fcoarse = fref;
-    } else if (o->param == BN_STUDY_PATCH_SIZE) {
+        P->mref.patch_size = 0;
+        P->mref.no_subdivide = 0;
+        P->mref.target_patches = o->ref_patches ? o->ref_patches : 4 * top;
+        P->mcoarse = P->mref;
+        P->mcoarse.target_patches = P->mref.target_patches / 4 > 0 ? P->mref.target_patches / 4 : 1;
+    } else {   /* patch size */
         double lo = INFINITY;
         for (size_t v = 0; v < o->nvalues; v++)
             lo = fmin(lo, o->values[v]);
-        mref.target_patches = 0;
-        mref.no_subdivide = 0;
-        mref.patch_size = lo / 2;
-        mcoarse = mref;
-        mcoarse.patch_size = lo;
-        fcoarse = fref;
-    } else if (o->param == BN_STUDY_EPS) {
-        /* dense K on the same mesh, its visibility from many rays: what K_H approximates */
-        fref.method = BN_FF_ANALYTIC;
-        fref.exact_visibility = 0;
-        fref.samples = o->ref_samples ? o->ref_samples : 256;
-        fref.seed = bn__hash64(o->ff.seed ^ 0x7265666572656e63ULL);
-        mcoarse = mref;
-        fcoarse = fref;
-        fcoarse.samples = fref.samples / 4 > 0 ? fref.samples / 4 : 1;
-        fcoarse.seed = bn__hash64(fref.seed + 1);
-    } else if (o->param == BN_STUDY_SAMPLES || o->param == BN_STUDY_FF) {
-        int top = 0;
-        for (size_t v = 0; o->param == BN_STUDY_SAMPLES && v < o->nvalues; v++)
-            top = (int)fmax(top, o->values[v]);
-        fref.method = BN_FF_ANALYTIC;
-        fref.exact_visibility = 0;   /* sampled like the settings, so that its error is measured the same way */
-        /* 32x the largest setting: 1/sqrt(32) ~ 1/5.7 of its error, so the reference is well below
-         * what it measures even with the noise of its own estimate */
-        fref.samples = o->ref_samples ? o->ref_samples : (32 * top > 1024 ? 32 * top : 1024);
-        /* Independent streams: a reference sharing the settings' seed (and stratification) would agree
-         * with them by correlation, not accuracy. */
-        fref.seed = bn__hash64(o->ff.seed ^ 0x7265666572656e63ULL);
-        mcoarse = mref;
-        fcoarse = fref;
-        fcoarse.samples = fref.samples / 4 > 0 ? fref.samples / 4 : 1;
-        fcoarse.seed = bn__hash64(fref.seed + 1);
-    } else {   /* precision */
-        fref.precision = BN_PRECISION_DOUBLE;
-        mcoarse = mref;
-        fcoarse = fref;
+        P->mref.target_patches = 0;
+        P->mref.no_subdivide = 0;
+        P->mref.patch_size = lo / 2;
+        P->mcoarse = P->mref;
+        P->mcoarse.patch_size = lo;
     }
-    if (mesh_study || o->param == BN_STUDY_SPP) {
-        use_trace = o->ref == BN_STUDY_REF_TRACE || (o->ref == BN_STUDY_REF_AUTO && mesh_study && o->nagainst > 0);
-        if (use_trace && !o->ref_patches) {   /* the finest setting's mesh: its rows compare patch by patch */
-            mref = o->mesh;
+}
+
+/* The reference's form factors for an eps, samples or ff study: sampled like the settings (dense K
+ * with many rays for eps: what K_H approximates), 32x the largest setting's samples (1/sqrt(32) of
+ * its error), from independent streams (a reference sharing the settings' seed and stratification
+ * would agree with them by correlation, not accuracy); the coarser level a quarter of the samples. */
+static void bn__ref_ff_levels(const bn_study_opts *o, bn__ref_plan *P)
+{
+    int top = 0;
+    for (size_t v = 0; o->param == BN_STUDY_SAMPLES && v < o->nvalues; v++)
+        top = (int)fmax(top, o->values[v]);
+    P->fref.method = BN_FF_ANALYTIC;
+    P->fref.exact_visibility = 0;
+    if (o->param == BN_STUDY_EPS)
+        P->fref.samples = o->ref_samples ? o->ref_samples : 256;
+    else
+        P->fref.samples = o->ref_samples ? o->ref_samples : (32 * top > 1024 ? 32 * top : 1024);
+    P->fref.seed = bn__hash64(o->ff.seed ^ 0x7265666572656e63ULL);
+    P->fcoarse = P->fref;
+    P->fcoarse.samples = P->fref.samples / 4 > 0 ? P->fref.samples / 4 : 1;
+    P->fcoarse.seed = bn__hash64(P->fref.seed + 1);
+}
+
+/* Whether the reference is the tracer (asked, or a mesh or eps study compared against it) and then
+ * its mesh: the finest setting's (its rows compare patch by patch), or the study's own for eps (dense
+ * K with many rays would be a reference of K_H alone, not of the light). */
+static void bn__ref_trace_choice(const bn_study_opts *o, bn__ref_plan *P)
+{
+    int asked = o->ref == BN_STUDY_REF_TRACE;
+    if (P->mesh_study || o->param == BN_STUDY_SPP) {
+        P->use_trace = asked || (o->ref == BN_STUDY_REF_AUTO && P->mesh_study && o->nagainst > 0);
+        if (P->use_trace && !o->ref_patches) {
+            P->mref = o->mesh;
             if (o->param == BN_STUDY_PATCHES) {
-                mref.patch_size = 0;
-                mref.target_patches = (size_t)o->values[0];
+                P->mref.patch_size = 0;
+                P->mref.target_patches = (size_t)o->values[0];
                 for (size_t v = 1; v < o->nvalues; v++)
-                    mref.target_patches = (size_t)fmax((double)mref.target_patches, o->values[v]);
+                    P->mref.target_patches = (size_t)fmax((double)P->mref.target_patches, o->values[v]);
             } else if (o->param == BN_STUDY_PATCH_SIZE)
-                mref.patch_size = mcoarse.patch_size;
+                P->mref.patch_size = P->mcoarse.patch_size;
         }
     }
-    if (o->param == BN_STUDY_EPS &&
-        (o->ref == BN_STUDY_REF_TRACE || (o->ref == BN_STUDY_REF_AUTO && o->nagainst > 0))) {
-        /* the equal-error comparison: the tracer on the study's own mesh, the reference of every method
-         * (dense K with many rays would be a reference of K_H alone, not of the light) */
-        use_trace = 1;
-        mref = o->mesh;
+    if (o->param == BN_STUDY_EPS && (asked || (o->ref == BN_STUDY_REF_AUTO && o->nagainst > 0))) {
+        P->use_trace = 1;
+        P->mref = o->mesh;
     }
-    P->mref = mref;
-    P->mcoarse = mcoarse;
-    P->fref = fref;
-    P->fcoarse = fcoarse;
-    P->mesh_study = mesh_study;
-    P->use_trace = use_trace;
+}
+
+static void bn__ref_levels(const bn_study_opts *o, bn__ref_plan *P)
+{
+    P->mref = P->mcoarse = o->mesh;
+    P->fref = P->fcoarse = o->ff;
+    P->mesh_study = o->param == BN_STUDY_PATCHES || o->param == BN_STUDY_PATCH_SIZE;
+    P->use_trace = 0;
+    if (P->mesh_study || o->param == BN_STUDY_SPP)
+        bn__ref_mesh_levels(o, P);
+    else if (o->param == BN_STUDY_EPS || o->param == BN_STUDY_SAMPLES || o->param == BN_STUDY_FF)
+        bn__ref_ff_levels(o, P);
+    else   /* precision */
+        P->fref.precision = P->fcoarse.precision = BN_PRECISION_DOUBLE;
+    bn__ref_trace_choice(o, P);
 }
 
 /* Richardson extrapolation of a mesh study's reference (Richardson 1911; Roache, "Quantification of
@@ -1430,14 +1431,80 @@ static void bn__warnings_flush(const bn__warnings *W)
     }
 }
 
+/* Each value the study varies, checked against its parameter's range. */
+static bn_status bn__study_check_value(bn_study_param param, double x, bn_error *err)
+{
+    int whole = x == floor(x);
+    switch (param) {
+    case BN_STUDY_BOUNCES:
+        if (!whole || x < 0 || x > 100000)
+            return bn_error_set(err, BN_EUSAGE, "study: bounces must be whole numbers in [0, 100000] (got %g)", x);
+        break;
+    case BN_STUDY_MAX_ITER: case BN_STUDY_PATCHES: case BN_STUDY_SAMPLES: case BN_STUDY_SPP:
+        if (!whole || x < 1 || x > 1e9)
+            return bn_error_set(err, BN_EUSAGE, "study: %s must be whole numbers >= 1 (got %g)",
+                                bn_study_param_name(param), x);
+        break;
+    case BN_STUDY_TOL:
+        if (!(x > 0 && x < 1))
+            return bn_error_set(err, BN_EUSAGE, "study: tol must be in (0, 1) (got %g)", x);
+        break;
+    case BN_STUDY_PATCH_SIZE:
+        if (!(x > 0) || !isfinite(x))
+            return bn_error_set(err, BN_EUSAGE, "study: patch-size must be > 0 (got %g)", x);
+        break;
+    case BN_STUDY_FF:
+        if (!whole || x < 0 || x > 2)
+            return bn_error_set(err, BN_EUSAGE, "study: bad form-factor method index %g", x);
+        break;
+    case BN_STUDY_PRECISION:
+        if (!whole || x < 0 || x > 1)
+            return bn_error_set(err, BN_EUSAGE, "study: bad precision index %g", x);
+        break;
+    case BN_STUDY_EPS:
+        if (!(x > 0 && x < 1))
+            return bn_error_set(err, BN_EUSAGE, "study: eps must be in (0, 1) (got %g)", x);
+        break;
+    }
+    return BN_OK;
+}
+
+/* The study's surfaces: the scene's materials, their names and areas (m^2). */
+static bn_status bn__study_surfaces(const char *path, const bn_load_opts *load, bn_study_result *res,
+                                    bn_error *err)
+{
+    bn_scene *probe = NULL;
+    const bn_material *mats;
+    const bn_face *f;
+    size_t nm, nf;
+    double u;
+    bn_status st = bn_scene_load(path, load, &probe, err);
+    if (st != BN_OK)
+        return st;
+    mats = bn_scene_materials(probe, &nm);
+    f = bn_scene_faces(probe, &nf);
+    u = bn_unit_to_metres(bn_scene_unit(probe));
+    res->nsurfaces = nm;
+    res->surface = bn__calloc(nm + 1, sizeof *res->surface);
+    res->surface_area = bn__calloc(nm + 1, sizeof(double));
+    if (!res->surface || !res->surface_area) {
+        bn_scene_destroy(probe);
+        return bn_error_set(err, BN_ENOMEM, "study: out of memory");
+    }
+    for (size_t m = 0; m < nm; m++)
+        snprintf(res->surface[m], BN_NAME_MAX, "%s", mats[m].name);
+    for (size_t i = 0; i < nf; i++)
+        if (f[i].material < nm)
+            res->surface_area[f[i].material] += f[i].area * u * u;
+    bn_scene_destroy(probe);
+    return BN_OK;
+}
+
 static bn_status bn__study_run_body(const char *path, const bn_study_opts *o_in, bn_study_result *res, bn_error *err)
 {
     bn_study_opts oo = *o_in, *o = &oo;
     bn__warnings W;
     bn__study S;
-    bn_scene *probe = NULL;
-    const bn_material *mats;
-    size_t nm;
     bn_status st;
     memset(res, 0, sizeof *res);
     memset(&S, 0, sizeof S);
@@ -1458,66 +1525,13 @@ static bn_status bn__study_run_body(const char *path, const bn_study_opts *o_in,
     res->ref_error = res->ref_error_patch = res->ref_order = res->ref_error_raw = NAN;
     if (!o->values || o->nvalues == 0)
         return bn_error_set(err, BN_EUSAGE, "study: `vary` needs at least one value");
-    for (size_t v = 0; v < o->nvalues; v++) {
-        double x = o->values[v];
-        int whole = x == floor(x);
-        switch (o->param) {
-        case BN_STUDY_BOUNCES:
-            if (!whole || x < 0 || x > 100000)
-                return bn_error_set(err, BN_EUSAGE, "study: bounces must be whole numbers in [0, 100000] (got %g)", x);
-            break;
-        case BN_STUDY_MAX_ITER: case BN_STUDY_PATCHES: case BN_STUDY_SAMPLES: case BN_STUDY_SPP:
-            if (!whole || x < 1 || x > 1e9)
-                return bn_error_set(err, BN_EUSAGE, "study: %s must be whole numbers >= 1 (got %g)",
-                                    bn_study_param_name(o->param), x);
-            break;
-        case BN_STUDY_TOL:
-            if (!(x > 0 && x < 1))
-                return bn_error_set(err, BN_EUSAGE, "study: tol must be in (0, 1) (got %g)", x);
-            break;
-        case BN_STUDY_PATCH_SIZE:
-            if (!(x > 0) || !isfinite(x))
-                return bn_error_set(err, BN_EUSAGE, "study: patch-size must be > 0 (got %g)", x);
-            break;
-        case BN_STUDY_FF:
-            if (!whole || x < 0 || x > 2)
-                return bn_error_set(err, BN_EUSAGE, "study: bad form-factor method index %g", x);
-            break;
-        case BN_STUDY_PRECISION:
-            if (!whole || x < 0 || x > 1)
-                return bn_error_set(err, BN_EUSAGE, "study: bad precision index %g", x);
-            break;
-        case BN_STUDY_EPS:
-            if (!(x > 0 && x < 1))
-                return bn_error_set(err, BN_EUSAGE, "study: eps must be in (0, 1) (got %g)", x);
-            break;
-        }
-    }
-    /* Surfaces are the scene's materials. */
-    st = bn_scene_load(path, &o->load, &probe, err);
-    if (st != BN_OK)
-        return st;
-    mats = bn_scene_materials(probe, &nm);
-    res->nsurfaces = nm;
-    res->surface = bn__calloc(nm + 1, sizeof *res->surface);
-    res->surface_area = bn__calloc(nm + 1, sizeof(double));
-    if (!res->surface || !res->surface_area) {
-        bn_scene_destroy(probe);
+    for (size_t v = 0; v < o->nvalues; v++)
+        if ((st = bn__study_check_value(o->param, o->values[v], err)) != BN_OK)
+            return st;
+    if ((st = bn__study_surfaces(path, &o->load, res, err)) != BN_OK) {
         bn_study_result_free(res);
-        return bn_error_set(err, BN_ENOMEM, "study: out of memory");
+        return st;
     }
-    {
-        size_t nf;
-        const bn_face *f = bn_scene_faces(probe, &nf);
-        double u = bn_unit_to_metres(bn_scene_unit(probe));
-        for (size_t m = 0; m < nm; m++)
-            snprintf(res->surface[m], BN_NAME_MAX, "%s", mats[m].name);
-        for (size_t i = 0; i < nf; i++)
-            if (f[i].material < nm)
-                res->surface_area[f[i].material] += f[i].area * u * u;
-    }
-    bn_scene_destroy(probe);
-
     if (o->param == BN_STUDY_BOUNCES || o->param == BN_STUDY_MAX_ITER || o->param == BN_STUDY_TOL)
         st = bn__study_operator(&S, err);
     else
