@@ -191,3 +191,33 @@ BN_TEST(cli_exit_codes)
     BN_ASSERT(strstr(out, "auto (default): gauss-seidel") && strstr(out, "default 1e-6") && strstr(out, "default 100000"));
     free(out);
 }
+
+/* Warnings of one code beyond the first 5 are gathered into one line at the end (a real asset's
+ * thousands of back-to-back faces must not flood the terminal): 12 thin panels, each two faces back
+ * to back, floating in the furnace box, give 5 [back-to-back] lines and "7 more like the 5 above
+ * (12 in all". */
+BN_TEST(cli_warnings_gathered_by_code)
+{
+    char cmd[4096], *out = NULL, *p;
+    FILE *fp;
+    int lines = 0, rc;
+    write_scene("0.5");
+    fp = fopen(bn_test_tmp("box.obj"), "a");
+    BN_ASSERT(fp != NULL);
+    fprintf(fp, "\nusemtl furnace\n");
+    for (int k = 0; k < 12; k++) {
+        double x = 0.1 + 0.07 * k;
+        fprintf(fp, "v %g 0.3 0.4\nv %g 0.3 0.45\nv %g 0.35 0.45\nv %g 0.35 0.4\n", x, x, x, x);
+        fprintf(fp, "f -4 -3 -2 -1\nf -1 -2 -3 -4\n");
+    }
+    fclose(fp);
+    snprintf(cmd, sizeof cmd, "info %s", bn_test_tmp("box.obj"));
+    rc = bn_test_bounce(cmd, &out);
+    BN_ASSERT_EQ(rc, 0);
+    for (p = out; (p = strstr(p, "[back-to-back]")) != NULL; p++)
+        lines++;
+    fprintf(stderr, "%d [back-to-back] lines\n", lines);
+    BN_ASSERT_EQ(lines, 6);
+    BN_ASSERT(strstr(out, "7 more like the 5 above (12 in all") != NULL);
+    free(out);
+}

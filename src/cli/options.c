@@ -4,6 +4,7 @@
 
 #include <errno.h>
 #include <math.h>
+#include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -317,11 +318,55 @@ const char *bn_cli_translate(const char *msg, char *out, size_t n)
     return out;
 }
 
-/* A warning as the compilers write theirs: the text, then its code in brackets. */
+/* A warning as the compilers write theirs: the text, then its code in brackets. The first
+ * BN__CLI_WARN_SHOWN of each code are printed as they come; the rest are counted, the worst kept
+ * (by the warning's measure; the latest when it has none), and said once when the command ends
+ * (a real asset's 2,321 back-to-back faces are 5 lines and a count, not 2,321 lines). */
+#define BN__CLI_WARN_SHOWN 5
+
+typedef struct bn__cli_held {
+    size_t count;
+    double value;
+    char text[2304];
+} bn__cli_held;
+
+static bn__cli_held bn__cli_held_[BN_WARNING_COUNT];
+static size_t bn__cli_seen[BN_WARNING_COUNT];
+static pthread_mutex_t bn__cli_warn_lock = PTHREAD_MUTEX_INITIALIZER;
+
+static void bn__cli_held_flush(void)
+{
+    for (int c = 0; c < BN_WARNING_COUNT; c++) {
+        const bn__cli_held *h = &bn__cli_held_[c];
+        if (h->count)
+            fprintf(stderr, "bounce: warning: %zu more like the %d above (%zu in all; %s): %s [%s]\n", h->count,
+                    BN__CLI_WARN_SHOWN, h->count + BN__CLI_WARN_SHOWN,
+                    isfinite(h->value) ? "the worst of them" : "the last of them", h->text,
+                    bn_warning_name((bn_warning)c));
+    }
+}
+
 static void bn__cli_warning(const bn_message *m)
 {
     char t[2304];
-    fprintf(stderr, "bounce: warning: %s [%s]\n", bn_cli_translate(m->text, t, sizeof t), bn_warning_name(m->code));
+    unsigned c = (unsigned)m->code;
+    bn_cli_translate(m->text, t, sizeof t);
+    pthread_mutex_lock(&bn__cli_warn_lock);   /* warnings may come from the library's threads */
+    {
+        if (c >= BN_WARNING_COUNT || bn__cli_seen[c]++ < BN__CLI_WARN_SHOWN) {
+            fprintf(stderr, "bounce: warning: %s [%s]\n", t, bn_warning_name(m->code));
+        } else {
+            bn__cli_held *h = &bn__cli_held_[c];
+            static int registered;
+            if (!registered)
+                registered = atexit(bn__cli_held_flush) == 0;
+            if (h->count++ == 0 || !isfinite(m->value) || !(m->value <= h->value)) {
+                h->value = m->value;
+                snprintf(h->text, sizeof h->text, "%s", t);
+            }
+        }
+    }
+    pthread_mutex_unlock(&bn__cli_warn_lock);
 }
 
 void bn_cli_log(void *user, const bn_message *m)
