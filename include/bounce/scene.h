@@ -37,6 +37,7 @@ typedef struct bn_face {
     double   normal[3];   /* unit, front side */
     double   area;        /* scene units squared */
     size_t   source;      /* index of the input polygon it came from (0-based) */
+    unsigned object;      /* index of its object (bn_scene_object_name) */
     unsigned line;        /* line of that polygon in the file, 0 if not known */
 } bn_face;
 
@@ -87,6 +88,11 @@ typedef struct bn_mesh_opts {
      * corners near a contact move onto it (no thin strips; a patch grows by at most a third), so
      * patch edges there may reach BN_CONTACT_STRETCH times the grid's longest edge. */
     int    no_contacts;
+    /* Contacts are cut where one object touches another (bn_scene_object_name: the floor under a
+     * chair's legs); 1 also cuts where an object touches itself (a model's own touching or
+     * interpenetrating parts: most of a furniture model's contacts, hidden inside it). A scene of
+     * one object has all its contacts cut. */
+    int    self_contacts;
     /* Distance from a face's plane that still counts as touching it, scene units (0: 1e-6 of the
      * scene's diameter). A scanned model that rests on a floor with its base a millimetre above
      * it (the bunny box) needs about that much. */
@@ -138,6 +144,15 @@ void bn_scene_emitted_power(const bn_scene *s, double watts[3]);
  * channel: pi * sum_i A_i x_i with A in m^2 (a term K^k E gives that bounce's power). */
 void bn_scene_power(const bn_scene *s, const double *radiance, double watts[3]);
 size_t bn_scene_emitter_count(const bn_scene *s);   /* faces with Le > 0 in any channel */
+/* Objects group faces for counts, contact cuts and partitions: the file's own groups when it names
+ * two or more (OBJ `o`/`g`), else the material names' prefixes up to the first '_' (`couch_Chrome`
+ * and `couch_Fabric`: "couch"). */
+size_t      bn_scene_object_count(const bn_scene *s);
+const char *bn_scene_object_name(const bn_scene *s, size_t k);
+int         bn_scene_objects_from_file(const bn_scene *s);   /* 1: the file's groups; 0: material prefixes */
+/* 1: object k is one model's parts (a file's group, or a prefix before a '_'), whose own contacts
+ * are not cut unless asked (bn_mesh_opts.self_contacts); 0: a material named without a prefix. */
+int         bn_scene_object_is_assembly(const bn_scene *s, size_t k);
 
 /* Per-patch emission E (= Le, W m^-2 sr^-1) and reflectance rho, written into caller-allocated
  * arrays of N*3 doubles (patch-major, channel-minor: a[3*i + c]). */

@@ -79,6 +79,7 @@ void bn_cli_pipeline_opts(const bn_cli_scene *so, const bn_cli_ff *ff, const bn_
         out->mesh.target_patches = so->default_patches;
     out->mesh.no_subdivide = so->no_subdivide;
     out->mesh.no_contacts = so->no_contacts;
+    out->mesh.self_contacts = so->self_contacts;
     out->mesh.contact_gap = so->contact_gap;
     out->mesh_auto = !(so->patch_size > 0) && !so->patches && !so->no_subdivide;
     if (ff) {

@@ -72,12 +72,16 @@ typedef struct bn_cli_scene {
     size_t default_patches;   /* the command's own default for --patches (0: the library's, 1200) */
     int    no_subdivide;
     int    no_contacts;
+    int    self_contacts;
     double contact_gap;
     double planar_tol;
 } bn_cli_scene;
 void bn_cli_add_scene(bn_optset *s, bn_cli_scene *o);
-/* Loads and meshes (the pipeline's first stage); prints the error and returns its status on failure. */
-bn_status bn_cli_load_scene(const char *path, const bn_cli_scene *o, const bn_cli_common *c, bn_scene **out);
+/* Loads and meshes (the pipeline's first stage; transport "auto": the mesh a default solve makes,
+ * the hierarchy's for a large scene; NULL: the mesh options alone); prints the error and returns
+ * its status on failure. */
+bn_status bn_cli_load_scene(const char *path, const bn_cli_scene *o, const bn_cli_common *c, const char *transport,
+                            bn_scene **out);
 /* Log sink for library notes and warnings: warnings always, notes unless --quiet (user: the bn_cli_common). */
 void bn_cli_log(void *user, const bn_message *m);
 /* The same with notes on stdout without a prefix ("wrote FILE ..."), for commands whose notes are

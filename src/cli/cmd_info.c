@@ -17,6 +17,32 @@ static void bn__bytes(double b, char *buf, size_t n)
     snprintf(buf, n, "%.3g %s", b, u[i]);
 }
 
+/* The objects (the file's groups or the material names' prefixes), with their faces, the largest
+ * first (at most 24 named). */
+static void bn__info_objects(const bn_scene *s)
+{
+    size_t nf, no = bn_scene_object_count(s), *count = bn__calloc(no + 1, sizeof(size_t));
+    const bn_face *faces = bn_scene_faces(s, &nf);
+    char *shown = bn__calloc(no + 1, 1);
+    if (count && shown) {
+        for (size_t f = 0; f < nf; f++)
+            count[faces[f].object]++;
+        printf("objects     %zu (%s):", no,
+               bn_scene_objects_from_file(s) ? "the file's o/g groups" : "material-name prefixes");
+        for (size_t n = 0; n < no && n < 24; n++) {
+            size_t best = SIZE_MAX;
+            for (size_t k = 0; k < no; k++)
+                if (!shown[k] && (best == SIZE_MAX || count[k] > count[best]))
+                    best = k;
+            shown[best] = 1;
+            printf("%s %s %zu", n ? "," : "", bn_scene_object_name(s, best), count[best]);
+        }
+        printf("%s faces\n", no > 24 ? ", ..." : "");
+    }
+    free(count);
+    free(shown);
+}
+
 /* Faces, vertices, bounds, area, emitters, patches, contacts and dense K's size. */
 static void bn__info_summary(const bn_scene *s, const bn_cli_scene *so)
 {
@@ -46,7 +72,10 @@ static void bn__info_summary(const bn_scene *s, const bn_cli_scene *so)
     printf("patches     %zu (largest patch edge %.6g %s)\n", np, bn_scene_largest_patch_edge(s), unit);
     printf("contacts    %zu segments on %zu faces split %zu patches into %zu%s\n", st.contact_segments,
            st.contact_faces, st.contact_patches_split, st.contact_patches_made,
-           so->no_contacts ? " (--no-contacts)" : "");
+           so->no_contacts                                        ? " (--no-contacts)"
+           : so->self_contacts || bn_scene_object_count(s) < 2 ? " (inside objects too)"
+                                                               : " (between objects only; --self-contacts: inside them too)");
+    bn__info_objects(s);
     bn__bytes((double)np * (double)np * 4.0, buf, sizeof buf);
     printf("dense K     %s as float (N^2 x 4 bytes; F is stored once for all channels)\n", buf);
 }
@@ -128,7 +157,8 @@ int bn_cmd_info(int argc, char **argv, bn_cli_common *c)
     bn_error_clear(&err);
     if (!bn_cli_parse_scene_command(&set, argc, argv, pos, &prc))
         return prc;
-    if ((st = bn_cli_load_scene(pos[0], &so, c, &s)) != BN_OK)
+    /* meshed as `bounce solve` would (the hierarchy's mesh for a large scene) */
+    if ((st = bn_cli_load_scene(pos[0], &so, c, "auto", &s)) != BN_OK)
         return bn_status_exit_code(st);
     bn__info_summary(s, &so);
     bn__info_hierarchy(s, &so, c);

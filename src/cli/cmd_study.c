@@ -195,6 +195,7 @@ static void bn__study_fixed(const bn__study_cli *a, bn_cli_common *c, bn_study_o
         o->mesh.target_patches = a->so.patches;
     o->mesh.no_subdivide = a->so.no_subdivide;
     o->mesh.no_contacts = a->so.no_contacts;
+    o->mesh.self_contacts = a->so.self_contacts;
     o->mesh.contact_gap = a->so.contact_gap;
     bn_cli_ff_opts(&a->ff, c, &o->ff);
     o->ff.quiet = 1;

@@ -135,7 +135,7 @@ int bn_cmd_trace(int argc, char **argv, bn_cli_common *c)
         bn_error_set(&err, BN_EUSAGE, "trace needs -o FILE.exr, --patches-out FILE.csv, or both");
         return bn_cli_fail(&err);
     }
-    if ((st = bn_cli_load_scene(pos[0], &a.so, c, &s)) != BN_OK)
+    if ((st = bn_cli_load_scene(pos[0], &a.so, c, NULL, &s)) != BN_OK)
         return bn_status_exit_code(st);
     bn_trace_opts_default(&to);
     to.spp = bn_cli_given(&set, "spp") ? (size_t)a.co.spp : 64;   /* the camera group's --spp, also per patch */

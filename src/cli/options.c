@@ -280,6 +280,8 @@ void bn_cli_add_scene(bn_optset *s, bn_cli_scene *o)
                               "one patch per input polygon (after triangulation; no contact cuts)"});
     bn_optset_add(s, (bn_opt){"no-contacts", 0, BN_OPT_FLAG, &o->no_contacts, NULL, 0, 0, NULL,
                               "do not split patches along contact lines (where a face touches or pierces another's front, as a block on the floor)"});
+    bn_optset_add(s, (bn_opt){"self-contacts", 0, BN_OPT_FLAG, &o->self_contacts, NULL, 0, 0, NULL,
+                              "also split where an object touches itself (its own touching or interpenetrating parts; default: only where one object touches another; objects: `bounce info`)"});
     bn_optset_add(s, (bn_opt){"contact-gap", 0, BN_OPT_DOUBLE, &o->contact_gap, NULL, 0, 1e300, "G",
                               "distance from a face's plane that still counts as touching it, scene units (default 1e-6 of the scene's diameter)"});
     bn_optset_add(s, (bn_opt){"planar-tol", 0, BN_OPT_DOUBLE, &o->planar_tol, NULL, 0, 1, "T",
@@ -379,7 +381,8 @@ void bn_cli_log(void *user, const bn_message *m)
         fprintf(stderr, "bounce: %s\n", bn_cli_translate(m->text, t, sizeof t));
 }
 
-bn_status bn_cli_load_scene(const char *path, const bn_cli_scene *o, const bn_cli_common *c, bn_scene **out)
+bn_status bn_cli_load_scene(const char *path, const bn_cli_scene *o, const bn_cli_common *c, const char *transport,
+                            bn_scene **out)
 {
     bn_pipeline_opts po;
     bn_pipeline p;
@@ -387,6 +390,7 @@ bn_status bn_cli_load_scene(const char *path, const bn_cli_scene *o, const bn_cl
     bn_status st;
     bn_error_clear(&err);
     bn_cli_pipeline_opts(o, NULL, NULL, c, &po);
+    po.transport = transport;
     st = bn_pipeline_scene(path, &po, &p, &err);
     *out = p.scene;
     if (st != BN_OK)

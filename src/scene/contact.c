@@ -57,6 +57,7 @@ typedef struct {
     double    edge;     /* 1e-6 of the scene's diameter: contacts this near a face's boundary, or
                            this short, cut nothing */
     double    snap;     /* points closer than this are one point */
+    int       self;     /* also contacts between faces of one object */
     double    keep;     /* on the current face: a patch corner this close to a contact line is
                            taken as on it, so cuts never leave slivers thinner than this */
 } bn__cx;
@@ -812,7 +813,8 @@ done:
 static int bn__visit(bn__cx *c, size_t fi, const double (*poly)[2], size_t *stamp, size_t q)
 {
     const bn_face *f = &c->s->faces[fi];
-    if (q == fi || stamp[q] == fi + 1)
+    if (q == fi || stamp[q] == fi + 1 ||
+        (!c->self && c->s->faces[q].object == f->object && c->s->obj_assembly[f->object]))
         return 1;
     stamp[q] = fi + 1;
     return bn__contacts_of(c, f, poly, f->nverts, &c->s->faces[q]);
@@ -877,8 +879,8 @@ static int bn__face_cut(bn__cx *c, size_t fi, bn_patch *patches, const size_t *f
     return bn__cut_face(c, fi, patches, first[fi], first[fi + 1], poly, st);
 }
 
-bn_status bn__mesh_contacts(bn_scene *s, double gap, bn_patch **patches, size_t *np, double **pv, size_t *nv,
-                           bn_error *err)
+bn_status bn__mesh_contacts(bn_scene *s, double gap, int self, bn_patch **patches, size_t *np, double **pv,
+                            size_t *nv, bn_error *err)
 {
     bn__cx c;
     bn__fgrid g;
@@ -897,6 +899,7 @@ bn_status bn__mesh_contacts(bn_scene *s, double gap, bn_patch **patches, size_t 
     c.edge = 1e-6 * bn_v3_len(d);
     c.tol = gap > 0 ? gap : c.edge;
     c.snap = 1e-9 * bn_v3_len(d);
+    c.self = self || s->nobjs < 2;
     if (!(c.tol > 0))
         return BN_OK;
     if (!bn__fgrid_build(s, c.tol, &g))

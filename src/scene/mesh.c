@@ -120,8 +120,8 @@ static void bn__grid_tri(const bn_scene *s, size_t fi, unsigned n, bn_patch *pat
 }
 
 /* The regular grid of every face at patch edge `size`, then the contact cuts (unless off). */
-static bn_status bn__grid(bn_scene *s, double size, int contacts, double gap, bn_patch **out_p, size_t *out_np, double **out_v,
-                          size_t *out_nv, bn_error *err)
+static bn_status bn__grid(bn_scene *s, double size, int contacts, const bn_mesh_opts *o, bn_patch **out_p,
+                          size_t *out_np, double **out_v, size_t *out_nv, bn_error *err)
 {
     size_t np = 0, nv = 0, ip = 0, iv = 0;
     bn_patch *patches;
@@ -156,7 +156,7 @@ static bn_status bn__grid(bn_scene *s, double size, int contacts, double gap, bn
     s->stats.contact_segments = s->stats.contact_faces = 0;
     s->stats.contact_patches_split = s->stats.contact_patches_made = 0;
     if (contacts) {
-        bn_status st = bn__mesh_contacts(s, gap, &patches, &np, &pv, &nv, err);
+        bn_status st = bn__mesh_contacts(s, o->contact_gap, o->self_contacts, &patches, &np, &pv, &nv, err);
         if (st != BN_OK) {
             free(patches);
             free(pv);
@@ -247,7 +247,7 @@ bn_status bn_scene_mesh(bn_scene *s, const bn_mesh_opts *o, bn_error *err)
         int contacts = !o->no_subdivide && !o->no_contacts,
             by_target = !o->no_subdivide && !(o->patch_size > 0) && o->target_patches > 0;
         for (int attempt = 0;; attempt++) {
-            st = bn__grid(s, size, contacts, o->contact_gap, &patches, &np, &pv, &nv, err);
+            st = bn__grid(s, size, contacts, o, &patches, &np, &pv, &nv, err);
             if (st != BN_OK)
                 return st;
             /* contact cuts add patches: a target count holds for the mesh with its cuts (where the

@@ -367,7 +367,7 @@ static bn_status bn__obj_mtllib(bn__objr *R, char *c, bn_error *err)
 /* Statements a Lambertian patch model does not need. */
 static int bn__obj_ignored(const char *kw)
 {
-    static const char *const skip[] = {"vt", "vn", "vp", "g", "o", "s", "l", "p", "mg", "usemap", "maplib"};
+    static const char *const skip[] = {"vt", "vn", "vp", "s", "l", "p", "mg", "usemap", "maplib"};
     for (size_t i = 0; i < sizeof skip / sizeof *skip; i++)
         if (strcmp(kw, skip[i]) == 0)
             return 1;
@@ -406,6 +406,11 @@ bn_status bn__read_obj_stream(FILE *fp, const char *path, bn__soup *s, const bn_
             st = bn__obj_usemtl(&R, c, err);
         else if (strcmp(kw, "mtllib") == 0)
             st = bn__obj_mtllib(&R, c, err);
+        else if (strcmp(kw, "o") == 0 || strcmp(kw, "g") == 0) {
+            /* the object the next faces belong to (a group with several names: its first) */
+            if (!bn__soup_use_object(s, bn__token(&c)))
+                st = bn_error_set(err, BN_ENOMEM, "out of memory");
+        }
         else if (!bn__obj_ignored(kw))
             bn_logf(log, BN_LOG_DEBUG, "%s:%u: statement '%s' ignored", path, R.line, kw);
     }

@@ -502,6 +502,8 @@ bn_status bn__scene_build(const char *path, const bn__soup *s, const bn_load_opt
         bn_error_set(err, st, "out of memory building faces of %s", path);
     if (st == BN_OK)
         st = bn__scene_finish(sc, path, o, P.degenerate, err);
+    if (st == BN_OK && bn__scene_objects(sc, s) != BN_OK)
+        st = bn_error_set(err, BN_ENOMEM, "out of memory for the objects of %s", path);
     if (st != BN_OK) {
         bn_scene_destroy(sc);
         return st;
@@ -592,6 +594,8 @@ void bn_scene_destroy(bn_scene *s)
     free(s->faces);
     free(s->patches);
     free(s->pverts);
+    free(s->objnames);
+    free(s->obj_assembly);
     free(s);
 }
 

@@ -21,12 +21,19 @@ typedef struct bn__soup {
     size_t    nidx, idx_cap;
     bn_material *mats;
     size_t    nmats, mats_cap;
+    /* objects as the file names them (OBJ `o`/`g`): per polygon, and their names; none read: obj NULL */
+    unsigned *obj;
+    unsigned  cur_obj;    /* the object bn__soup_add_polygon gives a polygon */
+    char    (*objnames)[BN_NAME_MAX];
+    size_t    nobjs, objs_cap;
 } bn__soup;
 
 void bn__soup_free(bn__soup *s);
 int bn__soup_add_vertex(bn__soup *s, const double p[3]);                 /* 0 on OOM */
 int bn__soup_add_polygon(bn__soup *s, const size_t *idx, unsigned n, unsigned mat, unsigned line);
 int bn__soup_add_material(bn__soup *s, const bn_material *m);
+/* The object the next polygons belong to, by name (a new one, or the one of that name); 0 on OOM. */
+int bn__soup_use_object(bn__soup *s, const char *name);
 /* One material per distinct key among keys[6 p .. 6 p + 6) (reflectance RGB, emission RGB) of
  * polygon p, named prefix0, prefix1, ... in order of first use; sets every polygon's material.
  * 0 on OOM. */
@@ -50,14 +57,17 @@ int bn__grow(void **p, size_t *cap, size_t need, size_t elem);
 bn_status bn__scene_build(const char *path, const bn__soup *soup, const bn_load_opts *o,
                           bn_scene **out, bn_error *err);
 
+/* The scene's objects and each face's (src/scene/objects.c), after its faces are built. */
+bn_status bn__scene_objects(bn_scene *sc, const bn__soup *s);
 /* The mesher's patch geometry (area, centroid, normal) from its corners. */
 void bn__scene_patch_finish(bn_patch *p, const double *pv, const double normal[3]);
 /* Splits the patches of faces that other faces touch or pierce along the contact lines
  * (src/scene/contact.c); gap: the distance that counts as touching (0: 1e-6 of the scene's
- * diameter). Patches must be in face order; *patches and *pv are replaced (grown) and
- * stay the caller's on failure. Counts go to s->stats. */
-bn_status bn__mesh_contacts(bn_scene *s, double gap, bn_patch **patches, size_t *np, double **pv, size_t *nv,
-                           bn_error *err);
+ * diameter); self: also where a face of the same object touches (bn_mesh_opts.self_contacts).
+ * Patches must be in face order; *patches and *pv are replaced (grown) and stay the caller's on
+ * failure. Counts go to s->stats. */
+bn_status bn__mesh_contacts(bn_scene *s, double gap, int self, bn_patch **patches, size_t *np, double **pv,
+                            size_t *nv, bn_error *err);
 
 struct bn_scene {
     char        *path;
@@ -78,6 +88,10 @@ struct bn_scene {
     double       largest_edge;   /* longest edge of any patch */
     bn_scene_stats stats;
     double       lo[3], hi[3];
+    char       (*objnames)[BN_NAME_MAX];   /* objects (src/scene/objects.c) */
+    size_t       nobjs;
+    unsigned char *obj_assembly;          /* per object: one model's parts (no contact cuts inside) */
+    int          objects_from_file;       /* 1: the file's groups; 0: material-name prefixes */
 };
 
 #ifdef __cplusplus

@@ -14,6 +14,8 @@ void bn__soup_free(bn__soup *s)
     free(s->line);
     free(s->idx);
     free(s->mats);
+    free(s->obj);
+    free(s->objnames);
     memset(s, 0, sizeof *s);
 }
 
@@ -51,12 +53,16 @@ int bn__soup_add_polygon(bn__soup *s, const size_t *idx, unsigned n, unsigned ma
     size_t cap = s->polys_cap;
     if (s->npolys + 1 > cap) {
         size_t c1 = cap, c2 = cap, c3 = cap;
+        size_t c4 = cap;
         if (!bn__grow((void **)&s->counts, &c1, s->npolys + 1, sizeof(unsigned)) ||
             !bn__grow((void **)&s->mat, &c2, s->npolys + 1, sizeof(unsigned)) ||
-            !bn__grow((void **)&s->line, &c3, s->npolys + 1, sizeof(unsigned)))
+            !bn__grow((void **)&s->line, &c3, s->npolys + 1, sizeof(unsigned)) ||
+            (s->nobjs && !bn__grow((void **)&s->obj, &c4, s->npolys + 1, sizeof(unsigned))))
             return 0;
         s->polys_cap = c1;
     }
+    if (s->obj)
+        s->obj[s->npolys] = s->cur_obj;
     if (!bn__grow((void **)&s->idx, &s->idx_cap, s->nidx + n, sizeof(size_t)))
         return 0;
     memcpy(s->idx + s->nidx, idx, n * sizeof(size_t));
@@ -65,6 +71,37 @@ int bn__soup_add_polygon(bn__soup *s, const size_t *idx, unsigned n, unsigned ma
     s->mat[s->npolys] = mat;
     s->line[s->npolys] = line;
     s->npolys++;
+    return 1;
+}
+
+/* Object `key`'s index, added at the end when new; SIZE_MAX on OOM. */
+static size_t bn__soup_object(bn__soup *s, const char *key)
+{
+    size_t k = 0;
+    while (k < s->nobjs && strcmp(s->objnames[k], key) != 0)
+        k++;
+    if (k == s->nobjs) {
+        if (!bn__grow((void **)&s->objnames, &s->objs_cap, s->nobjs + 1, sizeof *s->objnames))
+            return SIZE_MAX;
+        snprintf(s->objnames[k], BN_NAME_MAX, "%s", key);
+        s->nobjs++;
+    }
+    return k;
+}
+
+int bn__soup_use_object(bn__soup *s, const char *name)
+{
+    size_t k;
+    char key[BN_NAME_MAX];
+    snprintf(key, sizeof key, "%s", name && name[0] ? name : "default");
+    /* polygons before the first o/g form the object "default" (index 0: obj is zeroed) */
+    if (s->nobjs == 0 && s->npolys > 0 && bn__soup_object(s, "default") == SIZE_MAX)
+        return 0;
+    if ((k = bn__soup_object(s, key)) == SIZE_MAX)
+        return 0;
+    if (!s->obj && !(s->obj = bn__calloc(s->polys_cap ? s->polys_cap : 1, sizeof(unsigned))))
+        return 0;
+    s->cur_obj = (unsigned)k;
     return 1;
 }
 
