@@ -568,3 +568,83 @@ BN_TEST(smooth_bake_leaves_out_the_floor_under_the_block)
     bn_rt_destroy(rt);
     bn_pipeline_free(&p);
 }
+
+/* A chair on a floor, as a furniture library names it: materials `floor`, `chair_seat` and
+ * `chair_leg` (objects by prefix: floor, chair); a leg (a box) stands on the floor and passes up
+ * through the seat (a flat box) as real assets' parts do. groups: write `o` lines instead (objects
+ * from the file); mat_all: every face one material "white" (one object, not an assembly). */
+static void write_chair(int groups, int mat_all)
+{
+    FILE *m = fopen(bn_test_tmp("chair.mtl"), "w"), *f = fopen(bn_test_tmp("chair.obj"), "w");
+    /* boxes: lo, hi corners; faces outward */
+    static const double box[2][6] = {{-0.05, 0, -0.05, 0.05, 0.6, 0.05},   /* the leg, 0.6 high */
+                                     {-0.3, 0.4, -0.3, 0.3, 0.45, 0.3}};   /* the seat, pierced by the leg */
+    static const int q[6][4] = {{0, 3, 2, 1}, {4, 5, 6, 7}, {0, 1, 5, 4}, {2, 3, 7, 6}, {1, 2, 6, 5}, {3, 0, 4, 7}};
+    const char *names[2] = {"chair_leg", "chair_seat"};
+    BN_ASSERT(m && f);
+    fprintf(m, "newmtl floor\nKd 0.5 0.5 0.5\nnewmtl chair_leg\nKd 0.5 0.5 0.5\nnewmtl chair_seat\nKd 0.5 0.5 0.5\n"
+               "newmtl white\nKd 0.5 0.5 0.5\nnewmtl light\nKd 0 0 0\nKe 1 1 1\n");
+    fclose(m);
+    fprintf(f, "mtllib chair.mtl\n%susemtl %s\n", groups ? "o floor\n" : "", mat_all ? "white" : "floor");
+    fprintf(f, "v -1 0 -1\nv -1 0 1\nv 1 0 1\nv 1 0 -1\nf 1 2 3 4\n");
+    for (int b = 0; b < 2; b++) {
+        const double *c = box[b];
+        fprintf(f, "%susemtl %s\n", groups && b == 0 ? "o chair\n" : "", mat_all ? "white" : names[b]);
+        for (int k = 0; k < 8; k++)   /* corner k: bits x, z, y */
+            fprintf(f, "v %g %g %g\n", c[(k & 1) ? 3 : 0], c[(k & 4) ? 4 : 1], c[(k & 2) ? 5 : 2]);
+        for (int k = 0; k < 6; k++) {
+            static const int corner[8] = {0, 1, 3, 2, 4, 5, 7, 6};   /* bottom ring, then top ring */
+            fprintf(f, "f %d %d %d %d\n", 5 + 8 * b + corner[q[k][0]], 5 + 8 * b + corner[q[k][1]],
+                    5 + 8 * b + corner[q[k][2]], 5 + 8 * b + corner[q[k][3]]);
+        }
+    }
+    fprintf(f, "%susemtl light\nv -0.3 2 -0.3\nv 0.3 2 -0.3\nv 0.3 2 0.3\nv -0.3 2 0.3\nf 21 22 23 24\n",
+            groups ? "o lamp\n" : "");
+    fclose(f);
+}
+
+/* Faces that got contact segments, meshing the chair with or without self_contacts. */
+static size_t chair_contact_faces(int self, size_t *objects, int *from_file)
+{
+    bn_scene *s = NULL;
+    bn_load_opts lo;
+    bn_mesh_opts mo;
+    bn_error err;
+    size_t n;
+    bn_load_opts_default(&lo);
+    bn_mesh_opts_default(&mo);
+    mo.self_contacts = self;
+    BN_ASSERT_STATUS(bn_scene_load(bn_test_tmp("chair.obj"), &lo, &s, &err), BN_OK);
+    BN_ASSERT_STATUS(bn_scene_mesh(s, &mo, &err), BN_OK);
+    n = bn_scene_stats_get(s).contact_faces;
+    *objects = bn_scene_object_count(s);
+    *from_file = bn_scene_objects_from_file(s);
+    bn_scene_destroy(s);
+    return n;
+}
+
+/* Contacts between objects are cut, an object's own only when asked: the floor under the leg is
+ * the one face cut by default (its footprint); with self_contacts the seat's two faces the leg
+ * passes through and the leg's four sides where the seat's edges cross them are cut too. The same
+ * with the objects named by `o` lines; and with every face "white" (no prefix: one object that is
+ * not an assembly) everything is cut as before objects existed. */
+BN_TEST(contacts_between_objects)
+{
+    size_t nobj, dflt, self;
+    int from_file;
+    for (int groups = 0; groups < 2; groups++) {
+        write_chair(groups, 0);
+        dflt = chair_contact_faces(0, &nobj, &from_file);
+        self = chair_contact_faces(1, &nobj, &from_file);
+        fprintf(stderr, "%s: %zu objects; faces cut %zu, with self contacts %zu\n",
+                groups ? "o groups" : "material prefixes", nobj, dflt, self);
+        BN_ASSERT_EQ(from_file, groups);
+        BN_ASSERT_EQ(nobj, groups ? 3 : 4);   /* floor, chair, lamp | floor, chair, white (unused), light */
+        BN_ASSERT_EQ(dflt, 1);
+        BN_ASSERT_EQ(self, 7);
+    }
+    write_chair(0, 1);
+    dflt = chair_contact_faces(0, &nobj, &from_file);
+    fprintf(stderr, "one material: %zu objects; faces cut %zu\n", nobj, dflt);
+    BN_ASSERT_EQ(dflt, 7);
+}
