@@ -101,7 +101,9 @@ typedef struct bn__progress {
     double start, last;
     size_t total;
     int enabled, shown;
+    int plain;   /* stderr not a terminal: a line every BN__PROGRESS_PLAIN_S seconds instead of a bar */
 } bn__progress;
+#define BN__PROGRESS_PLAIN_S 30.0
 void bn__progress_begin(bn__progress *p, const char *label, size_t total, int quiet);
 void bn__progress_update(bn__progress *p, size_t done);   /* call from one thread */
 /* From inside an OpenMP loop: adds `work` finished items to *done (atomically); thread 0 redraws. */

@@ -273,14 +273,24 @@ void bn__progress_begin(bn__progress *p, const char *label, size_t total, int qu
     p->total = total;
     p->start = p->last = bn__now();
     p->enabled = !quiet && isatty(STDERR_FILENO);
+    p->plain = !quiet && !p->enabled;
 }
 
 void bn__progress_update(bn__progress *p, size_t done)
 {
     double now;
-    if (!p->enabled || p->total == 0)
+    if ((!p->enabled && !p->plain) || p->total == 0)
         return;
     now = bn__now();
+    if (p->plain) {   /* a log or a pipe: a plain line now and then, for stages that take minutes */
+        double frac = (double)done / (double)p->total;
+        if (now - p->last < BN__PROGRESS_PLAIN_S)
+            return;
+        p->last = now;
+        fprintf(stderr, "bounce: %s: %.0f%% after %.0f s (about %.0f s left)\n", p->label, 100 * frac,
+                now - p->start, frac > 0 ? (now - p->start) * (1 - frac) / frac : 0);
+        return;
+    }
     if (now - p->start < 1.5 || now - p->last < 0.2)
         return;
     p->last = now;
