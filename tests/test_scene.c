@@ -612,3 +612,53 @@ BN_TEST(binary_off_reads)
     BN_ASSERT_NEAR(total, 7.0, 1e-12);
     bn_scene_destroy(s);
 }
+
+/* Orientation from vertex normals: a closed unit room of 6 quads whose vn all point into the room,
+ * two of them (the floor and the right wall) wound by hand the other way (facing out). By default
+ * the two are turned (every face's front towards the room's centre: the room as meant), counted
+ * and their worst line reported; with BN_ORIENT_WINDING they are kept facing out. */
+BN_TEST(orientation_from_vertex_normals)
+{
+    /* every quad wound to face into the room (checked by hand with the right-hand rule), except the
+     * floor (y = 0) and the wall x = 1, wound the other way; the vn point into the room */
+    static const char *quads[6] = {"1 2 3 4", "5 8 7 6", "2 6 5 1", "4 3 7 8", "1 4 8 5", "3 7 6 2"};
+    static const double vn[6][3] = {{0, 0, 1}, {0, 0, -1}, {0, 1, 0}, {0, -1, 0}, {1, 0, 0}, {-1, 0, 0}};
+    FILE *f = fopen(bn_test_tmp("room-vn.obj"), "w");
+    BN_ASSERT(f != NULL);
+    fprintf(f, "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n");
+    for (int k = 0; k < 6; k++)
+        fprintf(f, "vn %g %g %g\n", vn[k][0], vn[k][1], vn[k][2]);
+    for (int k = 0; k < 6; k++) {
+        int c[4];
+        BN_ASSERT_EQ(sscanf(quads[k], "%d %d %d %d", &c[0], &c[1], &c[2], &c[3]), 4);
+        fprintf(f, "f %d//%d %d//%d %d//%d %d//%d\n", c[0], k + 1, c[1], k + 1, c[2], k + 1, c[3], k + 1);
+    }
+    fclose(f);
+    for (int keep = 0; keep < 2; keep++) {
+        bn_load_opts o;
+        bn_scene *s = NULL;
+        bn_error err;
+        size_t nf, inward = 0;
+        const bn_face *fc;
+        bn_scene_stats st;
+        bn_load_opts_default(&o);
+        o.orient = keep ? BN_ORIENT_WINDING : BN_ORIENT_NORMALS;
+        o.log.quiet = 1;
+        BN_ASSERT_STATUS(bn_scene_load(bn_test_tmp("room-vn.obj"), &o, &s, &err), BN_OK);
+        fc = bn_scene_faces(s, &nf);
+        st = bn_scene_stats_get(s);
+        for (size_t i = 0; i < nf; i++) {
+            const double *v = bn_scene_vertices(s, NULL) + 3 * bn_scene_face_indices(s, NULL)[fc[i].first];
+            double to_c[3] = {0.5 - v[0], 0.5 - v[1], 0.5 - v[2]};
+            inward += fc[i].normal[0] * to_c[0] + fc[i].normal[1] * to_c[1] + fc[i].normal[2] * to_c[2] > 0;
+        }
+        fprintf(stderr, "%s: %zu faces, %zu with normals, %zu against them, %zu turned, %zu facing the room\n",
+                keep ? "winding" : "normals", nf, st.with_normals, st.winding_disagree, st.flipped, inward);
+        BN_ASSERT_EQ(nf, 6);
+        BN_ASSERT_EQ(st.with_normals, 6);
+        BN_ASSERT_EQ(st.winding_disagree, 2);
+        BN_ASSERT_EQ(st.flipped, keep ? 0 : 2);
+        BN_ASSERT_EQ(inward, keep ? 4 : 6);
+        bn_scene_destroy(s);
+    }
+}

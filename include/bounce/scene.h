@@ -38,6 +38,8 @@ typedef struct bn_face {
     double   area;        /* scene units squared */
     size_t   source;      /* index of the input polygon it came from (0-based) */
     unsigned object;      /* index of its object (bn_scene_object_name) */
+    signed char vn;       /* its polygon's winding against its vertex normals (OBJ vn): 1 agreed, -1 did not
+                             (turned to agree unless bn_load_opts.orient keeps the winding), 0 no normals */
     unsigned line;        /* line of that polygon in the file, 0 if not known */
 } bn_face;
 
@@ -53,8 +55,14 @@ typedef struct bn_patch {
     double   centroid[3]; /* area centroid */
 } bn_patch;
 
+/* Which side of a face is its front: the winding (right-hand rule), or, where the file gives
+ * vertex normals (OBJ vn), the side they point to: a polygon wound against the sum of its corners'
+ * normals is reversed (the default; real assets keep their intended orientation in their normals,
+ * which every rasteriser shades with, while their winding goes unseen in two-sided viewers). */
+typedef enum bn_orient { BN_ORIENT_NORMALS, BN_ORIENT_WINDING } bn_orient;
 typedef struct bn_load_opts {
     bn_unit unit;            /* length unit of the file (default metres) */
+    bn_orient orient;        /* default BN_ORIENT_NORMALS */
     double  planar_tol;      /* non-planarity allowed, relative to the face's diameter (default 1e-6) */
     bn_log  log;             /* warnings: dropped faces, triangulated faces, no emitter */
 } bn_load_opts;
@@ -123,6 +131,10 @@ double             bn_scene_largest_patch_edge(const bn_scene *s);   /* longest 
 typedef struct bn_scene_stats {
     size_t input_polygons, degenerate_dropped, duplicates_dropped, nonplanar_split,
            polygons_triangulated, back_to_back;
+    /* polygons with vertex normals, those wound against them (the worst's line: the most opposed),
+     * and those reversed to agree (bn_load_opts.orient) */
+    size_t with_normals, winding_disagree, flipped;
+    unsigned winding_worst_line;
     /* from the last bn_scene_mesh: contact segments found, faces they cut, patches split and the
      * patches those became */
     size_t contact_segments, contact_faces, contact_patches_split, contact_patches_made;

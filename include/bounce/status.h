@@ -63,6 +63,7 @@ typedef enum bn_log_level { BN_LOG_DEBUG, BN_LOG_INFO, BN_LOG_WARN } bn_log_leve
     X(NONE, "none")                 /* not a warning: a note */                                   \
     X(FACE_DROPPED, "face-dropped") /* degenerate, repeated-vertex or duplicate faces dropped */  \
     X(BACK_TO_BACK, "back-to-back") /* faces back to back (a two-sided panel), both kept */       \
+    X(ORIENTATION, "orientation")   /* faces wound against their vertex normals */                \
     X(NONPLANAR, "nonplanar")       /* a polygon bent enough that its triangulation shows */      \
     X(NO_COLOURS, "no-colours")     /* a mesh file without colours: reflectance 0.5 */            \
     X(MATERIAL, "material")         /* a material defined twice, or faces without one */          \

@@ -75,6 +75,7 @@ typedef struct bn_cli_scene {
     int    self_contacts;
     double contact_gap;
     double planar_tol;
+    int    orient;         /* bn_orient */
 } bn_cli_scene;
 void bn_cli_add_scene(bn_optset *s, bn_cli_scene *o);
 /* Loads and meshes (the pipeline's first stage; transport "auto": the mesh a default solve makes,

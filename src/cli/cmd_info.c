@@ -43,6 +43,32 @@ static void bn__info_objects(const bn_scene *s)
     free(shown);
 }
 
+/* Polygons wound against their vertex normals, per object (faces: a split polygon counts per face). */
+static void bn__info_orientation(const bn_scene *s)
+{
+    size_t nf, no = bn_scene_object_count(s), *count = bn__calloc(no + 1, sizeof(size_t)), shown = 0;
+    const bn_face *faces = bn_scene_faces(s, &nf);
+    bn_scene_stats st = bn_scene_stats_get(s);
+    if (!count)
+        return;
+    if (!st.with_normals)
+        printf("orientation by winding (no vertex normals in the file)\n");
+    else if (!st.winding_disagree)
+        printf("orientation all %zu polygons with vertex normals are wound the way they point\n", st.with_normals);
+    else {
+        for (size_t f = 0; f < nf; f++)
+            count[faces[f].object] += faces[f].vn < 0;
+        printf("orientation %zu of %zu polygons with vertex normals wound against them (the most opposed at line %u), "
+               "%s; faces per object:", st.winding_disagree, st.with_normals, st.winding_worst_line,
+               st.flipped ? "turned to agree" : "kept as wound (--orient winding)");
+        for (size_t k = 0; k < no; k++)
+            if (count[k] && shown++ < 24)
+                printf("%s %s %zu", shown > 1 ? "," : "", bn_scene_object_name(s, k), count[k]);
+        printf("%s\n", shown > 24 ? ", ..." : "");
+    }
+    free(count);
+}
+
 /* Faces, vertices, bounds, area, emitters, patches, contacts and dense K's size. */
 static void bn__info_summary(const bn_scene *s, const bn_cli_scene *so)
 {
@@ -76,6 +102,7 @@ static void bn__info_summary(const bn_scene *s, const bn_cli_scene *so)
            : so->self_contacts || bn_scene_object_count(s) < 2 ? " (inside objects too)"
                                                                : " (between objects only; --self-contacts: inside them too)");
     bn__info_objects(s);
+    bn__info_orientation(s);
     bn__bytes((double)np * (double)np * 4.0, buf, sizeof buf);
     printf("dense K     %s as float (N^2 x 4 bytes; F is stored once for all channels)\n", buf);
 }

@@ -257,8 +257,8 @@ typedef struct bn__objr {
     int cur, default_mat;   /* the material in use (-1: none yet), the default one (-1: not made) */
 } bn__objr;
 
-/* "v x y z" */
-static bn_status bn__obj_vertex(bn__objr *R, char *c, bn_error *err)
+/* "v x y z", or with normal "vn x y z" */
+static bn_status bn__obj_vertex(bn__objr *R, char *c, bn_error *err, int normal)
 {
     double p[3];
     char *t[3];
@@ -266,11 +266,29 @@ static bn_status bn__obj_vertex(bn__objr *R, char *c, bn_error *err)
         t[k] = bn__token(&c);
     for (int k = 0; k < 3; k++)
         if (!bn__parse_double(t[k], &p[k]))
-            return bn_error_set(err, BN_EINPUT, "%s:%u: vertex coordinate '%s' is not a finite number", R->path, R->line,
-                                bn__show(t[k]));
-    if (!bn__soup_add_vertex(R->s, p))
+            return bn_error_set(err, BN_EINPUT, "%s:%u: %s '%s' is not a finite number", R->path, R->line,
+                                normal ? "vertex normal component" : "vertex coordinate", bn__show(t[k]));
+    if (normal ? !bn__soup_add_normal(R->s, p) : !bn__soup_add_vertex(R->s, p))
         return bn_error_set(err, BN_ENOMEM, "out of memory reading %s", R->path);
     return BN_OK;
+}
+
+/* The vn part of a reference "v//vn" or "v/vt/vn" added to the polygon's normal sum (a reference
+ * out of range: ignored, and the polygon then has no normal said to be its own: 0 is never a sum
+ * of unit normals' worth of agreement here, so it counts as none). */
+static void bn__obj_corner_normal(bn__objr *R, const char *t)
+{
+    const char *p = strchr(t, '/');
+    long long k;
+    if (!p || !(p = strchr(p + 1, '/')) || !p[1])
+        return;
+    k = strtoll(p + 1, NULL, 10);
+    if (k < 0)
+        k += (long long)R->s->nvn + 1;
+    if (k < 1 || (unsigned long long)k > R->s->nvn)
+        return;
+    for (int c = 0; c < 3; c++)
+        R->s->cur_pn[c] += R->s->vn[3 * (size_t)(k - 1) + c];
 }
 
 /* The vertex references of an "f" line into R->fv, *n of them. */
@@ -278,6 +296,7 @@ static bn_status bn__obj_face_refs(bn__objr *R, char *c, unsigned *n, bn_error *
 {
     char *t;
     *n = 0;
+    memset(R->s->cur_pn, 0, sizeof R->s->cur_pn);
     while ((t = bn__token(&c)) != NULL) {
         size_t vi;
         int r;
@@ -301,6 +320,7 @@ static bn_status bn__obj_face_refs(bn__objr *R, char *c, unsigned *n, bn_error *
             R->fv_cap = nc;
         }
         R->fv[(*n)++] = vi;
+        bn__obj_corner_normal(R, t);
     }
     return BN_OK;
 }
@@ -367,7 +387,7 @@ static bn_status bn__obj_mtllib(bn__objr *R, char *c, bn_error *err)
 /* Statements a Lambertian patch model does not need. */
 static int bn__obj_ignored(const char *kw)
 {
-    static const char *const skip[] = {"vt", "vn", "vp", "s", "l", "p", "mg", "usemap", "maplib"};
+    static const char *const skip[] = {"vt", "vp", "s", "l", "p", "mg", "usemap", "maplib"};
     for (size_t i = 0; i < sizeof skip / sizeof *skip; i++)
         if (strcmp(kw, skip[i]) == 0)
             return 1;
@@ -399,7 +419,9 @@ bn_status bn__read_obj_stream(FILE *fp, const char *path, bn__soup *s, const bn_
         if (!(kw = bn__token(&c)))
             continue;
         if (strcmp(kw, "v") == 0)
-            st = bn__obj_vertex(&R, c, err);
+            st = bn__obj_vertex(&R, c, err, 0);
+        else if (strcmp(kw, "vn") == 0)
+            st = bn__obj_vertex(&R, c, err, 1);
         else if (strcmp(kw, "f") == 0)
             st = bn__obj_face(&R, c, err);
         else if (strcmp(kw, "usemtl") == 0)

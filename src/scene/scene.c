@@ -29,6 +29,7 @@ void bn_load_opts_default(bn_load_opts *o)
 typedef struct bn__builder {
     bn_scene *sc;
     size_t faces_cap, fidx_cap;
+    signed char vn;   /* the polygon being built against its vertex normals: 1 agrees, -1 did not, 0 none */
 } bn__builder;
 
 static const double *bn__vp(const bn__soup *s, size_t i) { return s->verts + 3 * i; }
@@ -75,6 +76,7 @@ static bn_status bn__emit_face(bn__builder *b, const bn__soup *s, const size_t *
     f->area = area;
     f->source = source;
     f->line = line;
+    f->vn = b->vn;
     memcpy(sc->fidx + sc->nfidx, v, n * sizeof(size_t));
     sc->nfidx += n;
     return BN_OK;
@@ -377,7 +379,39 @@ typedef struct bn__polys {
     double area_eps;        /* a face smaller than this is below double rounding at the scene's size */
     size_t *tri, tri_cap;   /* scratch: triangles of an ear clipping, then the corners */
     size_t degenerate;
+    double worst_cos;       /* the cosine between winding and vertex normals of the worst polygon */
 } bn__polys;
+
+/* Polygon p's winding against its vertex normals (their sum, s->pn): b->vn and the counts; with
+ * BN_ORIENT_NORMALS a polygon wound against them is reversed (corners v[0 .. n)). 1 if reversed. */
+static int bn__orient(bn__builder *b, const bn__soup *s, bn__polys *P, size_t p, size_t *v, unsigned n,
+                      const bn__plane *pl)
+{
+    const double *pn = s->pn ? s->pn + 3 * p : NULL;
+    double len, c;
+    bn_scene_stats *st = &b->sc->stats;
+    b->vn = 0;
+    if (!pn || !((len = sqrt(pn[0] * pn[0] + pn[1] * pn[1] + pn[2] * pn[2])) > 0))
+        return 0;
+    st->with_normals++;
+    c = (pl->nrm[0] * pn[0] + pl->nrm[1] * pn[1] + pl->nrm[2] * pn[2]) / len;
+    b->vn = c < 0 ? -1 : 1;
+    if (c >= 0)
+        return 0;
+    if (st->winding_disagree++ == 0 || c < P->worst_cos) {
+        P->worst_cos = c;
+        st->winding_worst_line = s->line[p];
+    }
+    if (P->o->orient != BN_ORIENT_NORMALS)
+        return 0;
+    for (unsigned k = 0; k < n / 2; k++) {
+        size_t t = v[k];
+        v[k] = v[n - 1 - k];
+        v[n - 1 - k] = t;
+    }
+    st->flipped++;
+    return 1;
+}
 
 /* Polygon p (corners from idx) into faces: a triangle or a planar convex quad as it is; a
  * non-planar quad split along its 1st-3rd diagonal; anything else by ear clipping. */
@@ -402,6 +436,8 @@ static bn_status bn__build_polygon(bn__builder *b, const bn__soup *s, bn__polys 
         P->degenerate++;
         return BN_OK;
     }
+    if (bn__orient(b, s, P, p, v, n, &pl))
+        bn__polygon_plane(s, v, n, &pl);
     if (n == 3)
         return bn__emit_triangle(b, s, v[0], v[1], v[2], mat, p, line, P->area_eps, &P->degenerate);
     if (pl.dev > P->o->planar_tol * pl.diam) {
@@ -446,6 +482,25 @@ static bn_status bn__build_polygon(bn__builder *b, const bn__soup *s, bn__polys 
     return BN_OK;
 }
 
+/* Faces wound against their vertex normals: turned (said as a warning: the geometry is not the
+ * file's winding), or kept as wound (a warning: their lit side is the other one). */
+static void bn__orient_said(const bn_scene *sc, const char *path, const bn_load_opts *o)
+{
+    const bn_scene_stats *st = &sc->stats;
+    if (!st->winding_disagree)
+        return;
+    if (st->flipped)
+        bn_warnf(&o->log, BN_W_ORIENTATION, (double)st->flipped,
+                 "%s: %zu of the %zu polygons with vertex normals are wound against them (the most opposed at line %u); "
+                 "turned to face where their normals point (`orient` winding keeps the file's winding)",
+                 path, st->flipped, st->with_normals, st->winding_worst_line);
+    else
+        bn_warnf(&o->log, BN_W_ORIENTATION, (double)st->winding_disagree,
+                 "%s: %zu of the %zu polygons with vertex normals are wound against them (the most opposed at line %u); "
+                 "kept as wound (`orient` winding), so they reflect on the side their normals point away from",
+                 path, st->winding_disagree, st->with_normals, st->winding_worst_line);
+}
+
 /* Duplicates dropped, counts and warnings said, and a scene with no face refused. */
 static bn_status bn__scene_finish(bn_scene *sc, const char *path, const bn_load_opts *o, size_t degenerate,
                                   bn_error *err)
@@ -459,6 +514,7 @@ static bn_status bn__scene_finish(bn_scene *sc, const char *path, const bn_load_
                 degenerate == 1 ? "" : "s");
     if (sc->nfaces == 0)
         return bn_error_set(err, BN_EINPUT, "%s: no face with a non-zero area", path);
+    bn__orient_said(sc, path, o);
     if (bn_scene_emitter_count(sc) == 0)
         bn_warnf(&o->log, BN_W_NO_EMITTER, NAN, "%s: no emitter (no material with Ke > 0): the result will be black", path);
     return BN_OK;

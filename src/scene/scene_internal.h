@@ -26,12 +26,19 @@ typedef struct bn__soup {
     unsigned  cur_obj;    /* the object bn__soup_add_polygon gives a polygon */
     char    (*objnames)[BN_NAME_MAX];
     size_t    nobjs, objs_cap;
+    /* vertex normals (OBJ vn) and, per polygon, the sum of its corners' normals (pn; NULL while no
+     * polygon has any; a zero sum: none), the polygon's intended front */
+    double   *vn;
+    size_t    nvn, vn_cap;
+    double   *pn;
+    double    cur_pn[3];   /* what bn__soup_add_polygon gives the next polygon */
 } bn__soup;
 
 void bn__soup_free(bn__soup *s);
 int bn__soup_add_vertex(bn__soup *s, const double p[3]);                 /* 0 on OOM */
 int bn__soup_add_polygon(bn__soup *s, const size_t *idx, unsigned n, unsigned mat, unsigned line);
 int bn__soup_add_material(bn__soup *s, const bn_material *m);
+int bn__soup_add_normal(bn__soup *s, const double n[3]);                  /* a vn; 0 on OOM */
 /* The object the next polygons belong to, by name (a new one, or the one of that name); 0 on OOM. */
 int bn__soup_use_object(bn__soup *s, const char *name);
 /* One material per distinct key among keys[6 p .. 6 p + 6) (reflectance RGB, emission RGB) of

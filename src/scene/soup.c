@@ -16,6 +16,8 @@ void bn__soup_free(bn__soup *s)
     free(s->mats);
     free(s->obj);
     free(s->objnames);
+    free(s->vn);
+    free(s->pn);
     memset(s, 0, sizeof *s);
 }
 
@@ -53,14 +55,20 @@ int bn__soup_add_polygon(bn__soup *s, const size_t *idx, unsigned n, unsigned ma
     size_t cap = s->polys_cap;
     if (s->npolys + 1 > cap) {
         size_t c1 = cap, c2 = cap, c3 = cap;
-        size_t c4 = cap;
+        size_t c4 = cap, c5 = cap;
         if (!bn__grow((void **)&s->counts, &c1, s->npolys + 1, sizeof(unsigned)) ||
             !bn__grow((void **)&s->mat, &c2, s->npolys + 1, sizeof(unsigned)) ||
             !bn__grow((void **)&s->line, &c3, s->npolys + 1, sizeof(unsigned)) ||
-            (s->nobjs && !bn__grow((void **)&s->obj, &c4, s->npolys + 1, sizeof(unsigned))))
+            (s->nobjs && !bn__grow((void **)&s->obj, &c4, s->npolys + 1, sizeof(unsigned))) ||
+            (s->pn && !bn__grow((void **)&s->pn, &c5, s->npolys + 1, 3 * sizeof(double))))
             return 0;
         s->polys_cap = c1;
     }
+    if (!s->pn && (s->cur_pn[0] != 0 || s->cur_pn[1] != 0 || s->cur_pn[2] != 0) &&
+        !(s->pn = bn__calloc(s->polys_cap, 3 * sizeof(double))))   /* the first polygon with normals */
+        return 0;
+    if (s->pn)
+        memcpy(s->pn + 3 * s->npolys, s->cur_pn, sizeof s->cur_pn);
     if (s->obj)
         s->obj[s->npolys] = s->cur_obj;
     if (!bn__grow((void **)&s->idx, &s->idx_cap, s->nidx + n, sizeof(size_t)))
@@ -71,6 +79,14 @@ int bn__soup_add_polygon(bn__soup *s, const size_t *idx, unsigned n, unsigned ma
     s->mat[s->npolys] = mat;
     s->line[s->npolys] = line;
     s->npolys++;
+    return 1;
+}
+
+int bn__soup_add_normal(bn__soup *s, const double n[3])
+{
+    if (!bn__grow((void **)&s->vn, &s->vn_cap, s->nvn + 1, 3 * sizeof(double)))
+        return 0;
+    memcpy(s->vn + 3 * s->nvn++, n, 3 * sizeof(double));
     return 1;
 }
 
