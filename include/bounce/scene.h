@@ -38,6 +38,7 @@ typedef struct bn_face {
     double   area;        /* scene units squared */
     size_t   source;      /* index of the input polygon it came from (0-based) */
     unsigned object;      /* index of its object (bn_scene_object_name) */
+    unsigned char back;   /* 1: the back side of a two-sided face, the face before it wound the other way */
     signed char vn;       /* its polygon's winding against its vertex normals (OBJ vn): 1 agreed, -1 did not
                              (turned to agree unless bn_load_opts.orient keeps the winding), 0 no normals */
     unsigned line;        /* line of that polygon in the file, 0 if not known */
@@ -63,6 +64,9 @@ typedef enum bn_orient { BN_ORIENT_NORMALS, BN_ORIENT_WINDING } bn_orient;
 typedef struct bn_load_opts {
     bn_unit unit;            /* length unit of the file (default metres) */
     bn_orient orient;        /* default BN_ORIENT_NORMALS */
+    /* Materials whose faces reflect and emit on both sides, each side a surface of its own with its
+     * own radiance: "all", or material names separated by commas; NULL or "": none (one-sided). */
+    const char *two_sided;
     double  planar_tol;      /* non-planarity allowed, relative to the face's diameter (default 1e-6) */
     bn_log  log;             /* warnings: dropped faces, triangulated faces, no emitter */
 } bn_load_opts;
@@ -159,6 +163,8 @@ size_t bn_scene_emitter_count(const bn_scene *s);   /* faces with Le > 0 in any 
 /* Objects group faces for counts, contact cuts and partitions: the file's own groups when it names
  * two or more (OBJ `o`/`g`), else the material names' prefixes up to the first '_' (`couch_Chrome`
  * and `couch_Fabric`: "couch"). */
+/* 1 if material m's faces reflect and emit on both sides (bn_load_opts.two_sided). */
+int         bn_scene_material_two_sided(const bn_scene *s, size_t m);
 size_t      bn_scene_object_count(const bn_scene *s);
 const char *bn_scene_object_name(const bn_scene *s, size_t k);
 int         bn_scene_objects_from_file(const bn_scene *s);   /* 1: the file's groups; 0: material prefixes */

@@ -72,6 +72,7 @@ void bn_cli_pipeline_opts(const bn_cli_scene *so, const bn_cli_ff *ff, const bn_
     if (so->planar_tol > 0)
         out->load.planar_tol = so->planar_tol;
     out->load.orient = (bn_orient)so->orient;
+    out->load.two_sided = so->two_sided;
     out->load.log = (bn_log){bn_cli_log, (void *)c, c->quiet};
     out->mesh.patch_size = so->patch_size;
     if (so->patches)

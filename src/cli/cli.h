@@ -76,6 +76,7 @@ typedef struct bn_cli_scene {
     double contact_gap;
     double planar_tol;
     int    orient;         /* bn_orient */
+    const char *two_sided; /* bn_load_opts.two_sided */
 } bn_cli_scene;
 void bn_cli_add_scene(bn_optset *s, bn_cli_scene *o);
 /* Loads and meshes (the pipeline's first stage; transport "auto": the mesh a default solve makes,

@@ -66,6 +66,7 @@ bn_status bn_rt_create(const bn_scene *scene, int threads, bn_rt **out, bn_error
     }
     rtcSetDeviceErrorFunction(rt->device, bn__embree_error, &local);
     rt->rtscene = rtcNewScene(rt->device);
+    rtcSetSceneFlags(rt->rtscene, RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION);   /* bn__front_only */
     rtcSetSceneBuildQuality(rt->rtscene, RTC_BUILD_QUALITY_HIGH);
     geom = rtcNewGeometry(rt->device, RTC_GEOMETRY_TYPE_TRIANGLE);
     vb = rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), npv);
@@ -96,6 +97,7 @@ bn_status bn_rt_create(const bn_scene *scene, int threads, bn_rt **out, bn_error
             }
         }
     }
+    rtcSetGeometryUserData(geom, rt);
     rtcCommitGeometry(geom);
     rtcAttachGeometry(rt->rtscene, geom);
     rtcReleaseGeometry(geom);
@@ -147,6 +149,46 @@ static void bn__ray_init(struct RTCRay *r, const double o[3], const double d[3],
     r->flags = 0;
 }
 
+/* A context filter that keeps only hits on a patch's front: the second look of bn_rt_intersect. */
+static void bn__front_only(const struct RTCFilterFunctionNArguments *a)
+{
+    const bn_rt *rt = a->geometryUserPtr;
+    const bn_patch *patches = bn_scene_patches(rt->scene, NULL);
+    const float *ray = (const float *)a->ray;        /* SOA: dir_x at 4N, dir_y 5N, dir_z 6N (rtcore_ray.h) */
+    const unsigned *hit = (const unsigned *)a->hit;  /* primID at 5N */
+    unsigned N = a->N;
+    for (unsigned i = 0; i < N; i++) {
+        const bn_patch *p;
+        if (a->valid[i] != -1)
+            continue;
+        p = &patches[rt->prim_patch[hit[5 * N + i]]];
+        if (p->normal[0] * ray[4 * N + i] + p->normal[1] * ray[5 * N + i] + p->normal[2] * ray[6 * N + i] >= 0)
+            a->valid[i] = 0;
+    }
+}
+
+/* Where a ray meets the back of a patch, another patch may lie back to back with it (a two-sided
+ * surface: its two sides, or a thin panel modelled as two faces), at the same distance: Embree
+ * reports either. The front one is the surface the ray sees; look for it within 4 eps. */
+static void bn__prefer_front(const bn_rt *rt, const double o[3], const double d[3], bn_hit *hit)
+{
+    struct RTCIntersectContext ctx;
+    struct RTCRayHit rh;
+    double dl = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]), w = 4 * rt->eps / dl;
+    rtcInitIntersectContext(&ctx);
+    ctx.filter = bn__front_only;
+    bn__ray_init(&rh.ray, o, d, fmax(0, hit->t - w), hit->t + w);
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(rt->rtscene, &ctx, &rh);
+    if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID)
+        return;
+    hit->patch = rt->prim_patch[rh.hit.primID];
+    hit->t = rh.ray.tfar;
+    bn_v3_madd(o, hit->t, d, hit->p);
+    hit->front = 1;
+}
+
 int bn_rt_intersect(const bn_rt *rt, const double o[3], const double d[3], double tnear, double tfar, bn_hit *hit)
 {
     struct RTCIntersectContext ctx;
@@ -165,6 +207,8 @@ int bn_rt_intersect(const bn_rt *rt, const double o[3], const double d[3], doubl
     hit->t = rh.ray.tfar;
     bn_v3_madd(o, hit->t, d, hit->p);
     hit->front = bn_v3_dot(patches[hit->patch].normal, d) < 0;
+    if (!hit->front)
+        bn__prefer_front(rt, o, d, hit);
     return 1;
 }
 

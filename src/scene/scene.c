@@ -236,7 +236,7 @@ static bn_status bn__drop_duplicates(bn_scene *sc, const char *path, const bn_lo
                 sc->stats.duplicates_dropped++;
                 bn_warnf(log, BN_W_FACE_DROPPED, 1, "%s:%u: face duplicates the face at line %u; dropped", path, b->line,
                         a->line);
-            } else {
+            } else if (!(a->source == b->source && (a->back || b->back))) {   /* not a two-sided face's sides */
                 sc->stats.back_to_back++;
                 bn_warnf(log, BN_W_BACK_TO_BACK, NAN,
                         "%s:%u: face lies back to back with the face at line %u (a two-sided panel); both kept",
@@ -557,6 +557,8 @@ bn_status bn__scene_build(const char *path, const bn__soup *s, const bn_load_opt
     if (st == BN_ENOMEM)
         bn_error_set(err, st, "out of memory building faces of %s", path);
     if (st == BN_OK)
+        st = bn__scene_two_sided(sc, path, o->two_sided, err);
+    if (st == BN_OK)
         st = bn__scene_finish(sc, path, o, P.degenerate, err);
     if (st == BN_OK && bn__scene_objects(sc, s) != BN_OK)
         st = bn_error_set(err, BN_ENOMEM, "out of memory for the objects of %s", path);
@@ -652,6 +654,7 @@ void bn_scene_destroy(bn_scene *s)
     free(s->pverts);
     free(s->objnames);
     free(s->obj_assembly);
+    free(s->mat_two_sided);
     free(s);
 }
 

@@ -64,6 +64,9 @@ int bn__grow(void **p, size_t *cap, size_t need, size_t elem);
 bn_status bn__scene_build(const char *path, const bn__soup *soup, const bn_load_opts *o,
                           bn_scene **out, bn_error *err);
 
+/* The back sides of the faces of two-sided materials (spec: bn_load_opts.two_sided), appended
+ * (src/scene/twosided.c). */
+bn_status bn__scene_two_sided(bn_scene *sc, const char *path, const char *spec, bn_error *err);
 /* The scene's objects and each face's (src/scene/objects.c), after its faces are built. */
 bn_status bn__scene_objects(bn_scene *sc, const bn__soup *s);
 /* The mesher's patch geometry (area, centroid, normal) from its corners. */
@@ -98,6 +101,7 @@ struct bn_scene {
     char       (*objnames)[BN_NAME_MAX];   /* objects (src/scene/objects.c) */
     size_t       nobjs;
     unsigned char *obj_assembly;          /* per object: one model's parts (no contact cuts inside) */
+    unsigned char *mat_two_sided;         /* per material, or NULL: none two-sided */
     int          objects_from_file;       /* 1: the file's groups; 0: material-name prefixes */
 };
 

@@ -1,0 +1,123 @@
+/* Two-sided surfaces (bn_load_opts.two_sided): a plate floating at the centre of a closed unit cube.
+ * The furnace: rho 0.5 and Le 1 on every surface, both sides of the plate included, gives L = 2 on
+ * every patch (every row of F sums to 1 in a closed scene: L = Le / (1 - rho)); with the plate
+ * one-sided the walls lose the light that meets its back, so they fall below 2 (the test sees the
+ * difference). Lit by the walls alone the two sides of the plate, mirror images of each other in the
+ * plane y = 0.5, receive the same light. And the ray caster returns the side a ray meets. */
+#include "bn_test.h"
+#include "bounce/pipeline.h"
+#include "bounce/rt.h"
+
+/* The cube [0,1]^3 facing in (material wall), the plate y = 0.5, x and z in [0.3, 0.7], wound to
+ * face up (material plate). */
+static void write_room(const char *wall_ke, const char *plate_ke)
+{
+    FILE *m = fopen(bn_test_tmp("room.mtl"), "w"), *f = fopen(bn_test_tmp("room.obj"), "w");
+    BN_ASSERT(m && f);
+    fprintf(m, "newmtl wall\nKd 0.5 0.5 0.5\nKe %s\nnewmtl plate\nKd 0.5 0.5 0.5\nKe %s\n", wall_ke, plate_ke);
+    fclose(m);
+    fprintf(f, "mtllib room.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n");
+    /* each wound to face into the cube (right-hand rule, checked by hand) */
+    fprintf(f, "usemtl wall\nf 1 2 3 4\nf 5 8 7 6\nf 1 5 6 2\nf 4 3 7 8\nf 1 4 8 5\nf 2 6 7 3\n");
+    fprintf(f, "usemtl plate\nv 0.3 0.5 0.3\nv 0.3 0.5 0.7\nv 0.7 0.5 0.7\nv 0.7 0.5 0.3\nf 9 10 11 12\n");
+    fclose(f);
+}
+
+static void run(const char *two_sided, bn_pipeline *p)
+{
+    bn_pipeline_opts o;
+    bn_error err;
+    bn_pipeline_opts_default(&o);
+    o.load.log.quiet = 1;
+    o.load.two_sided = two_sided;
+    o.mesh.target_patches = 200;
+    o.transport = "dense";
+    o.ff.quiet = 1;
+    o.solve.quiet = 1;
+    o.solve.tol = 1e-12;
+    o.keep_rt = 1;
+    if (bn_pipeline_run(bn_test_tmp("room.obj"), &o, p, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+}
+
+/* Mean L (channel 0) over the patches of the plate's front (back = 0) or back side (1), or of the
+ * walls (back = -1); their count. */
+static double mean_L(const bn_pipeline *p, int back, size_t *n)
+{
+    size_t np, nf;
+    const bn_patch *pt = bn_scene_patches(p->scene, &np);
+    const bn_face *fc = bn_scene_faces(p->scene, &nf);
+    double s = 0, a = 0;
+    *n = 0;
+    for (size_t i = 0; i < np; i++) {
+        const bn_face *f = &fc[pt[i].face];
+        int is_plate = strcmp(bn_scene_materials(p->scene, NULL)[f->material].name, "plate") == 0;
+        if (back < 0 ? is_plate : !is_plate || f->back != back)
+            continue;
+        s += pt[i].area * p->res.L[3 * i];
+        a += pt[i].area;
+        (*n)++;
+    }
+    return s / a;
+}
+
+BN_TEST(furnace_with_a_two_sided_plate)
+{
+    bn_pipeline p;
+    size_t np, n;
+    double worst = 0, walls_one_sided;
+    write_room("1 1 1", "1 1 1");
+    run("plate", &p);
+    bn_scene_patches(p.scene, &np);
+    for (size_t i = 0; i < np; i++)
+        worst = fmax(worst, fabs(p.res.L[3 * i] - 2));
+    fprintf(stderr, "two-sided plate: %zu patches (%zu on the plate's back), worst |L - 2| %.3g\n", np,
+            (mean_L(&p, 1, &n), n), worst);
+    BN_ASSERT_GT(n, 0);
+    BN_ASSERT_LT(worst, 2e-3);
+    bn_pipeline_free(&p);
+    run(NULL, &p);
+    walls_one_sided = mean_L(&p, -1, &n);
+    fprintf(stderr, "one-sided plate: the walls' mean L %.5f\n", walls_one_sided);
+    BN_ASSERT_LT(walls_one_sided, 1.99);
+    bn_pipeline_free(&p);
+}
+
+BN_TEST(two_sided_plate_sides_agree_by_symmetry)
+{
+    bn_pipeline p;
+    size_t nt, nb;
+    double top, bottom;
+    write_room("1 1 1", "0 0 0");
+    run("plate", &p);
+    top = mean_L(&p, 0, &nt);
+    bottom = mean_L(&p, 1, &nb);
+    fprintf(stderr, "plate lit by the walls: top %.6f (%zu patches), bottom %.6f (%zu)\n", top, nt, bottom, nb);
+    BN_ASSERT_EQ(nt, nb);
+    BN_ASSERT_LT(fabs(top - bottom), 2e-3 * top);
+    BN_ASSERT_GT(top, 0.5);   /* the walls' own emission at least, reflected: rho x 1 */
+    bn_pipeline_free(&p);
+}
+
+/* A ray down onto the plate meets its front (face back = 0), a ray up its back side (back = 1),
+ * each on the front of what it hits, wherever it lands (a 16 x 16 grid over the plate). */
+BN_TEST(rays_meet_the_side_they_see)
+{
+    bn_pipeline p;
+    size_t nf, wrong = 0;
+    const bn_face *fc;
+    write_room("1 1 1", "1 1 1");
+    run("plate", &p);
+    fc = bn_scene_faces(p.scene, &nf);
+    for (int k = 0; k < 256; k++)
+        for (int up = 0; up < 2; up++) {
+            double o[3] = {0.31 + 0.38 * (k % 16) / 15.0, up ? 0.1 : 0.9, 0.31 + 0.38 * (k / 16) / 15.0};
+            double d[3] = {0, up ? 1 : -1, 0};
+            bn_hit h;
+            BN_ASSERT(bn_rt_intersect(p.rt, o, d, 0, 10, &h));
+            wrong += !h.front || fc[bn_scene_patches(p.scene, NULL)[h.patch].face].back != up;
+        }
+    fprintf(stderr, "%zu of 512 rays met the wrong side\n", wrong);
+    BN_ASSERT_EQ(wrong, 0);
+    bn_pipeline_free(&p);
+}
