@@ -469,12 +469,16 @@ bn_status bn__pass(const bn__ref *R, bn__worker *W, int nt, bn__vec *work, bn__p
     bn__vec out = {0};
     bn__progress prog;
     size_t done = 0, round = 0;
+    char lbl[64];
     st->splits = 0;
     while (work->n) {
         volatile int oom = 0;
         long ln = (long)work->n;
         done = 0;
-        bn__progress_begin(&prog, label, work->n, R->o->quiet || round > 0);
+        /* every round its own bar (or, in a log, a line now and then): a round of a few links
+         * between large clusters can take minutes */
+        snprintf(lbl, sizeof lbl, "%s, round %zu", label, round + 1);
+        bn__progress_begin(&prog, lbl, work->n, R->o->quiet);
 #pragma omp parallel num_threads(nt)
         {
             bn__worker *w = &W[omp_get_thread_num()];
