@@ -518,6 +518,24 @@ big_scene() {
     echo "| $name | $polys | $(awk -v a="$t0" -v b="$t1" 'BEGIN { printf "%.1f", b - a }') | ${peak:-n/a} | ${links:-n/a} | ${bpl:-n/a} | ${rho:-n/a} | $diff | $means |" >>"$dest"
 }
 
+# The living room (issue 33): a whole default `bounces` run (512x512 from its camera sidecar), its
+# row: wall time, peak memory, patches, links, emitters, the contacts and the gather's choice.
+interior_scene() {
+    local sc=$1 dest=$2 name t0 t1 rc peak links patches emitters contacts
+    name=$(basename "$sc" .obj)
+    t0=$(date +%s.%N)
+    timeout 2700 /usr/bin/time -v "$bounce" bounces "$sc" --unit m -o "$work/$name.exr" >"$work/$name.out" \
+        2>"$work/$name.err"
+    rc=$?
+    t1=$(date +%s.%N)
+    peak=$(sed -n 's/.*Maximum resident set size (kbytes): //p' "$work/$name.err" | awk '{ printf "%.0f", $1 / 1024 }')
+    links=$(sed -n 's/.*hierarchy pass [0-9]*: \([0-9]*\) links.*/\1/p' "$work/$name.err" | tail -1)
+    patches=$(sed -n 's/.*dense F of \([0-9]*\) patches.*/\1/p' "$work/$name.err" | tail -1)
+    emitters=$(sed -n 's/^gather: .* \([0-9]*\) emitting face.*/\1/p' "$work/$name.err" "$work/$name.out" | tail -1)
+    contacts=$(sed -n 's/.*contact lines: \([0-9]* segments on [0-9]* faces\).*/\1/p' "$work/$name.err" | tail -1)
+    echo "| $name | $(awk -v a="$t0" -v b="$t1" 'BEGIN { printf "%.0f", b - a }') | ${peak:-n/a} | ${patches:-n/a} | ${links:-n/a} | ${emitters:-n/a} | ${contacts:-n/a} | exit $rc$([ "$rc" = 0 ] || echo ": $(tail -1 "$work/$name.err")") |" >>"$dest"
+}
+
 # ---- large scenes (--big): wall time, peak memory and image means of whole runs ----
 if [ "$big" = 1 ]; then
     big_report="$work/big.md"   # kept as bench/big.md between runs (a --big run takes ~40 minutes)
@@ -554,6 +572,21 @@ if [ "$big" = 1 ]; then
             big_scene "$work/$name.obj" "$work/bunny-box.means"
         done
         echo >>"$big_report"
+        if [ -f "$shared/scenes/living-room/living-room.obj" ]; then
+            note "large scenes: the living room (issue 33)"
+            cp "$shared/scenes/living-room/"living-room.* "$work/"
+            {
+                echo "## Real interiors: the living room with the defaults"
+                echo
+                echo "\`bounce bounces living-room.obj --unit m\` (../shared/data/scenes/living-room: nine CC0 furniture models,"
+                echo "199,536 triangles, four emitters; 512x512 from its camera sidecar). Target (issue 33): 3 minutes and 2 GiB."
+                echo
+                echo "| scene | wall s | peak MiB | patches | links | emitting faces | contacts | result |"
+                echo "|---|---|---|---|---|---|---|---|"
+            } >>"$big_report"
+            interior_scene "$work/living-room.obj" "$big_report"
+            echo >>"$big_report"
+        fi
         # the MPI identity checks on the bunny box (tests/mpi_check.sh with BN_TEST_BIG=1: out of the
         # suite's budget, a big scene)
         if command -v mpirun >/dev/null 2>&1 && grep -q "BOUNCE_MPI:BOOL=ON" "$build/CMakeCache.txt" 2>/dev/null; then
