@@ -91,7 +91,7 @@ static void bn__bounces_options(bn_optset *set, bn__bounces_cli *a, bn_cli_commo
         "OpenEXR (channels KE.R, KE.G, KE.B, ...; radiance in W m^-2 sr^-1), an sRGB PNG per layer\n"
         "(out.<layer>.png) and a contact sheet (out.sheet.png): row 1 every layer at one exposure, row 2 each\n"
         "normalised on its own. Each pixel by the final gather at the point it sees (KE in closed form with\n"
-        "shadow rays, higher terms gathered from the solution; default mesh 300 patches), or with --gather none\n"
+        "shadow rays, higher terms gathered from the solution; default mesh " BN__STR(BN_GATHER_PATCHES) " patches), or with --gather none\n"
         "the value of the patch it sees. The camera comes from NAME.camera beside the scene if it exists; flags\n"
         "override.";
     bn_optset_add(set, (bn_opt){"bounces", 'n', BN_OPT_INT, &a->n, NULL, 0, 64, "K",
