@@ -25,13 +25,18 @@ static size_t bn__name_index(char (**names)[BN_NAME_MAX], size_t *n, size_t *cap
     return k;
 }
 
-/* Objects from the material names' prefixes: per material, its object's index into mobj. */
+/* Objects from the material names' prefixes (of the materials some face uses): per material, its
+ * object's index into mobj. */
 static bn_status bn__objects_from_materials(bn_scene *sc, unsigned *mobj)
 {
     size_t cap = 0, acap = 0;
+    for (size_t f = 0; f < sc->nfaces; f++)
+        mobj[sc->faces[f].material] = 1;   /* used */
     for (size_t m = 0; m < sc->nmats; m++) {
         char key[BN_NAME_MAX];
         size_t k, before = sc->nobjs;
+        if (!mobj[m])
+            continue;
         snprintf(key, sizeof key, "%s", sc->mats[m].name);
         key[strcspn(key, "_")] = '\0';
         if (!key[0])
