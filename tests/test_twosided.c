@@ -7,10 +7,11 @@
 #include "bn_test.h"
 #include "bounce/pipeline.h"
 #include "bounce/rt.h"
+#include "bounce/bake.h"
 
 /* The cube [0,1]^3 facing in (material wall), the plate y = 0.5, x and z in [0.3, 0.7], wound to
  * face up (material plate). */
-static void write_room(const char *wall_ke, const char *plate_ke)
+static void write_room_lamp(const char *wall_ke, const char *plate_ke, int lamp)
 {
     FILE *m = fopen(bn_test_tmp("room.mtl"), "w"), *f = fopen(bn_test_tmp("room.obj"), "w");
     BN_ASSERT(m && f);
@@ -20,8 +21,18 @@ static void write_room(const char *wall_ke, const char *plate_ke)
     /* each wound to face into the cube (right-hand rule, checked by hand) */
     fprintf(f, "usemtl wall\nf 1 2 3 4\nf 5 8 7 6\nf 1 5 6 2\nf 4 3 7 8\nf 1 4 8 5\nf 2 6 7 3\n");
     fprintf(f, "usemtl plate\nv 0.3 0.5 0.3\nv 0.3 0.5 0.7\nv 0.7 0.5 0.7\nv 0.7 0.5 0.3\nf 9 10 11 12\n");
+    if (lamp)   /* a small lamp on the floor under the plate, facing up */
+        fprintf(f, "usemtl lamp\nv 0.45 0.01 0.45\nv 0.45 0.01 0.55\nv 0.55 0.01 0.55\nv 0.55 0.01 0.45\nf 13 14 15 16\n");
     fclose(f);
+    if (lamp) {
+        m = fopen(bn_test_tmp("room.mtl"), "a");
+        BN_ASSERT(m != NULL);
+        fprintf(m, "newmtl lamp\nKd 0 0 0\nKe 20 20 20\n");
+        fclose(m);
+    }
 }
+
+static void write_room(const char *wall_ke, const char *plate_ke) { write_room_lamp(wall_ke, plate_ke, 0); }
 
 static void run(const char *two_sided, bn_pipeline *p)
 {
@@ -119,5 +130,52 @@ BN_TEST(rays_meet_the_side_they_see)
         }
     fprintf(stderr, "%zu of 512 rays met the wrong side\n", wrong);
     BN_ASSERT_EQ(wrong, 0);
+    bn_pipeline_free(&p);
+}
+
+/* A bake writes each side of a two-sided face with its own vertices and values: lit by a lamp under
+ * the plate, the bake's vertices on the plate's underside (those of its back-side patches) carry
+ * the underside's patch values, several times the top's, and the top's vertices the top's (each a
+ * mean of its side's patches: within the range of that side's patch values). */
+BN_TEST(bake_keeps_each_side)
+{
+    bn_pipeline p;
+    bn_bake *b = NULL;
+    bn_error err;
+    size_t np, nv;
+    const bn_patch *pt;
+    const bn_face *fc;
+    double *vv, lo[2] = {INFINITY, INFINITY}, hi[2] = {0, 0}, vlo[2] = {INFINITY, INFINITY}, vhi[2] = {0, 0};
+    write_room_lamp("0 0 0", "0 0 0", 1);
+    run("plate", &p);
+    pt = bn_scene_patches(p.scene, &np);
+    fc = bn_scene_faces(p.scene, NULL);
+    BN_ASSERT_STATUS(bn_bake_create(p.scene, 30, &b, &err), BN_OK);
+    nv = bn_bake_vertex_count(b);
+    vv = malloc(3 * nv * sizeof *vv);
+    BN_ASSERT(vv != NULL);
+    bn_bake_vertex_values(b, p.res.L, vv);
+    for (size_t i = 0; i < np; i++) {
+        const bn_face *f = &fc[pt[i].face];
+        int side = f->back;
+        if (strcmp(bn_scene_materials(p.scene, NULL)[f->material].name, "plate") != 0)
+            continue;
+        lo[side] = fmin(lo[side], p.res.L[3 * i]);
+        hi[side] = fmax(hi[side], p.res.L[3 * i]);
+        for (unsigned k = 0; k < pt[i].ncorners; k++) {
+            double v = vv[3 * bn_bake_corner_vertex(b, i, k)];
+            vlo[side] = fmin(vlo[side], v);
+            vhi[side] = fmax(vhi[side], v);
+        }
+    }
+    fprintf(stderr, "plate top: patches %.4g .. %.4g, bake vertices %.4g .. %.4g; underside: patches %.4g .. %.4g, "
+            "vertices %.4g .. %.4g\n", lo[0], hi[0], vlo[0], vhi[0], lo[1], hi[1], vlo[1], vhi[1]);
+    BN_ASSERT_GT(lo[1], 3 * hi[0]);   /* the lamp lights the underside */
+    for (int s = 0; s < 2; s++) {
+        BN_ASSERT_GT(vlo[s], lo[s] * (1 - 1e-9));
+        BN_ASSERT_LT(vhi[s], hi[s] * (1 + 1e-9));
+    }
+    free(vv);
+    bn_bake_destroy(b);
     bn_pipeline_free(&p);
 }
