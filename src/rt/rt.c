@@ -23,94 +23,97 @@ static void bn__embree_error(void *user, enum RTCError code, const char *str)
         bn_error_set(err, code == RTC_ERROR_OUT_OF_MEMORY ? BN_ENOMEM : BN_EINTERNAL, "Embree: %s", str ? str : "error");
 }
 
-bn_status bn_rt_create(const bn_scene *scene, int threads, bn_rt **out, bn_error *err)
+/* The device with the caller's thread count (BOUNCE_EMBREE_CONFIG adds settings, e.g. "isa=sse4.2"
+ * under valgrind), and an empty scene that allows the context filter (bn__front_only). */
+static bn_status bn__rt_device(bn_rt *rt, int threads, bn_error *err)
 {
-    size_t np, npv, ntri = 0;
-    const bn_patch *patches = bn_scene_patches(scene, &np);
-    const double *pv = bn_scene_patch_vertices(scene, &npv);
-    bn_rt *rt;
     char cfg[256];
-    RTCGeometry geom;
-    float *vb;
-    unsigned *ib;
-    double lo[3], hi[3], m = 0;
-    bn_error local;
-
-    *out = NULL;
-    if (np == 0)
-        return bn_error_set(err, BN_EINPUT, "%s: the scene has no patches (mesh it first)", bn_scene_path(scene));
-    if (npv > 0xffffffffu)
-        return bn_error_set(err, BN_ENOMEM, "too many patch vertices for Embree's 32-bit indices (%zu)", npv);
-    for (size_t i = 0; i < np; i++)
-        ntri += patches[i].ncorners == 4 ? 2 : 1;
-    rt = calloc(1, sizeof *rt);
-    if (!rt)
-        return bn_error_set(err, BN_ENOMEM, "out of memory");
-    rt->scene = scene;
-    rt->prim_patch = bn__malloc_array(ntri, sizeof(size_t));
-    if (!rt->prim_patch) {
-        free(rt);
-        return bn_error_set(err, BN_ENOMEM, "out of memory for %zu triangles", ntri);
-    }
-    bn_error_clear(&local);
-    /* BOUNCE_EMBREE_CONFIG adds Embree device settings, e.g. "isa=sse4.2" under valgrind. */
-    {
-        const char *extra = getenv("BOUNCE_EMBREE_CONFIG");
-        snprintf(cfg, sizeof cfg, "threads=%d%s%s", threads > 0 ? threads : 0, extra ? "," : "", extra ? extra : "");
-    }
+    const char *extra = getenv("BOUNCE_EMBREE_CONFIG");
+    snprintf(cfg, sizeof cfg, "threads=%d%s%s", threads > 0 ? threads : 0, extra ? "," : "", extra ? extra : "");
     rt->device = rtcNewDevice(cfg);
-    if (!rt->device) {
-        free(rt->prim_patch);
-        free(rt);
+    if (!rt->device)
         return bn_error_set(err, BN_EINTERNAL, "Embree: cannot create a device (error %d)", (int)rtcGetDeviceError(NULL));
-    }
-    rtcSetDeviceErrorFunction(rt->device, bn__embree_error, &local);
     rt->rtscene = rtcNewScene(rt->device);
     rtcSetSceneFlags(rt->rtscene, RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION);   /* bn__front_only */
     rtcSetSceneBuildQuality(rt->rtscene, RTC_BUILD_QUALITY_HIGH);
-    geom = rtcNewGeometry(rt->device, RTC_GEOMETRY_TYPE_TRIANGLE);
-    vb = rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), npv);
-    ib = rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned), ntri);
+    return BN_OK;
+}
+
+/* The patches as float triangles (a quad as two) and prim_patch; *m: the largest |coordinate|. */
+static bn_status bn__rt_geometry(bn_rt *rt, size_t ntri, double *m, bn_error *err)
+{
+    size_t np, npv, t = 0;
+    const bn_patch *patches = bn_scene_patches(rt->scene, &np);
+    const double *pv = bn_scene_patch_vertices(rt->scene, &npv);
+    RTCGeometry geom = rtcNewGeometry(rt->device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    float *vb = rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), npv);
+    unsigned *ib = rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned), ntri);
     if (!vb || !ib) {
         rtcReleaseGeometry(geom);
-        bn_rt_destroy(rt);
         return bn_error_set(err, BN_ENOMEM, "Embree: out of memory for %zu triangles", ntri);
     }
     for (size_t i = 0; i < npv; i++)
         for (int k = 0; k < 3; k++) {
             vb[3 * i + k] = (float)pv[3 * i + k];
-            m = fmax(m, fabs(pv[3 * i + k]));
+            *m = fmax(*m, fabs(pv[3 * i + k]));
         }
-    {
-        size_t t = 0;
-        for (size_t i = 0; i < np; i++) {
-            const size_t *c = patches[i].corner;
+    for (size_t i = 0; i < np; i++) {
+        const size_t *c = patches[i].corner;
+        for (unsigned tri = 0; tri + 2 < patches[i].ncorners; tri++) {   /* (0 1 2), and (0 2 3) for a quad */
             ib[3 * t + 0] = (unsigned)c[0];
-            ib[3 * t + 1] = (unsigned)c[1];
-            ib[3 * t + 2] = (unsigned)c[2];
+            ib[3 * t + 1] = (unsigned)c[tri + 1];
+            ib[3 * t + 2] = (unsigned)c[tri + 2];
             rt->prim_patch[t++] = i;
-            if (patches[i].ncorners == 4) {
-                ib[3 * t + 0] = (unsigned)c[0];
-                ib[3 * t + 1] = (unsigned)c[2];
-                ib[3 * t + 2] = (unsigned)c[3];
-                rt->prim_patch[t++] = i;
-            }
         }
     }
     rtcSetGeometryUserData(geom, rt);
     rtcCommitGeometry(geom);
     rtcAttachGeometry(rt->rtscene, geom);
     rtcReleaseGeometry(geom);
-    rtcCommitScene(rt->rtscene);
-    rtcSetDeviceErrorFunction(rt->device, NULL, NULL);
-    if (local.status != BN_OK) {
-        bn_status st = local.status;
-        if (err)
-            *err = local;
+    return BN_OK;
+}
+
+bn_status bn_rt_create(const bn_scene *scene, int threads, bn_rt **out, bn_error *err)
+{
+    size_t np, npv, ntri = 0;
+    const bn_patch *patches = bn_scene_patches(scene, &np);
+    bn_rt *rt;
+    double m = 0;
+    bn_error local;
+    bn_status st;
+
+    *out = NULL;
+    bn_scene_patch_vertices(scene, &npv);
+    if (np == 0)
+        return bn_error_set(err, BN_EINPUT, "%s: the scene has no patches (mesh it first)", bn_scene_path(scene));
+    if (npv > 0xffffffffu)
+        return bn_error_set(err, BN_ENOMEM, "too many patch vertices for Embree's 32-bit indices (%zu)", npv);
+    for (size_t i = 0; i < np; i++)
+        ntri += patches[i].ncorners == 4 ? 2 : 1;
+    if (!(rt = calloc(1, sizeof *rt)) || !(rt->prim_patch = bn__malloc_array(ntri, sizeof(size_t)))) {
+        free(rt);
+        return bn_error_set(err, BN_ENOMEM, "out of memory for %zu triangles", ntri);
+    }
+    rt->scene = scene;
+    bn_error_clear(&local);
+    if ((st = bn__rt_device(rt, threads, err)) != BN_OK) {
         bn_rt_destroy(rt);
         return st;
     }
-    bn_scene_bounds(scene, lo, hi);
+    rtcSetDeviceErrorFunction(rt->device, bn__embree_error, &local);
+    st = bn__rt_geometry(rt, ntri, &m, err);
+    if (st == BN_OK)
+        rtcCommitScene(rt->rtscene);
+    rtcSetDeviceErrorFunction(rt->device, NULL, NULL);
+    if (st == BN_OK && local.status != BN_OK) {
+        st = local.status;
+        if (err)
+            *err = local;
+    }
+    if (st != BN_OK) {
+        bn_rt_destroy(rt);
+        return st;
+    }
     /* Float coordinates of size m are exact to m * 2^-24; 2^-14 * m leaves a margin of 1024 ulps
      * for Embree's own intersection error. */
     rt->eps = ldexp(fmax(m, 1e-30), -14);
