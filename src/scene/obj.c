@@ -113,6 +113,57 @@ static int bn__control_byte(const char *buf, ssize_t len)
     return -1;
 }
 
+/* "newmtl NAME": a new material (Kd 0.8, the MTL default, until said), or the earlier one of that
+ * name again (a warning: the later definition wins); *cur: its index. */
+static bn_status bn__mtl_newmtl(const char *path, unsigned line, char *c, bn__soup *s, const bn_log *log, int *cur,
+                                bn_error *err)
+{
+    char *name = bn__token(&c);
+    bn_material m;
+    if (!name)
+        return bn_error_set(err, BN_EINPUT, "%s:%u: newmtl without a name", path, line);
+    if (strlen(name) >= BN_NAME_MAX)
+        return bn_error_set(err, BN_EINPUT, "%s:%u: material name longer than %d characters", path, line,
+                            BN_NAME_MAX - 1);
+    if ((*cur = bn__find_material(s, name)) >= 0) {
+        bn_warnf(log, BN_W_MATERIAL, NAN, "%s:%u: material '%s' defined again; the later definition wins", path, line,
+                 name);
+        return BN_OK;
+    }
+    memset(&m, 0, sizeof m);
+    snprintf(m.name, sizeof m.name, "%s", name);
+    m.rho[0] = m.rho[1] = m.rho[2] = 0.8;
+    if (!bn__soup_add_material(s, &m))
+        return bn_error_set(err, BN_ENOMEM, "out of memory reading %s", path);
+    *cur = (int)s->nmats - 1;
+    return BN_OK;
+}
+
+/* "Kd r g b" (a reflectance in [0, 1]) or "Ke r g b" (an emission >= 0) of material cur. */
+static bn_status bn__mtl_colour(const char *path, unsigned line, const char *kw, char *c, bn__soup *s, int cur,
+                                bn_error *err)
+{
+    double v[3];
+    int is_kd = kw[1] == 'd';
+    bn_status st;
+    if (cur < 0)
+        return bn_error_set(err, BN_EINPUT, "%s:%u: %s before any newmtl", path, line, kw);
+    if ((st = bn__mtl_rgb(path, line, kw, &c, v, err)) != BN_OK)
+        return st;
+    for (int k = 0; k < 3; k++) {
+        if (is_kd && (v[k] < 0.0 || v[k] > 1.0))
+            return bn_error_set(err, BN_EINPUT,
+                                "%s:%u: material '%s': Kd %g is outside [0, 1] (reflectance above 1 makes the "
+                                "light-transport series diverge)",
+                                path, line, s->mats[cur].name, v[k]);
+        if (!is_kd && v[k] < 0.0)
+            return bn_error_set(err, BN_EINPUT, "%s:%u: material '%s': negative emission Ke %g", path, line,
+                                s->mats[cur].name, v[k]);
+    }
+    memcpy(is_kd ? s->mats[cur].rho : s->mats[cur].Le, v, sizeof v);
+    return BN_OK;
+}
+
 static bn_status bn__read_mtl(const char *path, const char *objpath, unsigned objline, bn__soup *s,
                               const bn_log *log, bn_error *err)
 {
@@ -126,73 +177,21 @@ static bn_status bn__read_mtl(const char *path, const char *objpath, unsigned ob
     if (!fp)
         return bn_error_set(err, BN_EIO, "%s:%u: cannot open material library %s: %s", objpath, objline, path,
                             strerror(errno));
-    while ((len = getline(&buf, &cap, fp)) >= 0) {
-        char *l, *kw, *c;
+    while (st == BN_OK && (len = getline(&buf, &cap, fp)) >= 0) {
+        char *c, *kw;
         int cb;
         line++;
         if ((cb = bn__control_byte(buf, len)) >= 0) {
             st = bn_error_set(err, BN_EINPUT, "%s:%u: control byte 0x%02x in MTL text (not a text file?)", path, line, cb);
             break;
         }
-        l = bn__strip(buf);
-        c = l;
-        kw = bn__token(&c);
-        if (!kw)
+        c = bn__strip(buf);
+        if (!(kw = bn__token(&c)))
             continue;
-        if (strcmp(kw, "newmtl") == 0) {
-            char *name = bn__token(&c);
-            bn_material m;
-            if (!name) {
-                st = bn_error_set(err, BN_EINPUT, "%s:%u: newmtl without a name", path, line);
-                break;
-            }
-            if (strlen(name) >= BN_NAME_MAX) {
-                st = bn_error_set(err, BN_EINPUT, "%s:%u: material name longer than %d characters", path, line,
-                                  BN_NAME_MAX - 1);
-                break;
-            }
-            if (bn__find_material(s, name) >= 0) {
-                bn_warnf(log, BN_W_MATERIAL, NAN, "%s:%u: material '%s' defined again; the later definition wins", path,
-                        line, name);
-                cur = bn__find_material(s, name);
-                continue;
-            }
-            memset(&m, 0, sizeof m);
-            snprintf(m.name, sizeof m.name, "%s", name);
-            m.rho[0] = m.rho[1] = m.rho[2] = 0.8;   /* the MTL default Kd when a material has none */
-            if (!bn__soup_add_material(s, &m)) {
-                st = bn_error_set(err, BN_ENOMEM, "out of memory reading %s", path);
-                break;
-            }
-            cur = (int)s->nmats - 1;
-        } else if (strcmp(kw, "Kd") == 0 || strcmp(kw, "Ke") == 0) {
-            double v[3];
-            int is_kd = kw[1] == 'd';
-            if (cur < 0) {
-                st = bn_error_set(err, BN_EINPUT, "%s:%u: %s before any newmtl", path, line, kw);
-                break;
-            }
-            st = bn__mtl_rgb(path, line, kw, &c, v, err);
-            if (st != BN_OK)
-                break;
-            for (int k = 0; k < 3; k++) {
-                if (is_kd && (v[k] < 0.0 || v[k] > 1.0)) {
-                    st = bn_error_set(err, BN_EINPUT,
-                                      "%s:%u: material '%s': Kd %g is outside [0, 1] (reflectance above 1 makes "
-                                      "the light-transport series diverge)",
-                                      path, line, s->mats[cur].name, v[k]);
-                    break;
-                }
-                if (!is_kd && v[k] < 0.0) {
-                    st = bn_error_set(err, BN_EINPUT, "%s:%u: material '%s': negative emission Ke %g", path, line,
-                                      s->mats[cur].name, v[k]);
-                    break;
-                }
-            }
-            if (st != BN_OK)
-                break;
-            memcpy(is_kd ? s->mats[cur].rho : s->mats[cur].Le, v, sizeof v);
-        }
+        if (strcmp(kw, "newmtl") == 0)
+            st = bn__mtl_newmtl(path, line, c, s, log, &cur, err);
+        else if (strcmp(kw, "Kd") == 0 || strcmp(kw, "Ke") == 0)
+            st = bn__mtl_colour(path, line, kw, c, s, cur, err);
         /* Ka, Ks, Ns, Ni, d, Tr, illum and maps: not part of a Lambertian model; ignored. */
     }
     free(buf);
@@ -273,9 +272,8 @@ static bn_status bn__obj_vertex(bn__objr *R, char *c, bn_error *err, int normal)
     return BN_OK;
 }
 
-/* The vn part of a reference "v//vn" or "v/vt/vn" added to the polygon's normal sum (a reference
- * out of range: ignored, and the polygon then has no normal said to be its own: 0 is never a sum
- * of unit normals' worth of agreement here, so it counts as none). */
+/* The vn part of a reference "v//vn" or "v/vt/vn" added to the polygon's normal sum (a vn index
+ * out of range is ignored: the sum is then over the corners that have one; a zero sum means none). */
 static void bn__obj_corner_normal(bn__objr *R, const char *t)
 {
     const char *p = strchr(t, '/');
