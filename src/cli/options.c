@@ -58,9 +58,66 @@ static int bn__parse_num(const char *v, double *out)
     return 1;
 }
 
-static bn_status bn__set(const bn_opt *o, const char *v, bn_error *err)
+/* "X,Y,Z": three finite numbers. */
+static bn_status bn__set_vec3(const bn_opt *o, const char *v, bn_error *err)
+{
+    double p[3];
+    char buf[256], *a, *b;
+    if (strlen(v) >= sizeof buf)
+        return bn_error_set(err, BN_EUSAGE, "--%s: value too long", o->name);
+    memcpy(buf, v, strlen(v) + 1);
+    a = strchr(buf, ',');
+    b = a ? strchr(a + 1, ',') : NULL;
+    if (!a || !b)
+        return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not X,Y,Z", o->name, v);
+    *a = *b = '\0';
+    if (!bn__parse_num(buf, &p[0]) || !bn__parse_num(a + 1, &p[1]) || !bn__parse_num(b + 1, &p[2]))
+        return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not three finite numbers X,Y,Z", o->name, v);
+    memcpy(o->dest, p, sizeof p);
+    return BN_OK;
+}
+
+/* "WIDTHxHEIGHT", each side in [min, max]. */
+static bn_status bn__set_wxh(const bn_opt *o, const char *v, bn_error *err)
+{
+    char *end;
+    const char *orig = v;
+    long w, h;
+    errno = 0;
+    w = strtol(v, &end, 10);
+    if (end == v || *end != 'x' || errno)
+        return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not WIDTHxHEIGHT", o->name, v);
+    v = end + 1;
+    h = strtol(v, &end, 10);
+    if (end == v || *end != '\0' || errno || w < o->min || h < o->min || w > o->max || h > o->max)
+        return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not WIDTHxHEIGHT with sides in [%g, %g]", o->name, orig,
+                            o->min, o->max);
+    ((int *)o->dest)[0] = (int)w;
+    ((int *)o->dest)[1] = (int)h;
+    return BN_OK;
+}
+
+/* An int, size or double within [min, max] (whole for the first two). */
+static bn_status bn__set_number(const bn_opt *o, const char *v, bn_error *err)
 {
     double x;
+    if (!bn__parse_num(v, &x))
+        return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not a finite number", o->name, v);
+    if (x < o->min || x > o->max)
+        return bn_error_set(err, BN_EUSAGE, "--%s: %s is outside [%g, %g]", o->name, v, o->min, o->max);
+    if (o->type != BN_OPT_DOUBLE && x != floor(x))
+        return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not a whole number", o->name, v);
+    if (o->type == BN_OPT_INT)
+        *(int *)o->dest = (int)x;
+    else if (o->type == BN_OPT_SIZE)
+        *(size_t *)o->dest = (size_t)x;
+    else
+        *(double *)o->dest = x;
+    return BN_OK;
+}
+
+static bn_status bn__set(const bn_opt *o, const char *v, bn_error *err)
+{
     switch (o->type) {
     case BN_OPT_FLAG:
         *(int *)o->dest = 1;
@@ -82,39 +139,10 @@ static bn_status bn__set(const bn_opt *o, const char *v, bn_error *err)
         *(int *)o->dest = i;
         return BN_OK;
     }
-    case BN_OPT_VEC3: {
-        double p[3];
-        char buf[256], *a, *b;
-        if (strlen(v) >= sizeof buf)
-            return bn_error_set(err, BN_EUSAGE, "--%s: value too long", o->name);
-        memcpy(buf, v, strlen(v) + 1);
-        a = strchr(buf, ',');
-        b = a ? strchr(a + 1, ',') : NULL;
-        if (!a || !b)
-            return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not X,Y,Z", o->name, v);
-        *a = *b = '\0';
-        if (!bn__parse_num(buf, &p[0]) || !bn__parse_num(a + 1, &p[1]) || !bn__parse_num(b + 1, &p[2]))
-            return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not three finite numbers X,Y,Z", o->name, v);
-        memcpy(o->dest, p, sizeof p);
-        return BN_OK;
-    }
-    case BN_OPT_WXH: {
-        char *end;
-        const char *orig = v;
-        long w, h;
-        errno = 0;
-        w = strtol(v, &end, 10);
-        if (end == v || *end != 'x' || errno)
-            return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not WIDTHxHEIGHT", o->name, v);
-        v = end + 1;
-        h = strtol(v, &end, 10);
-        if (end == v || *end != '\0' || errno || w < o->min || h < o->min || w > o->max || h > o->max)
-            return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not WIDTHxHEIGHT with sides in [%g, %g]", o->name,
-                                orig, o->min, o->max);
-        ((int *)o->dest)[0] = (int)w;
-        ((int *)o->dest)[1] = (int)h;
-        return BN_OK;
-    }
+    case BN_OPT_VEC3:
+        return bn__set_vec3(o, v, err);
+    case BN_OPT_WXH:
+        return bn__set_wxh(o, v, err);
     case BN_OPT_U64: {
         char *end;
         unsigned long long u;
@@ -128,19 +156,7 @@ static bn_status bn__set(const bn_opt *o, const char *v, bn_error *err)
     case BN_OPT_INT:
     case BN_OPT_SIZE:
     case BN_OPT_DOUBLE:
-        if (!bn__parse_num(v, &x))
-            return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not a finite number", o->name, v);
-        if (x < o->min || x > o->max)
-            return bn_error_set(err, BN_EUSAGE, "--%s: %s is outside [%g, %g]", o->name, v, o->min, o->max);
-        if (o->type != BN_OPT_DOUBLE && x != floor(x))
-            return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not a whole number", o->name, v);
-        if (o->type == BN_OPT_INT)
-            *(int *)o->dest = (int)x;
-        else if (o->type == BN_OPT_SIZE)
-            *(size_t *)o->dest = (size_t)x;
-        else
-            *(double *)o->dest = x;
-        return BN_OK;
+        return bn__set_number(o, v, err);
     }
     return bn_error_set(err, BN_EINTERNAL, "option type");
 }
