@@ -610,6 +610,65 @@ static int bn__sines(const bn__cx *c, const bn_patch *p, double *sn)
     return 1;
 }
 
+/* Where interior corner id would snap to: the nearest point of a contact segment within a third of
+ * the patches' width (and farther than snap); 0 for none, or a corner on the face's boundary. */
+static int bn__snap_target(const bn__cx *c, const bn_face *f, size_t id, const double (*poly)[2], double width,
+                           double to[2])
+{
+    double q[2], best = INFINITY;
+    bn__xy(c, id, q);
+    for (unsigned k = 0; k < f->nverts; k++) {
+        const double *a = poly[k], *b = poly[(k + 1) % f->nverts];
+        double len = hypot(b[0] - a[0], b[1] - a[1]);
+        if (len > 0 && fabs(bn__cross2(a, b, q)) / len <= c->edge)
+            return 0;
+    }
+    for (size_t g = 0; g < c->nsegs; g++) {
+        const bn__seg *sg = &c->segs[g];
+        double e[2] = {sg->b[0] - sg->a[0], sg->b[1] - sg->a[1]}, l2 = e[0] * e[0] + e[1] * e[1], t, p2[2], d;
+        t = l2 > 0 ? bn_clamp(((q[0] - sg->a[0]) * e[0] + (q[1] - sg->a[1]) * e[1]) / l2, 0, 1) : 0;
+        p2[0] = sg->a[0] + t * e[0];
+        p2[1] = sg->a[1] + t * e[1];
+        d = hypot(q[0] - p2[0], q[1] - p2[1]);
+        if (d < best) {
+            best = d;
+            to[0] = p2[0];
+            to[1] = p2[1];
+        }
+    }
+    return best <= width / 3 && best > c->snap;
+}
+
+/* Corner id moved to `to` (in the face's frame) if its ninc patches (indices inc) stay convex with
+ * every corner's sine at least half what it was and none wider than 4/3 of `longest`; else put back. */
+static void bn__snap_try(bn__cx *c, const bn_face *f, bn_patch *pt, const size_t *inc, size_t ninc, size_t id,
+                         const double to[2], double longest)
+{
+    double old[3], sn0[16][4];
+    int good = 1;
+    for (size_t i = 0; i < ninc && good; i++)
+        good = bn__sines(c, &pt[inc[i]], sn0[i]);
+    if (!good)
+        return;
+    memcpy(old, c->pv + 3 * id, sizeof old);
+    for (int k = 0; k < 3; k++)
+        c->pv[3 * id + k] = c->fr.o[k] + to[0] * c->fr.e1[k] + to[1] * c->fr.e2[k];
+    for (size_t i = 0; i < ninc && good; i++) {
+        const bn_patch *p = &pt[inc[i]];
+        double sn[4];
+        good = bn__sines(c, p, sn);
+        for (unsigned k = 0; k < p->ncorners && good; k++)
+            good = sn[k] >= 0.5 * sn0[i][k];
+        good = good && bn__diameter(c, p) <= 4.0 / 3.0 * longest;
+    }
+    if (!good) {
+        memcpy(c->pv + 3 * id, old, sizeof old);
+        return;
+    }
+    for (size_t i = 0; i < ninc; i++)
+        bn__scene_patch_finish(&pt[inc[i]], c->pv, f->normal);
+}
+
 /* Moves interior patch corners that lie within a third of a patch's width of a contact segment
  * onto it (its nearest point), where the patches around them stay convex with every corner's sine
  * at least half what it was and none grows wider than 4/3 of the face's widest patch (diameter).
@@ -651,55 +710,11 @@ static int bn__snap_corners(bn__cx *c, const bn_face *f, bn_patch *pt, size_t n,
             inc[start[v] + fill[v]++] = p;
         }
     for (size_t v = 0; v < nloc; v++) {
-        size_t id = v + vmin;
-        double q[2], best = INFINITY, to[2] = {0, 0}, old[3], sn0[16][4];
-        int boundary = 0, good = 1;
-        if (start[v] == start[v + 1] || start[v + 1] - start[v] > 16)
+        double to[2] = {0, 0};
+        if (start[v] == start[v + 1] || start[v + 1] - start[v] > 16 ||
+            !bn__snap_target(c, f, v + vmin, poly, width, to))
             continue;
-        bn__xy(c, id, q);
-        for (unsigned k = 0; k < f->nverts && !boundary; k++) {
-            const double *a = poly[k], *b = poly[(k + 1) % f->nverts];
-            double len = hypot(b[0] - a[0], b[1] - a[1]);
-            boundary = len > 0 && fabs(bn__cross2(a, b, q)) / len <= c->edge;
-        }
-        if (boundary)
-            continue;
-        for (size_t g = 0; g < c->nsegs; g++) {
-            const bn__seg *sg = &c->segs[g];
-            double e[2] = {sg->b[0] - sg->a[0], sg->b[1] - sg->a[1]}, l2 = e[0] * e[0] + e[1] * e[1], t, p2[2], d;
-            t = l2 > 0 ? bn_clamp(((q[0] - sg->a[0]) * e[0] + (q[1] - sg->a[1]) * e[1]) / l2, 0, 1) : 0;
-            p2[0] = sg->a[0] + t * e[0];
-            p2[1] = sg->a[1] + t * e[1];
-            d = hypot(q[0] - p2[0], q[1] - p2[1]);
-            if (d < best) {
-                best = d;
-                to[0] = p2[0];
-                to[1] = p2[1];
-            }
-        }
-        if (!(best <= width / 3) || best <= c->snap)
-            continue;
-        for (size_t i = start[v]; i < start[v + 1] && good; i++)
-            good = bn__sines(c, &pt[inc[i]], sn0[i - start[v]]);
-        if (!good)
-            continue;
-        memcpy(old, c->pv + 3 * id, sizeof old);
-        for (int k = 0; k < 3; k++)
-            c->pv[3 * id + k] = c->fr.o[k] + to[0] * c->fr.e1[k] + to[1] * c->fr.e2[k];
-        for (size_t i = start[v]; i < start[v + 1] && good; i++) {
-            const bn_patch *p = &pt[inc[i]];
-            double sn[4];
-            good = bn__sines(c, p, sn);
-            for (unsigned k = 0; k < p->ncorners && good; k++)
-                good = sn[k] >= 0.5 * sn0[i - start[v]][k];
-            good = good && bn__diameter(c, p) <= 4.0 / 3.0 * longest;
-        }
-        if (!good) {
-            memcpy(c->pv + 3 * id, old, sizeof old);
-            continue;
-        }
-        for (size_t i = start[v]; i < start[v + 1]; i++)
-            bn__scene_patch_finish(&pt[inc[i]], c->pv, f->normal);
+        bn__snap_try(c, f, pt, inc + start[v], start[v + 1] - start[v], v + vmin, to, longest);
     }
     ok = 1;
 done:
