@@ -10,21 +10,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* Name k's index in names[0 .. *n), added when new; SIZE_MAX on OOM. */
-static size_t bn__name_index(char (**names)[BN_NAME_MAX], size_t *n, size_t *cap, const char *key)
-{
-    size_t k = 0;
-    while (k < *n && strcmp((*names)[k], key) != 0)
-        k++;
-    if (k == *n) {
-        if (!bn__grow((void **)names, cap, *n + 1, sizeof **names))
-            return SIZE_MAX;
-        snprintf((*names)[k], BN_NAME_MAX, "%s", key);
-        (*n)++;
-    }
-    return k;
-}
-
 /* Objects from the material names' prefixes (of the materials some face uses): per material, its
  * object's index into mobj. */
 static bn_status bn__objects_from_materials(bn_scene *sc, unsigned *mobj)

@@ -39,6 +39,8 @@ int bn__soup_add_vertex(bn__soup *s, const double p[3]);                 /* 0 on
 int bn__soup_add_polygon(bn__soup *s, const size_t *idx, unsigned n, unsigned mat, unsigned line);
 int bn__soup_add_material(bn__soup *s, const bn_material *m);
 int bn__soup_add_normal(bn__soup *s, const double n[3]);                  /* a vn; 0 on OOM */
+/* Name key's index in (*names)[0 .. *n) (capacity *cap), appended when new; SIZE_MAX on OOM. */
+size_t bn__name_index(char (**names)[BN_NAME_MAX], size_t *n, size_t *cap, const char *key);
 /* The object the next polygons belong to, by name (a new one, or the one of that name); 0 on OOM. */
 int bn__soup_use_object(bn__soup *s, const char *name);
 /* One material per distinct key among keys[6 p .. 6 p + 6) (reflectance RGB, emission RGB) of

@@ -90,17 +90,16 @@ int bn__soup_add_normal(bn__soup *s, const double n[3])
     return 1;
 }
 
-/* Object `key`'s index, added at the end when new; SIZE_MAX on OOM. */
-static size_t bn__soup_object(bn__soup *s, const char *key)
+size_t bn__name_index(char (**names)[BN_NAME_MAX], size_t *n, size_t *cap, const char *key)
 {
     size_t k = 0;
-    while (k < s->nobjs && strcmp(s->objnames[k], key) != 0)
+    while (k < *n && strcmp((*names)[k], key) != 0)
         k++;
-    if (k == s->nobjs) {
-        if (!bn__grow((void **)&s->objnames, &s->objs_cap, s->nobjs + 1, sizeof *s->objnames))
+    if (k == *n) {
+        if (!bn__grow((void **)names, cap, *n + 1, sizeof **names))
             return SIZE_MAX;
-        snprintf(s->objnames[k], BN_NAME_MAX, "%s", key);
-        s->nobjs++;
+        snprintf((*names)[k], BN_NAME_MAX, "%s", key);
+        (*n)++;
     }
     return k;
 }
@@ -111,9 +110,9 @@ int bn__soup_use_object(bn__soup *s, const char *name)
     char key[BN_NAME_MAX];
     snprintf(key, sizeof key, "%s", name && name[0] ? name : "default");
     /* polygons before the first o/g form the object "default" (index 0: obj is zeroed) */
-    if (s->nobjs == 0 && s->npolys > 0 && bn__soup_object(s, "default") == SIZE_MAX)
+    if (s->nobjs == 0 && s->npolys > 0 && bn__name_index(&s->objnames, &s->nobjs, &s->objs_cap, "default") == SIZE_MAX)
         return 0;
-    if ((k = bn__soup_object(s, key)) == SIZE_MAX)
+    if ((k = bn__name_index(&s->objnames, &s->nobjs, &s->objs_cap, key)) == SIZE_MAX)
         return 0;
     if (!s->obj && !(s->obj = bn__calloc(s->polys_cap ? s->polys_cap : 1, sizeof(unsigned))))
         return 0;
