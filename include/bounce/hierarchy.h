@@ -74,7 +74,8 @@ typedef struct bn_hierarchy_opts {
 void bn_hierarchy_opts_default(bn_hierarchy_opts *o);
 
 /* The hierarchy's leaves are the patches: its default meshing cuts the large polygons finer than
- * dense radiosity can afford, aiming at the input polygons plus this many patches. */
+ * dense radiosity can afford, into this many patches, the polygons smaller than a patch kept
+ * whole besides (so about the input polygons plus this many). */
 #define BN_HIERARCHY_EXTRA_PATCHES 15000
 
 typedef struct bn_hierarchy_report {

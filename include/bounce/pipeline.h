@@ -38,7 +38,8 @@ typedef struct bn_pipeline_opts {
     bn_solve_opts solve;       /* method, tolerance, terms kept (solve.bounces) */
     int threads;               /* every stage's threads (0: the caller's), unless ff or solve set their own */
     int mesh_auto;             /* mesh is a default: when K is the hierarchy, re-mesh aiming at the input
-                                  polygons + BN_HIERARCHY_EXTRA_PATCHES patches */
+                                  polygons + BN_HIERARCHY_EXTRA_PATCHES patches (the target of the faces
+                                  it splits) */
     int method_auto;           /* solve.method is a default: gauss-seidel where K has rows, else jacobi
                                   (said in a note) */
     int keep_rt;               /* keep the ray scene for images and the tracer (built even when F
@@ -141,6 +142,7 @@ typedef struct bn_bounces_opts {
     int    gather_samples;     /* gather: hemisphere rays per pixel sample */
     int    gather_filter;      /* gather: same-face filter radius of the gathered terms, pixels */
     int    hit_emitters;       /* gather: K^2 E's hits take KE from the emitters up to this many (bn_gather_opts) */
+    int    tree_emitters;      /* gather: above this many emitting faces, picked from a light tree (bn_gather_opts) */
     int    quiet;              /* no progress bar */
     const bn_attr *attrs;      /* provenance for every file (borrowed); the first 4 go into PNG text */
     size_t nattrs;

@@ -88,7 +88,9 @@ bn_status bn_scene_from_arrays(const char *name, const double *verts, size_t nve
 void bn_scene_destroy(bn_scene *s);   /* NULL is a no-op */
 
 /* Patch meshing. patch_size > 0: largest patch edge in scene units; else target_patches > 0:
- * the patch size is chosen so the total count is close to it; no_subdivide: one patch per face.
+ * the patch size is chosen so the faces it splits hold close to that many patches (faces smaller
+ * than the size stay whole, besides: many small faces do not coarsen the large ones);
+ * no_subdivide: one patch per face.
  * Planar quads become regular grids, triangles uniform subdivisions. Replaces earlier patches. */
 typedef struct bn_mesh_opts {
     double patch_size;

@@ -292,7 +292,9 @@ void bn_cli_add_scene(bn_optset *s, bn_cli_scene *o)
     bn_optset_add(s, (bn_opt){"patch-size", 0, BN_OPT_DOUBLE, &o->patch_size, NULL, 1e-300, 1e300, "S",
                               "largest patch edge, scene units (default: from --patches)"});
     bn_optset_add(s, (bn_opt){"patches", 0, BN_OPT_SIZE, &o->patches, NULL, 1, 1e9, "N",
-                              "target total patch count (default " BN__STR(BN_DEFAULT_PATCHES) "; `bounce bounces` with the final gather: " BN__STR(BN_GATHER_PATCHES) ")"});
+                              "target patch count of the faces the mesher splits; faces smaller than the patch stay whole "
+                              "besides (default " BN__STR(BN_DEFAULT_PATCHES) "; `bounce bounces` with the final "
+                              "gather: " BN__STR(BN_GATHER_PATCHES) ")"});
     bn_optset_add(s, (bn_opt){"no-subdivide", 0, BN_OPT_FLAG, &o->no_subdivide, NULL, 0, 0, NULL,
                               "one patch per input polygon (after triangulation; no contact cuts)"});
     bn_optset_add(s, (bn_opt){"no-contacts", 0, BN_OPT_FLAG, &o->no_contacts, NULL, 0, 0, NULL,

@@ -114,14 +114,13 @@ bn_status bn_pipeline_scene(const char *path, const bn_pipeline_opts *o, bn_pipe
         st = bn_scene_mesh(p->scene, &m0, err);
     }
     if (st == BN_OK && o->mesh_auto) {
-        size_t n, nf;
+        size_t n;
         bn_scene_patches(p->scene, &n);
-        bn_scene_faces(p->scene, &nf);
         if (bn_pipeline_use_hierarchy(o, n, NULL, 0)) {
             bn_mesh_opts m = o->mesh;
             m.patch_size = 0;
             m.no_subdivide = 0;
-            m.target_patches = nf + BN_HIERARCHY_EXTRA_PATCHES;
+            m.target_patches = BN_HIERARCHY_EXTRA_PATCHES;   /* on the faces it splits; the rest stay whole */
             st = bn_scene_mesh(p->scene, &m, err);
         } else if (!o->mesh.no_contacts) {
             st = bn_scene_mesh(p->scene, &o->mesh, err);

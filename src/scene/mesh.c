@@ -57,6 +57,22 @@ static double bn__count(const bn_scene *s, double size)
     return total;
 }
 
+/* The grid's patches on the faces it splits (more than one patch): what a target count governs.
+ * A face smaller than the patch is one patch whatever the target, so a scene of many small faces
+ * (a scanned model, a lamp cut into 10,000 triangles) does not coarsen its large ones (the floor). */
+static double bn__count_split(const bn_scene *s, double size)
+{
+    double total = 0;
+    for (size_t f = 0; f < s->nfaces; f++) {
+        unsigned nu, nv;
+        double c;
+        bn__face_grid(s, &s->faces[f], size, &nu, &nv);
+        c = s->faces[f].nverts == 4 ? (double)nu * nv : (double)nu * nu;
+        total += c > 1 ? c : 0;
+    }
+    return total;
+}
+
 /* A patch of face fi with the given corners, finished (area, centroid, normal). */
 static void bn__grid_patch(bn_patch *p, size_t fi, const bn_face *f, unsigned nc, const size_t *corner,
                            const double *pv)
@@ -170,8 +186,9 @@ static bn_status bn__grid(bn_scene *s, double size, int contacts, const bn_mesh_
     return BN_OK;
 }
 
-/* The patch edge the options ask for: given, or the finest whose grid count does not exceed the
- * target (bisection on log(size): the count falls as the size grows); 0 for one patch a face. */
+/* The patch edge the options ask for: given, or the finest whose split faces' grid count does not
+ * exceed the target (bisection on log(size): the count falls as the size grows); 0 for one patch a
+ * face. */
 static bn_status bn__mesh_size(const bn_scene *s, const bn_mesh_opts *o, double *size, bn_error *err)
 {
     if (o->no_subdivide) {
@@ -185,10 +202,10 @@ static bn_status bn__mesh_size(const bn_scene *s, const bn_mesh_opts *o, double 
         bn_v3_sub(s->hi, s->lo, d);
         hi_s = 2 * bn_v3_len(d) + 1e-300;
         lo_s = hi_s * 1e-7;
-        if (bn__count(s, hi_s) < (double)o->target_patches)
+        if (bn__count_split(s, hi_s) < (double)o->target_patches)
             for (int it = 0; it < 60; it++) {
                 double mid = sqrt(lo_s * hi_s);
-                if (bn__count(s, mid) > (double)o->target_patches)
+                if (bn__count_split(s, mid) > (double)o->target_patches)
                     lo_s = mid;
                 else
                     hi_s = mid;
@@ -250,13 +267,14 @@ bn_status bn_scene_mesh(bn_scene *s, const bn_mesh_opts *o, bn_error *err)
             st = bn__grid(s, size, contacts, o, &patches, &np, &pv, &nv, err);
             if (st != BN_OK)
                 return st;
-            /* contact cuts add patches: a target count holds for the mesh with its cuts (where the
-             * grid alone can meet it: one patch a face may already be more) */
-            if (!by_target || np <= o->target_patches || (double)np <= bn__count(s, size) || attempt == 8)
+            /* contact cuts add patches: a target count holds for the mesh with its cuts, less the
+             * faces of one patch (where the grid alone can meet it) */
+            double single = bn__count(s, size) - bn__count_split(s, size), split = (double)np - single;
+            if (!by_target || split <= (double)o->target_patches || (double)np <= bn__count(s, size) || attempt == 8)
                 break;
             free(patches);
             free(pv);
-            size *= 1.02 * sqrt((double)np / (double)o->target_patches);
+            size *= 1.02 * sqrt(split / (double)o->target_patches);
         }
     }
     s->largest_edge = 0;
