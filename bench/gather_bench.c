@@ -9,6 +9,7 @@
  *
  * usage: gather_bench [--size W] [--ref-spp N] [--ref-cache FILE] [--target E] [--quick] [--smooth]
  * (--smooth: the gather's hits and the patch images read values interpolated across patches) */
+#include "ref_exr.h"
 #include "bounce/gather.h"
 #include "bounce/pipeline.h"
 #include "bounce/trace.h"
@@ -24,8 +25,6 @@
 #define BN_SOURCE_DIR "."
 #endif
 
-static const double WY[3] = {0.2126, 0.7152, 0.0722};
-
 typedef struct ref_img {
     int w, h;
     float *L, *var;   /* 3wh each */
@@ -33,51 +32,18 @@ typedef struct ref_img {
     size_t spp;
 } ref_img;
 
-static int cmp_d(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
-
-/* Median relative error of luminance against the reference (noise-corrected), over pixels whose
- * reference luminance exceeds 1e-3 of the brightest; *raw: without the correction. */
+/* bench/ref_exr.c's median per-pixel error against r; *raw without the noise correction, *ref_se
+ * the reference's own median standard error. */
 static double median_err(const ref_img *r, const float *L, double *raw, double *ref_se)
 {
-    size_t n = (size_t)r->w * (size_t)r->h, m = 0;
-    double *e = malloc(n * sizeof *e), *q = malloc(n * sizeof *q), *s = malloc(n * sizeof *s), ymax = 0, med;
-    for (size_t i = 0; i < n; i++) {
-        double y = 0;
-        for (int c = 0; c < 3; c++)
-            y += WY[c] * r->L[3 * i + c];
-        ymax = fmax(ymax, y);
-    }
-    for (size_t i = 0; i < n; i++) {
-        double y = 0, x = 0, v = 0, d;
-        for (int c = 0; c < 3; c++) {
-            y += WY[c] * r->L[3 * i + c];
-            x += WY[c] * L[3 * i + c];
-            v += WY[c] * WY[c] * r->var[3 * i + c];
-        }
-        if (!(y > 1e-3 * ymax))
-            continue;
-        d = x - y;
-        e[m] = sqrt(fmax(0, d * d - v)) / y;
-        q[m] = fabs(d) / y;
-        s[m] = sqrt(v) / y;
-        m++;
-    }
-    qsort(e, m, sizeof *e, cmp_d);
-    qsort(q, m, sizeof *q, cmp_d);
-    qsort(s, m, sizeof *s, cmp_d);
-    med = m ? e[m / 2] : NAN;
+    exr_img ri = {r->w, r->h, r->L, r->var};
+    double e[3];
+    exr_median_err(&ri, L, e);
     if (raw)
-        *raw = m ? q[m / 2] : NAN;
+        *raw = e[1];
     if (ref_se)
-        *ref_se = m ? s[m / 2] : NAN;
-    free(e);
-    free(q);
-    free(s);
-    return med;
+        *ref_se = e[2];
+    return e[0];
 }
 
 static void camera(const bn_scene *s, const char *path, int w, bn_camera *cam)

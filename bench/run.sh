@@ -183,11 +183,16 @@ raceref="$root/bench/data/cornell-trace-256-65536.exr"
     fi
     echo
 } >>"$report"
+# ---- many emitters (issue 33): the gather's cost with the Cornell light cut into 1, 100 and 10,000 faces ----
+if [ -f "$raceref" ]; then
+    run_prog emitter_bench "Many emitters: the gather with the Cornell light cut into 1, 100 and 10,000 faces" \
+        "$raceref" $([ "$quick" = 1 ] && echo --quick)
+fi
 # any other bench program someone adds later
 for src in "$root"/bench/*.c; do
     [ -e "$src" ] || continue
     name=$(basename "$src" .c)
-    case "$name" in ff_bench|solve_bench|trace_bench|gather_bench|race_bench) continue ;; esac
+    case "$name" in ff_bench|solve_bench|trace_bench|gather_bench|race_bench|emitter_bench|ref_exr) continue ;; esac
     run_prog "$name" "$name"
 done
 

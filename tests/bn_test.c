@@ -153,3 +153,33 @@ int main(int argc, char **argv)
     }
     return 0;
 }
+
+/* The Cornell box with its light cut into an nx x nx grid of quads, each two triangles (the same
+ * surface, the same emitted radiance, so the same light): written beside its material file. */
+const char *bn_test_cornell_cut_light(int nx)
+{
+    static char path[4096];
+    const double v0[3] = {343.0, 548.8, 227.0}, v1[3] = {343.0, 548.8, 332.0}, v3[3] = {213.0, 548.8, 227.0};
+    size_t size;
+    char *src = bn_test_read_file(bn_test_path("meshes/cornell-box.obj"), &size), *mtl, *light, *after;
+    FILE *fp;
+    BN_ASSERT(src && (light = strstr(src, "o light\n")) && (after = strstr(light, "\n\n")));
+    BN_ASSERT((mtl = bn_test_read_file(bn_test_path("meshes/cornell-box.mtl"), &size)) != NULL);
+    BN_ASSERT((fp = fopen(bn_test_tmp("cornell-box.mtl"), "w")) && fputs(mtl, fp) >= 0 && fclose(fp) == 0);
+    snprintf(path, sizeof path, "%s", bn_test_tmp("cornell-cut.obj"));
+    BN_ASSERT((fp = fopen(path, "w")) != NULL);
+    fprintf(fp, "%.*so light\nusemtl light\n", (int)(light - src), src);
+    for (int b = 0; b <= nx; b++)
+        for (int a = 0; a <= nx; a++)
+            fprintf(fp, "v %.9g %.9g %.9g\n", v0[0] + (v1[0] - v0[0]) * a / nx + (v3[0] - v0[0]) * b / nx, v0[1],
+                    v0[2] + (v1[2] - v0[2]) * a / nx + (v3[2] - v0[2]) * b / nx);
+    for (int b = 0; b < nx; b++)
+        for (int a = 0; a < nx; a++) {
+            int g = (nx + 1) * (nx + 1), i = b * (nx + 1) + a - g;   /* relative: from the end */
+            fprintf(fp, "f %d %d %d\nf %d %d %d\n", i, i + 1, i + nx + 2, i, i + nx + 2, i + nx + 1);
+        }
+    BN_ASSERT(fputs(after, fp) >= 0 && fclose(fp) == 0);
+    free(src);
+    free(mtl);
+    return path;
+}

@@ -101,6 +101,9 @@ int bn_test_bounce(const char *args, char **output);
 /* Reads a whole file (malloc'd, NUL-terminated) or NULL. */
 char *bn_test_read_file(const char *path, size_t *size);
 int bn_test_file_exists(const char *path);
+/* meshes/cornell-box.obj with its light cut into an nx x nx grid of quads, two triangles each (the
+ * same light), written with its .mtl into the test's folder: the file's path (static). */
+const char *bn_test_cornell_cut_light(int nx);
 
 /* F_ij of an operator with entries; fails the test if the operator cannot give it. */
 /* Perpendicular rectangles with a common edge of length l: the form factor from the w x l one to

@@ -372,3 +372,112 @@ BN_TEST(cornell_gathered_bounces_match_the_tracer) /* BN_SLOW */
     bn_trace_image_free(&ti);
     bn_pipeline_free(&p);
 }
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return x < y ? -1 : x > y;
+}
+
+/* One Cornell box (path) solved on a coarse mesh and gathered at 64 x 64: the images of E .. K2E,
+ * rest, L and the counts. */
+static void cornell_gather(const char *path, bn_image *g, bn_gather_stats *gs)
+{
+    bn_pipeline_opts o;
+    bn_pipeline p;
+    bn_error err;
+    bn_camera cam;
+    bn_gather_opts go;
+    const double *terms[3];
+    bn_pipeline_opts_default(&o);
+    o.load.log.quiet = o.ff.quiet = o.solve.quiet = 1;
+    o.load.unit = BN_UNIT_MM;
+    o.ff.exact_visibility = 0;
+    o.solve.bounces = 2;
+    o.keep_rt = 1;
+    o.mesh.target_patches = 300;
+    if (bn_pipeline_run(path, &o, &p, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    bn_camera_default(p.scene, &cam);
+    BN_ASSERT_STATUS(bn_camera_load_sidecar(bn_test_path("meshes/cornell-box.obj"), &cam, NULL, &err), BN_OK);
+    cam.width = cam.height = 64;
+    cam.spp = 4;
+    for (int k = 0; k < 3; k++)
+        terms[k] = p.res.terms[k];
+    for (int l = 0; l < 5; l++)
+        BN_ASSERT_STATUS(bn_image_alloc(&g[l], 64, 64, &err), BN_OK);
+    bn_gather_opts_default(&go);
+    go.hemi_samples = 16;
+    go.quiet = 1;
+    BN_ASSERT_STATUS(bn_gather_render(p.rt, &cam, terms, 2, p.rest, &go, g, gs, &err), BN_OK);
+    bn_pipeline_free(&p);
+}
+
+/* Issue 33: the light cut into 512 triangles is picked from the light tree (one shadow ray per
+ * pick), the one quad is visited whole; both are the same light, so KE and K2E (whose hits take
+ * KE from the emitters: one picked face each) agree in their image means within 1.5%, KE per pixel
+ * within 10% at the median, and the cut light costs no more shadow rays per camera ray. */
+BN_TEST(many_emitters_from_the_light_tree_match_one)
+{
+    bn_image one[5], cut[5];
+    bn_gather_stats s1, sc;
+    cornell_gather(bn_test_path("meshes/cornell-box.obj"), one, &s1);
+    cornell_gather(bn_test_cornell_cut_light(16), cut, &sc);
+    BN_ASSERT(!s1.light_tree && sc.light_tree && s1.emitters == 1 && sc.emitters == 512);
+    BN_ASSERT(s1.hit_direct && sc.hit_direct);
+    printf("shadow rays per camera ray: one face %.2f, 512 faces %.2f\n", s1.shadow_rays / s1.camera_rays,
+           sc.shadow_rays / sc.camera_rays);
+    BN_ASSERT_LE(sc.shadow_rays / sc.camera_rays, 1.05 * s1.shadow_rays / s1.camera_rays);
+    for (int l = 1; l <= 2; l++)
+        for (int c = 0; c < 3; c++) {
+            double m1 = 0, mc = 0;
+            for (size_t k = 0; k < 64 * 64; k++) {
+                m1 += one[l].rgb[3 * k + c];
+                mc += cut[l].rgb[3 * k + c];
+            }
+            printf("K%dE channel %d: one face %.6g, 512 faces %.6g (%+.3f%%)\n", l, c, m1, mc, 100 * (mc - m1) / m1);
+            BN_ASSERT_REL(mc, m1, 0.015);
+        }
+    {
+        double e[64 * 64];
+        size_t m = 0;
+        for (size_t k = 0; k < 64 * 64; k++)
+            if (one[1].rgb[3 * k + 1] > 1e-3)
+                e[m++] = fabs(cut[1].rgb[3 * k + 1] - one[1].rgb[3 * k + 1]) / one[1].rgb[3 * k + 1];
+        qsort(e, m, sizeof *e, cmp_double);
+        printf("KE per pixel: median relative difference %.3f%% over %zu pixels\n", 100 * e[m / 2], m);
+        BN_ASSERT_LE(e[m / 2], 0.10);
+    }
+    for (int l = 0; l < 5; l++) {
+        bn_image_free(&one[l]);
+        bn_image_free(&cut[l]);
+    }
+}
+
+/* Issue 33: faces smaller than the patch size do not coarsen the large ones: with the light cut into
+ * 512 triangles, the default target meshes the room's faces exactly as for the one-quad light (the
+ * same largest patch edge), and the total grows by about the light's own faces. */
+BN_TEST(many_small_faces_keep_the_large_ones_meshed)
+{
+    const char *paths[2] = {bn_test_path("meshes/cornell-box.obj"), bn_test_cornell_cut_light(16)};
+    double edge[2];
+    size_t np[2];
+    for (int k = 0; k < 2; k++) {
+        bn_load_opts lo;
+        bn_scene *s = NULL;
+        bn_error err;
+        bn_load_opts_default(&lo);
+        lo.log.quiet = 1;
+        lo.unit = BN_UNIT_MM;
+        BN_ASSERT_STATUS(bn_scene_load(paths[k], &lo, &s, &err), BN_OK);
+        BN_ASSERT_STATUS(bn_scene_mesh(s, NULL, &err), BN_OK);
+        bn_scene_patches(s, &np[k]);
+        edge[k] = bn_scene_largest_patch_edge(s);
+        bn_scene_destroy(s);
+    }
+    printf("one quad: %zu patches, largest edge %.4g mm; 512 triangles: %zu, %.4g mm\n", np[0], edge[0], np[1],
+           edge[1]);
+    BN_ASSERT_REL(edge[1], edge[0], 1e-9);
+    BN_ASSERT_GE(np[1], np[0] + 512 - 30);
+    BN_ASSERT_LE(np[1], np[0] + 512 + 60);
+}

@@ -5,7 +5,11 @@
  *           integral over the part of e in front of x (exact), V_e the visible fraction of e seen
  *           from x, estimated with the same stratified directions (uniform in e's solid angle,
  *           weighted by the cosine at x) as sum cos V / sum cos: exact where e is wholly visible or
- *           wholly hidden, and sharp to the pixel at a shadow's edge;
+ *           wholly hidden, and sharp to the pixel at a shadow's edge. Above tree_emitters emitting
+ *           faces, the sum is estimated instead from light_samples faces picked from a light tree
+ *           (in proportion to a bound on each one's contribution), each Le F (1 - blocked) / pdf with
+ *           one shadow ray (the blocked part by one direction): unbiased, exact where the picked face
+ *           is wholly visible, and as costly for 10,000 faces as for 20;
  *   K^k E(x), k >= 2: rho(x) times the cosine-weighted mean of the solved K^(k-1) E over the
  *           hemisphere (stratified rays; the value at each hit read from its patch, or interpolated
  *           across patches with `smooth`); for K^2 E, KE at each hit is the hit's own direct light
@@ -27,10 +31,12 @@
 extern "C" {
 #endif
 
-#define BN_GATHER_LIGHT_SAMPLES 16   /* shadow rays per emitting face per pixel sample */
+#define BN_GATHER_LIGHT_SAMPLES 16   /* shadow rays per emitting face per pixel sample (with the light
+                                        tree: emitting faces picked per pixel sample, one ray each) */
 #define BN_GATHER_HEMI_SAMPLES 144   /* gather rays per pixel sample */
 #define BN_GATHER_FILTER 3           /* pixels */
 #define BN_GATHER_HIT_EMITTERS 64    /* the hits' KE from the emitters up to this many emitting faces */
+#define BN_GATHER_TREE_EMITTERS 16   /* above this many emitting faces, they are picked from a light tree */
 /* The defaults meet the per-pixel race on the Cornell box (bench/race_bench.c, 256x256: the median
  * per-pixel error of L against a 65,536-spp path-traced reference at most 0.5% in at most 6 s,
  * measured 0.45% in about 4 s). With K^2 E's hits lit by the emitters themselves, what is left is
@@ -56,7 +62,12 @@ typedef struct bn_gather_opts {
                                         radius that see the same face (0: none; default BN_GATHER_FILTER) */
     int hit_emitters;                /* K^2 E gathers, at each hit, KE from the emitting faces (one shadow
                                         ray each) when the scene has at most this many, else the hit
-                                        patch's KE (0: always the patch's; default BN_GATHER_HIT_EMITTERS) */
+                                        patch's KE (0: always the patch's; default BN_GATHER_HIT_EMITTERS);
+                                        with the light tree, one ray to one picked face, whatever the count */
+    int tree_emitters;               /* more emitting faces than this: each pixel sample picks light_samples
+                                        of them from a light tree (src/rt/lights.h) in proportion to their
+                                        likely contribution, one ray each, so the cost per pixel does not
+                                        grow with their number (default BN_GATHER_TREE_EMITTERS) */
     int threads;                     /* 0: the caller's */
     int quiet;                       /* no progress bar */
 } bn_gather_opts;
@@ -67,6 +78,7 @@ typedef struct bn_gather_stats {
     double shadow_rays, gather_rays, camera_rays;
     size_t emitters;                 /* emitting faces */
     int hit_direct;                  /* 1: K^2 E's hits took KE from the emitters (hit_emitters) */
+    int light_tree;                  /* 1: emitting faces were picked from the light tree (tree_emitters) */
     double seconds;
 } bn_gather_stats;
 

@@ -74,7 +74,7 @@ typedef struct bn__bounces_cli {
     bn_cli_camera co;
     const char *out, *patches_out;
     int n, half, smooth, no_previews, tile, gather;
-    int light_samples, gather_samples, gather_filter, hit_emitters;
+    int light_samples, gather_samples, gather_filter, hit_emitters, tree_emitters;
     double ev, crease;
 } bn__bounces_cli;
 
@@ -82,7 +82,7 @@ static void bn__bounces_options(bn_optset *set, bn__bounces_cli *a, bn_cli_commo
 {
     *a = (bn__bounces_cli){.out = "bounces.exr", .n = 3, .tile = 320, .light_samples = BN_GATHER_LIGHT_SAMPLES,
                            .gather_samples = BN_GATHER_HEMI_SAMPLES, .gather_filter = BN_GATHER_FILTER,
-                           .hit_emitters = BN_GATHER_HIT_EMITTERS,
+                           .hit_emitters = BN_GATHER_HIT_EMITTERS, .tree_emitters = BN_GATHER_TREE_EMITTERS,
                            .crease = BN_BAKE_DEFAULT_CREASE};
     set->usage = "bounce bounces SCENE [-n K] [-o out.exr] [camera, solver, form-factor, meshing options]";
     set->summary =
@@ -118,7 +118,8 @@ static void bn__bounces_options(bn_optset *set, bn__bounces_cli *a, bn_cli_commo
                                 "sees (to look at the patches themselves)"});
     bn_optset_add(set, (bn_opt){"light-samples", 0, BN_OPT_INT, &a->light_samples, NULL, 1, 65536, "N",
                                 "gather: shadow rays per emitting face per pixel sample, rounded up to a square "
-                                "(default 16)"});
+                                "(with the light tree: faces picked per pixel sample, one ray each; default "
+                                BN__STR(BN_GATHER_LIGHT_SAMPLES) ")"});
     bn_optset_add(set, (bn_opt){"gather-samples", 0, BN_OPT_INT, &a->gather_samples, NULL, 1, 1 << 20, "N",
                                 "gather: hemisphere rays per pixel sample, rounded up to a square (default "
                                 BN__STR(BN_GATHER_HEMI_SAMPLES) ")"});
@@ -129,7 +130,13 @@ static void bn__bounces_options(bn_optset *set, bn__bounces_cli *a, bn_cli_commo
     bn_optset_add(set, (bn_opt){"hit-emitters", 0, BN_OPT_INT, &a->hit_emitters, NULL, 0, 1 << 20, "N",
                                 "gather: K2E's hemisphere hits take their KE from the emitting faces themselves "
                                 "(one shadow ray each) instead of the hit patch's value, when the scene has at most N "
-                                "emitting faces (default " BN__STR(BN_GATHER_HIT_EMITTERS) "; 0: always the patch's)"});
+                                "emitting faces (default " BN__STR(BN_GATHER_HIT_EMITTERS) "; 0: always the patch's; "
+                                "with the light tree, one ray each to one picked face)"});
+    bn_optset_add(set, (bn_opt){"tree-emitters", 0, BN_OPT_INT, &a->tree_emitters, NULL, 0, 1 << 30, "N",
+                                "gather: with more than N emitting faces, each pixel sample picks --light-samples "
+                                "of them from a light tree in proportion to their likely contribution (one ray "
+                                "each), so a lamp cut into 10,000 triangles costs about what one face does (default "
+                                BN__STR(BN_GATHER_TREE_EMITTERS) ")"});
     bn_optset_add(set, (bn_opt){"patches-out", 0, BN_OPT_STRING, &a->patches_out, NULL, 0, 0, "FILE.csv",
                                 "also write the per-patch CSV of `bounce solve -n K` (L and every term) from the "
                                 "same solution"});
@@ -162,6 +169,7 @@ static void bn__bounces_opts(const bn_optset *set, const bn__bounces_cli *a, con
     bo->gather_samples = a->gather_samples;
     bo->gather_filter = a->gather_filter;
     bo->hit_emitters = a->hit_emitters;
+    bo->tree_emitters = a->tree_emitters;
     bo->quiet = c->quiet;
     bo->log = (bn_log){bn_cli_stdout_log, (void *)c, c->quiet};
 }

@@ -7,6 +7,7 @@
 #include "base/internal.h"
 #include "base/vec.h"
 #include "formfactor/ff_internal.h"
+#include "rt/lights.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -23,6 +24,7 @@ void bn_gather_opts_default(bn_gather_opts *o)
     o->hemi_samples = BN_GATHER_HEMI_SAMPLES;
     o->filter = BN_GATHER_FILTER;
     o->hit_emitters = BN_GATHER_HIT_EMITTERS;
+    o->tree_emitters = BN_GATHER_TREE_EMITTERS;
     o->seed = 1;
 }
 
@@ -47,7 +49,8 @@ typedef struct bn__gather {
     bn__emitter *em;
     size_t nem;
     double eps;
-    int hit_direct;          /* the hits' KE from the emitters (nem <= hit_emitters), not the patches */
+    int hit_direct;          /* the hits' KE from the emitters (nem <= hit_emitters, or the tree), not the patches */
+    bn__lights *tree;        /* more than tree_emitters emitting faces: picked from this tree */
 } bn__gather;
 
 /* Streams: the camera's jitter, then the light and gather samples, keyed by pixel and sample. */
@@ -157,16 +160,6 @@ static void bn__direct_em(const bn__gather *G, const bn__emitter *em, const doub
         out[k] += sc > 0 ? em->Le[k] * v.F * (scv / sc) : 0;
 }
 
-/* rho-free direct light at x (normal n, on face f): the sum over the emitters of bn__direct_em. */
-static void bn__direct(const bn__gather *G, const double x0[3], const double n[3], size_t f, bn__rng *r, int side,
-                       double out[3], double *rays)
-{
-    out[0] = out[1] = out[2] = 0;
-    for (size_t e = 0; e < G->nem; e++)
-        if (G->em[e].face != f)
-            bn__direct_em(G, &G->em[e], x0, n, r, side, out, rays);
-}
-
 /* The gather's hits take one shadow ray per emitter, in a control-variate form that is exact where
  * the emitter is wholly in view: F (closed form) minus the blocked part, whose integrand is the
  * kernel times (1 - V), estimated from one point: by solid angle near the emitter, (Omega / pi) cos
@@ -198,35 +191,110 @@ static double bn__far_kernel(const bn__gather *G, const bn__emitter *em, const b
     return em->area * cx * ce / (BN_PI * r2);
 }
 
-/* rho-free direct light at a gather's hit x (normal n, on face f), one shadow ray per emitter. */
+/* One sample of emitter em seen from x (normal n): *F its form factor by the closed form, *est a
+ * one-point unbiased estimate of it (by solid angle near em, (Omega / pi) cos; by area beyond
+ * BN__HIT_FAR of its diameter from its centre), *seen whether that point's shadow ray reaches em.
+ * 0 when x cannot see em. */
+static int bn__em_sample(const bn__gather *G, const bn__emitter *em, const double x[3], const double n[3], bn__rng *r,
+                         double *F, double *est, int *seen, double *rays)
+{
+    double xc[3], dir[3], c, u, w;
+    int far;
+    bn__em_view v;
+    bn_v3_sub(x, em->c, xc);
+    far = bn_v3_dot(xc, em->n) > 2 * G->eps && bn_v3_len(xc) > BN__HIT_FAR * em->diam;
+    if (!bn__em_view_make(G, em, x, n, !far, &v))
+        return 0;
+    *F = v.F;
+    if (far) {
+        *est = bn__far_kernel(G, em, &v, n, r, seen, rays);
+        return 1;
+    }
+    u = bn__rng_uniform(r);
+    w = bn__rng_uniform(r);
+    bn__sph_poly_sample(&v.sp, u, w, dir);
+    c = bn__em_ray(G, em, &v, n, dir, seen);
+    *rays += c > 0;
+    *est = v.sp.total * c / BN_PI;
+    return 1;
+}
+
+/* Emitter em's direct light at x (normal n) from one shadow ray, rho-free, times wt, added to out:
+ * Le (F - the blocked part's one-point estimate), exact where em is wholly in view. */
+static void bn__direct_em_one(const bn__gather *G, const bn__emitter *em, const double x[3], const double n[3],
+                              bn__rng *r, double wt, double out[3], double *rays)
+{
+    double F, est;
+    int seen;
+    if (!bn__em_sample(G, em, x, n, r, &F, &est, &seen, rays))
+        return;
+    for (int k = 0; k < 3; k++)
+        out[k] += wt * em->Le[k] * (F - (seen ? 0 : est));
+}
+
+/* The hits' picks choose among the lights of a node that subtends less than this sine by power
+ * alone: their K^2 E loses little (on the Cornell box with its light cut into 10,000 faces, its
+ * median per-pixel error 0.241% against 0.238%) and the gather's time falls 2.6x. */
+#define BN__HIT_FAR_SINE 0.3
+
+/* rho-free direct light at a gather's hit x (normal n, on face f): one shadow ray per emitter, or
+ * one to an emitter picked from the light tree (unbiased: Le (F - blocked) / pdf). */
 static void bn__direct_one(const bn__gather *G, const double x[3], const double n[3], size_t f, bn__rng *r,
                            double out[3], double *rays)
 {
     out[0] = out[1] = out[2] = 0;
-    for (size_t e = 0; e < G->nem; e++) {
-        const bn__emitter *em = &G->em[e];
-        double xc[3], blocked = 0, dir[3], c, u, w;
-        int far, seen;
-        bn__em_view v;
-        if (em->face == f)
-            continue;
-        bn_v3_sub(x, em->c, xc);
-        far = bn_v3_dot(xc, em->n) > 2 * G->eps && bn_v3_len(xc) > BN__HIT_FAR * em->diam;
-        if (!bn__em_view_make(G, em, x, n, !far, &v))
-            continue;
-        if (far) {
-            blocked = bn__far_kernel(G, em, &v, n, r, &seen, rays);
-        } else {
-            u = bn__rng_uniform(r);
-            w = bn__rng_uniform(r);
-            bn__sph_poly_sample(&v.sp, u, w, dir);
-            c = bn__em_ray(G, em, &v, n, dir, &seen);
-            *rays += c > 0;
-            blocked = v.sp.total * c / BN_PI;
-        }
-        for (int k = 0; k < 3; k++)
-            out[k] += em->Le[k] * (v.F - (seen ? 0 : blocked));
+    if (G->tree) {
+        double pdf;
+        size_t e = bn__lights_pick(G->tree, x, n, bn__rng_uniform(r), BN__HIT_FAR_SINE, &pdf);
+        if (e != BN__LIGHTS_NONE && G->em[e].face != f && pdf > 0)
+            bn__direct_em_one(G, &G->em[e], x, n, r, 1 / pdf, out, rays);
+        return;
     }
+    for (size_t e = 0; e < G->nem; e++)
+        if (G->em[e].face != f)
+            bn__direct_em_one(G, &G->em[e], x, n, r, 1, out, rays);
+}
+
+/* rho-free direct light at x (normal n, on face f) from m emitters picked from the light tree by
+ * stratified uniforms, one ray each: the unoccluded light (the mean of Le F / pdf) times the
+ * visible fraction estimated across the picks, per channel sum Le est V / pdf over sum Le est / pdf,
+ * as bn__direct_em's sum cos V / sum cos does for one face: exact where every pick is wholly in
+ * view or wholly hidden (a shadow is black, not noise about 0), consistent in a penumbra. */
+static void bn__direct_tree(const bn__gather *G, const double x[3], const double n[3], size_t f, bn__rng *r, int m,
+                            double out[3], double *rays)
+{
+    double T[3] = {0, 0, 0}, N[3] = {0, 0, 0}, D[3] = {0, 0, 0};
+    for (int i = 0; i < m; i++) {
+        double pdf, F, est;
+        int seen;
+        size_t e = bn__lights_pick(G->tree, x, n, (i + bn__rng_uniform(r)) / m, 0, &pdf);
+        if (e == BN__LIGHTS_NONE || G->em[e].face == f || !(pdf > 0) ||
+            !bn__em_sample(G, &G->em[e], x, n, r, &F, &est, &seen, rays))
+            continue;
+        for (int k = 0; k < 3; k++) {
+            double a = G->em[e].Le[k] / pdf;
+            T[k] += a * F;
+            D[k] += a * est;
+            N[k] += seen ? a * est : 0;
+        }
+    }
+    for (int k = 0; k < 3; k++)
+        out[k] = D[k] > 0 ? T[k] / m * (N[k] / D[k]) : 0;
+}
+
+/* rho-free direct light at x (normal n, on face f): the sum over the emitters of bn__direct_em
+ * (side x side rays each), or, with the light tree, bn__direct_tree over side x side picks. */
+static void bn__direct(const bn__gather *G, const double x0[3], const double n[3], size_t f, bn__rng *r, int side,
+                       double out[3], double *rays)
+{
+    out[0] = out[1] = out[2] = 0;
+    if (G->tree) {
+        bn__direct_tree(G, x0, n, f, r, side * side, out, rays);
+        return;
+    }
+    for (size_t e = 0; e < G->nem; e++)
+        if (G->em[e].face != f)
+            bn__direct_em(G, &G->em[e], x0, n, r, side, out, rays);
 }
 
 /* KE at a gather's hit from the emitting faces themselves (one shadow ray each), rho applied, added
@@ -399,6 +467,23 @@ static bn_status bn__gather_emitters(bn__gather *G, bn_error *err)
     return BN_OK;
 }
 
+/* The light tree over the emitting faces, each weighted by its area x mean radiance. */
+static bn_status bn__gather_tree(bn__gather *G, bn_error *err)
+{
+    bn__light *l = bn__malloc_array(G->nem, sizeof *l);
+    if (!l)
+        return bn_error_set(err, BN_ENOMEM, "out of memory for the light tree of %zu emitting faces", G->nem);
+    for (size_t e = 0; e < G->nem; e++) {
+        const bn__emitter *em = &G->em[e];
+        l[e] = (bn__light){em->v, em->nv, {em->n[0], em->n[1], em->n[2]},
+                           em->area * (em->Le[0] + em->Le[1] + em->Le[2]) / 3};
+    }
+    G->tree = bn__lights_build(l, G->nem);
+    free(l);
+    return G->tree ? BN_OK : bn_error_set(err, BN_ENOMEM, "out of memory for the light tree of %zu emitting faces",
+                                          G->nem);
+}
+
 /* --smooth: the vertex values of K^1 E .. K^n E and rest, read at the gather's hits. */
 static bn_status bn__gather_smooth(bn__gather *G, const bn_bake *smooth, bn_error *err)
 {
@@ -431,9 +516,10 @@ static bn_status bn__gather_init(bn__gather *G, const bn_rt *rt, const double *c
     G->gh = bn__side(o->hemi_samples);
     G->eps = bn_rt_epsilon(rt);
     G->smooth = o->smooth;
-    if ((st = bn__gather_emitters(G, err)) != BN_OK)
+    if ((st = bn__gather_emitters(G, err)) != BN_OK || (G->nem > (size_t)o->tree_emitters &&
+                                                          (st = bn__gather_tree(G, err)) != BN_OK))
         return st;
-    G->hit_direct = G->nem > 0 && G->nem <= (size_t)o->hit_emitters;
+    G->hit_direct = G->nem > 0 && o->hit_emitters > 0 && (G->nem <= (size_t)o->hit_emitters || G->tree);
     return o->smooth ? bn__gather_smooth(G, o->smooth, err) : BN_OK;
 }
 
@@ -572,6 +658,7 @@ static bn_status bn__gather_finish(const bn__gather *G, const bn_camera *cam, co
     stats->gather_rays = c[2];
     stats->emitters = G->nem;
     stats->hit_direct = G->hit_direct;
+    stats->light_tree = G->tree != NULL;
     stats->seconds = bn__now() - t0;
     return BN_OK;
 }
@@ -604,6 +691,7 @@ done:
             free(G.vv[l]);
     free(G.vv);
     free(G.em);
+    bn__lights_free(G.tree);
     free(aux);
     return st;
 }

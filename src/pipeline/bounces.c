@@ -21,6 +21,7 @@ void bn_bounces_opts_default(bn_bounces_opts *o)
     o->gather_samples = BN_GATHER_HEMI_SAMPLES;
     o->gather_filter = BN_GATHER_FILTER;
     o->hit_emitters = BN_GATHER_HIT_EMITTERS;
+    o->tree_emitters = BN_GATHER_TREE_EMITTERS;
 }
 
 /* "dir/out.exr" + ".KE.png" -> "dir/out.KE.png" (the extension of `path` replaced). */
@@ -59,6 +60,7 @@ static bn_status bn__bounces_render(const bn_scene *scene, const bn_rt *rt, cons
         go.hemi_samples = o->gather_samples;
         go.filter = o->gather_filter;
         go.hit_emitters = o->hit_emitters;
+        go.tree_emitters = o->tree_emitters;
         go.smooth = bake;
         go.seed = o->seed;
         go.threads = o->threads;
@@ -66,9 +68,10 @@ static bn_status bn__bounces_render(const bn_scene *scene, const bn_rt *rt, cons
         st = bn_gather_render(rt, cam, layers, n, layers[n + 1], &go, imgs, &gs, err);
         if (st == BN_OK)
             bn_logf(&o->log, BN_LOG_INFO,
-                    "gather: %dx%d x %d spp, %zu emitting face%s (K2E's hits: KE %s); %.3g shadow rays, %.3g gather "
-                    "rays, %.2f s (%.3g rays/s)",
+                    "gather: %dx%d x %d spp, %zu emitting face%s, %s %d (K2E's hits: KE %s); %.3g shadow rays, "
+                    "%.3g gather rays, %.2f s (%.3g rays/s)",
                     cam->width, cam->height, cam->spp, gs.emitters, gs.emitters == 1 ? "" : "s",
+                    gs.light_tree ? "picked from a light tree: more than" : "each visited: at most", o->tree_emitters,
                     gs.hit_direct ? "from the emitters" : "of the patches (more emitting faces than the limit)",
                     gs.shadow_rays,
                     gs.gather_rays, gs.seconds,
@@ -131,7 +134,7 @@ bn_status bn_bounces_write(const bn_scene *scene, const bn_rt *rt, const bn_came
     bn_layer *named = bn__calloc(nl, sizeof *named);
     char (*names)[16] = bn__calloc(nl, sizeof *names);
     bn_attr *attrs = bn__calloc(na, sizeof *attrs);
-    char evbuf[32], shading[320];
+    char evbuf[32], shading[400];
     double ev = o->ev;
     bn_status st = imgs && named && names && attrs ? BN_OK : bn_error_set(err, BN_ENOMEM, "out of memory");
     if (st == BN_OK)
@@ -150,9 +153,10 @@ bn_status bn_bounces_write(const bn_scene *scene, const bn_rt *rt, const bn_came
         if (o->gather)
             snprintf(shading, sizeof shading, "final gather: %d shadow rays per emitting face, %d gather rays per "
                      "pixel sample, same-face filter radius %d px; hits read %s; KE at K2E's hits from the emitters up "
-                     "to %d emitting faces", o->light_samples, o->gather_samples,
-                     o->gather_filter, o->smooth ? "smooth (baked vertex values)" : "flat (patch values)",
-                     o->hit_emitters);
+                     "to %d emitting faces; above %d emitting faces, picked from a light tree", o->light_samples,
+                     o->gather_samples, o->gather_filter,
+                     o->smooth ? "smooth (baked vertex values)" : "flat (patch values)", o->hit_emitters,
+                     o->tree_emitters);
         else if (o->smooth)
             snprintf(shading, sizeof shading, "smooth (baked vertex values), crease %g degrees", o->crease);
         else
