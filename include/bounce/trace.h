@@ -54,7 +54,11 @@ typedef struct bn_trace_opts {
     uint64_t seed;         /* streams are keyed by (seed, pixel or patch, sample index) */
     int      quiet;        /* no progress bar */
     int      threads;      /* 0 = the caller's (all cores by default); results do not depend on it */
+    int      tree_emitters;  /* next-event estimation picks among more emitting patches than this from a
+                                light tree, in proportion to their likely contribution at the path's
+                                point (src/rt/lights.h); up to it, by power (default BN_TRACE_TREE_EMITTERS) */
 } bn_trace_opts;
+#define BN_TRACE_TREE_EMITTERS 64
 void bn_trace_opts_default(bn_trace_opts *o);
 
 
@@ -105,6 +109,12 @@ typedef struct bn_partition {
     double *centroid;     /* 3n: area-weighted */
 } bn_partition;
 bn_status bn_partition_regions(const bn_scene *s, size_t nregions, bn_partition *out, bn_error *err);
+/* The partition a reader names: one region per object and material (bn_scene_object_count: the
+ * file's o/g groups or its material-name prefixes), and each polygon of at least own_share of the
+ * scene's area a region of its own (each wall, the floor). Whole polygons too, so every meshing of
+ * one scene has the same regions. */
+bn_status bn_partition_objects(const bn_scene *s, double own_share, bn_partition *out, bn_error *err);
+#define BN_PARTITION_OWN_SHARE 0.01
 void bn_partition_free(bn_partition *p);
 /* Area-weighted means per region of per-patch layers (nlayers * npatch * 3, bn_layers_stack layout)
  * into out (nlayers * n * 3). */

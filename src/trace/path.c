@@ -2,9 +2,10 @@
  *
  * L_o(x) = Le(x) + rho(x)/pi * integral over the hemisphere of L_i(x, w) cos(theta) dw. A path with
  * k reflections between the emitter and the first vertex contributes to the term K^k E. Each
- * reflection gathers emission by next-event estimation (a point on an emitter, chosen by power)
+ * reflection gathers emission by next-event estimation (a point on an emitter, chosen by power,
+ * or above tree_emitters emitting patches from a light tree by its likely contribution at x)
  * and by cosine sampling, combined with the power heuristic (Veach 1997, ch. 9):
- *   w_nee = p_nee^2 / (p_nee^2 + p_bsdf^2),  p_nee = P(j) / A_j * d^2 / cos_y,  p_bsdf = cos_x / pi.
+ *   w_nee = p_nee^2 / (p_nee^2 + p_bsdf^2),  p_nee = P(j | x) / A_j * d^2 / cos_y,  p_bsdf = cos_x / pi.
  * For a Lambertian surface both weighted contributions are bounded by rho Le / 2, so sample means
  * are close to normal. Russian roulette after rr_depth reflections survives with probability
  * min(0.95, max_c rho_c) and divides the throughput by it (unbiased; pbrt-v4 8.2). */
@@ -30,6 +31,7 @@ void bn_trace_opts_default(bn_trace_opts *o)
     o->strategy = BN_TRACE_MIS;
     o->model = BN_TRACE_CONTINUOUS;
     o->seed = 1;
+    o->tree_emitters = BN_TRACE_TREE_EMITTERS;
 }
 
 static double bn__tri_area(const double *a, const double *b, const double *c)
@@ -39,6 +41,32 @@ static double bn__tri_area(const double *a, const double *b, const double *c)
     bn_v3_sub(c, a, e2);
     bn_v3_cross(e1, e2, n);
     return 0.5 * bn_v3_len(n);
+}
+
+/* The light tree over the emitting patches (corners, normal, area x summed radiance). */
+static bn_status bn__tracer_tree(bn__tracer *t, bn_error *err)
+{
+    bn__light *l = bn__malloc_array(t->nem, sizeof *l);
+    double *corners = bn__malloc_array(t->nem, 12 * sizeof(double));
+    if (l && corners && (t->em_index = bn__malloc_array(t->np, sizeof *t->em_index)))
+        for (size_t e = 0; e < t->nem; e++) {
+            size_t i = t->em_patch[e];
+            const bn_patch *p = &t->patches[i];
+            t->em_index[i] = e;
+            for (unsigned k = 0; k < p->ncorners; k++)
+                memcpy(corners + 12 * e + 3 * k, t->pv + 3 * p->corner[k], 3 * sizeof(double));
+            l[e] = (bn__light){corners + 12 * e, p->ncorners, {p->normal[0], p->normal[1], p->normal[2]},
+                               p->area * (t->Le[3 * i] + t->Le[3 * i + 1] + t->Le[3 * i + 2])};
+        }
+    if (l && corners && t->em_index)
+        t->tree = bn__lights_build(l, t->nem);
+    free(l);
+    free(corners);
+    if (!t->tree) {
+        bn__tracer_free(t);
+        return bn_error_set(err, BN_ENOMEM, "trace: out of memory for the light tree of %zu emitting patches", t->nem);
+    }
+    return BN_OK;
 }
 
 bn_status bn__tracer_init(bn__tracer *t, const bn_rt *rt, const bn_trace_opts *o, bn_error *err)
@@ -93,7 +121,7 @@ bn_status bn__tracer_init(bn__tracer *t, const bn_rt *rt, const bn_trace_opts *o
     }
     if (t->nem)
         t->em_cdf[t->nem - 1] = 1;
-    return BN_OK;
+    return t->nem > (size_t)o->tree_emitters ? bn__tracer_tree(t, err) : BN_OK;
 }
 
 void bn__tracer_free(bn__tracer *t)
@@ -104,6 +132,8 @@ void bn__tracer_free(bn__tracer *t)
     free(t->pdf_area);
     free(t->em_patch);
     free(t->em_cdf);
+    free(t->em_index);
+    bn__lights_free(t->tree);
     memset(t, 0, sizeof *t);
 }
 
@@ -128,9 +158,23 @@ void bn__tracer_patch_point(const bn__tracer *t, size_t p, double u1, double u2,
         x[k] = wa * a[k] + wb * b[k] + wc * c[k];
 }
 
-static size_t bn__pick_emitter(const bn__tracer *t, double u)
+/* The hits' and next-event picks choose among the patches of a node subtending less than this sine
+ * by power alone (src/rt/lights.h). */
+#define BN__TRACE_FAR 0.3
+
+/* Next-event estimation's emitter for the point x (normal n) from u: by power, or from the light
+ * tree; *pdf_area its probability over its area. SIZE_MAX when none can light x. */
+static size_t bn__pick_emitter(const bn__tracer *t, const double x[3], const double n[3], double u, double *pdf_area)
 {
     size_t lo = 0, hi = t->nem - 1;
+    if (t->tree) {
+        double p;
+        size_t e = bn__lights_pick(t->tree, x, n, u, BN__TRACE_FAR, &p);
+        if (e == BN__LIGHTS_NONE)
+            return SIZE_MAX;
+        *pdf_area = p / t->patches[t->em_patch[e]].area;
+        return t->em_patch[e];
+    }
     while (lo < hi) {
         size_t mid = lo + (hi - lo) / 2;
         if (u < t->em_cdf[mid])
@@ -138,7 +182,55 @@ static size_t bn__pick_emitter(const bn__tracer *t, double u)
         else
             lo = mid + 1;
     }
+    *pdf_area = t->pdf_area[t->em_patch[lo]];
     return t->em_patch[lo];
+}
+
+/* The area density with which next-event estimation at x (normal n) picks points on emitting patch j. */
+static double bn__emitter_pdf(const bn__tracer *t, const double x[3], const double n[3], size_t j)
+{
+    if (!t->tree)
+        return t->pdf_area[j];
+    return bn__lights_pdf(t->tree, x, n, t->em_index[j], BN__TRACE_FAR) / t->patches[j].area;
+}
+
+/* Next-event estimation at x (normal n, ray origin o): a point y on an emitter, its light times
+ * the throughput bx (MIS-weighted against cosine sampling with mis) added to bins[3 bin ..]. */
+static void bn__nee(const bn__tracer *t, const double x[3], const double n[3], const double o[3], const double bx[3],
+                    int mis, bn__rng *rng, double *bins, int bin, unsigned long long *rays)
+{
+    double ua = bn__rng_uniform(rng), ub = bn__rng_uniform(rng), uc = bn__rng_uniform(rng), ud = bn__rng_uniform(rng);
+    double y[3], d[3], dist2, dist, cx, cy, pa, pl, pb, wgt, ye[3], sd[3], len, g;
+    size_t j = bn__pick_emitter(t, x, n, ua, &pa);
+    if (j == SIZE_MAX)
+        return;
+    bn__tracer_patch_point(t, j, ub, uc, ud, y);
+    bn_v3_sub(y, x, d);
+    dist2 = bn_v3_dot(d, d);
+    dist = sqrt(dist2);
+    if (!(dist > 0))
+        return;
+    bn_v3_scale(d, 1.0 / dist, d);
+    cx = bn_v3_dot(n, d);
+    cy = -bn_v3_dot(t->patches[j].normal, d);
+    if (!(cx > 0 && cy > 0 && pa > 0))
+        return;
+    pl = pa * dist2 / cy;
+    pb = cx / BN_PI;
+    wgt = mis ? pl * pl / (pl * pl + pb * pb) : 1.0;
+    /* Shadow ray between offset end points, stopping short by eps. */
+    bn_v3_madd(y, t->eps, t->patches[j].normal, ye);
+    bn_v3_sub(ye, o, sd);
+    len = bn_v3_len(sd);
+    (*rays)++;
+    if (!(len > 2 * t->eps))
+        return;
+    bn_v3_scale(sd, 1.0 / len, sd);
+    if (bn_rt_occluded(t->rt, o, sd, 0, len - t->eps))
+        return;
+    g = wgt * cx / (BN_PI * pl);
+    for (int c = 0; c < 3; c++)
+        bins[3 * bin + c] += bx[c] * t->Le[3 * j + c] * g;
 }
 
 void bn__tracer_restart(const bn__tracer *t, size_t p, bn__rng *rng, double x[3])
@@ -175,40 +267,8 @@ void bn__tracer_path(const bn__tracer *t, const double x0[3], size_t p0, bn__rng
         for (int c = 0; c < 3; c++)
             bx[c] = beta[c] * rho[c];
         bn_v3_madd(x, t->eps, n, o);
-        if (use_nee) {
-            /* Next-event estimation: a point y on emitter j. */
-            double ua = bn__rng_uniform(rng), ub = bn__rng_uniform(rng), uc = bn__rng_uniform(rng),
-                   ud = bn__rng_uniform(rng);
-            size_t j = bn__pick_emitter(t, ua);
-            double y[3], d[3], dist2, dist, cx, cy;
-            bn__tracer_patch_point(t, j, ub, uc, ud, y);
-            bn_v3_sub(y, x, d);
-            dist2 = bn_v3_dot(d, d);
-            dist = sqrt(dist2);
-            if (dist > 0) {
-                bn_v3_scale(d, 1.0 / dist, d);
-                cx = bn_v3_dot(n, d);
-                cy = -bn_v3_dot(t->patches[j].normal, d);
-                if (cx > 0 && cy > 0) {
-                    double pl = t->pdf_area[j] * dist2 / cy, pb = cx / BN_PI;
-                    double wgt = mis ? pl * pl / (pl * pl + pb * pb) : 1.0;
-                    double ye[3], sd[3], len;
-                    /* Shadow ray between offset end points, stopping short by eps. */
-                    bn_v3_madd(y, t->eps, t->patches[j].normal, ye);
-                    bn_v3_sub(ye, o, sd);
-                    len = bn_v3_len(sd);
-                    (*rays)++;
-                    if (len > 2 * t->eps) {
-                        bn_v3_scale(sd, 1.0 / len, sd);
-                        if (!bn_rt_occluded(t->rt, o, sd, 0, len - t->eps)) {
-                            double g = wgt * cx / (BN_PI * pl);
-                            for (int c = 0; c < 3; c++)
-                                bins[3 * bin + c] += bx[c] * t->Le[3 * j + c] * g;
-                        }
-                    }
-                }
-            }
-        }
+        if (use_nee)
+            bn__nee(t, x, n, o, bx, mis, rng, bins, bin, rays);
         /* Cosine sampling: w = (r cos phi, r sin phi, sqrt(1 - u1)) around n. */
         u1 = bn__rng_uniform(rng);
         u2 = bn__rng_uniform(rng);
@@ -230,7 +290,7 @@ void bn__tracer_path(const bn__tracer *t, const double x0[3], size_t p0, bn__rng
                 if (mis && t->pdf_area[h.patch] > 0) {
                     double cy = -bn_v3_dot(t->patches[h.patch].normal, w);
                     double dd = bn_v3_dist(h.p, x);
-                    double pb = cz / BN_PI, pl = cy > 0 ? t->pdf_area[h.patch] * dd * dd / cy : INFINITY;
+                    double pb = cz / BN_PI, pl = cy > 0 ? bn__emitter_pdf(t, x, n, h.patch) * dd * dd / cy : INFINITY;
                     wgt = isinf(pl) ? 0.0 : pb * pb / (pb * pb + pl * pl);
                 }
                 for (int c = 0; c < 3; c++)

@@ -4,6 +4,7 @@
 
 #include "bounce/trace.h"
 #include "base/internal.h"
+#include "rt/lights.h"
 
 /* What a path needs of the scene, in double, built once per run. */
 typedef struct bn__tracer {
@@ -19,6 +20,10 @@ typedef struct bn__tracer {
     size_t         *em_patch;    /* nem */
     double         *em_cdf;      /* nem, last = 1 */
     double         *pdf_area;    /* N: P(choose j) / A_j, 0 for non-emitters (area density of NEE points) */
+    /* Above tree_emitters emitting patches: chosen from this light tree over em_patch instead (the
+     * probability then depends on the path's point); em_index: per patch its index in em_patch. */
+    bn__lights     *tree;
+    size_t         *em_index;
     double          eps;         /* ray offset, scene units */
     bn_trace_opts   o;
     int             nbins;       /* bounces + 2: K^0 E .. K^bounces E, rest */
