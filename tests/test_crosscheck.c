@@ -377,3 +377,71 @@ BN_TEST(cli_wrong_form_factors_fail)
     BN_ASSERT(strncmp(verdict_line(out), "verdict: fail ", 14) == 0);
     free(out);
 }
+
+/* Issue 33: the object partition against the scene's own listing: each polygon over 1% of the area
+ * is a region alone, the others one region per (object, material) pair, counted here from the faces;
+ * every patch lies in its face's region and the regions' areas sum to the scene's. The Cornell box
+ * with its light cut into 512 triangles: the light is one region, each other face its own. */
+BN_TEST(partition_by_object)
+{
+    bn_scene *s = NULL;
+    bn_load_opts lo;
+    size_t nf, np, nm, expect = 0;
+    const bn_face *f;
+    const bn_patch *pa;
+    double total = 0, sum = 0;
+    unsigned char *seen;
+    bn_partition part;
+    bn_error err;
+    bn_load_opts_default(&lo);
+    lo.log.quiet = 1;
+    BN_ASSERT_STATUS(bn_scene_load(bn_test_cornell_cut_light(16), &lo, &s, &err), BN_OK);
+    BN_ASSERT_STATUS(bn_scene_mesh(s, NULL, &err), BN_OK);
+    f = bn_scene_faces(s, &nf);
+    pa = bn_scene_patches(s, &np);
+    bn_scene_materials(s, &nm);
+    BN_ASSERT((seen = calloc(bn_scene_object_count(s) * nm, 1)) != NULL);
+    for (size_t k = 0; k < nf; k++)
+        total += f[k].area;
+    for (size_t k = 0; k < nf; k++) {
+        size_t key = f[k].object * nm + f[k].material;
+        if (f[k].area >= BN_PARTITION_OWN_SHARE * total)
+            expect++;
+        else if (f[k].area > 0 && !seen[key]) {
+            seen[key] = 1;
+            expect++;
+        }
+    }
+    BN_ASSERT_STATUS(bn_partition_objects(s, BN_PARTITION_OWN_SHARE, &part, &err), BN_OK);
+    printf("%zu faces, %zu objects: %zu regions (expected %zu)\n", nf, bn_scene_object_count(s), part.n, expect);
+    BN_ASSERT_EQ(part.n, expect);
+    BN_ASSERT_EQ(part.n, nf - 512 + 1);
+    for (size_t i = 0; i < np; i++)
+        for (size_t j = i + 1; j < np && j < i + 40; j++)   /* patches of one face share its region */
+            if (pa[i].face == pa[j].face)
+                BN_ASSERT_EQ(part.of_patch[i], part.of_patch[j]);
+    for (size_t g = 0; g < part.n; g++)
+        sum += part.area[g];
+    BN_ASSERT_REL(sum, total, 1e-9);
+    bn_partition_free(&part);
+    free(seen);
+    bn_scene_destroy(s);
+}
+
+/* Above --regions-above patches, `bounce crosscheck` compares per object and material by itself,
+ * says so, and passes on the Cornell box. */
+BN_TEST(cli_regions_by_object_when_patches_are_many)
+{
+    char cmd[1024], *out = NULL;
+    int rc;
+    snprintf(cmd, sizeof cmd, "crosscheck %s --unit mm --patches 300 --regions-above 100 --spp 1024 -q",
+             bn_test_path("meshes/cornell-box.obj"));
+    rc = bn_test_bounce(cmd, &out);
+    fprintf(stderr, "%s", verdict_line(out));
+    if (rc != 0)
+        BN_FAIL("bounce %s -> %d\n%s", cmd, rc, out ? out : "");
+    BN_ASSERT(strstr(out, "regions, one per object and material") != NULL);
+    BN_ASSERT(strstr(out, "samples per region") != NULL);
+    BN_ASSERT(strncmp(verdict_line(out), "verdict: pass", 13) == 0);
+    free(out);
+}

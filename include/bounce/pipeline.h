@@ -192,8 +192,12 @@ typedef struct bn_crosscheck_opts {
     double rtol, alpha;          /* a further relative allowance (0); family-wise false-failure rate (0.01) */
     int    worst;                /* worst entries listed (default 10) */
     size_t regions;              /* compare on about this many regions of whole polygons (bn_partition_regions),
-                                    traced with trace.spp samples each; 0 (default): per patch */
+                                    traced with trace.spp samples each; 0 (default): per patch, or ... */
+    size_t regions_above;        /* ... with regions 0 and more patches than this, per object and material
+                                    (bn_partition_objects: more than the tracer resolves at its default
+                                    samples in reasonable time); 0: never (default BN_CROSSCHECK_REGIONS_ABOVE) */
 } bn_crosscheck_opts;
+#define BN_CROSSCHECK_REGIONS_ABOVE 20000
 void bn_crosscheck_opts_default(bn_crosscheck_opts *o);
 
 typedef struct bn_crosscheck_run {
@@ -205,6 +209,7 @@ typedef struct bn_crosscheck_run {
     double *tol, *power_tol;     /* the discretisation tolerances (NULL without a second level) */
     bn_trace_patches trace;
     bn_partition part;           /* with regions: the partition (of the fine level's patches) */
+    int regioned;                /* 0 per patch; 1 regions asked (opts.regions); 2 per object (regions_above) */
     double *rad_regions;         /* with regions: the fine level's region means */
     bn_crosscheck_input in;      /* what was compared (borrowing the above) */
     bn_crosscheck_result result; /* result.pass: the verdict */

@@ -12,7 +12,7 @@
 typedef struct bn__xcheck_cli {
     bn_cli_scene so;
     bn_cli_ff ffo;
-    size_t spp, regions;
+    size_t spp, regions, regions_above;
     int bounces, disc, worst, strategy, model;
     double alpha, ratio, tol_scale, rtol, solve_tol;
 } bn__xcheck_cli;
@@ -20,7 +20,7 @@ typedef struct bn__xcheck_cli {
 static void bn__xcheck_options(bn_optset *set, bn__xcheck_cli *a, bn_cli_common *c)
 {
     *a = (bn__xcheck_cli){.spp = 1024, .bounces = 3, .worst = 10, .alpha = 0.01, .ratio = 2, .tol_scale = 3,
-                          .solve_tol = 1e-10, .model = BN_TRACE_PATCH};
+                          .solve_tol = 1e-10, .model = BN_TRACE_PATCH, .regions_above = BN_CROSSCHECK_REGIONS_ABOVE};
     set->usage = "bounce crosscheck SCENE [meshing and form-factor options] [--spp N] [-n K] [--alpha A]";
     set->summary =
         "Compares the radiosity solution (form factors + solve, bounce terms E, KE, ..., K{n}E, rest, L)\n"
@@ -42,7 +42,13 @@ static void bn__xcheck_options(bn_optset *set, bn__xcheck_cli *a, bn_cli_common 
     bn_optset_add(set, (bn_opt){"regions", 0, BN_OPT_SIZE, &a->regions, NULL, 1, 1e6, "N",
                                  "compare area means over about N regions of whole polygons, one material each "
                                  "(split at area medians), --spp samples each, instead of every patch: for scenes "
-                                 "with more patches than the tracer can resolve (default: per patch)"});
+                                 "with more patches than the tracer can resolve (default: per patch, or see "
+                                 "--regions-above)"});
+    bn_optset_add(set, (bn_opt){"regions-above", 0, BN_OPT_SIZE, &a->regions_above, NULL, 0, 1e12, "N",
+                                 "without --regions, a scene meshed into more than N patches is compared per object "
+                                 "and material (its o/g groups or material-name prefixes), each polygon over 1% of "
+                                 "the area (a wall, the floor) a region of its own (default "
+                                 BN__STR(BN_CROSSCHECK_REGIONS_ABOVE) "; 0: always per patch)"});
     bn_optset_add(set, (bn_opt){"bounces", 'n', BN_OPT_INT, &a->bounces, NULL, 0, 64, "K",
                                  "terms E .. K{K}E compared one by one, then rest and L (default 3)"});
     bn_optset_add(set, (bn_opt){"alpha", 0, BN_OPT_DOUBLE, &a->alpha, NULL, 1e-12, 0.5, "A",
@@ -93,6 +99,7 @@ static void bn__xcheck_opts(const bn__xcheck_cli *a, bn_cli_common *c, bn_crossc
     xo->alpha = a->alpha;
     xo->worst = a->worst;
     xo->regions = a->regions;
+    xo->regions_above = a->regions_above;
 }
 
 /* How radiosity was solved: the hierarchy's links or the form factors, the solver, the time. */
@@ -158,12 +165,16 @@ int bn_cmd_crosscheck(int argc, char **argv, bn_cli_common *c)
            bn_unit_name(bn_scene_unit(run.fine.scene)));
     bn__xcheck_radiosity(&xo, &run);
     bn__xcheck_disc(&a, &run);
-    if (a.regions)
+    if (run.regioned == 1)
         printf("# regions: %zu regions of whole polygons (asked %zu), one material each, area-balanced\n",
                run.part.n, a.regions);
+    else if (run.regioned == 2)
+        printf("# regions: %zu regions, one per object and material, each polygon over %g%% of the area its own, "
+               "chosen because %zu patches are more than --regions-above %zu (the tracer at %zu samples each)\n",
+               run.part.n, 100 * BN_PARTITION_OWN_SHARE, run.fine.n, a.regions_above, a.spp);
     printf("# path tracer: %s transport, %zu samples per %s, %s, rr_depth %d, seed %llu, %.3g rays in %.2f s "
            "(%.3g rays/s)\n",
-           bn_trace_model_name(xo.trace.model), a.spp, a.regions ? "region" : "patch",
+           bn_trace_model_name(xo.trace.model), a.spp, run.regioned ? "region" : "patch",
            bn_trace_strategy_name(xo.trace.strategy), xo.trace.rr_depth,
            (unsigned long long)c->seed, (double)run.trace.rays, run.trace.seconds,
            (double)run.trace.rays / fmax(run.trace.seconds, 1e-9));

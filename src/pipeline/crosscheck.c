@@ -25,6 +25,16 @@ void bn_crosscheck_opts_default(bn_crosscheck_opts *o)
     o->tol_scale = 3;
     o->alpha = 0.01;
     o->worst = 10;
+    o->regions_above = BN_CROSSCHECK_REGIONS_ABOVE;
+}
+
+/* The reporting partition of scene s that run->regioned says (1: about opts.regions regions; 2:
+ * per object and material). */
+static bn_status bn__partition(const bn_crosscheck_opts *o, const bn_crosscheck_run *run, const bn_scene *s,
+                               bn_partition *part, bn_error *err)
+{
+    return run->regioned == 1 ? bn_partition_regions(s, o->regions, part, err)
+                              : bn_partition_objects(s, BN_PARTITION_OWN_SHARE, part, err);
 }
 
 /* One level: the pipeline with mesh m (the rays kept), and its layers in the tracer's layout. */
@@ -72,7 +82,7 @@ static bn_status bn__second_mesh(const bn_crosscheck_opts *o, const bn_pipeline 
 static bn_status bn__tolerance(const bn_crosscheck_opts *o, bn_crosscheck_run *run, const bn_scene *scene2,
                                const double *layers2, bn_error *err)
 {
-    size_t nl = (size_t)bn_layer_count(o->bounces), n = o->regions ? run->part.n : run->fine.n;
+    size_t nl = (size_t)bn_layer_count(o->bounces), n = run->regioned ? run->part.n : run->fine.n;
     double *tol = bn__malloc_array(n * nl, 3 * sizeof(double)), *ptol = bn__malloc_array(nl, 3 * sizeof(double));
     bn_status st = BN_OK;
     if (!run->tol) {
@@ -84,13 +94,13 @@ static bn_status bn__tolerance(const bn_crosscheck_opts *o, bn_crosscheck_run *r
         free(ptol);
         return bn_error_set(err, BN_ENOMEM, "crosscheck: out of memory");
     }
-    if (!o->regions) {
+    if (!run->regioned) {
         st = bn_crosscheck_mesh_tolerance(run->fine.scene, run->layers_fine, scene2, layers2, o->bounces, tol, ptol,
                                           err);
     } else {   /* regions are whole polygons, so both levels have the same ones: compare their means */
         bn_partition q;
         double m = bn_unit_to_metres(bn_scene_unit(run->fine.scene)), *b = NULL;
-        st = bn_partition_regions(scene2, o->regions, &q, err);
+        st = bn__partition(o, run, scene2, &q, err);
         if (st == BN_OK) {
             b = bn__malloc_array(n * nl, 3 * sizeof(double));
             if (!b || q.n != n)
@@ -175,9 +185,10 @@ bn_status bn_crosscheck_run_scene(const char *path, const bn_crosscheck_opts *o,
     memset(run, 0, sizeof *run);
     to.bounces = o->bounces;
     st = bn__level(path, o, &o->pipeline.mesh, &run->fine, &run->layers_fine, &run->seconds_fine, err);
-    if (st == BN_OK && o->regions) {
+    run->regioned = o->regions ? 1 : o->regions_above && run->fine.n > o->regions_above ? 2 : 0;
+    if (st == BN_OK && run->regioned) {
         size_t nl = (size_t)bn_layer_count(o->bounces);
-        st = bn_partition_regions(run->fine.scene, o->regions, &run->part, err);
+        st = bn__partition(o, run, run->fine.scene, &run->part, err);
         if (st == BN_OK && !(run->rad_regions = bn__malloc_array(run->part.n * nl, 3 * sizeof(double))))
             st = bn_error_set(err, BN_ENOMEM, "crosscheck: out of memory");
         if (st == BN_OK) {
@@ -193,8 +204,8 @@ bn_status bn_crosscheck_run_scene(const char *path, const bn_crosscheck_opts *o,
     bn_crosscheck_input_default(in);
     in->scene = run->fine.scene;
     in->trace = &run->trace;
-    in->rad = o->regions ? run->rad_regions : run->layers_fine;
-    in->part = o->regions ? &run->part : NULL;
+    in->rad = run->regioned ? run->rad_regions : run->layers_fine;
+    in->part = run->regioned ? &run->part : NULL;
     in->tol = run->tol;
     in->power_tol = run->power_tol;
     /* Two-level grid-convergence estimate with order p = 1 (patch-constant radiosity): the error of

@@ -260,6 +260,52 @@ bn_status bn_partition_regions(const bn_scene *s, size_t nregions, bn_partition 
     return st;
 }
 
+bn_status bn_partition_objects(const bn_scene *s, double own_share, bn_partition *out, bn_error *err)
+{
+    size_t np, nf, nm, cnt = 0;
+    const bn_patch *pa = bn_scene_patches(s, &np);
+    const bn_face *f = bn_scene_faces(s, &nf);
+    bn__split S = {0};
+    double total = 0;
+    bn_status st = BN_OK;
+    bn_scene_materials(s, &nm);
+    memset(out, 0, sizeof *out);
+    if (!(own_share >= 0 && own_share <= 1))
+        return bn_error_set(err, BN_EUSAGE, "partition: own share %g is not in [0, 1]", own_share);
+    if (np == 0 || nf == 0)
+        return bn_error_set(err, BN_EINPUT, "%s: no patches to partition", bn_scene_path(s));
+    S.region = bn__malloc_array(nf, sizeof(uint32_t));
+    S.keys = bn__malloc_array(nf, sizeof *S.keys);
+    if (!S.region || !S.keys)
+        st = bn_error_set(err, BN_ENOMEM, "out of memory for a partition of %zu polygons", nf);
+    for (size_t k = 0; k < nf; k++)
+        total += f[k].area;
+    /* the key: the polygon itself (negative, unique) when large, else its object and material */
+    for (size_t k = 0; st == BN_OK && k < nf; k++) {
+        S.region[k] = UINT32_MAX;
+        if (f[k].area > 0)
+            S.keys[cnt++] = (bn__pkey){own_share > 0 && f[k].area >= own_share * total
+                                           ? -1.0 - (double)k
+                                           : (double)f[k].object * (double)nm + (double)f[k].material,
+                                       (uint32_t)k};
+    }
+    if (st == BN_OK) {
+        qsort(S.keys, cnt, sizeof *S.keys, bn__pkey_cmp);
+        for (size_t i = 0; i < cnt; i++) {
+            S.next += i == 0 || S.keys[i].k != S.keys[i - 1].k;
+            S.region[S.keys[i].f] = (uint32_t)(S.next - 1);
+        }
+        st = bn__drop_empty(&S, pa, np, nf, err);
+    }
+    if (st == BN_OK)
+        st = bn__partition_fill(&S, pa, np, out, err);
+    if (st != BN_OK)
+        bn_partition_free(out);
+    free(S.region);
+    free(S.keys);
+    return st;
+}
+
 void bn_partition_mean(const bn_partition *p, const bn_scene *s, const double *layers, int nlayers, double *out)
 {
     size_t np;
