@@ -6,11 +6,18 @@
  * one ray each, so its cost per pixel should not grow with their number: the table gives each
  * gather's time as a multiple of the one face's at the default light samples, and its errors.
  *
- * usage: emitter_bench REF.exr [--quick] (--quick: 1 and 100 faces only) */
+ * With --interior ROOM.obj (the living room): each emitting material rendered alone (the other
+ * emitters' Ke set to 0 in a copy of the MTL), KE only, twice with two seeds at the default light
+ * samples: the 90th percentile and mean over its lit pixels of the per-pixel relative standard
+ * deviation |a - b| / sqrt(2) / mean, and the time, against the ceiling panels'.
+ *
+ * usage: emitter_bench REF.exr [--quick] (--quick: 1 and 100 faces only)
+ *        emitter_bench --interior ROOM.obj (units: metres) */
 #include "ref_exr.h"
 #include "bounce/gather.h"
 #include "bounce/pipeline.h"
 #include "base/internal.h"
+#include "bounce/rt.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -127,6 +134,160 @@ static double gather(const bn_pipeline *p, const exr_img *rke, const exr_img *rk
     return t;
 }
 
+/* dir/room.mtl: src's MTL with every Ke but material `keep`'s set to 0; the emitting materials'
+ * names into names (at most 16), their count. */
+static int write_mtl_alone(const char *src, const char *keep, const char *dir, char names[16][128])
+{
+    char *m = slurp(src), *line, *save = NULL, cur[128] = "", path[4096];
+    int n = 0;
+    FILE *fp;
+    snprintf(path, sizeof path, "%s/room.mtl", dir);
+    if (!(fp = fopen(path, "w")))
+        exit(1);
+    for (line = strtok_r(m, "\n", &save); line; line = strtok_r(NULL, "\n", &save)) {
+        double r, g, b;
+        if (sscanf(line, "newmtl %127s", cur) == 1) {
+            fprintf(fp, "%s\n", line);
+        } else if (sscanf(line, "Ke %lf %lf %lf", &r, &g, &b) == 3 && (r > 0 || g > 0 || b > 0)) {
+            if (n < 16)
+                snprintf(names[n++], 128, "%s", cur);
+            fprintf(fp, "%s\n", keep && strcmp(keep, cur) ? "Ke 0 0 0" : line);
+        } else {
+            fprintf(fp, "%s\n", line);
+        }
+    }
+    fclose(fp);
+    free(m);
+    return n;
+}
+
+/* The room in dir (room.obj, room.mtl, room.camera) at 256x256, KE only (E and zero terms), with
+ * seed: the KE image's luminance into y (w*h), the gather's time. */
+static double interior_ke(const char *dir, uint64_t seed, float *y)
+{
+    char path[4096];
+    bn_load_opts lo;
+    bn_scene *s = NULL;
+    bn_rt *rt = NULL;
+    bn_error err;
+    bn_camera cam;
+    bn_gather_opts go;
+    bn_image g[4];
+    size_t np;
+    double *E, *zero, t0, t;
+    const double *terms[2];
+    snprintf(path, sizeof path, "%s/room.obj", dir);
+    bn_load_opts_default(&lo);
+    lo.log.quiet = 1;
+    lo.unit = BN_UNIT_M;
+    if (bn_scene_load(path, &lo, &s, &err) != BN_OK || bn_scene_mesh(s, NULL, &err) != BN_OK ||
+        bn_rt_create(s, 0, &rt, &err) != BN_OK) {
+        fprintf(stderr, "emitter_bench: %s\n", err.msg);
+        exit(1);
+    }
+    bn_scene_patches(s, &np);
+    E = calloc(3 * np, sizeof *E);
+    zero = calloc(3 * np, sizeof *zero);
+    bn_scene_patch_emission(s, E);
+    terms[0] = E;
+    terms[1] = zero;
+    bn_camera_default(s, &cam);
+    if (bn_camera_load_sidecar(path, &cam, NULL, &err) != BN_OK)
+        exit(1);
+    cam.width = cam.height = 256;
+    cam.spp = 1;
+    for (int l = 0; l < 4; l++)
+        bn_image_alloc(&g[l], 256, 256, &err);
+    bn_gather_opts_default(&go);
+    go.hemi_samples = 1;
+    go.seed = seed;
+    go.quiet = 1;
+    t0 = bn__now();
+    if (bn_gather_render(rt, &cam, terms, 1, zero, &go, g, NULL, &err) != BN_OK)
+        exit(1);
+    t = bn__now() - t0;
+    for (size_t k = 0; k < 256 * 256; k++)
+        y[k] = 0.2126f * g[1].rgb[3 * k] + 0.7152f * g[1].rgb[3 * k + 1] + 0.0722f * g[1].rgb[3 * k + 2];
+    for (int l = 0; l < 4; l++)
+        bn_image_free(&g[l]);
+    free(E);
+    free(zero);
+    bn_rt_destroy(rt);
+    bn_scene_destroy(s);
+    return t;
+}
+
+static int cmp_f(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return x < y ? -1 : x > y;
+}
+
+/* The per-pixel relative standard deviation of two renders over the pixels above 1e-3 of the
+ * brightest: its 90th percentile (most lit pixels are exact: their deviation is 0), *mean its mean. */
+static double rel_sd(const float *a, const float *b, size_t n, double *mean_out)
+{
+    double top = 0, *e = malloc(n * sizeof *e), med, sum = 0;
+    size_t m = 0;
+    for (size_t k = 0; k < n; k++)
+        top = fmax(top, 0.5 * (a[k] + b[k]));
+    for (size_t k = 0; k < n; k++) {
+        double mean = 0.5 * (a[k] + b[k]);
+        if (mean > 1e-3 * top) {
+            e[m] = fabs(a[k] - b[k]) / sqrt(2.0) / mean;
+            sum += e[m++];
+        }
+    }
+    qsort(e, m, sizeof *e, cmp_f);
+    med = m ? e[m * 9 / 10] : NAN;
+    *mean_out = m ? sum / (double)m : NAN;
+    free(e);
+    return med;
+}
+
+/* --interior: each emitting material alone, its KE's relative noise and time. */
+static int interior(const char *room)
+{
+    char dir[] = "/tmp/emitter_room.XXXXXX", names[16][128], path[8192], src[2048], *dot;
+    float *a = malloc(256 * 256 * sizeof(float)), *b = malloc(256 * 256 * sizeof(float));
+    int n;
+    if (!mkdtemp(dir) || !a || !b)
+        return 1;
+    snprintf(src, sizeof src, "%s", room);
+    if ((dot = strrchr(src, '.')))
+        *dot = 0;
+    snprintf(path, sizeof path, "%s/room.obj", dir);
+    { /* the OBJ as it is, but naming room.mtl; the camera beside it */
+        char *obj = slurp(room), *ml = strstr(obj, "mtllib "), cam[8192];
+        FILE *fp = fopen(path, "w");
+        if (!fp || !ml)
+            return 1;
+        fprintf(fp, "%.*smtllib room.mtl%s", (int)(ml - obj), obj, strchr(ml, '\n'));
+        fclose(fp);
+        free(obj);
+        snprintf(cam, sizeof cam, "cp '%s.camera' '%s/room.camera'", src, dir);
+        if (system(cam) != 0)
+            return 1;
+    }
+    snprintf(path, sizeof path, "%s.mtl", src);
+    n = write_mtl_alone(path, NULL, dir, names);
+    printf("| emitter alone | gather s (KE) | per-pixel relative standard deviation: 90th percentile | mean |\n"
+           "|---|---|---|---|\n");
+    for (int e = 0; e < n; e++) {
+        double t, p90, mean;
+        write_mtl_alone(path, names[e], dir, names);
+        t = interior_ke(dir, 1, a);
+        t += interior_ke(dir, 2, b);
+        p90 = rel_sd(a, b, 256 * 256, &mean);
+        printf("| %s | %.2f | %.3f%% | %.3f%% |\n", names[e], t / 2, 100 * p90, 100 * mean);
+        fflush(stdout);
+    }
+    free(a);
+    free(b);
+    snprintf(path, sizeof path, "rm -rf '%s'", dir);
+    return system(path) != 0;
+}
+
 int main(int argc, char **argv)
 {
     static const int na[] = {1, 5, 50}, nb[] = {0, 10, 100}, light[] = {16, 64, 256};
@@ -134,6 +295,8 @@ int main(int argc, char **argv)
     double t1 = NAN;
     exr_img rke, rk2, rl;
     char dir[] = "/tmp/emitter_bench.XXXXXX", path[4096];
+    if (argc == 3 && !strcmp(argv[1], "--interior"))
+        return interior(argv[2]);
     if (argc < 2 || !exr_img_load(argv[1], "KE", &rke, 1) || !exr_img_load(argv[1], "K2E", &rk2, 1) ||
         !exr_img_load(argv[1], "L", &rl, 1)) {
         fprintf(stderr, "usage: emitter_bench REF.exr [--quick] (REF: a `bounce trace` EXR with KE and L)\n");

@@ -591,6 +591,16 @@ if [ "$big" = 1 ]; then
             } >>"$big_report"
             interior_scene "$work/living-room.obj" "$big_report"
             echo >>"$big_report"
+            {
+                echo "Each emitting material of the living room alone (the others' Ke 0 in a copy of its MTL), its direct"
+                echo "light (KE) by the default gather at 256x256, twice with two seeds: the per-pixel relative standard"
+                echo "deviation over its lit pixels (\\`emitter_bench --interior\\`; target: none above the ceiling panels' at"
+                echo "equal time)."
+                echo
+                timeout 1800 "$build/bench/emitter_bench" --interior "$work/living-room.obj" 2>/dev/null ||
+                    echo "_emitter_bench --interior failed_"
+                echo
+            } >>"$big_report"
         fi
         # the MPI identity checks on the bunny box (tests/mpi_check.sh with BN_TEST_BIG=1: out of the
         # suite's budget, a big scene)
