@@ -76,6 +76,7 @@ void bn_gather_opts_default(bn_gather_opts *o);
 /* Counts of one render. */
 typedef struct bn_gather_stats {
     double shadow_rays, gather_rays, camera_rays;
+    double front_hits;               /* camera rays that met a surface's front (0: a black image) */
     size_t emitters;                 /* emitting faces */
     int hit_direct;                  /* 1: K^2 E's hits took KE from the emitters (hit_emitters) */
     int light_tree;                  /* 1: emitting faces were picked from the light tree (tree_emitters) */

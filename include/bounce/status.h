@@ -79,7 +79,8 @@ typedef enum bn_log_level { BN_LOG_DEBUG, BN_LOG_INFO, BN_LOG_WARN } bn_log_leve
     X(REFERENCE, "reference")       /* a study's reference not well below the errors measured */  \
     X(CLAMPED, "clamped")           /* values clamped on output (half floats) */                  \
     X(FONT, "font")                 /* a contact sheet without labels */                          \
-    X(NON_MANIFOLD, "non-manifold") /* bake vertices duplicated for OpenMesh */
+    X(NON_MANIFOLD, "non-manifold") /* bake vertices duplicated for OpenMesh */                   \
+    X(CAMERA, "camera")             /* the camera sees almost no front face: a black image */
 #define BN__WARNING_ENUM(id, name) BN_W_##id,
 typedef enum bn_warning { BN_WARNING_MAP(BN__WARNING_ENUM) BN_WARNING_COUNT } bn_warning;
 #undef BN__WARNING_ENUM

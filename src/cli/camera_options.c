@@ -20,13 +20,23 @@ void bn_cli_add_camera(bn_optset *s, bn_cli_camera *o)
 }
 
 bn_status bn_cli_make_camera(const bn_optset *s, const bn_cli_camera *o, const char *scene_path, const bn_scene *scene,
-                             bn_camera *cam, bn_error *err)
+                             const bn_cli_common *c, bn_camera *cam, bn_error *err)
 {
     bn_status st;
+    int found = 0;
+    bn_log lg = {bn_cli_log, (void *)c, c->quiet};
     bn_camera_default(scene, cam);
-    st = bn_camera_load_sidecar(scene_path, cam, NULL, err);
+    st = bn_camera_load_sidecar(scene_path, cam, &found, err);
     if (st != BN_OK)
         return st;
+    if (bn_cli_given(s, "eye") || bn_cli_given(s, "look"))
+        bn_logf(&lg, BN_LOG_INFO, "camera: --eye/--look as given%s", found ? " (over the scene's .camera sidecar)" : "");
+    else if (found)
+        bn_logf(&lg, BN_LOG_INFO, "camera: the scene's .camera sidecar (eye %g, %g, %g)", cam->eye[0], cam->eye[1],
+                cam->eye[2]);
+    else
+        bn_logf(&lg, BN_LOG_INFO, "camera: the default, in front of the scene's box looking at its centre (no .camera "
+                "sidecar; --eye/--look place it, inside a closed room for an interior)");
     if (bn_cli_given(s, "eye"))
         memcpy(cam->eye, o->eye, sizeof cam->eye);
     if (bn_cli_given(s, "look"))

@@ -141,7 +141,7 @@ typedef struct bn_cli_camera {
 } bn_cli_camera;
 void bn_cli_add_camera(bn_optset *s, bn_cli_camera *o);
 bn_status bn_cli_make_camera(const bn_optset *s, const bn_cli_camera *o, const char *scene_path, const bn_scene *scene,
-                             bn_camera *cam, bn_error *err);
+                             const bn_cli_common *c, bn_camera *cam, bn_error *err);
 /* Camera as one provenance line: "eye x,y,z look x,y,z up x,y,z fov F size WxH spp N". */
 void bn_cli_camera_describe(const bn_camera *cam, char *buf, size_t n);
 

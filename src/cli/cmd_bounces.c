@@ -214,7 +214,7 @@ int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c)
         return bn_cli_fail(&err);
     st = bn_cli_run_solution(pos[0], &a.so, &a.ff, &a.sol, c, a.n, &p, NULL, 0);
     if (st == BN_OK)
-        st = bn_cli_make_camera(&set, &a.co, pos[0], p.scene, &cam, &err);
+        st = bn_cli_make_camera(&set, &a.co, pos[0], p.scene, c, &cam, &err);
     else
         err.status = BN_OK;   /* already printed */
     if (st == BN_OK) {

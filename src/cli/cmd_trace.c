@@ -86,7 +86,7 @@ static bn_status bn__trace_image_out(const bn_optset *set, bn__trace_cli *a, bn_
     bn_trace_image img;
     bn_log lg = {bn_cli_log, c, c->quiet};
     char spp_s[32], n_s[16], method[96];
-    bn_status st = bn_cli_make_camera(set, &a->co, scene_path, s, &cam, err);
+    bn_status st = bn_cli_make_camera(set, &a->co, scene_path, s, c, &cam, err);
     if (st == BN_OK)
         st = bn_trace_image_run(rt, &cam, to, &img, err);
     if (st != BN_OK)

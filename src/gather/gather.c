@@ -328,6 +328,7 @@ static long bn__sample(const bn__gather *G, const double o[3], const double d[3]
     memset(hv, 0, (size_t)nl * 3 * sizeof(double));
     if (!bn_rt_intersect(G->rt, o, d, 0, INFINITY, &h) || !h.front)
         return -1;
+    st->front_hits += 1;
     p = &G->patch[h.patch];
     rho = G->mat[p->material].rho;
     bn__direct(G, h.p, p->normal, p->face, r, G->gl, ke, &st->shadow_rays);
@@ -587,20 +588,20 @@ static bn_status bn__gather_share(int stop, bn_image *out, const bn_camera *cam,
 }
 
 /* Every row of this rank: E and KE into out[0..1], the faces and gathered means into aux (stride
- * values per pixel); c[3] += camera, shadow and gather rays. Returns 0, 1 interrupted, 2 out of memory. */
+ * values per pixel); c[4] += camera, shadow and gather rays and front hits. Returns 0, 1 interrupted, 2 out of memory. */
 static int bn__gather_rows(const bn__gather *G, const bn_camera *cam, const bn_gather_opts *o, bn_image *out,
-                           double *aux, size_t stride, double c[3])
+                           double *aux, size_t stride, double c[4])
 {
     int sx, sy;
     volatile int stop = 0;
-    double cr = 0, sr = 0, gr = 0;
+    double cr = 0, sr = 0, gr = 0, fh = 0;
     size_t done = 0, nl3 = stride - 1, rowv = (size_t)cam->width * stride, row3 = (size_t)3 * (size_t)cam->width;
     bn__progress prog;
     for (sx = (int)floor(sqrt((double)cam->spp)); sx > 1 && cam->spp % sx != 0;)
         sx--;
     sy = cam->spp / sx;
     bn__progress_begin(&prog, "gather", (size_t)cam->height, o->quiet);
-#pragma omp parallel reduction(+ : cr, sr, gr)
+#pragma omp parallel reduction(+ : cr, sr, gr, fh)
     {
         bn__pixbuf B = {malloc(6 * sizeof(double)), malloc(nl3 * sizeof(double)), malloc(nl3 * sizeof(double)),
                         malloc(nl3 * sizeof(double))};
@@ -623,6 +624,7 @@ static int bn__gather_rows(const bn__gather *G, const bn_camera *cam, const bn_g
                 cr += ls.camera_rays;
                 sr += ls.shadow_rays;
                 gr += ls.gather_rays;
+                fh += ls.front_hits;
             }
             bn__progress_step(&prog, &done, 1);
         }
@@ -635,12 +637,13 @@ static int bn__gather_rows(const bn__gather *G, const bn_camera *cam, const bn_g
     c[0] += cr;
     c[1] += sr;
     c[2] += gr;
+    c[3] += fh;
     return stop;
 }
 
 /* The layers composed, checked finite, and the counts (summed over ranks) into stats. */
 static bn_status bn__gather_finish(const bn__gather *G, const bn_camera *cam, const double *aux, int filter,
-                                   double c[3], double t0, bn_image *out, bn_gather_stats *stats, bn_error *err)
+                                   double c[4], double t0, bn_image *out, bn_gather_stats *stats, bn_error *err)
 {
     size_t npix = (size_t)cam->width * (size_t)cam->height;
     bn_status st;
@@ -651,11 +654,12 @@ static bn_status bn__gather_finish(const bn__gather *G, const bn_camera *cam, co
                 return bn_error_set(err, BN_ENUMERIC, "gather: a non-finite value in layer %zu at pixel %zu", l, k / 3);
     if (!stats)
         return BN_OK;
-    if (bn_dist_size() > 1 && (st = bn_dist_sum(c, 3, err)) != BN_OK)
+    if (bn_dist_size() > 1 && (st = bn_dist_sum(c, 4, err)) != BN_OK)
         return st;
     stats->camera_rays = c[0];
     stats->shadow_rays = c[1];
     stats->gather_rays = c[2];
+    stats->front_hits = c[3];
     stats->emitters = G->nem;
     stats->hit_direct = G->hit_direct;
     stats->light_tree = G->tree != NULL;
@@ -670,7 +674,7 @@ static bn_status bn__gather_body(const bn_rt *rt, const bn_camera *cam, const do
     bn__gather G;
     size_t npix = (size_t)cam->width * (size_t)cam->height, stride = 1 + 3 * ((size_t)n + 1);
     bn_status st;
-    double t0 = bn__now(), c[3] = {0, 0, 0}, *aux = NULL;
+    double t0 = bn__now(), c[4] = {0, 0, 0, 0}, *aux = NULL;
 
     memset(&G, 0, sizeof G);
     if ((st = bn__gather_check(cam, n, o, out, err)) != BN_OK)

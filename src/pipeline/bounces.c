@@ -66,6 +66,11 @@ static bn_status bn__bounces_render(const bn_scene *scene, const bn_rt *rt, cons
         go.threads = o->threads;
         go.quiet = o->quiet;
         st = bn_gather_render(rt, cam, layers, n, layers[n + 1], &go, imgs, &gs, err);
+        if (st == BN_OK && gs.front_hits < 0.01 * gs.camera_rays)
+            bn_warnf(&o->log, BN_W_CAMERA, gs.camera_rays - gs.front_hits,
+                     "the camera (eye %g, %g, %g) sees a surface's front in %.2g%% of its samples: the image is "
+                     "black (is its eye outside a closed room, or behind the surfaces it looks at?)", cam->eye[0],
+                     cam->eye[1], cam->eye[2], 100 * gs.front_hits / gs.camera_rays);
         if (st == BN_OK)
             bn_logf(&o->log, BN_LOG_INFO,
                     "gather: %dx%d x %d spp, %zu emitting face%s, %s %d (K2E's hits: KE %s); %.3g shadow rays, "
