@@ -427,21 +427,3 @@ BN_TEST(partition_by_object)
     free(seen);
     bn_scene_destroy(s);
 }
-
-/* Above --regions-above patches, `bounce crosscheck` compares per object and material by itself,
- * says so, and passes on the Cornell box. */
-BN_TEST(cli_regions_by_object_when_patches_are_many)
-{
-    char cmd[1024], *out = NULL;
-    int rc;
-    snprintf(cmd, sizeof cmd, "crosscheck %s --unit mm --patches 300 --regions-above 100 --spp 1024 -q",
-             bn_test_path("meshes/cornell-box.obj"));
-    rc = bn_test_bounce(cmd, &out);
-    fprintf(stderr, "%s", verdict_line(out));
-    if (rc != 0)
-        BN_FAIL("bounce %s -> %d\n%s", cmd, rc, out ? out : "");
-    BN_ASSERT(strstr(out, "regions, one per object and material") != NULL);
-    BN_ASSERT(strstr(out, "samples per region") != NULL);
-    BN_ASSERT(strncmp(verdict_line(out), "verdict: pass", 13) == 0);
-    free(out);
-}

@@ -200,7 +200,7 @@ BN_TEST(open_box_plate_sides_match_the_tracer)
     pt = bn_scene_patches(p.scene, &np);
     fc = bn_scene_faces(p.scene, NULL);
     bn_trace_opts_default(&to);
-    to.spp = 2048;
+    to.spp = 1024;
     to.bounces = 3;
     to.quiet = 1;
     BN_ASSERT_STATUS(bn_trace_patches_run(p.rt, &to, &tr, &err), BN_OK);
