@@ -87,7 +87,7 @@ static const char *write_room(void)
     nv += 4;
     lamp(f, &nv);
     fprintf(f, "o window\nusemtl window\nv 3.99 0.9 0.8\nv 3.99 0.9 2.2\nv 3.99 2 2.2\nv 3.99 2 0.8\nf %d %d %d %d\n",
-            nv + 1, nv + 4, nv + 3, nv + 2);   /* on the x = 4 wall, facing -x */
+            nv + 1, nv + 2, nv + 3, nv + 4);   /* on the x = 4 wall, facing -x (into the room) */
     BN_ASSERT(fclose(f) == 0);
     BN_ASSERT((f = fopen(bn_test_tmp("room.camera"), "w")) != NULL);   /* inside, in a corner */
     fprintf(f, "eye 0.3,1.6,0.3\nlook 3,0.7,2.4\nup 0,1,0\nfov 70\n");

@@ -71,7 +71,7 @@ static void never_miss(void)
     bn__rng r = bn__rng_make(99, 0, 0);
     bn__lights *t;
     make_lights(v, l);
-    t = bn__lights_build(l, NL);
+    t = bn__lights_build(l, NL, 0);
     BN_ASSERT(t != NULL);
     BN_ASSERT_EQ(bn__lights_nodes(t), 2 * NL - 1);
     for (int j = 0; j < NX; j++) {
@@ -116,7 +116,7 @@ static void frequencies(void)
     bn__lights *t;
     double pdf;
     make_lights(v, l);
-    BN_ASSERT((t = bn__lights_build(l, NL)) != NULL);
+    BN_ASSERT((t = bn__lights_build(l, NL, 0)) != NULL);
     for (size_t s = 0; s < N; s++) {
         size_t i = bn__lights_pick(t, x, n, bn__rng_uniform(&r), FAR, &pdf);
         BN_ASSERT(i < NL || i == BN__LIGHTS_NONE);

@@ -479,7 +479,7 @@ static bn_status bn__gather_tree(bn__gather *G, bn_error *err)
         l[e] = (bn__light){em->v, em->nv, {em->n[0], em->n[1], em->n[2]},
                            em->area * (em->Le[0] + em->Le[1] + em->Le[2]) / 3};
     }
-    G->tree = bn__lights_build(l, G->nem);
+    G->tree = bn__lights_build(l, G->nem, 4 * G->eps);
     free(l);
     return G->tree ? BN_OK : bn_error_set(err, BN_ENOMEM, "out of memory for the light tree of %zu emitting faces",
                                           G->nem);

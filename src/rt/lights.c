@@ -1,5 +1,6 @@
-/* The light tree (src/rt/lights.h): a binary tree split at the median of the emitters' centroids
- * along the widest axis, one emitter per leaf; each node's box, normal cone and power. */
+/* The light tree (src/rt/lights.h): a binary tree, each split where the two halves' power x box area
+ * x normal spread is least along the three axes (pbrt-v4's surface area orientation heuristic,
+ * simplified), one emitter per leaf; each node's box, normal cone and power. */
 #include "rt/lights.h"
 #include "base/internal.h"
 #include "base/vec.h"
@@ -11,6 +12,7 @@
 typedef struct bn__lnode {
     double c[3], r2;         /* the centre of the box and its half-diagonal squared */
     double m[3];             /* the power-weighted mean of its lights' centroids */
+    double behind;           /* a leaf: how far behind its plane a point still receives (else -1) */
     double axis[3], cos_o, sin_o;   /* the cone of the front normals: axis and half-angle */
     double power;
     double lo[3], hi[3];
@@ -26,6 +28,8 @@ struct bn__lights {
     size_t *order;           /* the lights, each node's contiguous */
     double *prefix;          /* n + 1: the sums of the powers of order[0 .. k) */
     const struct bn__lkey *keys0;   /* while building */
+    double *cost;                   /* while building: n */
+    double behind;
     int depth;
 };
 
@@ -95,9 +99,28 @@ static double bn__far(const bn__lnode *nd, const double x[3], const double n[3],
     return nd->power * (c2 > BN__KEEP * bound ? c2 : BN__KEEP * bound) / d2;
 }
 
-static double bn__importance(const bn__lnode *nd, const double x[3], const double n[3])
+/* Whether node nd may be weighed by its mean point at x: far (its bounding sphere under the sine
+ * BN__NEAR) and flat (its normals within acos BN__FLAT of their axis). */
+static int bn__far_ok(const bn__lnode *nd, const double x[3])
+{
+    double d[3];
+    bn_v3_sub(x, nd->c, d);
+    return nd->cos_o > BN__FLAT && nd->r2 < BN__NEAR * BN__NEAR * bn_v3_dot(d, d);
+}
+
+/* Node nd's weight at x (normal n); far: by its mean point where bn__far_ok, else by its bounds.
+ * Siblings are weighed the same way (far only when every one of them is far and flat): the
+ * mean point's weight is much below the bounds' for a light seen at a grazing angle, and a light
+ * weighed by it beside one weighed by bounds would get a tiny probability for what it gives (a
+ * speckled image). */
+static double bn__importance(const bn__lnode *nd, const double x[3], const double n[3], int far)
 {
     double d[3], d2, sb, cb, cw, ce, ci = 1, inv;
+    if (nd->behind >= 0) {   /* one light: no light at all behind its plane */
+        bn_v3_sub(x, nd->m, d);
+        if (bn_v3_dot(d, nd->axis) < -nd->behind)
+            return 0;
+    }
     bn_v3_sub(x, nd->c, d);
     d2 = bn_v3_dot(d, d);
     if (d2 <= nd->r2)   /* x within the node's bounding sphere: every angle possible */
@@ -117,7 +140,7 @@ static double bn__importance(const bn__lnode *nd, const double x[3], const doubl
         double cx = -bn_v3_dot(n, d) * inv;
         cx = cx > 1 ? 1 : cx < -1 ? -1 : cx;
         ci = cx >= cb ? 1 : bn__cos_bound(cx, bn__sin(cx), cb, sb);
-        if (sb < BN__NEAR && nd->cos_o > BN__FLAT)
+        if (far)
             return bn__far(nd, x, n, sb, ce * ci);
     }
     return nd->power * ce * ci / d2;
@@ -197,33 +220,91 @@ static void bn__leaf(bn__lights *T, const bn__light *l, size_t i, size_t at)
     T->leaf[i] = at;
 }
 
+/* A running bound of lights for the split cost: box, cone and power. */
+typedef struct bn__acc {
+    double lo[3], hi[3], axis[3], cos_o, power;
+    int any;
+} bn__acc;
+
+static void bn__acc_add(bn__acc *a, const bn__light *li)
+{
+    for (size_t c = 0; c < li->nv; c++)
+        for (int k = 0; k < 3; k++) {
+            double v = li->v[3 * c + k];
+            a->lo[k] = a->any ? fmin(a->lo[k], v) : v;
+            a->hi[k] = a->any ? fmax(a->hi[k], v) : v;
+            if (!a->any && c == 0) {   /* the first light sets the box from its first corner */
+                for (int q = 0; q < 3; q++)
+                    a->lo[q] = a->hi[q] = li->v[q];
+                a->any = 1;
+            }
+        }
+    if (a->power == 0) {
+        memcpy(a->axis, li->n, sizeof a->axis);
+        a->cos_o = 1;
+    } else {
+        bn__cone_union(a->axis, a->cos_o, li->n, 1, a->axis, &a->cos_o);
+    }
+    a->power += li->power;
+}
+
+/* The surface area orientation cost of a bound (pbrt-v4's, simplified): power x box area x the
+ * normals' spread. */
+static double bn__acc_cost(const bn__acc *a)
+{
+    double d[3] = {a->hi[0] - a->lo[0], a->hi[1] - a->lo[1], a->hi[2] - a->lo[2]};
+    return a->power * (2 * (d[0] * d[1] + d[1] * d[2] + d[2] * d[0]) + 1e-300) * (bn__acos(a->cos_o) + BN_PI / 2);
+}
+
+/* keys[0..m) sorted along the axis, and the split position (1 .. m - 1), of least cost over the three
+ * axes (cost: scratch of m). */
+static size_t bn__best_split(const bn__light *l, const double *cen, bn__lkey *keys, size_t m, double *cost)
+{
+    double best = INFINITY;
+    int bax = 0;
+    size_t bpos = m / 2;
+    for (int ax = 0; ax < 3; ax++) {
+        bn__acc a = {0};
+        for (size_t j = 0; j < m; j++)
+            keys[j].key = cen[3 * keys[j].i + ax];
+        qsort(keys, m, sizeof *keys, bn__lkey_cmp);
+        for (size_t j = 0; j + 1 < m; j++) {
+            bn__acc_add(&a, &l[keys[j].i]);
+            cost[j + 1] = bn__acc_cost(&a);
+        }
+        memset(&a, 0, sizeof a);
+        for (size_t j = m - 1; j >= 1; j--) {
+            bn__acc_add(&a, &l[keys[j].i]);
+            if (cost[j] + bn__acc_cost(&a) < best) {
+                best = cost[j] + bn__acc_cost(&a);
+                bax = ax;
+                bpos = j;
+            }
+        }
+    }
+    for (size_t j = 0; j < m; j++)
+        keys[j].key = cen[3 * keys[j].i + bax];
+    qsort(keys, m, sizeof *keys, bn__lkey_cmp);
+    return bpos;
+}
+
 /* The node at `at` over keys[0..m): returns the next free node. */
 static size_t bn__build(bn__lights *T, const bn__light *l, const double *cen, bn__lkey *keys, size_t m, size_t at,
                         int depth)
 {
     T->node[at].first = (size_t)(keys - T->keys0);
     T->node[at].count = m;
-    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-    int ax = 0;
-    size_t next, half = m / 2;
+    size_t next, half;
     bn__lnode *nd, *a, *b;
     T->depth = depth > T->depth ? depth : T->depth;
     if (m == 1) {
         bn__leaf(T, l, keys[0].i, at);
         memcpy(T->node[at].m, cen + 3 * keys[0].i, sizeof T->node[at].m);
+        T->node[at].behind = T->behind;
         T->order[T->node[at].first] = keys[0].i;
         return at + 1;
     }
-    for (size_t j = 0; j < m; j++)
-        for (int k = 0; k < 3; k++) {
-            lo[k] = fmin(lo[k], cen[3 * keys[j].i + k]);
-            hi[k] = fmax(hi[k], cen[3 * keys[j].i + k]);
-        }
-    for (int k = 1; k < 3; k++)
-        ax = hi[k] - lo[k] > hi[ax] - lo[ax] ? k : ax;
-    for (size_t j = 0; j < m; j++)
-        keys[j].key = cen[3 * keys[j].i + ax];
-    qsort(keys, m, sizeof *keys, bn__lkey_cmp);
+    half = bn__best_split(l, cen, keys, m, T->cost);
     T->node[at].child[0] = (long)at + 1;
     next = bn__build(T, l, cen, keys, half, at + 1, depth + 1);
     T->node[at].child[1] = (long)next;
@@ -239,12 +320,13 @@ static size_t bn__build(bn__lights *T, const bn__light *l, const double *cen, bn
     bn__cone_union(a->axis, a->cos_o, b->axis, b->cos_o, nd->axis, &nd->cos_o);
     bn__node_sphere(nd);
     nd->power = a->power + b->power;
+    nd->behind = -1;
     for (int k = 0; k < 3; k++)
         nd->m[k] = nd->power > 0 ? (a->power * a->m[k] + b->power * b->m[k]) / nd->power : nd->c[k];
     return next;
 }
 
-bn__lights *bn__lights_build(const bn__light *l, size_t n)
+bn__lights *bn__lights_build(const bn__light *l, size_t n, double behind)
 {
     bn__lights *T = bn__calloc(1, sizeof *T);
     double *cen = bn__malloc_array(n, 3 * sizeof(double));
@@ -266,9 +348,18 @@ bn__lights *bn__lights_build(const bn__light *l, size_t n)
         keys[i].i = i;
     }
     T->nl = n;
+    T->behind = behind > 0 ? behind : 0;
     T->keys0 = keys;
+    if (!(T->cost = bn__malloc_array(n + 1, sizeof(double)))) {
+        free(cen);
+        free(keys);
+        bn__lights_free(T);
+        return NULL;
+    }
     T->nn = bn__build(T, l, cen, keys, n, 0, 0);
     T->keys0 = NULL;
+    free(T->cost);
+    T->cost = NULL;
     T->prefix[0] = 0;
     for (size_t k = 0; k < n; k++)
         T->prefix[k + 1] = T->prefix[k] + l[T->order[k]].power;
@@ -294,8 +385,11 @@ static double bn__cluster_weights(const bn__lights *t, const bn__lnode *nd, cons
                                   double *w)
 {
     double s = 0;
+    int far = 1;
+    for (size_t k = 0; k < nd->count; k++)
+        far &= bn__far_ok(&t->node[t->leaf[t->order[nd->first + k]]], x);
     for (size_t k = 0; k < nd->count; k++) {
-        double v = bn__importance(&t->node[t->leaf[t->order[nd->first + k]]], x, n);
+        double v = bn__importance(&t->node[t->leaf[t->order[nd->first + k]]], x, n, far);
         s += w[k] = v > 0 ? v : 0;
     }
     return s;
@@ -351,8 +445,10 @@ static size_t bn__power_pick(const bn__lights *t, const bn__lnode *nd, double u,
 static int bn__split(const bn__lights *t, const bn__lnode *nd, const double x[3], const double n[3], double w[2])
 {
     double s;
-    w[0] = bn__importance(&t->node[nd->child[0]], x, n);
-    w[1] = bn__importance(&t->node[nd->child[1]], x, n);
+    const bn__lnode *a = &t->node[nd->child[0]], *b = &t->node[nd->child[1]];
+    int far = bn__far_ok(a, x) && bn__far_ok(b, x);
+    w[0] = bn__importance(a, x, n, far);
+    w[1] = bn__importance(b, x, n, far);
     s = w[0] + w[1];
     return s > 0 && isfinite(s);
 }

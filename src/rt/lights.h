@@ -30,8 +30,10 @@ typedef struct bn__light {
 
 typedef struct bn__lights bn__lights;
 
-/* The tree over n lights (n >= 1); NULL when out of memory. */
-bn__lights *bn__lights_build(const bn__light *l, size_t n);
+/* The tree over n lights (n >= 1); NULL when out of memory. behind: how far behind a light's plane
+ * a point may lie and still receive its light (the gather takes points within 2 eps of a plane as
+ * in front of it; the tracer, 0): one light's weight is 0 beyond it. */
+bn__lights *bn__lights_build(const bn__light *l, size_t n, double behind);
 void bn__lights_free(bn__lights *t);   /* NULL is a no-op */
 
 #define BN__LIGHTS_NONE SIZE_MAX

@@ -59,7 +59,7 @@ static bn_status bn__tracer_tree(bn__tracer *t, bn_error *err)
                                p->area * (t->Le[3 * i] + t->Le[3 * i + 1] + t->Le[3 * i + 2])};
         }
     if (l && corners && t->em_index)
-        t->tree = bn__lights_build(l, t->nem);
+        t->tree = bn__lights_build(l, t->nem, 2 * t->eps);
     free(l);
     free(corners);
     if (!t->tree) {
