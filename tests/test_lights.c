@@ -152,3 +152,28 @@ BN_TEST(pick_frequencies_follow_the_probabilities)
     FAR = 0.3;
     frequencies();
 }
+
+/* 4,096 lights at one point (every split position costs the same): the tree stays shallow (cost
+ * splits to depth 40, medians below: at most 40 + 12) and a pick's probability is still
+ * bn__lights_pdf's. */
+BN_TEST(coincident_lights_keep_the_tree_shallow)
+{
+    enum { N = 4096 };
+    static const double v[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+    static bn__light l[N];
+    bn__lights *t;
+    const double x[3] = {0.2, 0.3, 2}, n[3] = {0, 0, -1};
+    double pdf;
+    for (size_t i = 0; i < N; i++)
+        l[i] = (bn__light){v, 3, {0, 0, 1}, 1};
+    BN_ASSERT((t = bn__lights_build(l, N, 0)) != NULL);
+    printf("depth %d for %d coincident lights\n", bn__lights_depth(t), N);
+    BN_ASSERT_LE(bn__lights_depth(t), 52);
+    for (int s = 0; s < 64; s++) {
+        size_t i = bn__lights_pick(t, x, n, (s + 0.5) / 64, 0, &pdf);
+        BN_ASSERT(i < N);
+        BN_ASSERT_REL(pdf, bn__lights_pdf(t, x, n, i, 0), 1e-12);
+        BN_ASSERT_REL(pdf, 1.0 / N, 1e-9);
+    }
+    bn__lights_free(t);
+}

@@ -231,13 +231,9 @@ static void bn__acc_add(bn__acc *a, const bn__light *li)
     for (size_t c = 0; c < li->nv; c++)
         for (int k = 0; k < 3; k++) {
             double v = li->v[3 * c + k];
-            a->lo[k] = a->any ? fmin(a->lo[k], v) : v;
-            a->hi[k] = a->any ? fmax(a->hi[k], v) : v;
-            if (!a->any && c == 0) {   /* the first light sets the box from its first corner */
-                for (int q = 0; q < 3; q++)
-                    a->lo[q] = a->hi[q] = li->v[q];
-                a->any = 1;
-            }
+            a->lo[k] = a->any && a->lo[k] < v ? a->lo[k] : v;
+            a->hi[k] = a->any && a->hi[k] > v ? a->hi[k] : v;
+            a->any |= k == 2;
         }
     if (a->power == 0) {
         memcpy(a->axis, li->n, sizeof a->axis);
@@ -258,11 +254,16 @@ static double bn__acc_cost(const bn__acc *a)
 
 /* keys[0..m) sorted along the axis, and the split position (1 .. m - 1), of least cost over the three
  * axes (cost: scratch of m). */
-static size_t bn__best_split(const bn__light *l, const double *cen, bn__lkey *keys, size_t m, double *cost)
+#define BN__SAOH_DEPTH 40
+
+static size_t bn__best_split(const bn__light *l, const double *cen, bn__lkey *keys, size_t m, int depth, double *cost)
 {
     double best = INFINITY;
     int bax = 0;
-    size_t bpos = m / 2;
+    /* any split down to depth BN__SAOH_DEPTH (a lamp and a window must part at the root, 1 of 49
+     * or not), the median below it: depth at most BN__SAOH_DEPTH + log2 n, so the build's recursion
+     * and bn__lights_pdf's path stay short whatever the lights (all at one point, say) */
+    size_t bpos = m / 2, lo = depth < BN__SAOH_DEPTH ? 1 : m / 2, hi = depth < BN__SAOH_DEPTH ? m - 1 : m / 2;
     for (int ax = 0; ax < 3; ax++) {
         bn__acc a = {0};
         for (size_t j = 0; j < m; j++)
@@ -275,7 +276,7 @@ static size_t bn__best_split(const bn__light *l, const double *cen, bn__lkey *ke
         memset(&a, 0, sizeof a);
         for (size_t j = m - 1; j >= 1; j--) {
             bn__acc_add(&a, &l[keys[j].i]);
-            if (cost[j] + bn__acc_cost(&a) < best) {
+            if (j >= lo && j <= hi && cost[j] + bn__acc_cost(&a) < best) {
                 best = cost[j] + bn__acc_cost(&a);
                 bax = ax;
                 bpos = j;
@@ -304,7 +305,7 @@ static size_t bn__build(bn__lights *T, const bn__light *l, const double *cen, bn
         T->order[T->node[at].first] = keys[0].i;
         return at + 1;
     }
-    half = bn__best_split(l, cen, keys, m, T->cost);
+    half = bn__best_split(l, cen, keys, m, depth, T->cost);
     T->node[at].child[0] = (long)at + 1;
     next = bn__build(T, l, cen, keys, half, at + 1, depth + 1);
     T->node[at].child[1] = (long)next;
