@@ -23,11 +23,13 @@ double bn__ff_pair(const bn__ff_pairs *p, bn__ff_worker *w, size_t i, size_t j, 
 /* The largest sample count bn__ff_pair_quick uses. */
 #define BN__FF_QUICK_MAX 256
 /* F_ij (receiver i): the unoccluded form factor by the dense assembly's quadrature (to rtol) times the
- * visible fraction from S shadow rays between point pairs drawn by the kernel (4S when the first S
- * find partial visibility): the dense value but for fewer, freshly seeded rays. *sigma: the
- * visibility estimate's standard error times the unoccluded F. */
+ * visible fraction from S shadow rays between point pairs (4S when the first S find partial
+ * visibility and their standard error's bound, F_unoccluded / (2 sqrt S), exceeds ftol; ftol 0:
+ * whenever partial): the dense value but for fewer, freshly seeded rays. *sigma: the visibility
+ * estimate's standard error times the unoccluded F; *first_only: 1 when the first S found partial
+ * visibility and ftol spared the second look (a caller that later wants it calls again). */
 double bn__ff_pair_quick(const bn__ff_pairs *p, bn__ff_worker *w, size_t i, size_t j, int S, double rtol,
-                         double *sigma);
+                         double ftol, double *sigma, int *first_only);
 size_t bn__ff_worker_rays(const bn__ff_worker *w);   /* rays cast so far */
 
 #endif

@@ -479,6 +479,28 @@ static void bn__kernel_points(bn__rng *r, const bn__pair *p, const double ni[3],
     }
 }
 
+/* Point pairs for the hierarchy's near leaf links (bn__ff_pair_quick), cheaper than the kernel's
+ * own directions: x_k stratified uniformly on a with the exact weight w_k = F(x_k -> b), y_k
+ * stratified uniformly on b. The visible fraction sum w V / sum w then weighs each x by its exact
+ * share, and the part of b seen from x by area rather than by the kernel: the same where a pair is
+ * wholly visible or wholly blocked (most leaf links), and without the solid-angle set-up per point
+ * that made the kernel's directions most of refinement's time in foliage (slivers by the thousand,
+ * each near dozens of others). */
+static void bn__near_points(bn__rng *r, const bn__pair *p, const double ni[3], bn__scratch *s)
+{
+    size_t S = s->S;
+    bn__perms(r, s->perm, S);
+    for (size_t k = 0; k < S; k++) {
+        double u1, v1, u2, v2, *x = s->x + 3 * k, *y = s->y + 3 * k;
+        bn__lhs4(r, s, k, &u1, &v1, &u2, &v2);
+        bn__poly_sample(p->a, p->na, u1, v1, x);
+        bn__poly_sample(p->b, p->nb, u2, v2, y);
+        s->w[k] = bn__ff_point_polygon(x, ni, p->b, p->nb);
+        if (!(s->w[k] > 0))
+            s->w[k] = 0;   /* x sees none of b: no ray */
+    }
+}
+
 /* Point pairs for separated patches: x on a and y on b uniform in area (stratified, Latin
  * hypercube), weighted by the kernel cos cos / r^2, which is bounded there; the visible fraction
  * is then sum w V / sum w as with the kernel's own directions, at a fraction of their cost (no
@@ -1483,7 +1505,7 @@ double bn__ff_pair(const bn__ff_pairs *p, bn__ff_worker *w, size_t i, size_t j, 
 }
 
 double bn__ff_pair_quick(const bn__ff_pairs *p, bn__ff_worker *w, size_t i, size_t j, int S, double rtol,
-                         double *sigma)
+                         double ftol, double *sigma, int *first_only)
 {
     const bn__ffg *g = &p->g;
     const double *ni = g->patch[i].normal, *nj = g->patch[j].normal;
@@ -1492,6 +1514,7 @@ double bn__ff_pair_quick(const bn__ff_pairs *p, bn__ff_worker *w, size_t i, size
     double I;
     int near;
     *sigma = 0;
+    *first_only = 0;
     if (i == j || !bn__pair_prep(g, i, j, &pp))
         return 0;
     if (S < 1)
@@ -1513,7 +1536,7 @@ double bn__ff_pair_quick(const bn__ff_pairs *p, bn__ff_worker *w, size_t i, size
             n = w->cap;
         w->s.S = n;
         if (near)
-            bn__kernel_points(&r, &pp, ni, nj, &w->s);
+            bn__near_points(&r, &pp, ni, &w->s);
         else
             bn__area_points(&r, &pp, ni, nj, &w->s);
         w->c.rays += bn__pair_rays(p->rt, g, ni, nj, &w->s);
@@ -1525,8 +1548,11 @@ double bn__ff_pair_quick(const bn__ff_pairs *p, bn__ff_worker *w, size_t i, size
             else
                 sv += w->s.w[k];
         }
-        if (round == 0 && blocked > 0 && blocked < seen)
-            continue;   /* partly visible: four times the rays */
+        if (round == 0 && blocked > 0 && blocked < seen) {
+            if (I * 0.5 / sqrt((double)n) > ftol)
+                continue;   /* partly visible, and its noise could matter: four times the rays */
+            *first_only = 1;
+        }
         {
             double v = sw > 0 ? sv / sw : 1;
             *sigma = I * sqrt((v * (1 - v) + 1.0 / (double)n) / (double)n);

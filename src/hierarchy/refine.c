@@ -121,15 +121,43 @@ static int bn__splittable(const bn__ref *R, uint32_t v)
     return !bn__tree_is_leaf(t, v) && (t->plane[v] < 0 || R->force || t->area[v] >= R->min_area);
 }
 
-/* The oracle: the most a link could carry to the receiver's radiance, rho_r B_s F_bound. */
-static double bn__link_error(const bn__ref *R, uint32_t r, uint32_t s)
+/* What a unit of F from s adds to r's radiance at most: max over channels of rho_r B_s. */
+static double bn__link_weight(const bn__ref *R, uint32_t r, uint32_t s)
 {
     const float *rho = R->t->rho_max + 3 * (size_t)r;
     const double *B = R->Bmax + 3 * (size_t)s;
     double m = 0;
     for (int c = 0; c < 3; c++)
         m = fmax(m, (double)rho[c] * B[c]);
+    return m;
+}
+
+/* The oracle: the most a link could carry to the receiver's radiance, rho_r B_s F_bound. */
+static double bn__link_error(const bn__ref *R, uint32_t r, uint32_t s)
+{
+    double m = bn__link_weight(R, r, s);
     return m > 0 ? m * bn__F_bound(R->t, r, s) : 0;
+}
+
+/* The F error a link may keep from its first look at visibility: BN__PARTIAL x eps in radiance (as
+ * partly visible links above the patches are held to); 0 at eps 0. Before the first gather a
+ * non-emitter's brightness is 0, so its partly visible leaf links get a second look in a later pass
+ * when they turn out to matter (bn__second_look). */
+static double bn__link_ftol(const bn__ref *R, uint32_t r, uint32_t s)
+{
+    double m = bn__link_weight(R, r, s);
+    if (R->force)
+        return 0;
+    return m > 0 ? BN__PARTIAL * R->eps_abs / m : INFINITY;
+}
+
+/* Is an existing link that no pass can split (between patches, or nodes below min_area), its F from
+ * a first look that found it partly visible, now bright enough for the second? Its unoccluded F is at
+ * most BN__LEAF_RAYS x F (a leaf link's first look: one ray in BN__LEAF_RAYS unblocked); links above
+ * the patches take that bound too, as the first look's noise (S >= 8 rays: 0.18 F) lies within it. */
+static int bn__second_look(const bn__ref *R, uint32_t r, uint32_t s, float F)
+{
+    return (double)F * BN__LEAF_RAYS * 0.5 / sqrt((double)BN__LEAF_RAYS) > bn__link_ftol(R, r, s);
 }
 
 /* The leaves of m nodes v[j] (m <= 2) where the area fractions u1[j] fall: the last leaf k of each
@@ -254,11 +282,13 @@ static double bn__F_kernel(const bn__ref *R, uint32_t r, uint32_t s, bn__worker 
 }
 
 /* Area-averaged F from r to s (per unit cosine when r is a cluster) by S stratified point pairs with
- * one shadow ray each; S x 4 when the first S find partial visibility, and for nodes whose bounding
- * spheres overlap (then Wallace's disk regulariser keeps every term bounded). */
-static double bn__F_sampled(const bn__ref *R, uint32_t r, uint32_t s, bn__worker *w, int *partial)
+ * one shadow ray each; S x 4 when the first S find partial visibility (unless split_if_partial: the
+ * caller splits such a link, and wants only to know), and for nodes whose bounding spheres overlap
+ * (then Wallace's disk regulariser keeps every term bounded). */
+static double bn__F_sampled(const bn__ref *R, uint32_t r, uint32_t s, int split_if_partial, bn__worker *w, int *partial)
 {
     int sep = bn__separated(R->t, r, s), S = (R->o->samples > 0 ? R->o->samples : 8) * (sep ? 1 : 4);
+    double F;
     if (!sep && R->t->plane[r] >= 0 && R->t->plane[s] >= 0 && R->t->hi[s] - R->t->lo[s] <= BN__KERNEL_LEAVES)
         return bn__F_kernel(R, r, s, w, partial);
     for (int round = 0; round < 2; round++) {
@@ -299,16 +329,20 @@ static double bn__F_sampled(const bn__ref *R, uint32_t r, uint32_t s, bn__worker
             sum += cr * cs * a / (BN_PI * r2 + (sep ? 0 : a));
         }
         *partial = blocked > 0 && blocked < seen;
-        if (round == 1 || !*partial)
-            /* a cluster receiver: F per unit of cosine, K = F / (the receiver's mean cosine toward s,
-             * from the same points), handed to each polygon as K max(0, n . u) (operator.c) */
-            return R->t->plane[r] < 0 ? (cos_sum > 0 ? sum / (cos_sum * inv) : 0) : sum;
+        if (*partial && split_if_partial)
+            return -1;   /* to be split: its F is not wanted */
+        /* a cluster receiver: F per unit of cosine, K = F / (the receiver's mean cosine toward s, from
+         * the same points), handed to each polygon as K max(0, n . u) (operator.c) */
+        F = R->t->plane[r] < 0 ? (cos_sum > 0 ? sum / (cos_sum * inv) : 0) : sum;
+        if (round == 1 || !*partial || F * 0.5 / sqrt((double)S) <= bn__link_ftol(R, r, s))
+            return F;   /* final, or its noise within BN__PARTIAL x eps in radiance */
         S *= 4;
     }
     return 0;
 }
 
-static float bn__link_F(const bn__ref *R, uint32_t r, uint32_t s, bn__worker *w, int *partial)
+/* The link's F in [0, 1] (split_if_partial: -1 when it finds partial visibility, see bn__F_sampled). */
+static float bn__link_F(const bn__ref *R, uint32_t r, uint32_t s, int split_if_partial, bn__worker *w, int *partial)
 {
     const bn__tree *t = R->t;
     double F;
@@ -319,10 +353,13 @@ static float bn__link_F(const bn__ref *R, uint32_t r, uint32_t s, bn__worker *w,
             F = bn__ff_pair(R->pairs, w->ff, i, j, R->o->cull_leaf_rays) / R->patch[i].area;
         } else {
             double sigma;
-            F = bn__ff_pair_quick(R->pairs, w->ff, i, j, BN__LEAF_RAYS, BN__LEAF_RTOL, &sigma);
+            F = bn__ff_pair_quick(R->pairs, w->ff, i, j, BN__LEAF_RAYS, BN__LEAF_RTOL, bn__link_ftol(R, r, s), &sigma,
+                                  partial);
         }
     } else {
-        F = bn__F_sampled(R, r, s, w, partial);
+        F = bn__F_sampled(R, r, s, split_if_partial, w, partial);
+        if (F < 0)
+            return -1;
     }
     return (float)fmin(fmax(F, 0.0), 1.0);
 }
@@ -357,10 +394,11 @@ static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int par
                                                                                     : bn__link_error(R, r, s);
         split = e > (F >= 0 && partial ? BN__PARTIAL : 1.0) * R->eps_abs;
         if (!split && F < 0) {   /* accepted as it stands: its F, and a second look if partly visible */
-            F = bn__link_F(R, r, s, w, &partial);
-            split = partial && e > BN__PARTIAL * R->eps_abs;
+            int split_if_partial = e > BN__PARTIAL * R->eps_abs;
+            F = bn__link_F(R, r, s, split_if_partial, w, &partial);
+            split = partial && split_if_partial;
             if (split)
-                F = -1;   /* computed, but split: not an existing link */
+                F = -1;   /* partly visible (found by its first rays) and too bright for that: split */
         }
     }
     if (split) {
@@ -382,8 +420,8 @@ static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int par
         }
         return;
     }
-    if (F < 0)
-        F = bn__link_F(R, r, s, w, &partial);
+    if (F < 0 || (partial && !sr && !ss && bn__second_look(R, r, s, F)))
+        F = bn__link_F(R, r, s, 0, w, &partial);
     if (!(F > 0) && lr && bn__tree_is_leaf(t, s))
         return;   /* two patches that do not see each other: no link (nothing below them to refine later) */
     bn__vec_push(&w->links, r, s, F, partial);
@@ -512,9 +550,11 @@ bn_status bn__pass(const bn__ref *R, bn__worker *W, int nt, bn__vec *work, bn__p
         }
         round++;
     }
-    for (int k = 0; k < nt; k++) {
-        st->rays += W[k].rays + bn__ff_worker_rays(W[k].ff);
+    for (int k = 0; k < nt; k++) {   /* the form-factor worker counts from its creation */
+        size_t ff = bn__ff_worker_rays(W[k].ff);
+        st->rays += W[k].rays + ff - W[k].ff_rays;
         W[k].rays = 0;
+        W[k].ff_rays = ff;
     }
     qsort(out.a, out.n, sizeof *out.a, bn__link_cmp);
     free(work->a);

@@ -59,6 +59,7 @@ typedef struct bn__worker {
     bn__vec links, pending;
     bn__ff_worker *ff;
     size_t rays, splits;
+    size_t ff_rays;           /* ff's rays counted already (it counts from its creation) */
 } bn__worker;
 
 /* Links ordered by receiver, then source (qsort). */
