@@ -45,7 +45,8 @@ typedef struct bn_hierarchy_opts {
     int    clusters;     /* 1 (default): start from the root's self-link; 0: from every pair of input
                             polygons (k^2 links before any refinement) */
     int    samples;      /* point pairs (and rays) per link above the patches (default 8; partly
-                            visible links get 4x as many) */
+                            visible links get 4x as many where their noise could exceed eps/8 in
+                            the receiver's radiance) */
     int    flat_clusters;    /* 1 (default): nearly flat clusters facing a source may receive as one
                                 node, handing each polygon its cosine's share; 0: receivers are
                                 polygons' nodes only (more links and time: bench/results.md) */

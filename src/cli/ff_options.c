@@ -38,7 +38,7 @@ void bn_cli_add_ff(bn_optset *s, bn_cli_ff *o)
                               "that reaches a surface (default: rows as the links make them; doc/hierarchy.md)"});
     bn_optset_add(s, (bn_opt){"link-samples", 0, BN_OPT_INT, &o->link_samples, NULL, 1, 1 << 16, "N",
                               "hierarchy: point pairs and rays per link above the patches (default 8; x4 when "
-                              "partly visible)"});
+                              "partly visible and its noise could exceed eps/8)"});
     bn_optset_add(s, (bn_opt){"min-area", 0, BN_OPT_DOUBLE, &o->min_area, NULL, -1, 1e300, "A",
                               "hierarchy: planar elements smaller than A (scene units^2) are not split (default: "
                               "2^-20 of the scene's surface area; a negative value: down to the patches)"});

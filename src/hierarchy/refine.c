@@ -17,7 +17,7 @@
 /* Quadrature tolerance of a leaf link's unoccluded form factor (a link's error is eps-level
  * anyway; the dense assembly's 1e-5 costs ten times the time near contact). */
 #define BN__LEAF_RTOL 1e-3
-/* Shadow rays of a leaf link (x4 when partly visible). */
+/* Shadow rays of a leaf link (x4 when partly visible and its noise could matter: bn__link_ftol). */
 #define BN__LEAF_RAYS 16
 /* Partly visible links are split down to this fraction of eps. */
 #define BN__PARTIAL 0.125
