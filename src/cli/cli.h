@@ -60,6 +60,8 @@ typedef struct bn_cli_common {
     int      threads;     /* 0 = all cores */
     uint64_t seed;
     int      quiet;
+    int      no_summary;  /* set by a command that runs another (view bakes first): that one's progress
+                             and notes, not its "wrote" line */
     const char *cmdline;  /* the full command line, for provenance */
 } bn_cli_common;
 void bn_cli_add_common(bn_optset *s, bn_cli_common *c);

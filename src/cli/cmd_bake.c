@@ -205,7 +205,7 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
              bn__bake_make(&a, &set, c, &p, &bake, &err) != BN_OK ||
              bn__bake_write(&a, c, &p, bake, layers, nl, solver, &err) != BN_OK)
         rc = bn_cli_fail(&err);
-    else if (!c->quiet)
+    else if (!c->quiet && !c->no_summary)
         bn__bake_summary(&a, &p, bake);
     free(layers);
     free(names);

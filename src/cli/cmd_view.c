@@ -24,102 +24,115 @@ static const char *bn__view_help =
     "  -q, --quiet              no progress or summary\n"
     "  -h, --help               this help\n";
 
-int bn_cmd_view(int argc, char **argv, bn_cli_common *c)
+/* The command line: the page (-o), -q, and everything else for the bake (bargv, from "bake"; room for
+ * four more). 0 to go on; else the exit code (after --help: 0 through *done). */
+typedef struct bn__view_cli {
+    const char *in, *out;
+    char **bargv;
+    int bargc, quiet;
+} bn__view_cli;
+
+static int bn__view_args(int argc, char **argv, bn__view_cli *v, int *done)
 {
-    const char *in = NULL, *out = "view.html", *title;
-    char **bargv = NULL, *tmp = NULL;
-    int bargc = 0, rc = 0, quiet = 0;
-    bn_error err;
-    bn_status st;
-    bn_error_clear(&err);
-    bargv = calloc((size_t)argc + 6, sizeof *bargv);
-    if (!bargv) {
+    *done = 0;
+    v->out = "view.html";
+    if (!(v->bargv = calloc((size_t)argc + 6, sizeof *v->bargv))) {
         fprintf(stderr, "bounce: error: out of memory\n");
         return bn_status_exit_code(BN_ENOMEM);
     }
-    bargv[bargc++] = "bake";
+    v->bargv[v->bargc++] = "bake";
     for (int i = 1; i < argc; i++) {   /* -o is the page's; everything else goes to the bake */
         if (strcmp(argv[i], "-h") == 0 || strcmp(argv[i], "--help") == 0) {
             fputs(bn__view_help, stdout);
-            free(bargv);
+            *done = 1;
             return 0;
         }
         if (strcmp(argv[i], "-o") == 0 || strcmp(argv[i], "--output") == 0) {
             if (i + 1 >= argc) {
                 fprintf(stderr, "bounce: error: %s needs a value (see --help)\n", argv[i]);
-                free(bargv);
                 return 2;
             }
-            out = argv[++i];
-            continue;
+            v->out = argv[++i];
+        } else if (strncmp(argv[i], "--output=", 9) == 0)
+            v->out = argv[i] + 9;
+        else if (strcmp(argv[i], "-q") == 0 || strcmp(argv[i], "--quiet") == 0)
+            v->quiet = 1;   /* and the bake's progress and notes (bn__view_bake) */
+        else {
+            if (argv[i][0] != '-' && !v->in)
+                v->in = argv[i];
+            v->bargv[v->bargc++] = argv[i];
         }
-        if (strncmp(argv[i], "--output=", 9) == 0) {
-            out = argv[i] + 9;
-            continue;
-        }
-        if (strcmp(argv[i], "-q") == 0 || strcmp(argv[i], "--quiet") == 0) {
-            quiet = 1;
-            continue;   /* the bake is quiet anyway (below) */
-        }
-        if (argv[i][0] != '-' && !in)
-            in = argv[i];
-        bargv[bargc++] = argv[i];
     }
-    if (!in) {
+    if (!v->in) {
         fprintf(stderr, "bounce: error: view needs a scene or a .glb bake (see --help)\n");
-        free(bargv);
         return 2;
     }
-    {
-        size_t n = strlen(out);
-        if (n < 5 || strcasecmp(out + n - 5, ".html") != 0) {
-            fprintf(stderr, "bounce: error: -o %s: the page is written as .html\n", out);
-            free(bargv);
+    size_t n = strlen(v->out);
+    if (n < 5 || strcasecmp(v->out + n - 5, ".html") != 0) {
+        fprintf(stderr, "bounce: error: -o %s: the page is written as .html\n", v->out);
+        return 2;
+    }
+    return 0;
+}
+
+/* A scene baked (bounce bake --per-bounce, its progress and notes shown unless -q) into a temporary
+ * .glb beside the page, then embedded; the .glb removed. */
+static int bn__view_bake(bn__view_cli *v, const char *title, bn_cli_common *c, bn_error *err, bn_status *st)
+{
+    size_t len = strlen(v->out) + 32;
+    char *tmp = malloc(len);
+    int rc;
+    if (!tmp)
+        return bn_status_exit_code(BN_ENOMEM);
+    snprintf(tmp, len, "%s.%ld.bake.glb", v->out, (long)getpid());
+    v->bargv[v->bargc++] = "--per-bounce";
+    v->bargv[v->bargc++] = "-o";
+    v->bargv[v->bargc++] = tmp;
+    if (v->quiet)
+        v->bargv[v->bargc++] = "-q";
+    else
+        fprintf(stderr, "bounce: view: baking %s first (bounce bake --per-bounce; a .glb from it is embedded as it "
+                        "is)\n", v->in);
+    c->no_summary = 1;   /* its progress and notes, not its "wrote" line of the temporary .glb */
+    rc = bn_cmd_bake(v->bargc, v->bargv, c);
+    c->no_summary = 0;
+    if (rc == 0)
+        *st = bn_view_write(tmp, title, v->out, err);
+    unlink(tmp);
+    free(tmp);
+    return rc;
+}
+
+int bn_cmd_view(int argc, char **argv, bn_cli_common *c)
+{
+    bn__view_cli v = {0};
+    const char *title;
+    int rc, done;
+    bn_error err;
+    bn_status st = BN_OK;
+    bn_error_clear(&err);
+    rc = bn__view_args(argc, argv, &v, &done);
+    if (rc != 0 || done) {
+        free(v.bargv);
+        return rc;
+    }
+    title = strrchr(v.in, '/') ? strrchr(v.in, '/') + 1 : v.in;
+    size_t n = strlen(v.in);
+    if (n > 4 && strcasecmp(v.in + n - 4, ".glb") == 0) {
+        if (v.bargc > 2) {
+            fprintf(stderr, "bounce: error: view of a .glb takes no bake options (only -o): %s\n", v.bargv[2]);
+            free(v.bargv);
             return 2;
         }
-    }
-    title = strrchr(in, '/') ? strrchr(in, '/') + 1 : in;
-    {
-        size_t n = strlen(in);
-        if (n > 4 && strcasecmp(in + n - 4, ".glb") == 0) {
-            if (bargc > 2) {
-                fprintf(stderr, "bounce: error: view of a .glb takes no bake options (only -o): %s\n", bargv[2]);
-                free(bargv);
-                return 2;
-            }
-            st = bn_view_write(in, title, out, &err);
-        } else {   /* bake into a temporary .glb beside the page, then embed it */
-            size_t len = strlen(out) + 32;
-            tmp = malloc(len);
-            if (!tmp) {
-                free(bargv);
-                return bn_status_exit_code(BN_ENOMEM);
-            }
-            snprintf(tmp, len, "%s.%ld.bake.glb", out, (long)getpid());
-            bargv[bargc++] = "--per-bounce";
-            bargv[bargc++] = "-q";
-            bargv[bargc++] = "-o";
-            bargv[bargc++] = tmp;
-            {
-                int q = c->quiet;   /* the bake runs with -q, which sets it */
-                rc = bn_cmd_bake(bargc, bargv, c);
-                c->quiet = q;
-            }
-            if (rc != 0) {
-                unlink(tmp);
-                free(tmp);
-                free(bargv);
-                return rc;
-            }
-            st = bn_view_write(tmp, title, out, &err);
-            unlink(tmp);
-        }
+        st = bn_view_write(v.in, title, v.out, &err);
+    } else if ((rc = bn__view_bake(&v, title, c, &err, &st)) != 0) {
+        free(v.bargv);
+        return rc;
     }
     if (st != BN_OK)
         rc = bn_cli_fail(&err);
-    else if (!quiet && !c->quiet)
-        printf("wrote %s (open it in a browser; %s)\n", out, title);
-    free(tmp);
-    free(bargv);
+    else if (!v.quiet && !c->quiet)
+        printf("wrote %s (open it in a browser; %s)\n", v.out, title);
+    free(v.bargv);
     return rc;
 }
