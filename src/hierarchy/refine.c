@@ -151,10 +151,12 @@ static double bn__link_ftol(const bn__ref *R, uint32_t r, uint32_t s)
     return m > 0 ? BN__PARTIAL * R->eps_abs / m : INFINITY;
 }
 
-/* Is an existing link that no pass can split (between patches, or nodes below min_area), its F from
- * a first look that found it partly visible, now bright enough for the second? Its unoccluded F is at
- * most BN__LEAF_RAYS x F (a leaf link's first look: one ray in BN__LEAF_RAYS unblocked); links above
- * the patches take that bound too, as the first look's noise (S >= 8 rays: 0.18 F) lies within it. */
+/* Is an existing link between patches (no pass can split it), its F from a first look that found it
+ * partly visible (its partial bit: bn__ff_pair_quick's first_only), now bright enough for the second?
+ * Its unoccluded F is at most BN__LEAF_RAYS x F (one ray in BN__LEAF_RAYS unblocked). A link above the
+ * patches whose first look's noise could matter is split instead (its bound exceeds eps/8), unless
+ * it lies between elements below min_area: those keep their first look (8 point pairs, 32 where
+ * their bounding spheres overlap). */
 static int bn__second_look(const bn__ref *R, uint32_t r, uint32_t s, float F)
 {
     return (double)F * BN__LEAF_RAYS * 0.5 / sqrt((double)BN__LEAF_RAYS) > bn__link_ftol(R, r, s);
@@ -420,7 +422,7 @@ static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int par
         }
         return;
     }
-    if (F < 0 || (partial && !sr && !ss && bn__second_look(R, r, s, F)))
+    if (F < 0 || (partial && lr && bn__tree_is_leaf(t, s) && bn__second_look(R, r, s, F)))
         F = bn__link_F(R, r, s, 0, w, &partial);
     if (!(F > 0) && lr && bn__tree_is_leaf(t, s))
         return;   /* two patches that do not see each other: no link (nothing below them to refine later) */
