@@ -9,6 +9,8 @@
 #include "bn_test.h"
 #include "bounce/hierarchy.h"
 #include "bounce/pipeline.h"
+#include "formfactor/ff_internal.h"
+#include "formfactor/ff_pair.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -117,6 +119,118 @@ static void leaf_links_match(int clusters)
 
 BN_TEST(leaf_links_without_clusters_are_dense_k) { leaf_links_match(0); }
 BN_TEST(leaf_links_from_the_root_are_dense_k) { leaf_links_match(1); }
+
+/* The corners of patch i as a flat array (for bn__ff_near). */
+static size_t corners(const bn_scene *s, size_t i, double *v)
+{
+    const bn_patch *p = bn_scene_patches(s, NULL);
+    const double *pv = bn_scene_patch_vertices(s, NULL);
+    for (size_t k = 0; k < p[i].ncorners; k++)
+        memcpy(v + 3 * k, pv + 3 * p[i].corner[k], 3 * sizeof(double));
+    return p[i].ncorners;
+}
+
+typedef struct pair_sums {
+    size_t n;
+    double diff, exact, var;
+} pair_sums;
+
+/* One ordered pair, if its first 16 rays find it partly visible: the first look alone (ftol
+ * infinite) casts those 16 and says so; the second look (ftol 0) casts 64 more and says it did; its
+ * value against the exact visible part is added to the near or the far sums. */
+static void second_look_pair(const bn__ff_pairs *pp, bn__ff_worker *w, const cornell *c, size_t i, size_t j,
+                             pair_sums *sums)
+{
+    const bn_patch *p = bn_scene_patches(c->s, NULL);
+    double sg, a[12], b[12];
+    int first, again;
+    size_t r0 = bn__ff_worker_rays(w);
+    bn__ff_pair_quick(pp, w, i, j, 16, 1e-3, INFINITY, &sg, &first);
+    size_t r1 = bn__ff_worker_rays(w);
+    if (!first)
+        return;   /* wholly visible, blocked, or unseen */
+    BN_ASSERT_LE(r1 - r0, 16);
+    double f = bn__ff_pair_quick(pp, w, i, j, 16, 1e-3, 0, &sg, &again);
+    BN_ASSERT_EQ(again, 0);
+    BN_ASSERT(bn__ff_worker_rays(w) - r1 > 64);
+    double exact = bn__ff_pair(pp, w, i, j, 1) / p[i].area;
+    size_t na = corners(c->s, i, a), nb = corners(c->s, j, b);
+    pair_sums *q = &sums[bn__ff_near(a, na, b, nb) ? 1 : 0];
+    q->n++;
+    q->diff += f - exact;
+    q->exact += exact;
+    q->var += sg * sg;
+}
+
+/* A corner with fins: a 1 m floor and wall meeting at an edge (the wall lit), and nine 0.3 m plates
+ * standing across the corner 2 mm from both, so that pairs of floor and wall patches at the edge,
+ * each the other's near neighbour, see each other past a fin's edge. */
+static void fin_open(cornell *c, size_t patches)
+{
+    const char *path = bn_test_tmp("fins.obj");
+    FILE *f = fopen(bn_test_tmp("fins.mtl"), "w");
+    bn_load_opts lo;
+    bn_mesh_opts mo;
+    bn_error err;
+    BN_ASSERT(f != NULL);
+    fprintf(f, "newmtl grey\nKd 0.5 0.5 0.5\nnewmtl lit\nKd 0.5 0.5 0.5\nKe 1 1 1\n");
+    fclose(f);
+    BN_ASSERT((f = fopen(path, "w")) != NULL);
+    fprintf(f, "mtllib fins.mtl\nv 0 0 0\nv 0 0 1\nv 1 0 1\nv 1 0 0\nv 0 1 0\nv 0 1 1\n"
+               "usemtl grey\nf 1 2 3 4\nusemtl lit\nf 1 5 6 2\nusemtl grey\n");   /* floor +y, wall +x */
+    for (int k = 1; k <= 9; k++) {   /* fins facing +z */
+        double z = 0.1 * k + 0.013;
+        fprintf(f, "v 0.002 0.002 %g\nv 0.3 0.002 %g\nv 0.3 0.3 %g\nv 0.002 0.3 %g\nf -4 -3 -2 -1\n", z, z, z, z);
+    }
+    fclose(f);
+    bn_load_opts_default(&lo);
+    lo.unit = BN_UNIT_M;
+    lo.log.quiet = 1;
+    BN_ASSERT_STATUS(bn_scene_load(path, &lo, &c->s, &err), BN_OK);
+    bn_mesh_opts_default(&mo);
+    mo.target_patches = patches;
+    BN_ASSERT_STATUS(bn_scene_mesh(c->s, &mo, &err), BN_OK);
+    bn_scene_patches(c->s, &c->n);
+    BN_ASSERT_STATUS(bn_rt_create(c->s, 0, &c->rt, &err), BN_OK);
+}
+
+/* The leaf links' form factor (bn__ff_pair_quick) on partly visible pairs against the exact visible
+ * part (the dense assembly's default): with the second look unbiased within 4 standard errors (and
+ * the quadrature's 1e-3), for near pairs (directions drawn by the kernel; at the fin's corner) and
+ * far ones (area pairs weighted by the kernel; the Cornell box). A first version drew near pairs'
+ * source points uniformly in area: 5-11% low on these pairs. */
+static void second_look(int fin, int k)
+{
+    cornell c;
+    bn_formfactor_opts fo;
+    bn__ff_pairs *pp = NULL;
+    bn__ff_worker *w;
+    bn_error err;
+    pair_sums sums[2] = {{0}};
+    if (fin)
+        fin_open(&c, 150);
+    else
+        cornell_open(&c, 80);
+    bn_formfactor_opts_default(&fo);
+    fo.quiet = 1;
+    BN_ASSERT_STATUS(bn__ff_pairs_create(c.s, c.rt, &fo, &pp, &err), BN_OK);
+    BN_ASSERT((w = bn__ff_worker_create(pp)) != NULL);
+    for (size_t i = 0; i < c.n; i++)
+        for (size_t j = 0; j < c.n; j++)
+            if (i != j)
+                second_look_pair(pp, w, &c, i, j, sums);
+    double bound = 4 * sqrt(sums[k].var) + 1e-3 * sums[k].exact;
+    printf("%s partly visible pairs: %zu, sum of F %.4g, sum of (second look - exact) %+.3g (bound %.3g)\n",
+           k ? "near" : "far", sums[k].n, sums[k].exact, sums[k].diff, bound);
+    BN_ASSERT(sums[k].n >= 20);
+    BN_ASSERT_LE(fabs(sums[k].diff), bound);
+    bn__ff_worker_destroy(w);
+    bn__ff_pairs_destroy(pp);
+    cornell_close(&c);
+}
+
+BN_TEST(leaf_links_second_look_is_unbiased_far) { second_look(0, 0); }
+BN_TEST(leaf_links_second_look_is_unbiased_near) { second_look(1, 1); }
 
 /* L from K (Jacobi to 1e-10 through the operator interface). */
 static double *solve(bn_transport *k, const bn_scene *s)

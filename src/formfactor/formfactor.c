@@ -479,28 +479,6 @@ static void bn__kernel_points(bn__rng *r, const bn__pair *p, const double ni[3],
     }
 }
 
-/* Point pairs for the hierarchy's near leaf links (bn__ff_pair_quick), cheaper than the kernel's
- * own directions: x_k stratified uniformly on a with the exact weight w_k = F(x_k -> b), y_k
- * stratified uniformly on b. The visible fraction sum w V / sum w then weighs each x by its exact
- * share, and the part of b seen from x by area rather than by the kernel: the same where a pair is
- * wholly visible or wholly blocked (most leaf links), and without the solid-angle set-up per point
- * that made the kernel's directions most of refinement's time in foliage (slivers by the thousand,
- * each near dozens of others). */
-static void bn__near_points(bn__rng *r, const bn__pair *p, const double ni[3], bn__scratch *s)
-{
-    size_t S = s->S;
-    bn__perms(r, s->perm, S);
-    for (size_t k = 0; k < S; k++) {
-        double u1, v1, u2, v2, *x = s->x + 3 * k, *y = s->y + 3 * k;
-        bn__lhs4(r, s, k, &u1, &v1, &u2, &v2);
-        bn__poly_sample(p->a, p->na, u1, v1, x);
-        bn__poly_sample(p->b, p->nb, u2, v2, y);
-        s->w[k] = bn__ff_point_polygon(x, ni, p->b, p->nb);
-        if (!(s->w[k] > 0))
-            s->w[k] = 0;   /* x sees none of b: no ray */
-    }
-}
-
 /* Point pairs for separated patches: x on a and y on b uniform in area (stratified, Latin
  * hypercube), weighted by the kernel cos cos / r^2, which is bounded there; the visible fraction
  * is then sum w V / sum w as with the kernel's own directions, at a fraction of their cost (no
@@ -1536,7 +1514,7 @@ double bn__ff_pair_quick(const bn__ff_pairs *p, bn__ff_worker *w, size_t i, size
             n = w->cap;
         w->s.S = n;
         if (near)
-            bn__near_points(&r, &pp, ni, &w->s);
+            bn__kernel_points(&r, &pp, ni, nj, &w->s);
         else
             bn__area_points(&r, &pp, ni, nj, &w->s);
         w->c.rays += bn__pair_rays(p->rt, g, ni, nj, &w->s);
