@@ -152,7 +152,7 @@ static void second_look_pair(const bn__ff_pairs *pp, bn__ff_worker *w, const cor
     BN_ASSERT_LE(r1 - r0, 16);
     double f = bn__ff_pair_quick(pp, w, i, j, 16, 1e-3, 0, &sg, &again);
     BN_ASSERT_EQ(again, 0);
-    BN_ASSERT(bn__ff_worker_rays(w) - r1 > 64);
+    BN_ASSERT(bn__ff_worker_rays(w) - r1 > r1 - r0);   /* the same first rays, and then more */
     double exact = bn__ff_pair(pp, w, i, j, 1) / p[i].area;
     size_t na = corners(c->s, i, a), nb = corners(c->s, j, b);
     pair_sums *q = &sums[bn__ff_near(a, na, b, nb) ? 1 : 0];

@@ -6,6 +6,8 @@
 
 #include "bounce/formfactor.h"
 
+#include <math.h>
+
 typedef struct bn__ff_pairs bn__ff_pairs;     /* geometry, rays and options; read-only once made */
 typedef struct bn__ff_worker bn__ff_worker;   /* one thread's scratch */
 
@@ -20,6 +22,11 @@ void bn__ff_worker_destroy(bn__ff_worker *w);
  * pass over the faces per new row); 0: always cast them (an unblocked pair gets exactly the same
  * value). */
 double bn__ff_pair(const bn__ff_pairs *p, bn__ff_worker *w, size_t i, size_t j, int cull);
+/* A bound of the standard error of F estimated as F_unoccluded x a visible fraction from n rays:
+ * F_unoccluded / (2 sqrt n) (the fraction's variance v (1 - v) / n is at most 1 / 4n). Where it is
+ * below a caller's tolerance, a partly visible estimate needs no more rays. */
+static inline double bn__ff_vis_noise(double F, double n) { return F * 0.5 / sqrt(n); }
+
 /* The largest sample count bn__ff_pair_quick uses. */
 #define BN__FF_QUICK_MAX 256
 /* F_ij (receiver i): the unoccluded form factor by the dense assembly's quadrature (to rtol) times the

@@ -1527,7 +1527,7 @@ double bn__ff_pair_quick(const bn__ff_pairs *p, bn__ff_worker *w, size_t i, size
                 sv += w->s.w[k];
         }
         if (round == 0 && blocked > 0 && blocked < seen) {
-            if (I * 0.5 / sqrt((double)n) > ftol)
+            if (bn__ff_vis_noise(I, (double)n) > ftol)
                 continue;   /* partly visible, and its noise could matter: four times the rays */
             *first_only = 1;
         }

@@ -159,7 +159,7 @@ static double bn__link_ftol(const bn__ref *R, uint32_t r, uint32_t s)
  * their bounding spheres overlap). */
 static int bn__second_look(const bn__ref *R, uint32_t r, uint32_t s, float F)
 {
-    return (double)F * BN__LEAF_RAYS * 0.5 / sqrt((double)BN__LEAF_RAYS) > bn__link_ftol(R, r, s);
+    return bn__ff_vis_noise((double)F * BN__LEAF_RAYS, BN__LEAF_RAYS) > bn__link_ftol(R, r, s);
 }
 
 /* The leaves of m nodes v[j] (m <= 2) where the area fractions u1[j] fall: the last leaf k of each
@@ -336,7 +336,7 @@ static double bn__F_sampled(const bn__ref *R, uint32_t r, uint32_t s, int split_
         /* a cluster receiver: F per unit of cosine, K = F / (the receiver's mean cosine toward s, from
          * the same points), handed to each polygon as K max(0, n . u) (operator.c) */
         F = R->t->plane[r] < 0 ? (cos_sum > 0 ? sum / (cos_sum * inv) : 0) : sum;
-        if (round == 1 || !*partial || F * 0.5 / sqrt((double)S) <= bn__link_ftol(R, r, s))
+        if (round == 1 || !*partial || bn__ff_vis_noise(F, S) <= bn__link_ftol(R, r, s))
             return F;   /* final, or its noise within BN__PARTIAL x eps in radiance */
         S *= 4;
     }
