@@ -11,10 +11,18 @@ scripts/setup.sh
 secs=${1:-60}
 shift || true
 names=("$@")
-[ ${#names[@]} -gt 0 ] || names=(fuzz_obj fuzz_cli fuzz_ply fuzz_camera fuzz_glb)
+[ ${#names[@]} -gt 0 ] || names=(fuzz_obj fuzz_cli fuzz_ply fuzz_camera fuzz_glb fuzz_gltf)
 runs=${FUZZ_RUNS:--1}
-# only the harnesses that exist
-have=(); table="| harness | executions | exec/s | cov | ft | corpus | crashes |
+# only the harnesses that exist, built with clang (7c0e909 dropped these lines: the script ran whatever
+# build-fuzz/ held, and nothing on a fresh clone)
+have=(); for n in "${names[@]}"; do [ -f "tests/fuzz/$n.c" ] && have+=("$n"); done; names=("${have[@]}")
+CC=clang CXX=clang++ cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DBOUNCE_FUZZ=ON \
+  -DBOUNCE_BUILD_TESTS=OFF -DBOUNCE_BUILD_BENCH=OFF >/dev/null
+cmake --build build-fuzz -j "$(nproc)" --target "${names[@]}"
+mkdir -p build-fuzz/crashes
+export ASAN_OPTIONS="detect_leaks=1"
+export LSAN_OPTIONS="suppressions=$PWD/tests/lsan.supp:print_suppressions=0"
+table="| harness | executions | exec/s | cov | ft | corpus | crashes |
 |---|---|---|---|---|---|---|"
 for n in "${names[@]}"; do
   [ -x "build-fuzz/tests/fuzz/$n" ] || { echo "fuzz: no harness $n" >&2; continue; }

@@ -12,6 +12,8 @@ PACKAGES=(
   libopenmpi-dev openmpi-bin # bounce under mpirun -np P (include/bounce/dist.h)
   liblapacke-dev libopenblas-dev         # the dense direct solve (reference answer)
   libtinyobjloader-dev       # an independent OBJ reader the tests compare ours with
+  libtinygltf-dev            # glTF 2.0 input (.gltf, .glb)
+  assimp-testmodels          # tests: real glTF 2.0 files, broken ones among them (/usr/share/assimp/models/glTF2)
   libplplot-dev plplot-driver-cairo      # study plots (PNG, SVG)
   fonts-dejavu-core          # labels on the contact sheet
   clang libclang-rt-14-dev   # libFuzzer harnesses

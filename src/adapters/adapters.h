@@ -59,6 +59,58 @@ typedef struct bn__bake_mesh {
  * *duplicated counts vertices OpenMesh needed duplicated for non-manifold faces. */
 bn_status bn__openmesh_write(const char *path, const bn__bake_mesh *m, size_t *duplicated, bn_error *err);
 
+/* glTF 2.0 (.gltf with its buffers, or .glb) as tinygltf parsed it (src/adapters/gltf_io.cpp: parsing
+ * only), mirrored in plain C for src/scene/gltf.c, which validates every index and size and walks the
+ * default scene. Index fields are -1 where the file has none; n* fields count what the file gave, so a
+ * wrong length (a 3-component baseColorFactor) is caught above; values past the mirror's room are
+ * not copied. Strings and bytes live as long as the bn__gltf. */
+typedef struct bn__gltf_buffer { const unsigned char *data; size_t size; } bn__gltf_buffer;
+typedef struct bn__gltf_view { int buffer; size_t offset, length, stride; } bn__gltf_view;
+typedef struct bn__gltf_accessor {
+    int view, ctype, type, normalized;    /* type: 1..4 (SCALAR..VEC4), 0 any other */
+    size_t offset, count;
+    size_t sparse_count;                  /* 0: not sparse */
+    int sparse_iview, sparse_ictype, sparse_vview;
+    size_t sparse_ioffset, sparse_voffset;
+} bn__gltf_accessor;
+typedef struct bn__gltf_prim { int mode, material, indices, position, texcoord0; } bn__gltf_prim;
+typedef struct bn__gltf_mesh { const char *name; size_t first, n; } bn__gltf_mesh;   /* prims[first..] */
+typedef struct bn__gltf_material {
+    const char *name, *alpha_mode;
+    unsigned nbase, nemissive;
+    double base[4], emissive[3], strength;    /* strength: KHR_materials_emissive_strength, else 1 */
+    int base_tex, base_uv, emissive_tex, double_sided, unlit, has_strength;
+} bn__gltf_material;
+typedef struct bn__gltf_node {
+    const char *name;
+    int mesh, skin;
+    size_t first, n;                      /* children[first..] */
+    unsigned nmatrix, nt, nr, ns;
+    double matrix[16], t[3], r[4], s[3];
+} bn__gltf_node;
+typedef struct bn__gltf_scene { size_t first, n; } bn__gltf_scene;       /* roots[first..] */
+typedef struct bn__gltf {
+    size_t nbuffers, nviews, naccessors, nprims, nmeshes, nmaterials, nnodes, nscenes, nlights, ntextures;
+    size_t nchildren, nroots, nrequired;
+    const bn__gltf_buffer *buffers;
+    const bn__gltf_view *views;
+    const bn__gltf_accessor *accessors;
+    const bn__gltf_prim *prims;
+    const bn__gltf_mesh *meshes;
+    const bn__gltf_material *materials;
+    const bn__gltf_node *nodes;
+    const bn__gltf_scene *scenes;
+    const int *children, *roots;
+    const char *const *required;          /* extensionsRequired */
+    int default_scene;
+    const char *warnings;                 /* tinygltf's, "" for none */
+    void *impl;
+} bn__gltf;
+/* Parses `path` (.glb by its magic, else JSON) with its external buffers and data URIs; images are
+ * not decoded. On failure *out is NULL and err names the file with tinygltf's message. */
+bn_status bn__gltf_parse(const char *path, bn__gltf **out, bn_error *err);
+void bn__gltf_free(bn__gltf *g);   /* NULL is a no-op */
+
 #ifdef __cplusplus
 }
 #endif

@@ -516,7 +516,7 @@ static bn_status bn__scene_finish(bn_scene *sc, const char *path, const bn_load_
         return bn_error_set(err, BN_EINPUT, "%s: no face with a non-zero area", path);
     bn__orient_said(sc, path, o);
     if (bn_scene_emitter_count(sc) == 0)
-        bn_warnf(&o->log, BN_W_NO_EMITTER, NAN, "%s: no emitter (no material with Ke > 0): the result will be black", path);
+        bn_warnf(&o->log, BN_W_NO_EMITTER, NAN, "%s: no emitter (no material emits: Ke in MTL, emissiveFactor in glTF): the result will be black", path);
     return BN_OK;
 }
 
@@ -557,7 +557,7 @@ bn_status bn__scene_build(const char *path, const bn__soup *s, const bn_load_opt
     if (st == BN_ENOMEM)
         bn_error_set(err, st, "out of memory building faces of %s", path);
     if (st == BN_OK)
-        st = bn__scene_two_sided(sc, path, o->two_sided, err);
+        st = bn__scene_two_sided(sc, path, s->mat_two, s->mat_two_cap, o->two_sided, err);
     if (st == BN_OK)
         st = bn__scene_finish(sc, path, o, P.degenerate, err);
     if (st == BN_OK && bn__scene_objects(sc, s) != BN_OK)
@@ -632,9 +632,15 @@ bn_status bn_scene_load(const char *path, const bn_load_opts *o, bn_scene **out,
         st = bn__read_ply(path, &s, &o->log, err);
     else if (strcasecmp(ext, "off") == 0)
         st = bn__read_off(path, &s, &o->log, err);
+    else if (strcasecmp(ext, "gltf") == 0 || strcasecmp(ext, "glb") == 0) {
+        st = bn__read_gltf(path, &s, &o->log, err);
+        if (st == BN_OK && o->unit != BN_UNIT_M)
+            bn_logf(&o->log, BN_LOG_INFO, "%s: glTF is in metres by its specification; read in %s as asked", path,
+                    bn_unit_name(o->unit));
+    }
     else
-        st = bn_error_set(err, BN_EINPUT, "%s: unknown scene format '.%s' (bounce reads .obj, .ply and .off)", path,
-                          ext);
+        st = bn_error_set(err, BN_EINPUT, "%s: unknown scene format '.%s' (bounce reads .obj, .ply, .off, .gltf and .glb)",
+                          path, ext);
     if (st == BN_OK)
         st = bn__scene_build(path, &s, o, out, err);
     bn__soup_free(&s);

@@ -32,6 +32,9 @@ typedef struct bn__soup {
     size_t    nvn, vn_cap;
     double   *pn;
     double    cur_pn[3];   /* what bn__soup_add_polygon gives the next polygon */
+    /* per material, 1: two-sided as the file says (glTF doubleSided); NULL while none is */
+    unsigned char *mat_two;
+    size_t    mat_two_cap;
 } bn__soup;
 
 void bn__soup_free(bn__soup *s);
@@ -39,6 +42,7 @@ int bn__soup_add_vertex(bn__soup *s, const double p[3]);                 /* 0 on
 int bn__soup_add_polygon(bn__soup *s, const size_t *idx, unsigned n, unsigned mat, unsigned line);
 int bn__soup_add_material(bn__soup *s, const bn_material *m);
 int bn__soup_add_normal(bn__soup *s, const double n[3]);                  /* a vn; 0 on OOM */
+int bn__soup_set_two_sided(bn__soup *s, unsigned mat);                    /* the file says so; 0 on OOM */
 /* Name key's index in (*names)[0 .. *n) (capacity *cap), appended when new; SIZE_MAX on OOM. */
 size_t bn__name_index(char (**names)[BN_NAME_MAX], size_t *n, size_t *cap, const char *key);
 /* The object the next polygons belong to, by name (a new one, or the one of that name); 0 on OOM. */
@@ -58,6 +62,9 @@ bn_status bn__read_ply(const char *path, bn__soup *out, const bn_log *log, bn_er
  * bn__read_off_binary into a sink over the soup), which reads it from its path after a check of
  * the header's counts against the file's size. */
 bn_status bn__read_off(const char *path, bn__soup *out, const bn_log *log, bn_error *err);
+/* glTF 2.0 (.gltf, .glb; src/scene/gltf.c over tinygltf's parse in src/adapters): the default scene's
+ * triangles in world space, materials from the PBR base colour and emission, doubleSided as two-sided. */
+bn_status bn__read_gltf(const char *path, bn__soup *out, const bn_log *log, bn_error *err);
 
 /* Grows *p (capacity *cap elements of elem bytes) to hold need; 0 when out of memory (soup.c). */
 int bn__grow(void **p, size_t *cap, size_t need, size_t elem);
@@ -66,9 +73,10 @@ int bn__grow(void **p, size_t *cap, size_t need, size_t elem);
 bn_status bn__scene_build(const char *path, const bn__soup *soup, const bn_load_opts *o,
                           bn_scene **out, bn_error *err);
 
-/* The back sides of the faces of two-sided materials (spec: bn_load_opts.two_sided), appended
- * (src/scene/twosided.c). */
-bn_status bn__scene_two_sided(bn_scene *sc, const char *path, const char *spec, bn_error *err);
+/* The back sides of the faces of two-sided materials (the file's own flags file_two[0 .. nfile_two), or
+ * NULL, and spec: bn_load_opts.two_sided), appended (src/scene/twosided.c). */
+bn_status bn__scene_two_sided(bn_scene *sc, const char *path, const unsigned char *file_two, size_t nfile_two,
+                              const char *spec, bn_error *err);
 /* The scene's objects and each face's (src/scene/objects.c), after its faces are built. */
 bn_status bn__scene_objects(bn_scene *sc, const bn__soup *s);
 /* The mesher's patch geometry (area, centroid, normal) from its corners. */

@@ -18,6 +18,7 @@ void bn__soup_free(bn__soup *s)
     free(s->objnames);
     free(s->vn);
     free(s->pn);
+    free(s->mat_two);
     memset(s, 0, sizeof *s);
 }
 
@@ -125,6 +126,16 @@ int bn__soup_add_material(bn__soup *s, const bn_material *m)
     if (!bn__grow((void **)&s->mats, &s->mats_cap, s->nmats + 1, sizeof *m))
         return 0;
     s->mats[s->nmats++] = *m;
+    return 1;
+}
+
+int bn__soup_set_two_sided(bn__soup *s, unsigned mat)
+{
+    size_t old = s->mat_two_cap;
+    if (!bn__grow((void **)&s->mat_two, &s->mat_two_cap, (size_t)mat + 1, 1))
+        return 0;
+    memset(s->mat_two + old, 0, s->mat_two_cap - old);
+    s->mat_two[mat] = 1;
     return 1;
 }
 

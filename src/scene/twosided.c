@@ -51,16 +51,21 @@ static int bn__append_back(bn_scene *sc, size_t f, size_t *faces_cap, size_t *fi
     return 1;
 }
 
-bn_status bn__scene_two_sided(bn_scene *sc, const char *path, const char *spec, bn_error *err)
+bn_status bn__scene_two_sided(bn_scene *sc, const char *path, const unsigned char *file_two, size_t nfile_two,
+                              const char *spec, bn_error *err)
 {
     unsigned char *two;
     size_t nf = sc->nfaces, faces_cap = sc->nfaces, fidx_cap = sc->nfidx;
-    bn_status st;
-    if (!spec || !spec[0])
-        return BN_OK;
+    bn_status st = BN_OK;
+    if (((!spec || !spec[0]) && !file_two) || (spec && strcmp(spec, "none") == 0))
+        return BN_OK;   /* "none": one-sided everywhere, whatever the file says */
     if (!(two = bn__calloc(sc->nmats + 1, 1)))
         return bn_error_set(err, BN_ENOMEM, "out of memory");
-    st = bn__mark(sc, path, spec, two, err);
+    if (file_two)
+        for (size_t m = 0; m < sc->nmats && m < nfile_two; m++)
+            two[m] = file_two[m] != 0;
+    if (spec && spec[0])
+        st = bn__mark(sc, path, spec, two, err);
     if (st == BN_OK) {
         sc->mat_two_sided = two;
         two = NULL;
