@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # glTF bakes through the Khronos validator (tests/gltf_validate.js): the Cornell box (.glb with
-# every term, .gltf + .bin on the input mesh with the display set) and McGuire's Cornell box as
+# every term, .gltf + .bin on the input mesh with the display set), the same from Blender's glTF export and McGuire's Cornell box as
 # published (skipped visibly when ../shared is missing). The bunny box's 69,460 polygons are
 # validated by bench/run.sh --big (a big scene: a minute and a half of baking).
 # usage: gltf_validate.sh BOUNCE SOURCE_DIR OUT_DIR
@@ -18,7 +18,10 @@ files=()
 vis=(--ff-visibility rays)
 "$bounce" bake "$src/meshes/cornell-box.obj" --unit mm -q --patches 400 --per-bounce "${vis[@]}" -o "$out/cornell.glb" 2>/dev/null
 "$bounce" bake "$src/meshes/cornell-box.obj" --unit mm -q --mesh input --ldr "${vis[@]}" -o "$out/cornell-input.gltf" 2>/dev/null
-files+=("$out/cornell.glb" "$out/cornell-input.gltf")
+# from a glTF input: Blender's export of the box (every material doubleSided: each side baked)
+"$bounce" bake "$src/meshes/cornell-box-blender.glb" -q --patches 300 --per-bounce "${vis[@]}" -o "$out/blender.glb" 2>/dev/null
+"$bounce" bake "$src/meshes/cornell-box-blender.glb" -q --mesh input "${vis[@]}" -o "$out/blender-input.gltf" 2>/dev/null
+files+=("$out/cornell.glb" "$out/cornell-input.gltf" "$out/blender.glb" "$out/blender-input.gltf")
 mcguire="$src/../shared/data/external/mcguire-cornell/CornellBox-Original.obj"
 if [ -f "$mcguire" ]; then
   "$bounce" bake "$mcguire" -q --per-bounce "${vis[@]}" -o "$out/mcguire.glb" 2>/dev/null

@@ -222,7 +222,7 @@ BN_TEST(component_types_strides_and_sparse_values)
     bn_scene_destroy(s);
 }
 
-/* Materials: reflectance from baseColorFactor, emission = emissiveFactor x emissiveStrength, doubleSided
+/* Materials: reflectance from baseColorFactor (or an older file's specular-glossiness diffuseFactor), emission = emissiveFactor x emissiveStrength, doubleSided
  * as two-sided faces (the back side added), unlit / blended / textured said, no material a grey default. */
 BN_TEST(materials_as_the_format_says)
 {
@@ -231,19 +231,21 @@ BN_TEST(materials_as_the_format_says)
         "\"materials\":[{\"name\":\"lamp\",\"pbrMetallicRoughness\":{\"baseColorFactor\":[0.8,0.2,0.1,1],"
         "\"metallicFactor\":1},\"emissiveFactor\":[1,0.5,0.25],\"doubleSided\":true,"
         "\"extensions\":{\"KHR_materials_emissive_strength\":{\"emissiveStrength\":4}}},"
-        "{\"name\":\"lamp\",\"alphaMode\":\"BLEND\",\"extensions\":{\"KHR_materials_unlit\":{}}}],"
+        "{\"name\":\"lamp\",\"alphaMode\":\"BLEND\",\"extensions\":{\"KHR_materials_unlit\":{}}},"
+        "{\"name\":\"old\",\"extensions\":{\"KHR_materials_pbrSpecularGlossiness\":{\"diffuseFactor\":[0.3,0.4,0.5,1]}}}],"
         "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0},\"indices\":1,\"material\":0}]},"
         "{\"primitives\":[{\"attributes\":{\"POSITION\":0},\"indices\":1,\"material\":1}]},"
-        "{\"primitives\":[{\"attributes\":{\"POSITION\":0},\"indices\":1}]}],"
-        "\"nodes\":[{\"mesh\":0},{\"mesh\":1,\"translation\":[0,0,1]},{\"mesh\":2,\"translation\":[0,0,2]}],"
-        "\"scenes\":[{\"nodes\":[0,1,2]}]}";
+        "{\"primitives\":[{\"attributes\":{\"POSITION\":0},\"indices\":1}]},"
+        "{\"primitives\":[{\"attributes\":{\"POSITION\":0},\"indices\":1,\"material\":2}]}],"
+        "\"nodes\":[{\"mesh\":0},{\"mesh\":1,\"translation\":[0,0,1]},{\"mesh\":2,\"translation\":[0,0,2]},"
+        "{\"mesh\":3,\"translation\":[0,0,3]}],\"scenes\":[{\"nodes\":[0,1,2,3]}]}";
     counted_log c;
     memset(&c, 0, sizeof c);
     bn_scene *s = load(write_gltf("materials.gltf", json, &square, sizeof square), &c);
     size_t nm, nf;
     const bn_material *m = bn_scene_materials(s, &nm);
     const bn_face *f = bn_scene_faces(s, &nf);
-    BN_ASSERT_EQ(nm, 3);
+    BN_ASSERT_EQ(nm, 4);
     BN_ASSERT(strcmp(m[0].name, "lamp") == 0 && strcmp(m[1].name, "lamp#1") == 0);
     BN_ASSERT_NEAR(m[0].rho[0], 0.8, 1e-15);
     BN_ASSERT_NEAR(m[0].rho[2], 0.1, 1e-15);
@@ -251,9 +253,10 @@ BN_TEST(materials_as_the_format_says)
     BN_ASSERT_NEAR(m[0].Le[1], 2, 1e-15);
     BN_ASSERT_NEAR(m[0].Le[2], 1, 1e-15);
     BN_ASSERT_NEAR(m[1].rho[1], 1, 0);   /* the schema's default base colour */
-    BN_ASSERT_NEAR(m[2].rho[0], 0.5, 0); /* no material: grey */
+    BN_ASSERT_NEAR(m[2].rho[1], 0.4, 0); /* KHR_materials_pbrSpecularGlossiness's diffuseFactor */
+    BN_ASSERT_NEAR(m[3].rho[0], 0.5, 0); /* no material: grey, added when first needed */
     BN_ASSERT(bn_scene_material_two_sided(s, 0) && !bn_scene_material_two_sided(s, 1));
-    BN_ASSERT_EQ(nf, 8);   /* 2 + its 2 back sides, 2, 2 */
+    BN_ASSERT_EQ(nf, 10);   /* 2 + its 2 back sides, 2, 2, 2 */
     size_t backs = 0;
     for (size_t i = 0; i < nf; i++)
         backs += f[i].back;
@@ -364,7 +367,7 @@ static void material_sums(const bn_scene *s, mat_sum *out, size_t nout)
 
 /* Scene s written as glTF: a primitive per material, float positions, unsigned int indices, polygons as
  * fans of triangles, each emission as a colour in [0, 1] times a strength. */
-static const char *scene_to_gltf(const bn_scene *s, const char *name)
+static const char *scene_to_gltf(const bn_scene *s, const char *name, const char *node)
 {
     size_t nv, nf, nm, ni, k = 0;
     const double *v = bn_scene_vertices(s, &nv);
@@ -407,7 +410,7 @@ static const char *scene_to_gltf(const bn_scene *s, const char *name)
     for (size_t mat = 0; mat < nm; mat++)
         o += snprintf(json + o, 65536 - o, "%s{\"attributes\":{\"POSITION\":0},\"indices\":%zu,\"material\":%zu}",
                       mat ? "," : "", mat + 1, mat);
-    snprintf(json + o, 65536 - o, "]}],\"nodes\":[{\"mesh\":0}],\"scenes\":[{\"nodes\":[0]}],\"scene\":0}");
+    snprintf(json + o, 65536 - o, "]}],\"nodes\":[%s],\"scenes\":[{\"nodes\":[0]}],\"scene\":0}", node);
     const char *path = write_gltf(name, json, bin, bytes);
     free(json), free(bin);
     return path;
@@ -422,7 +425,7 @@ BN_TEST(cornell_box_as_gltf_reads_as_its_obj)
     bn_scene *obj = load(bn_test_path("meshes/cornell-box.obj"), &c);
     size_t nm;
     const bn_material *m = bn_scene_materials(obj, &nm);
-    const char *path = scene_to_gltf(obj, "cornell-box.gltf");
+    const char *path = scene_to_gltf(obj, "cornell-box.gltf", "{\"mesh\":0}");
     bn_scene *gl = load(path, &c);
     mat_sum a[64], b[64];
     material_sums(obj, a, nm);
@@ -569,4 +572,83 @@ BN_TEST(blender_export_reads_as_the_obj)
     bn_scene_emitted_power(two, p2);
     BN_ASSERT_REL(p2[0], 2 * p1[0], 1e-12);
     bn_scene_destroy(obj), bn_scene_destroy(one), bn_scene_destroy(two);
+}
+
+/* The same triangles as scene_to_gltf writes (positions rounded to float, faces in material order,
+ * polygons as fans), as OBJ + MTL. */
+static const char *scene_to_obj(const bn_scene *s, const char *name)
+{
+    size_t nv, nf, nm, ni;
+    const double *v = bn_scene_vertices(s, &nv);
+    const bn_face *f = bn_scene_faces(s, &nf);
+    const size_t *fi = bn_scene_face_indices(s, &ni);
+    const bn_material *m = bn_scene_materials(s, &nm);
+    char mtl[64];
+    snprintf(mtl, sizeof mtl, "%s.mtl", name);
+    FILE *fo = fopen(bn_test_tmp(name), "w"), *fm = fopen(bn_test_tmp(mtl), "w");
+    BN_ASSERT(fo && fm);
+    for (size_t mat = 0; mat < nm; mat++)
+        fprintf(fm, "newmtl %s\nKd %.17g %.17g %.17g\nKe %.17g %.17g %.17g\n", m[mat].name, m[mat].rho[0], m[mat].rho[1],
+                m[mat].rho[2], m[mat].Le[0], m[mat].Le[1], m[mat].Le[2]);
+    fprintf(fo, "mtllib %s\n", mtl);
+    for (size_t i = 0; i < nv; i++)
+        fprintf(fo, "v %.9g %.9g %.9g\n", (float)v[3 * i], (float)v[3 * i + 1], (float)v[3 * i + 2]);
+    for (size_t mat = 0; mat < nm; mat++) {
+        fprintf(fo, "usemtl %s\n", m[mat].name);
+        for (size_t i = 0; i < nf; i++)
+            for (unsigned t = 0; f[i].material == mat && t + 2 < f[i].nverts; t++)
+                fprintf(fo, "f %zu %zu %zu\n", fi[f[i].first] + 1, fi[f[i].first + t + 1] + 1, fi[f[i].first + t + 2] + 1);
+    }
+    fclose(fo), fclose(fm);
+    return bn_test_tmp(name);
+}
+
+/* Area (m^2) and L per patch from `bounce solve` (its CSV: patch,face,material,area,L_R,L_G,L_B); returns
+ * the count. */
+static size_t solve_csv(const char *args, double *L, size_t max)
+{
+    char cmd[1024], *out = NULL, line[512];
+    const char *csv = bn_test_tmp("solve.csv");
+    size_t n = 0;
+    snprintf(cmd, sizeof cmd, "solve %s --patches 200 -q -o '%s'", args, csv);
+    if (bn_test_bounce(cmd, &out) != 0)
+        BN_FAIL("bounce %s: %s", cmd, out ? out : "");
+    free(out);
+    FILE *f = fopen(csv, "r");
+    BN_ASSERT(f);
+    while (fgets(line, sizeof line, f))
+        if (line[0] >= '0' && line[0] <= '9' && n < max) {
+            const char *p = line;
+            for (int comma = 0; comma < 3; p++)
+                comma += *p == ',';
+            BN_ASSERT_EQ(sscanf(p, "%lf,%lf,%lf,%lf", &L[4 * n], &L[4 * n + 1], &L[4 * n + 2], &L[4 * n + 3]), 4);
+            n++;
+        }
+    fclose(f);
+    return n;
+}
+
+/* The Cornell box's polygons as triangles in millimetres under a node whose matrix scales by 0.001 give
+ * the solution of an OBJ of the same triangles read with --unit mm, patch by patch. */
+BN_TEST(millimetres_under_a_scaling_node_solve_as_the_obj)
+{
+    counted_log c;
+    memset(&c, 0, sizeof c);
+    bn_scene *box = load(bn_test_path("meshes/cornell-box.obj"), &c);
+    char a[512], b[512];
+    snprintf(a, sizeof a, "'%s'", scene_to_gltf(box, "mm.gltf", "{\"mesh\":0,\"matrix\":[0.001,0,0,0, 0,0.001,0,0, "
+                                                            "0,0,0.001,0, 0,0,0,1]}"));
+    snprintf(b, sizeof b, "'%s' --unit mm", scene_to_obj(box, "mm.obj"));
+    bn_scene_destroy(box);
+    static double La[4 * 4096], Lb[4 * 4096];
+    size_t na = solve_csv(a, La, 4096), nb = solve_csv(b, Lb, 4096), worst = 1;
+    BN_ASSERT_EQ(na, nb);
+    BN_ASSERT_GT(na, 100);
+    for (size_t i = 0; i < na; i++) {
+        BN_ASSERT_REL(La[4 * i], Lb[4 * i], 1e-6);   /* the patch's area in m^2: the node's scale */
+        for (size_t k = 4 * i + 1; k < 4 * i + 4; k++)
+            if (fabs(La[k] - Lb[k]) > fabs(La[worst] - Lb[worst]))
+                worst = k;
+    }
+    BN_ASSERT_NEAR(La[worst], Lb[worst], 1e-6);
 }

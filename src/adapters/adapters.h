@@ -80,6 +80,10 @@ typedef struct bn__gltf_material {
     unsigned nbase, nemissive;
     double base[4], emissive[3], strength;    /* strength: KHR_materials_emissive_strength, else 1 */
     int base_tex, base_uv, emissive_tex, double_sided, unlit, has_strength;
+    /* KHR_materials_pbrSpecularGlossiness (older exporters): its diffuseFactor is the diffuse colour */
+    int specgloss, diffuse_tex;
+    unsigned ndiffuse;
+    double diffuse[4];
 } bn__gltf_material;
 typedef struct bn__gltf_node {
     const char *name;

@@ -146,6 +146,23 @@ void mirror_material(const tinygltf::Material &mt, bn__gltf_material &x)
         x.strength = v.IsNumber() ? v.GetNumberAsDouble() : -1.0;   // not a number: refused above
     }
     x.unlit = mt.extensions.count("KHR_materials_unlit") != 0;
+    auto sg = mt.extensions.find("KHR_materials_pbrSpecularGlossiness");
+    x.diffuse_tex = -1;
+    if (sg != mt.extensions.end()) {
+        const tinygltf::Value &d = sg->second.Get("diffuseFactor");
+        x.specgloss = 1;
+        x.ndiffuse = 4;   // the extension's default: white
+        for (int c = 0; c < 4; c++)
+            x.diffuse[c] = 1.0;
+        if (d.IsArray()) {
+            x.ndiffuse = (unsigned)std::min<size_t>(d.ArrayLen(), 1000);
+            for (size_t c = 0; c < 4 && c < d.ArrayLen(); c++)
+                x.diffuse[c] = d.Get((int)c).IsNumber() ? d.Get((int)c).GetNumberAsDouble() : -1.0;
+        }
+        const tinygltf::Value &t = sg->second.Get("diffuseTexture");
+        if (t.IsObject() && t.Get("index").IsNumber())
+            x.diffuse_tex = (int)t.Get("index").GetNumberAsDouble();
+    }
 }
 
 void mirror_scene(Impl &m)

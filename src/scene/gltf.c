@@ -186,6 +186,11 @@ static bn_status bn__material_check(bn__gr *r, size_t i, const bn__gltf_material
         if (!(m->emissive[c] >= 0 && m->emissive[c] <= 1))
             return bn_error_set(r->err, BN_EINPUT, "%s: /materials/%zu/emissiveFactor/%d: %g is outside [0, 1]", r->path,
                                 i, c, m->emissive[c]);
+    for (int c = 0; m->specgloss && c < 4; c++)
+        if (m->ndiffuse != 4 || !(m->diffuse[c] >= 0 && m->diffuse[c] <= 1))
+            return bn_error_set(r->err, BN_EINPUT, "%s: /materials/%zu/extensions/KHR_materials_pbrSpecularGlossiness/"
+                                "diffuseFactor: %u values, the %dth %g (4 in [0, 1] expected)", r->path, i, m->ndiffuse,
+                                c, m->diffuse[c]);
     if (!(m->strength >= 0 && isfinite(m->strength)))
         return bn_error_set(r->err, BN_EINPUT, "%s: /materials/%zu/extensions/KHR_materials_emissive_strength/"
                             "emissiveStrength: %g is not a finite number >= 0", r->path, i, m->strength);
@@ -195,10 +200,13 @@ static bn_status bn__material_check(bn__gr *r, size_t i, const bn__gltf_material
 /* What bounce does not model of material i, said once for it. */
 static void bn__material_notes(bn__gr *r, size_t i, const bn__gltf_material *m, const char *name)
 {
-    if (m->base_tex >= 0 || m->emissive_tex >= 0)
+    if (m->specgloss)
+        bn_logf(r->log, BN_LOG_INFO, "%s: /materials/%zu ('%s'): KHR_materials_pbrSpecularGlossiness: its diffuseFactor "
+                "is the reflectance", r->path, i, name);
+    if (m->base_tex >= 0 || m->emissive_tex >= 0 || m->diffuse_tex >= 0)
         bn_warnf(r->log, BN_W_MATERIAL, NAN, "%s: /materials/%zu ('%s'): its %s texture is not applied (bounce does "
                  "not read textures yet): the factor alone is used", r->path, i, name,
-                 m->base_tex >= 0 ? "baseColor" : "emissive");
+                 m->base_tex >= 0 ? "baseColor" : m->diffuse_tex >= 0 ? "diffuse" : "emissive");
     if (m->unlit)
         bn_warnf(r->log, BN_W_MATERIAL, NAN, "%s: /materials/%zu ('%s') is KHR_materials_unlit (shown at its base "
                  "colour whatever the light): bounce reflects light off it as a Lambertian surface of that colour",
@@ -239,7 +247,7 @@ static bn_status bn__materials(bn__gr *r)
         memset(&mt, 0, sizeof mt);
         bn__material_name(r->s, i, m->name, mt.name);
         for (int c = 0; c < 3; c++) {
-            mt.rho[c] = m->base[c];
+            mt.rho[c] = m->specgloss ? m->diffuse[c] : m->base[c];
             mt.Le[c] = m->emissive[c] * m->strength;
         }
         bn__material_notes(r, i, m, mt.name);
@@ -600,6 +608,9 @@ static bn_status bn__read(bn__gr *r)
     if (st == BN_OK)
         st = bn__walk(r, roots, nroots, where);
     free(orphans);
+    if (st == BN_OK && r->triangles == 0)
+        return bn_error_set(r->err, BN_EINPUT, "%s: %s: no triangles under these nodes (%zu primitives of points or "
+                            "lines, which have no area)", r->path, where, r->skipped);
     if (st == BN_OK && r->skipped)
         bn_logf(r->log, BN_LOG_INFO, "%s: %zu primitives of points or lines skipped (no area)", r->path, r->skipped);
     if (st == BN_OK && r->skinned)
