@@ -2,6 +2,8 @@
 #define _POSIX_C_SOURCE 200809L
 #include "bn_test.h"
 
+#include <stdint.h>
+
 #include <errno.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
@@ -181,5 +183,40 @@ const char *bn_test_cornell_cut_light(int nx)
     BN_ASSERT(fputs(after, fp) >= 0 && fclose(fp) == 0);
     free(src);
     free(mtl);
+    return path;
+}
+
+static char *bn_test_base64(const unsigned char *p, size_t n)
+{
+    static const char *t = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    char *out = malloc(4 * (n / 3 + 1) + 1), *o = out;
+    BN_ASSERT(out);
+    for (size_t i = 0; i < n; i += 3) {
+        uint32_t v = (uint32_t)p[i] << 16 | (i + 1 < n ? (uint32_t)p[i + 1] << 8 : 0) | (i + 2 < n ? p[i + 2] : 0);
+        *o++ = t[v >> 18 & 63], *o++ = t[v >> 12 & 63];
+        *o++ = i + 1 < n ? t[v >> 6 & 63] : '=';
+        *o++ = i + 2 < n ? t[v & 63] : '=';
+    }
+    *o = 0;
+    return out;
+}
+
+const char *bn_test_write_gltf(const char *name, const char *json, const void *bin, size_t n)
+{
+    const char *path = bn_test_tmp(name);
+    char *b64 = bn_test_base64(bin, n), num[32];
+    FILE *f = fopen(path, "w");
+    BN_ASSERT(f);
+    snprintf(num, sizeof num, "%zu", n);
+    for (const char *p = json; *p;) {
+        if (strncmp(p, "@URI@", 5) == 0)
+            fprintf(f, "data:application/octet-stream;base64,%s", b64), p += 5;
+        else if (strncmp(p, "@N@", 3) == 0)
+            fputs(num, f), p += 3;
+        else
+            fputc(*p++, f);
+    }
+    BN_ASSERT(fclose(f) == 0);
+    free(b64);
     return path;
 }

@@ -105,6 +105,10 @@ int bn_test_file_exists(const char *path);
  * same light), written with its .mtl into the test's folder: the file's path (static). */
 const char *bn_test_cornell_cut_light(int nx);
 
+/* Writes `json` to "<tmpdir>/<name>" with every "@URI@" replaced by the data URI of bin[0 .. n) and "@N@"
+ * by n (a glTF with its buffer inline): the path (bn_test_tmp's). */
+const char *bn_test_write_gltf(const char *name, const char *json, const void *bin, size_t n);
+
 /* F_ij of an operator with entries; fails the test if the operator cannot give it. */
 /* Perpendicular rectangles with a common edge of length l: the form factor from the w x l one to
  * the h x l one (Howell's catalogue, C-14): the independent answer of several tests. */

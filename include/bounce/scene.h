@@ -176,9 +176,14 @@ int         bn_scene_objects_from_file(const bn_scene *s);   /* 1: the file's gr
 int         bn_scene_object_is_assembly(const bn_scene *s, size_t k);
 
 /* Per-patch emission E (= Le, W m^-2 sr^-1) and reflectance rho, written into caller-allocated
- * arrays of N*3 doubles (patch-major, channel-minor: a[3*i + c]). */
+ * arrays of N*3 doubles (patch-major, channel-minor: a[3*i + c]). A textured material's patches get
+ * its factor times the texture's mean over the patch. */
 void bn_scene_patch_emission(const bn_scene *s, double *E);
 void bn_scene_patch_reflectance(const bn_scene *s, double *rho);
+/* The reflectance at point x of face `face` (on its plane): the material's, times its texture there
+ * (glTF baseColorTexture, MTL map_Kd) when it has one; what the final gather's pixels use. */
+void bn_scene_reflectance_at(const bn_scene *s, size_t face, const double x[3], double rho[3]);
+int  bn_scene_textured(const bn_scene *s);   /* 1: some material has a reflectance texture */
 
 #ifdef __cplusplus
 }

@@ -29,6 +29,15 @@ bn_status bn__oiio_write_rgb8(const char *path, int w, int h, const unsigned cha
                               size_t nlabels, const char *font, const bn_attr *attrs, size_t nattrs, int *labels_ok,
                               bn_error *err);
 
+/* Reads an image as stored (RGB floats, row 0 on top, 8- and 16-bit values scaled to [0, 1], no colour
+ * conversion; *rgb malloc'd) from `path`, or from mem[0 .. size) when mem is not NULL (`path` then names
+ * the format by its extension, and the image in messages); *is_float: float or half values (linear by
+ * convention). Through the OpenImageIO module as bn__oiio_write_rgb8 (bn__oiio_module_read_rgbf). */
+typedef bn_status bn__oiio_read_rgbf_fn(const char *path, const void *mem, size_t size, int *w, int *h, float **rgb,
+                                        int *is_float, bn_error *err);
+bn_status bn__oiio_read_rgbf(const char *path, const void *mem, size_t size, int *w, int *h, float **rgb, int *is_float,
+                             bn_error *err);
+
 /* Where a reader puts the mesh it reads: vertices in order, then polygons of vertex indices; each
  * returns 0 when out of memory. (The scene module passes its soup in; the adapter calls back, so
  * that src/adapters depends on nothing above it.) */
@@ -73,7 +82,12 @@ typedef struct bn__gltf_accessor {
     int sparse_iview, sparse_ictype, sparse_vview;
     size_t sparse_ioffset, sparse_voffset;
 } bn__gltf_accessor;
-typedef struct bn__gltf_prim { int mode, material, indices, position, texcoord0; } bn__gltf_prim;
+typedef struct bn__gltf_prim { int mode, material, indices, position, texcoord[2]; } bn__gltf_prim;
+/* An image's encoded bytes (from its bufferView or its uri, NULL when tinygltf could not load it) and
+ * its MIME type or uri for the format; a texture's image and sampler (wrap: glTF's codes; mag: 9728
+ * NEAREST, else linear). */
+typedef struct bn__gltf_image { const unsigned char *bytes; size_t size; const char *mime, *uri, *name; } bn__gltf_image;
+typedef struct bn__gltf_texture { int source, wrap_s, wrap_t, mag; } bn__gltf_texture;
 typedef struct bn__gltf_mesh { const char *name; size_t first, n; } bn__gltf_mesh;   /* prims[first..] */
 typedef struct bn__gltf_material {
     const char *name, *alpha_mode;
@@ -82,6 +96,7 @@ typedef struct bn__gltf_material {
     int base_tex, base_uv, emissive_tex, double_sided, unlit, has_strength;
     /* KHR_materials_pbrSpecularGlossiness (older exporters): its diffuseFactor is the diffuse colour */
     int specgloss, diffuse_tex;
+    int tex_transform;                    /* its reflectance texture uses KHR_texture_transform */
     unsigned ndiffuse;
     double diffuse[4];
 } bn__gltf_material;
@@ -95,7 +110,9 @@ typedef struct bn__gltf_node {
 typedef struct bn__gltf_scene { size_t first, n; } bn__gltf_scene;       /* roots[first..] */
 typedef struct bn__gltf {
     size_t nbuffers, nviews, naccessors, nprims, nmeshes, nmaterials, nnodes, nscenes, nlights, ntextures;
-    size_t nchildren, nroots, nrequired;
+    size_t nchildren, nroots, nrequired, nimages;
+    const bn__gltf_image *images;
+    const bn__gltf_texture *textures;
     const bn__gltf_buffer *buffers;
     const bn__gltf_view *views;
     const bn__gltf_accessor *accessors;
@@ -110,8 +127,9 @@ typedef struct bn__gltf {
     const char *warnings;                 /* tinygltf's, "" for none */
     void *impl;
 } bn__gltf;
-/* Parses `path` (.glb by its magic, else JSON) with its external buffers and data URIs; images are
- * not decoded. On failure *out is NULL and err names the file with tinygltf's message. */
+/* Parses `path` (.glb by its magic, else JSON) with its external buffers and data URIs; images are kept
+ * encoded (bounce decodes them through OpenImageIO). On failure *out is NULL and err names the file
+ * with tinygltf's message. */
 bn_status bn__gltf_parse(const char *path, bn__gltf **out, bn_error *err);
 void bn__gltf_free(bn__gltf *g);   /* NULL is a no-op */
 

@@ -2,7 +2,7 @@
 // src/scene/gltf.c, which does every check and the walk. Nothing here interprets the scene: it copies
 // what the file said, with counts, so the C side can name a wrong value by its JSON pointer.
 // tinygltf (Debian's libtinygltf-dev, a shared library) reads the JSON, the .glb container, external
-// buffers and data URIs; images are left undecoded (textures come later, through OpenImageIO).
+// buffers and data URIs; images are kept encoded (bounce decodes those it uses through OpenImageIO).
 #include "adapters/adapters.h"
 
 #include <tiny_gltf.h>
@@ -27,15 +27,20 @@ struct Impl {
     std::vector<bn__gltf_material> materials;
     std::vector<bn__gltf_node> nodes;
     std::vector<bn__gltf_scene> scenes;
+    std::vector<bn__gltf_image> images;
+    std::vector<bn__gltf_texture> textures;
     std::vector<int> children, roots;
     std::vector<const char *> required;
     bn__gltf c;
 };
 
-// Images are decoded when a texture is used, not by the parser.
-bool no_image(tinygltf::Image *, const int, std::string *, std::string *, int, int, const unsigned char *, int,
-              void *)
+// Images stay encoded (bounce decodes those a material uses, through OpenImageIO): their bytes are
+// kept in image.image with width -1.
+bool keep_image(tinygltf::Image *image, const int, std::string *, std::string *, int, int, const unsigned char *bytes,
+                int size, void *)
 {
+    image->image.assign(bytes, bytes + (size > 0 ? size : 0));
+    image->width = image->height = -1;
     return true;
 }
 
@@ -124,7 +129,7 @@ void mirror_meshes(Impl &m)
         m.meshes.push_back({mesh.name.c_str(), m.prims.size(), mesh.primitives.size()});
         for (const auto &p : mesh.primitives)
             m.prims.push_back({p.mode < 0 ? TINYGLTF_MODE_TRIANGLES : p.mode, p.material, p.indices,
-                               attribute(p, "POSITION"), attribute(p, "TEXCOORD_0")});
+                               attribute(p, "POSITION"), {attribute(p, "TEXCOORD_0"), attribute(p, "TEXCOORD_1")}});
     }
 }
 
@@ -137,6 +142,7 @@ void mirror_material(const tinygltf::Material &mt, bn__gltf_material &x)
     x.base_tex = mt.pbrMetallicRoughness.baseColorTexture.index;
     x.base_uv = mt.pbrMetallicRoughness.baseColorTexture.texCoord;
     x.emissive_tex = mt.emissiveTexture.index;
+    x.tex_transform = mt.pbrMetallicRoughness.baseColorTexture.extensions.count("KHR_texture_transform") != 0;
     x.double_sided = mt.doubleSided;
     x.strength = 1.0;
     auto es = mt.extensions.find("KHR_materials_emissive_strength");
@@ -162,6 +168,23 @@ void mirror_material(const tinygltf::Material &mt, bn__gltf_material &x)
         const tinygltf::Value &t = sg->second.Get("diffuseTexture");
         if (t.IsObject() && t.Get("index").IsNumber())
             x.diffuse_tex = (int)t.Get("index").GetNumberAsDouble();
+    }
+}
+
+void mirror_images(Impl &m)
+{
+    for (const auto &im : m.model.images) {
+        bool have = im.width == -1 && !im.image.empty();
+        m.images.push_back({have ? im.image.data() : nullptr, have ? im.image.size() : 0, im.mimeType.c_str(),
+                            im.uri.c_str(), im.name.c_str()});
+    }
+    for (const auto &t : m.model.textures) {
+        bn__gltf_texture x{t.source, 10497, 10497, -1};
+        if (t.sampler >= 0 && (size_t)t.sampler < m.model.samplers.size()) {
+            const auto &sm = m.model.samplers[t.sampler];
+            x.wrap_s = sm.wrapS, x.wrap_t = sm.wrapT, x.mag = sm.magFilter;
+        }
+        m.textures.push_back(x);
     }
 }
 
@@ -210,7 +233,8 @@ void publish(Impl &m)
     c.nroots = m.roots.size(), c.roots = m.roots.data();
     c.nrequired = m.required.size(), c.required = m.required.data();
     c.nlights = m.model.lights.size();
-    c.ntextures = m.model.textures.size();
+    c.ntextures = m.textures.size(), c.textures = m.textures.data();
+    c.nimages = m.images.size(), c.images = m.images.data();
     c.default_scene = m.model.defaultScene;
     c.warnings = m.warnings.c_str();
     c.impl = &m;
@@ -225,7 +249,7 @@ extern "C" bn_status bn__gltf_parse(const char *path, bn__gltf **out, bn_error *
     try {
         m = new Impl();
         tinygltf::TinyGLTF loader;
-        loader.SetImageLoader(no_image, nullptr);
+        loader.SetImageLoader(keep_image, nullptr);
         std::string error;
         bool ok = is_glb(path) ? loader.LoadBinaryFromFile(&m->model, &error, &m->warnings, path)
                                : loader.LoadASCIIFromFile(&m->model, &error, &m->warnings, path);
@@ -242,6 +266,7 @@ extern "C" bn_status bn__gltf_parse(const char *path, bn__gltf **out, bn_error *
         mirror_data(*m);
         mirror_meshes(*m);
         mirror_scene(*m);
+        mirror_images(*m);
         publish(*m);
         *out = &m->c;
         return BN_OK;

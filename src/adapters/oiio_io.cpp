@@ -1,16 +1,21 @@
-// OpenImageIO behind extern "C": 8-bit image writing with text labels (ImageBufAlgo::render_text).
+// OpenImageIO behind extern "C": 8-bit image writing with text labels (ImageBufAlgo::render_text), and
+// reading textures (any format OpenImageIO reads, from a file or from memory: glTF's embedded images).
 // Built as a module of its own (libbounce_oiio.so, beside libbounce.so) that the library opens on
 // the first preview (src/image/oiio_module.c): OpenImageIO brings some 260 shared libraries, whose
 // loading and relocation cost every bounce process 0.4 s at start when linked directly.
 #include "adapters/adapters.h"
 #include "base/internal.h"
 
+#include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imagebuf.h>
 #include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/imageio.h>
 
+#include <cctype>
+#include <cstdlib>
 #include <new>
 #include <string>
+#include <vector>
 
 extern "C" bn_status bn__oiio_module_write_rgb8(const char *path, int w, int h, const unsigned char *rgb,
                                                 const bn__label *labels, size_t nlabels, const char *font,
@@ -43,5 +48,53 @@ extern "C" bn_status bn__oiio_module_write_rgb8(const char *path, int w, int h, 
         return bn_error_set(err, BN_EINTERNAL, "OpenImageIO: %s", e.what());
     } catch (...) {
         return bn_error_set(err, BN_EINTERNAL, "OpenImageIO: unknown exception");
+    }
+}
+
+// An image as stored (no colour conversion): RGB floats, row 0 on top; 8- and 16-bit values scaled to
+// [0, 1]. From `path`, or from mem[0 .. size) when mem is not NULL (`path` then only names the format
+// by its extension and the image in messages). *is_float: the file holds float or half values.
+extern "C" bn_status bn__oiio_module_read_rgbf(const char *path, const void *mem, size_t size, int *w, int *h,
+                                               float **rgb, int *is_float, bn_error *err)
+{
+    *rgb = nullptr;
+    try {
+        OIIO::Filesystem::IOMemReader proxy(mem, mem ? size : 0);
+        auto in = OIIO::ImageInput::open(path, nullptr, mem ? &proxy : nullptr);
+        if (!in)
+            return bn_error_set(err, BN_EINPUT, "%s: cannot read the image: %s", path, OIIO::geterror().c_str());
+        const OIIO::ImageSpec &spec = in->spec();
+        int nc = spec.nchannels;
+        if (spec.width <= 0 || spec.height <= 0 || nc <= 0 || (size_t)spec.width * spec.height > ((size_t)1 << 28))
+            return bn_error_set(err, BN_EINPUT, "%s: an image of %d x %d pixels and %d channels is not a texture bounce "
+                                "reads", path, spec.width, spec.height, nc);
+        std::vector<float> px((size_t)spec.width * spec.height * nc);
+        if (!in->read_image(0, 0, 0, nc, OIIO::TypeDesc::FLOAT, px.data()))
+            return bn_error_set(err, BN_EINPUT, "%s: cannot read the image: %s", path, in->geterror().c_str());
+        float *out = static_cast<float *>(std::malloc(sizeof(float) * 3 * (size_t)spec.width * spec.height));
+        if (!out)
+            return bn_error_set(err, BN_ENOMEM, "%s: out of memory for the image", path);
+        int ch[3];   // R, G, B by name ("R" or "layer.R": EXR stores channels sorted), else by position
+        for (int c = 0; c < 3; c++) {
+            ch[c] = nc >= 3 ? c : 0;   // grey (and grey + alpha) to RGB; alpha dropped
+            for (int k = 0; nc >= 3 && k < nc; k++) {
+                const std::string &n = spec.channelnames[k];
+                if (!n.empty() && std::toupper((unsigned char)n.back()) == "RGB"[c] &&
+                    (n.size() == 1 || n[n.size() - 2] == '.'))
+                    ch[c] = k;
+            }
+        }
+        for (size_t i = 0; i < (size_t)spec.width * spec.height; i++)
+            for (int c = 0; c < 3; c++)
+                out[3 * i + c] = px[i * nc + ch[c]];
+        *w = spec.width, *h = spec.height;
+        *is_float = spec.format.basetype == OIIO::TypeDesc::FLOAT || spec.format.basetype == OIIO::TypeDesc::HALF ||
+                    spec.format.basetype == OIIO::TypeDesc::DOUBLE;
+        *rgb = out;
+        return BN_OK;
+    } catch (const std::bad_alloc &) {
+        return bn_error_set(err, BN_ENOMEM, "%s: out of memory reading the image", path);
+    } catch (const std::exception &e) {
+        return bn_error_set(err, BN_EINPUT, "%s: cannot read the image: %s", path, e.what());
     }
 }

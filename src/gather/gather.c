@@ -50,11 +50,15 @@ typedef struct bn__gather {
     size_t nem;
     double eps;
     int hit_direct;          /* the hits' KE from the emitters (nem <= hit_emitters, or the tree), not the patches */
+    int textured;            /* some material has a reflectance texture: rho per point (bn__rho_at) */
     bn__lights *tree;        /* more than tree_emitters emitting faces: picked from this tree */
 } bn__gather;
 
 /* Streams: the camera's jitter, then the light and gather samples, keyed by pixel and sample. */
 #define BN__GATHER_STREAM 0x67617468ULL
+/* Doubles per pixel between the per-pixel pass and the composition: the face seen plus one, the mean
+ * reflectance at the samples' points, the gathered means of K^1 E .. K^n E and rest. */
+#define BN__AUX(n) (4 + 3 * ((size_t)(n) + 1))
 
 static int bn__side(int samples)
 {
@@ -297,6 +301,16 @@ static void bn__direct(const bn__gather *G, const double x0[3], const double n[3
             bn__direct_em(G, &G->em[e], x0, n, r, side, out, rays);
 }
 
+/* The reflectance at x on patch p: its material's, times its texture at x (glTF baseColorTexture, MTL
+ * map_Kd) when it has one: the pixels show the texture while the transport uses its patch means. */
+static void bn__rho_at(const bn__gather *G, const bn_patch *p, const double x[3], double rho[3])
+{
+    if (G->textured)
+        bn_scene_reflectance_at(G->scene, p->face, x, rho);
+    else
+        memcpy(rho, G->mat[p->material].rho, 3 * sizeof *rho);
+}
+
 /* KE at a gather's hit from the emitting faces themselves (one shadow ray each), rho applied, added
  * to hv[0..2] x wt: the patch's KE is constant over it, where the light it reads is not (a shadow
  * edge, the fall-off near a lamp); the K^2 E it gathers is then free of that error (on the Cornell
@@ -304,8 +318,8 @@ static void bn__direct(const bn__gather *G, const double x0[3], const double n[3
 static void bn__hit_direct(const bn__gather *G, const bn_hit *q, bn__rng *r, double wt, double *hv, double *rays)
 {
     const bn_patch *p = &G->patch[q->patch];
-    const double *rho = G->mat[p->material].rho;
-    double ke[3];
+    double ke[3], rho[3];
+    bn__rho_at(G, p, q->p, rho);
     if (!(rho[0] > 0 || rho[1] > 0 || rho[2] > 0))
         return;
     bn__direct_one(G, q->p, p->normal, p->face, r, ke, rays);
@@ -314,14 +328,14 @@ static void bn__hit_direct(const bn__gather *G, const bn_hit *q, bn__rng *r, dou
 }
 
 /* One camera sample: E and KE (rho applied) added to acc[0..5]; hv (n + 1 layers x 3) receives the
- * hemisphere means of K^1 E .. K^n E and rest at the hits (rho not applied). Returns the face seen,
- * or -1 (a miss or a back face: black, surfaces are one-sided). */
+ * hemisphere means of K^1 E .. K^n E and rest at the hits (rho not applied), rho the reflectance at the
+ * point seen (its texture's there). Returns the face seen, or -1 (a miss or a back face: black,
+ * surfaces are one-sided). */
 static long bn__sample(const bn__gather *G, const double o[3], const double d[3], bn__rng *r, double *acc,
-                       double *hv, bn_gather_stats *st)
+                       double *hv, double rho[3], bn_gather_stats *st)
 {
     bn_hit h;
     const bn_patch *p;
-    const double *rho;
     double ke[3], s[3], t[3], xo[3], inv = 1.0 / ((double)G->gh * G->gh);
     int nl = G->n + 1;   /* gathered layers: K^1 E .. K^n E, rest */
     st->camera_rays += 1;
@@ -330,7 +344,7 @@ static long bn__sample(const bn__gather *G, const double o[3], const double d[3]
         return -1;
     st->front_hits += 1;
     p = &G->patch[h.patch];
-    rho = G->mat[p->material].rho;
+    bn__rho_at(G, p, h.p, rho);
     bn__direct(G, h.p, p->normal, p->face, r, G->gl, ke, &st->shadow_rays);
     for (int c = 0; c < 3; c++) {
         acc[c] += G->terms[0][3 * h.patch + c];
@@ -359,19 +373,17 @@ static long bn__sample(const bn__gather *G, const double o[3], const double d[3]
     return (long)p->face;
 }
 
-/* The gathered layers after the per-pixel pass: aux holds per pixel 1 + 3 (n + 1) doubles: the face
- * seen by all its samples plus one (0: mixed, missed, or none), then the hemisphere means (rho not
- * applied) for one face, or their rho-weighted sample mean (rho applied) for a mixed pixel. Each
+/* The gathered layers after the per-pixel pass: aux holds per pixel BN__AUX(n) doubles: the face seen
+ * by all its samples plus one (0: mixed, missed, or none), the mean reflectance at its samples' points,
+ * then the hemisphere means (rho not applied) for one face, or their rho-weighted sample mean (rho
+ * applied) for a mixed pixel. Each
  * pixel's gathered means are averaged with those of the pixels within `radius` that see the same face
  * (a box filter that never crosses a face's edge: the indirect terms are smooth inside a face), then
  * the layers K^2 E .. K^n E, rest and L are composed. */
 static void bn__compose(const bn__gather *G, const bn_camera *cam, const double *aux, int radius, bn_image *out)
 {
     int n = G->n, w = cam->width, h = cam->height;
-    size_t stride = 1 + 3 * ((size_t)n + 1);
-    const bn_face *faces;
-    size_t nf;
-    faces = bn_scene_faces(G->scene, &nf);
+    size_t stride = BN__AUX(n);
 #pragma omp parallel for schedule(dynamic, 4)
     for (int y = 0; y < h; y++) {
         double g[3 * 66];
@@ -381,10 +393,10 @@ static void bn__compose(const bn__gather *G, const bn_camera *cam, const double 
             double face = a[0];
             const double *rho = NULL;
             int nl = n + 1;
-            memcpy(g, a + 1, (size_t)nl * 3 * sizeof(double));
+            memcpy(g, a + 4, (size_t)nl * 3 * sizeof(double));
             if (face > 0) {
                 double cnt = 1;
-                rho = G->mat[faces[(size_t)face - 1].material].rho;
+                rho = a + 1;   /* the pixel's own reflectance: a texture varies inside a face */
                 for (int yy = y - radius; yy <= y + radius; yy++)
                     for (int xx = x - radius; xx <= x + radius; xx++) {
                         const double *b;
@@ -394,7 +406,7 @@ static void bn__compose(const bn__gather *G, const bn_camera *cam, const double 
                         if (b[0] != face)
                             continue;
                         for (int k = 0; k < 3 * nl; k++)
-                            g[k] += b[1 + k];
+                            g[k] += b[4 + k];
                         cnt += 1;
                     }
                 for (int k = 0; k < 3 * nl; k++)
@@ -509,6 +521,7 @@ static bn_status bn__gather_init(bn__gather *G, const bn_rt *rt, const double *c
     G->rt = rt;
     G->scene = bn_rt_scene(rt);
     G->patch = bn_scene_patches(G->scene, &np);
+    G->textured = bn_scene_textured(G->scene);
     G->mat = bn_scene_materials(G->scene, &nm);
     G->terms = terms;
     G->rest = rest;
@@ -534,10 +547,9 @@ typedef struct bn__pixbuf {
 static void bn__gather_pixel(const bn__gather *G, const bn_camera *cam, const bn_gather_opts *o, int x, int y, int sx,
                              int sy, bn__pixbuf *B, bn_image *out, double *aux, bn_gather_stats *ls)
 {
-    size_t pix = (size_t)y * (size_t)cam->width + (size_t)x, nl3 = 3 * ((size_t)G->n + 1), nf;
-    const bn_face *faces = bn_scene_faces(G->scene, &nf);
+    size_t pix = (size_t)y * (size_t)cam->width + (size_t)x, nl3 = 3 * ((size_t)G->n + 1);
     long face = -2;   /* -2: no sample yet; -1: mixed or missed */
-    double *a = aux + pix * (1 + nl3);
+    double *a = aux + pix * BN__AUX(G->n), rho[3], rsum[3] = {0, 0, 0};
     memset(B->acc, 0, 6 * sizeof(double));
     memset(B->gp, 0, nl3 * sizeof(double));
     memset(B->gr, 0, nl3 * sizeof(double));
@@ -552,10 +564,11 @@ static void bn__gather_pixel(const bn__gather *G, const bn_camera *cam, const bn
         }
         r = bn__rng_make(o->seed ^ BN__GATHER_STREAM, pix, (uint64_t)s);
         bn_camera_ray(cam, x + fx, y + fy, org, dir);
-        f = bn__sample(G, org, dir, &r, B->acc, B->hv, ls);
+        f = bn__sample(G, org, dir, &r, B->acc, B->hv, rho, ls);
         face = face == -2 ? f : face == f ? face : -1;
         if (f >= 0) {
-            const double *rho = G->mat[faces[f].material].rho;
+            for (int c = 0; c < 3; c++)
+                rsum[c] += rho[c];
             for (size_t k = 0; k < nl3; k++) {
                 B->gp[k] += B->hv[k];
                 B->gr[k] += rho[k % 3] * B->hv[k];
@@ -566,8 +579,10 @@ static void bn__gather_pixel(const bn__gather *G, const bn_camera *cam, const bn
         for (int c = 0; c < 3; c++)
             out[l].rgb[3 * pix + c] = (float)(B->acc[3 * l + c] / cam->spp);
     a[0] = face >= 0 ? (double)face + 1 : 0;
+    for (int c = 0; c < 3; c++)
+        a[1 + c] = rsum[c] / cam->spp;
     for (size_t k = 0; k < nl3; k++)
-        a[1 + k] = (face >= 0 ? B->gp[k] : B->gr[k]) / cam->spp;
+        a[4 + k] = (face >= 0 ? B->gp[k] : B->gr[k]) / cam->spp;
 }
 
 /* Under mpirun: every rank's status, then its rows to every rank (each pixel nonzero on one rank:
@@ -595,7 +610,7 @@ static int bn__gather_rows(const bn__gather *G, const bn_camera *cam, const bn_g
     int sx, sy;
     volatile int stop = 0;
     double cr = 0, sr = 0, gr = 0, fh = 0;
-    size_t done = 0, nl3 = stride - 1, rowv = (size_t)cam->width * stride, row3 = (size_t)3 * (size_t)cam->width;
+    size_t done = 0, nl3 = stride - 4, rowv = (size_t)cam->width * stride, row3 = (size_t)3 * (size_t)cam->width;
     bn__progress prog;
     for (sx = (int)floor(sqrt((double)cam->spp)); sx > 1 && cam->spp % sx != 0;)
         sx--;
@@ -672,7 +687,7 @@ static bn_status bn__gather_body(const bn_rt *rt, const bn_camera *cam, const do
                                  bn_error *err)
 {
     bn__gather G;
-    size_t npix = (size_t)cam->width * (size_t)cam->height, stride = 1 + 3 * ((size_t)n + 1);
+    size_t npix = (size_t)cam->width * (size_t)cam->height, stride = BN__AUX(n);
     bn_status st;
     double t0 = bn__now(), c[4] = {0, 0, 0, 0}, *aux = NULL;
 

@@ -7,6 +7,7 @@
  * KHR_materials_emissive_strength, in W m^-2 sr^-1; doubleSided: two-sided), one object per node. */
 #include "scene/scene_internal.h"
 #include "adapters/adapters.h"
+#include "base/vec.h"
 
 #include <math.h>
 #include <stdint.h>
@@ -25,6 +26,8 @@ typedef struct bn__gr {
     unsigned *mat_of;        /* glTF material -> soup material */
     unsigned default_mat;    /* UINT32_MAX until a primitive without a material needs it */
     unsigned char *seen;     /* per node: reached by the walk */
+    int *tex_of;             /* glTF texture -> soup texture (-1: not decoded yet) */
+    int *mat_uv;             /* per glTF material: the TEXCOORD set of its texture, -1: untextured */
     size_t skipped, skinned, triangles;
 } bn__gr;
 
@@ -171,6 +174,64 @@ static double *bn__accessor(bn__gr *r, int a, int type, const char *ref, size_t 
     return out;
 }
 
+/* glTF texture ti decoded (once) into the soup: its index there, or -1 (err set). */
+static int bn__decode_texture(bn__gr *r, int ti, size_t mat)
+{
+    const bn__gltf *g = r->g;
+    bn__texture t;
+    char name[256];
+    if (ti < 0 || (size_t)ti >= g->ntextures) {
+        bn_error_set(r->err, BN_EINPUT, "%s: /materials/%zu: texture %d does not exist (the file has %zu)", r->path, mat,
+                     ti, g->ntextures);
+        return -1;
+    }
+    if (r->tex_of[ti] >= 0)
+        return r->tex_of[ti];
+    int im = g->textures[ti].source;
+    if (im < 0 || (size_t)im >= g->nimages || !g->images[im].bytes) {
+        bn_error_set(r->err, BN_EINPUT, "%s: /textures/%d/source: image %d %s", r->path, ti, im,
+                     im < 0 || (size_t)im >= g->nimages ? "does not exist" : "could not be read (a missing file?)");
+        return -1;
+    }
+    const bn__gltf_image *I = &g->images[im];
+    const char *ext = strstr(I->mime, "jpeg") ? ".jpg" : strstr(I->mime, "png") ? ".png" : "";
+    if (!ext[0] && strncmp(I->uri, "data:", 5) != 0 && strrchr(I->uri, '.'))
+        ext = strrchr(I->uri, '.');
+    snprintf(name, sizeof name, "%s (/images/%d%s%.100s)%s", r->path, im, I->uri[0] && strncmp(I->uri, "data:", 5) ? ": " : "",
+             strncmp(I->uri, "data:", 5) ? I->uri : "", ext);
+    if (bn__texture_decode(name, I->bytes, I->size, &t, r->err) != BN_OK)
+        return -1;
+    for (int a = 0; a < 2; a++) {
+        int w = a ? g->textures[ti].wrap_t : g->textures[ti].wrap_s;
+        t.wrap[a] = w == 33071 ? BN__WRAP_CLAMP : w == 33648 ? BN__WRAP_MIRROR : BN__WRAP_REPEAT;
+    }
+    t.nearest = g->textures[ti].mag == 9728;
+    snprintf(t.name, sizeof t.name, "image %d", im);
+    if ((r->tex_of[ti] = bn__soup_add_texture(r->s, &t)) < 0) {
+        free(t.rgb);
+        bn_error_set(r->err, BN_ENOMEM, "out of memory");
+    }
+    return r->tex_of[ti];
+}
+
+/* Material i's reflectance texture (baseColorTexture, or the specular-glossiness diffuseTexture). */
+static bn_status bn__material_texture(bn__gr *r, size_t i, const bn__gltf_material *m)
+{
+    int ti = m->specgloss ? m->diffuse_tex : m->base_tex, t;
+    r->mat_uv[i] = -1;
+    if (ti < 0)
+        return BN_OK;
+    if (m->base_uv < 0 || m->base_uv > 1)
+        return bn_error_set(r->err, BN_EINPUT, "%s: /materials/%zu/pbrMetallicRoughness/baseColorTexture/texCoord: %d "
+                            "(bounce reads TEXCOORD_0 and TEXCOORD_1)", r->path, i, m->base_uv);
+    if ((t = bn__decode_texture(r, ti, i)) < 0)
+        return r->err->status;
+    if (!bn__soup_set_material_texture(r->s, r->mat_of[i], t))
+        return bn_error_set(r->err, BN_ENOMEM, "out of memory");
+    r->mat_uv[i] = m->specgloss ? 0 : m->base_uv;
+    return BN_OK;
+}
+
 /* Material i's values, each checked against the schema's ranges. */
 static bn_status bn__material_check(bn__gr *r, size_t i, const bn__gltf_material *m)
 {
@@ -203,10 +264,12 @@ static void bn__material_notes(bn__gr *r, size_t i, const bn__gltf_material *m, 
     if (m->specgloss)
         bn_logf(r->log, BN_LOG_INFO, "%s: /materials/%zu ('%s'): KHR_materials_pbrSpecularGlossiness: its diffuseFactor "
                 "is the reflectance", r->path, i, name);
-    if (m->base_tex >= 0 || m->emissive_tex >= 0 || m->diffuse_tex >= 0)
-        bn_warnf(r->log, BN_W_MATERIAL, NAN, "%s: /materials/%zu ('%s'): its %s texture is not applied (bounce does "
-                 "not read textures yet): the factor alone is used", r->path, i, name,
-                 m->base_tex >= 0 ? "baseColor" : m->diffuse_tex >= 0 ? "diffuse" : "emissive");
+    if (m->tex_transform)
+        bn_warnf(r->log, BN_W_MATERIAL, NAN, "%s: /materials/%zu ('%s'): KHR_texture_transform is not applied: the "
+                 "texture is read with its coordinates as they are", r->path, i, name);
+    if (m->emissive_tex >= 0)
+        bn_warnf(r->log, BN_W_MATERIAL, NAN, "%s: /materials/%zu ('%s'): its emissiveTexture is not applied (bounce "
+                 "reads reflectance textures only): emissiveFactor alone is used", r->path, i, name);
     if (m->unlit)
         bn_warnf(r->log, BN_W_MATERIAL, NAN, "%s: /materials/%zu ('%s') is KHR_materials_unlit (shown at its base "
                  "colour whatever the light): bounce reflects light off it as a Lambertian surface of that colour",
@@ -236,8 +299,12 @@ static void bn__material_name(const bn__soup *s, size_t i, const char *given, ch
 static bn_status bn__materials(bn__gr *r)
 {
     const bn__gltf *g = r->g;
-    if (!(r->mat_of = bn__malloc_array(g->nmaterials + 1, sizeof *r->mat_of)))
+    if (!(r->mat_of = bn__malloc_array(g->nmaterials + 1, sizeof *r->mat_of)) ||
+        !(r->mat_uv = bn__malloc_array(g->nmaterials + 1, sizeof *r->mat_uv)) ||
+        !(r->tex_of = bn__malloc_array(g->ntextures + 1, sizeof *r->tex_of)))
         return bn_error_set(r->err, BN_ENOMEM, "out of memory");
+    for (size_t t = 0; t < g->ntextures; t++)
+        r->tex_of[t] = -1;
     for (size_t i = 0; i < g->nmaterials; i++) {
         const bn__gltf_material *m = &g->materials[i];
         bn_material mt;
@@ -254,6 +321,8 @@ static bn_status bn__materials(bn__gr *r)
         r->mat_of[i] = (unsigned)r->s->nmats;
         if (!bn__soup_add_material(r->s, &mt) || (m->double_sided && !bn__soup_set_two_sided(r->s, r->mat_of[i])))
             return bn_error_set(r->err, BN_ENOMEM, "out of memory");
+        if ((st = bn__material_texture(r, i, m)) != BN_OK)
+            return st;
     }
     size_t two = 0;
     for (size_t i = 0; i < g->nmaterials; i++)
@@ -291,12 +360,61 @@ static bn_status bn__material_of(bn__gr *r, int mat, size_t m, size_t k, unsigne
     return BN_OK;
 }
 
-/* The triangles of a primitive's index list (mode 4, 5 or 6), wound as the file winds them, or the
- * other way under a mirroring transform (flip); vertex indices offset by base. */
-static bn_status bn__triangles(bn__gr *r, int mode, const double *idx, size_t n, size_t base, int flip, unsigned mat)
+/* Polygon v[0 .. n) (soup vertices; uv per primitive vertex from base, or NULL) into the soup. */
+static bn_status bn__emit(bn__gr *r, const size_t *v, unsigned n, size_t base, unsigned mat, const double *uv)
 {
-    size_t ntri = mode == 4 ? n / 3 : (n >= 3 ? n - 2 : 0);
-    for (size_t t = 0; t < ntri; t++) {
+    double cuv[8];
+    for (unsigned k = 0; uv && k < n; k++)
+        cuv[2 * k] = uv[2 * (v[k] - base)], cuv[2 * k + 1] = uv[2 * (v[k] - base) + 1];
+    if (!bn__soup_add_polygon(r->s, v, n, mat, 0) || (uv && !bn__soup_set_corner_uv(r->s, cuv, n)))
+        return bn_error_set(r->err, BN_ENOMEM, "out of memory");
+    return BN_OK;
+}
+
+/* Triangles a and b as one quad (q), when they share an edge the other way round (the same positions and
+ * texture coordinates) and together make a planar convex quad: what an exporter's triangulation of a
+ * quad left. The quad's diagonal is its
+ * corners 0-2, the shared edge, so its texture map (affine over 0-1-2 and 0-2-3) is the triangles'. */
+static int bn__same(const bn__soup *s, size_t i, size_t j, size_t base, const double *uv)
+{
+    return i == j || (memcmp(s->verts + 3 * i, s->verts + 3 * j, 3 * sizeof(double)) == 0 &&
+                      (!uv || memcmp(uv + 2 * (i - base), uv + 2 * (j - base), 2 * sizeof(double)) == 0));
+}
+
+static int bn__quad(const bn__soup *s, const size_t a[3], const size_t b[3], size_t base, const double *uv, size_t q[4])
+{
+    for (int k = 0; k < 3; k++) {   /* a's edge a[k+2] -> a[k] shared: b holds a[k] -> a[k+2] (by position and uv) */
+        size_t x = a[k], y = a[(k + 1) % 3], z = a[(k + 2) % 3];
+        for (int j = 0; j < 3; j++)
+            if (bn__same(s, b[j], x, base, uv) && bn__same(s, b[(j + 1) % 3], z, base, uv)) {
+                q[0] = x, q[1] = y, q[2] = z, q[3] = b[(j + 2) % 3];
+                double n[4][3], e1[3], e2[3], len = 0;
+                for (int c = 0; c < 4; c++) {
+                    bn_v3_sub(s->verts + 3 * q[(c + 1) % 4], s->verts + 3 * q[c], e1);
+                    bn_v3_sub(s->verts + 3 * q[(c + 3) % 4], s->verts + 3 * q[c], e2);
+                    bn_v3_cross(e1, e2, n[c]);
+                    len = fmax(len, bn_v3_len(n[c]));
+                }
+                for (int c = 0; c < 4; c++)   /* every corner turns the same way, about one normal */
+                    if (!(len > 0) || bn_v3_dot(n[c], n[0]) < (1 - 1e-12) * bn_v3_len(n[c]) * bn_v3_len(n[0]) ||
+                        !(bn_v3_len(n[c]) > 1e-9 * len))
+                        return 0;
+                return 1;
+            }
+    }
+    return 0;
+}
+
+/* The triangles of a primitive's index list (mode 4, 5 or 6), wound as the file winds them, or the
+ * other way under a mirroring transform (flip); vertex indices offset by base. Two in a row that make
+ * a planar convex quad become that quad (bounce meshes quads as grids). */
+static bn_status bn__triangles(bn__gr *r, int mode, const double *idx, size_t n, size_t base, int flip, unsigned mat,
+                               const double *uv)
+{
+    size_t ntri = mode == 4 ? n / 3 : (n >= 3 ? n - 2 : 0), held[3], quad[4];
+    int holding = 0;
+    bn_status st = BN_OK;
+    for (size_t t = 0; t < ntri && st == BN_OK; t++) {
         size_t v[3];
         if (mode == 4) {
             v[0] = 3 * t, v[1] = 3 * t + 1, v[2] = 3 * t + 2;
@@ -306,11 +424,20 @@ static bn_status bn__triangles(bn__gr *r, int mode, const double *idx, size_t n,
             v[0] = 0, v[1] = t + 1, v[2] = t + 2;
         }
         size_t tri[3] = {base + (size_t)idx[v[0]], base + (size_t)idx[v[flip ? 2 : 1]], base + (size_t)idx[v[flip ? 1 : 2]]};
-        if (!bn__soup_add_polygon(r->s, tri, 3, mat, 0))
-            return bn_error_set(r->err, BN_ENOMEM, "out of memory");
+        if (holding && bn__quad(r->s, held, tri, base, uv, quad)) {
+            st = bn__emit(r, quad, 4, base, mat, uv);
+            holding = 0;
+            continue;
+        }
+        if (holding)
+            st = bn__emit(r, held, 3, base, mat, uv);
+        memcpy(held, tri, sizeof tri);
+        holding = 1;
     }
+    if (st == BN_OK && holding)
+        st = bn__emit(r, held, 3, base, mat, uv);
     r->triangles += ntri;
-    return BN_OK;
+    return st;
 }
 
 /* The index list of a primitive (0 .. np-1 without one), each checked against its np positions. */
@@ -376,6 +503,34 @@ static bn_status bn__positions(bn__gr *r, const bn__gltf_prim *p, size_t m, size
     return BN_OK;
 }
 
+/* The texture coordinates of a primitive's np vertices when its material has a texture (*uv NULL
+ * otherwise): TEXCOORD_n as the material's texture says, float or normalized integers, finite. */
+static bn_status bn__texcoords(bn__gr *r, const bn__gltf_prim *p, size_t m, size_t k, size_t np, double **uv)
+{
+    char ref[96];
+    size_t n = 0;
+    int set = p->material >= 0 && (size_t)p->material < r->g->nmaterials ? r->mat_uv[p->material] : -1;
+    *uv = NULL;
+    if (set < 0)
+        return BN_OK;
+    snprintf(ref, sizeof ref, "/meshes/%zu/primitives/%zu/attributes/TEXCOORD_%d", m, k, set);
+    if (p->texcoord[set] < 0) {
+        bn_warnf(r->log, BN_W_MATERIAL, NAN, "%s: %s: missing, so its material's texture is not applied to it (the "
+                 "factor alone)", r->path, ref);
+        return BN_OK;
+    }
+    if (!(*uv = bn__accessor(r, p->texcoord[set], 2, ref, &n)))
+        return r->err->status;
+    for (size_t i = 0; i < 2 * n; i++)
+        if (!isfinite((*uv)[i]) || n != np) {
+            bn_error_set(r->err, BN_EINPUT, "%s: %s: %s", r->path, ref, n != np ? "not one per position" : "not finite");
+            free(*uv);
+            *uv = NULL;
+            return BN_EINPUT;
+        }
+    return BN_OK;
+}
+
 static bn_status bn__primitive(bn__gr *r, size_t m, size_t k, const double M[16], int flip)
 {
     const bn__gltf_prim *p = &r->g->prims[r->g->meshes[m].first + k];
@@ -395,12 +550,14 @@ static bn_status bn__primitive(bn__gr *r, size_t m, size_t k, const double M[16]
         return st;
     if (!(idx = bn__indices(r, p, m, k, np, &n)))
         return r->err->status;
+    double *uv = NULL;
     if (p->mode == 4 && n % 3 != 0)
         st = bn_error_set(r->err, BN_EINPUT, "%s: /meshes/%zu/primitives/%zu: %zu indices, not a multiple of 3 "
                           "(mode TRIANGLES)", r->path, m, k, n);
-    else
-        st = bn__triangles(r, p->mode, idx, n, base, flip, mat);
+    else if ((st = bn__texcoords(r, p, m, k, np, &uv)) == BN_OK)
+        st = bn__triangles(r, p->mode, idx, n, base, flip, mat, uv);
     free(idx);
+    free(uv);
     return st;
 }
 
@@ -636,6 +793,8 @@ bn_status bn__read_gltf(const char *path, bn__soup *out, const bn_log *log, bn_e
     r.default_mat = UINT32_MAX;
     st = bn__read(&r);
     free(r.mat_of);
+    free(r.mat_uv);
+    free(r.tex_of);
     free(r.seen);
     bn__gltf_free(g);
     return st;

@@ -289,5 +289,5 @@ bn_status bn_scene_mesh(bn_scene *s, const bn_mesh_opts *o, bn_error *err)
     s->pverts = pv;
     s->npverts = nv;
     s->patch_size = size;
-    return BN_OK;
+    return bn__scene_patch_textures(s, err);
 }

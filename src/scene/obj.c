@@ -164,6 +164,49 @@ static bn_status bn__mtl_colour(const char *path, unsigned line, const char *kw,
     return BN_OK;
 }
 
+/* "map_Kd [options] FILE": material cur's reflectance texture, Kd times the map as the MTL format says
+ * (the file beside the MTL; -clamp on: clamped; the other options are not applied, and said). */
+static bn_status bn__mtl_map(const char *path, unsigned line, char *c, bn__soup *s, int cur, const bn_log *log,
+                             bn_error *err)
+{
+    char file[4096], *t;
+    int clamp = 0, tex;
+    bn__texture tx;
+    const char *slash = strrchr(path, '/');
+    if (cur < 0)
+        return bn_error_set(err, BN_EINPUT, "%s:%u: map_Kd before any newmtl", path, line);
+    for (;;) {   /* options: -name and its values */
+        while (*c && isspace((unsigned char)*c))
+            c++;
+        if (*c != '-' || !(t = bn__token(&c)))
+            break;
+        char *v = bn__token(&c);
+        for (;;) {   /* -o, -s, -t take up to three numbers, -mm two */
+            while (*c && isspace((unsigned char)*c))
+                c++;
+            if (!(isdigit((unsigned char)*c) || ((*c == '-' || *c == '.') && isdigit((unsigned char)c[1]))))
+                break;
+            bn__token(&c);
+        }
+        if (strcmp(t, "-clamp") == 0)
+            clamp = v && strcmp(v, "on") == 0;
+        else
+            bn_warnf(log, BN_W_MATERIAL, NAN, "%s:%u: map_Kd option %s is not applied", path, line, t);
+    }
+    if (!*c)
+        return bn_error_set(err, BN_EINPUT, "%s:%u: map_Kd without a file name", path, line);
+    snprintf(file, sizeof file, "%.*s%s", c[0] == '/' || !slash ? 0 : (int)(slash - path) + 1, path, c);
+    if (bn__texture_decode(file, NULL, 0, &tx, err) != BN_OK)
+        return err && err->status == BN_ENOMEM ? BN_ENOMEM : bn_error_set(err, BN_EINPUT, "%s:%u: map_Kd: %s", path,
+                                                                         line, err ? err->msg : file);
+    tx.wrap[0] = tx.wrap[1] = clamp ? BN__WRAP_CLAMP : BN__WRAP_REPEAT;
+    if ((tex = bn__soup_add_texture(s, &tx)) < 0 || !bn__soup_set_material_texture(s, (unsigned)cur, tex)) {
+        free(tx.rgb);
+        return bn_error_set(err, BN_ENOMEM, "out of memory for %s", file);
+    }
+    return BN_OK;
+}
+
 static bn_status bn__read_mtl(const char *path, const char *objpath, unsigned objline, bn__soup *s,
                               const bn_log *log, bn_error *err)
 {
@@ -192,7 +235,9 @@ static bn_status bn__read_mtl(const char *path, const char *objpath, unsigned ob
             st = bn__mtl_newmtl(path, line, c, s, log, &cur, err);
         else if (strcmp(kw, "Kd") == 0 || strcmp(kw, "Ke") == 0)
             st = bn__mtl_colour(path, line, kw, c, s, cur, err);
-        /* Ka, Ks, Ns, Ni, d, Tr, illum and maps: not part of a Lambertian model; ignored. */
+        else if (strcmp(kw, "map_Kd") == 0)
+            st = bn__mtl_map(path, line, c, s, cur, log, err);
+        /* Ka, Ks, Ns, Ni, d, Tr, illum and the other maps: not part of a Lambertian model; ignored. */
     }
     free(buf);
     if (st == BN_OK && ferror(fp))
@@ -252,6 +297,10 @@ typedef struct bn__objr {
     const bn_log *log;
     char *dir;              /* the file's folder, for mtllib */
     size_t *fv, fv_cap;     /* the face being read */
+    double *fuv;            /* its corners' texture coordinates (2 each, NaN: none), fv_cap of them */
+    double *vt;             /* texture coordinates read (vt u v), v turned to glTF's (row 0 at v = 0) */
+    size_t nvt, vt_cap;
+    int any_uv;             /* the face being read has texture coordinates */
     unsigned line;
     int cur, default_mat;   /* the material in use (-1: none yet), the default one (-1: not made) */
 } bn__objr;
@@ -269,6 +318,43 @@ static bn_status bn__obj_vertex(bn__objr *R, char *c, bn_error *err, int normal)
                                 normal ? "vertex normal component" : "vertex coordinate", bn__show(t[k]));
     if (normal ? !bn__soup_add_normal(R->s, p) : !bn__soup_add_vertex(R->s, p))
         return bn_error_set(err, BN_ENOMEM, "out of memory reading %s", R->path);
+    return BN_OK;
+}
+
+/* "vt u [v [w]]": texture coordinates (v 0 at the image's bottom, as OBJ has it; kept as 1 - v). */
+static bn_status bn__obj_texcoord(bn__objr *R, char *c, bn_error *err)
+{
+    double uv[2] = {0, 0};
+    char *t[2] = {bn__token(&c), bn__token(&c)};
+    for (int k = 0; k < 2; k++)
+        if ((k == 0 || t[k]) && !bn__parse_double(t[k], &uv[k]))
+            return bn_error_set(err, BN_EINPUT, "%s:%u: texture coordinate '%s' is not a finite number", R->path, R->line,
+                                bn__show(t[k]));
+    if (!bn__grow((void **)&R->vt, &R->vt_cap, 2 * (R->nvt + 1), sizeof(double)))
+        return bn_error_set(err, BN_ENOMEM, "out of memory reading %s", R->path);
+    R->vt[2 * R->nvt] = uv[0];
+    R->vt[2 * R->nvt + 1] = 1 - uv[1];
+    R->nvt++;
+    return BN_OK;
+}
+
+/* The vt part of a reference "v/vt" or "v/vt/vn" as corner k's texture coordinates (NaN without one). */
+static bn_status bn__obj_corner_uv(bn__objr *R, const char *t, unsigned k, bn_error *err)
+{
+    const char *p = strchr(t, '/');
+    long long i;
+    R->fuv[2 * k] = R->fuv[2 * k + 1] = NAN;
+    if (!p || p[1] == '/' || !p[1])
+        return BN_OK;
+    i = strtoll(p + 1, NULL, 10);
+    if (i < 0)
+        i += (long long)R->nvt + 1;
+    if (i < 1 || (unsigned long long)i > R->nvt)
+        return bn_error_set(err, BN_EINPUT, "%s:%u: texture coordinate index in '%s' is out of range (%zu vt so far)",
+                            R->path, R->line, t, R->nvt);
+    R->fuv[2 * k] = R->vt[2 * (size_t)(i - 1)];
+    R->fuv[2 * k + 1] = R->vt[2 * (size_t)(i - 1) + 1];
+    R->any_uv = 1;
     return BN_OK;
 }
 
@@ -294,6 +380,7 @@ static bn_status bn__obj_face_refs(bn__objr *R, char *c, unsigned *n, bn_error *
 {
     char *t;
     *n = 0;
+    R->any_uv = 0;
     memset(R->s->cur_pn, 0, sizeof R->s->cur_pn);
     while ((t = bn__token(&c)) != NULL) {
         size_t vi;
@@ -312,11 +399,16 @@ static bn_status bn__obj_face_refs(bn__objr *R, char *c, unsigned *n, bn_error *
         if (*n >= R->fv_cap) {
             size_t nc = R->fv_cap ? 2 * R->fv_cap : 16;
             size_t *p = bn__realloc_array(R->fv, nc, sizeof *p);
-            if (!p)
+            double *q = p ? bn__realloc_array(R->fuv, 2 * nc, sizeof *q) : NULL;
+            if (p)
+                R->fv = p;
+            if (!q)
                 return bn_error_set(err, BN_ENOMEM, "out of memory reading %s", R->path);
-            R->fv = p;
+            R->fuv = q;
             R->fv_cap = nc;
         }
+        if (bn__obj_corner_uv(R, t, *n, err) != BN_OK)
+            return BN_EINPUT;
         R->fv[(*n)++] = vi;
         bn__obj_corner_normal(R, t);
     }
@@ -347,7 +439,8 @@ static bn_status bn__obj_face(bn__objr *R, char *c, bn_error *err)
         }
         R->cur = R->default_mat;
     }
-    if (!bn__soup_add_polygon(R->s, R->fv, n, (unsigned)R->cur, R->line))
+    if (!bn__soup_add_polygon(R->s, R->fv, n, (unsigned)R->cur, R->line) ||
+        (R->any_uv && !bn__soup_set_corner_uv(R->s, R->fuv, n)))
         return bn_error_set(err, BN_ENOMEM, "out of memory reading %s", R->path);
     return BN_OK;
 }
@@ -385,7 +478,7 @@ static bn_status bn__obj_mtllib(bn__objr *R, char *c, bn_error *err)
 /* Statements a Lambertian patch model does not need. */
 static int bn__obj_ignored(const char *kw)
 {
-    static const char *const skip[] = {"vt", "vp", "s", "l", "p", "mg", "usemap", "maplib"};
+    static const char *const skip[] = {"vp", "s", "l", "p", "mg", "usemap", "maplib"};
     for (size_t i = 0; i < sizeof skip / sizeof *skip; i++)
         if (strcmp(kw, skip[i]) == 0)
             return 1;
@@ -394,7 +487,7 @@ static int bn__obj_ignored(const char *kw)
 
 bn_status bn__read_obj_stream(FILE *fp, const char *path, bn__soup *s, const bn_log *log, bn_error *err)
 {
-    bn__objr R = {path, s, log, NULL, NULL, 0, 0, -1, -1};
+    bn__objr R = {path, s, log, NULL, NULL, 0, NULL, NULL, 0, 0, 0, 0, -1, -1};
     const char *slash = strrchr(path, '/');
     char *buf = NULL;
     size_t cap = 0;
@@ -420,6 +513,8 @@ bn_status bn__read_obj_stream(FILE *fp, const char *path, bn__soup *s, const bn_
             st = bn__obj_vertex(&R, c, err, 0);
         else if (strcmp(kw, "vn") == 0)
             st = bn__obj_vertex(&R, c, err, 1);
+        else if (strcmp(kw, "vt") == 0)
+            st = bn__obj_texcoord(&R, c, err);
         else if (strcmp(kw, "f") == 0)
             st = bn__obj_face(&R, c, err);
         else if (strcmp(kw, "usemtl") == 0)
@@ -438,6 +533,8 @@ bn_status bn__read_obj_stream(FILE *fp, const char *path, bn__soup *s, const bn_
         st = bn_error_set(err, BN_EIO, "%s: read error", path);
     free(buf);
     free(R.fv);
+    free(R.fuv);
+    free(R.vt);
     free(R.dir);
     return st;
 }

@@ -520,7 +520,7 @@ static bn_status bn__scene_finish(bn_scene *sc, const char *path, const bn_load_
     return BN_OK;
 }
 
-bn_status bn__scene_build(const char *path, const bn__soup *s, const bn_load_opts *o, bn_scene **out,
+bn_status bn__scene_build(const char *path, bn__soup *s, const bn_load_opts *o, bn_scene **out,
                           bn_error *err)
 {
     bn_load_opts defo;
@@ -562,6 +562,8 @@ bn_status bn__scene_build(const char *path, const bn__soup *s, const bn_load_opt
         st = bn__scene_finish(sc, path, o, P.degenerate, err);
     if (st == BN_OK && bn__scene_objects(sc, s) != BN_OK)
         st = bn_error_set(err, BN_ENOMEM, "out of memory for the objects of %s", path);
+    if (st == BN_OK && bn__scene_textures(sc, s) != BN_OK)
+        st = bn_error_set(err, BN_ENOMEM, "out of memory for the texture coordinates of %s", path);
     if (st != BN_OK) {
         bn_scene_destroy(sc);
         return st;
@@ -661,6 +663,10 @@ void bn_scene_destroy(bn_scene *s)
     free(s->objnames);
     free(s->obj_assembly);
     free(s->mat_two_sided);
+    bn__texture_free(s->tex, s->ntex);
+    free(s->mat_tex);
+    free(s->fuv);
+    free(s->prho);
     free(s);
 }
 
@@ -755,6 +761,8 @@ unsigned long long bn_scene_digest(const bn_scene *s)
     h = bn__fnv1a(h, s->pverts, s->npverts * 3 * sizeof(double));
     for (size_t p = 0; p < s->npatches; p++)
         h = bn__fnv1a(h, s->patches[p].corner, sizeof s->patches[p].corner);
+    if (s->prho)   /* textured reflectance per patch */
+        h = bn__fnv1a(h, s->prho, 3 * s->npatches * sizeof *s->prho);
     return (unsigned long long)h;
 }
 
@@ -769,5 +777,7 @@ void bn_scene_patch_reflectance(const bn_scene *s, double *rho)
 {
     for (size_t i = 0; i < s->npatches; i++)
         for (int c = 0; c < 3; c++)
-            rho[3 * i + c] = s->mats[s->patches[i].material].rho[c];
+            rho[3 * i + c] = s->prho ? s->prho[3 * i + c] : s->mats[s->patches[i].material].rho[c];
 }
+
+int bn_scene_textured(const bn_scene *s) { return s->mat_tex != NULL; }

@@ -9,6 +9,23 @@
 extern "C" {
 #endif
 
+/* A texture: linear values, row 0 at v = 0 (glTF's convention; OBJ's vt is turned to it on reading),
+ * sampled with wrap modes per axis (BN__WRAP_*) and bilinearly or at the nearest texel. */
+enum { BN__WRAP_REPEAT, BN__WRAP_CLAMP, BN__WRAP_MIRROR };
+typedef struct bn__texture {
+    int w, h;
+    float *rgb;            /* w * h * 3, owned */
+    int wrap[2], nearest;
+    char name[BN_NAME_MAX];
+} bn__texture;
+void bn__texture_free(bn__texture *t, size_t n);   /* the texels of t[0 .. n), and t */
+/* An image file (mem NULL), or encoded bytes mem[0 .. size) whose format `name`'s extension says, as a
+ * reflectance texture (repeat, bilinear): 8- and 16-bit images are sRGB (decoded to linear, as glTF and
+ * MTL maps are), float images linear; every value must lie in [0, 1]. Through OpenImageIO's module. */
+bn_status bn__texture_decode(const char *name, const void *mem, size_t size, bn__texture *t, bn_error *err);
+/* Texture t at (u, v): rgb (linear). */
+void bn__texture_sample(const bn__texture *t, double u, double v, double rgb[3]);
+
 /* A polygon soup as a reader produces it, before validation. */
 typedef struct bn__soup {
     double   *verts;      /* xyz */
@@ -35,6 +52,14 @@ typedef struct bn__soup {
     /* per material, 1: two-sided as the file says (glTF doubleSided); NULL while none is */
     unsigned char *mat_two;
     size_t    mat_two_cap;
+    /* texture coordinates per polygon corner (2 per idx entry, NaN: none; NULL while no polygon has
+     * any), decoded textures, and per material its reflectance texture (-1: none; NULL: none has) */
+    double   *cuv;
+    size_t    cuv_cap;
+    bn__texture *tex;
+    size_t    ntex, tex_cap;
+    int      *mat_tex;
+    size_t    mat_tex_cap;
 } bn__soup;
 
 void bn__soup_free(bn__soup *s);
@@ -43,6 +68,13 @@ int bn__soup_add_polygon(bn__soup *s, const size_t *idx, unsigned n, unsigned ma
 int bn__soup_add_material(bn__soup *s, const bn_material *m);
 int bn__soup_add_normal(bn__soup *s, const double n[3]);                  /* a vn; 0 on OOM */
 int bn__soup_set_two_sided(bn__soup *s, unsigned mat);                    /* the file says so; 0 on OOM */
+/* The texture coordinates of the last polygon's corners (uv: 2 per corner; called right after
+ * bn__soup_add_polygon); 0 on OOM. */
+int bn__soup_set_corner_uv(bn__soup *s, const double *uv, unsigned n);
+/* Texture t added (taken: its texels become the soup's): its index, or -1 on OOM. */
+int bn__soup_add_texture(bn__soup *s, bn__texture *t);
+/* Texture tex (an index from bn__soup_add_texture) as material mat's reflectance texture; 0 on OOM. */
+int bn__soup_set_material_texture(bn__soup *s, unsigned mat, int tex);
 /* Name key's index in (*names)[0 .. *n) (capacity *cap), appended when new; SIZE_MAX on OOM. */
 size_t bn__name_index(char (**names)[BN_NAME_MAX], size_t *n, size_t *cap, const char *key);
 /* The object the next polygons belong to, by name (a new one, or the one of that name); 0 on OOM. */
@@ -69,14 +101,20 @@ bn_status bn__read_gltf(const char *path, bn__soup *out, const bn_log *log, bn_e
 /* Grows *p (capacity *cap elements of elem bytes) to hold need; 0 when out of memory (soup.c). */
 int bn__grow(void **p, size_t *cap, size_t need, size_t elem);
 
-/* Validates a soup and builds faces; takes ownership of nothing (copies). */
-bn_status bn__scene_build(const char *path, const bn__soup *soup, const bn_load_opts *o,
+/* Validates a soup and builds faces; copies all but the textures, which it takes. */
+bn_status bn__scene_build(const char *path, bn__soup *soup, const bn_load_opts *o,
                           bn_scene **out, bn_error *err);
 
 /* The back sides of the faces of two-sided materials (the file's own flags file_two[0 .. nfile_two), or
  * NULL, and spec: bn_load_opts.two_sided), appended (src/scene/twosided.c). */
 bn_status bn__scene_two_sided(bn_scene *sc, const char *path, const unsigned char *file_two, size_t nfile_two,
                               const char *spec, bn_error *err);
+/* Textures (src/scene/texture.c): the soup's textures moved into the scene with each face corner's
+ * texture coordinates (looked up by vertex in the polygon it came from), after its faces are built. */
+bn_status bn__scene_textures(bn_scene *sc, bn__soup *s);
+/* Each textured patch's mean reflectance (the material's factor x the texture's mean over the patch),
+ * after meshing; NULL prho when no material has a texture. */
+bn_status bn__scene_patch_textures(bn_scene *sc, bn_error *err);
 /* The scene's objects and each face's (src/scene/objects.c), after its faces are built. */
 bn_status bn__scene_objects(bn_scene *sc, const bn__soup *s);
 /* The mesher's patch geometry (area, centroid, normal) from its corners. */
@@ -113,6 +151,11 @@ struct bn_scene {
     unsigned char *obj_assembly;          /* per object: one model's parts (no contact cuts inside) */
     unsigned char *mat_two_sided;         /* per material, or NULL: none two-sided */
     int          objects_from_file;       /* 1: the file's groups; 0: material-name prefixes */
+    bn__texture *tex;                     /* reflectance textures (src/scene/texture.c) */
+    size_t       ntex;
+    int         *mat_tex;                 /* per material: its texture, -1 none; NULL: no textures */
+    double      *fuv;                     /* 2 per face index entry (NaN: none); NULL: no textures */
+    double      *prho;                    /* 3 per patch: the patch's mean reflectance; NULL: none */
 };
 
 #ifdef __cplusplus

@@ -2,6 +2,7 @@
  * API) and scene.c validates: vertices, polygons by vertex index, materials. */
 #include "scene/scene_internal.h"
 
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -19,6 +20,9 @@ void bn__soup_free(bn__soup *s)
     free(s->vn);
     free(s->pn);
     free(s->mat_two);
+    free(s->cuv);
+    bn__texture_free(s->tex, s->ntex);
+    free(s->mat_tex);
     memset(s, 0, sizeof *s);
 }
 
@@ -136,6 +140,37 @@ int bn__soup_set_two_sided(bn__soup *s, unsigned mat)
         return 0;
     memset(s->mat_two + old, 0, s->mat_two_cap - old);
     s->mat_two[mat] = 1;
+    return 1;
+}
+
+int bn__soup_set_corner_uv(bn__soup *s, const double *uv, unsigned n)
+{
+    size_t old = s->cuv_cap, first = s->nidx - n;   /* entries past cuv_cap are NaN too */
+    if (!bn__grow((void **)&s->cuv, &s->cuv_cap, 2 * s->idx_cap, sizeof(double)))
+        return 0;
+    for (size_t k = old; k < s->cuv_cap; k++)   /* corners without coordinates: NaN */
+        s->cuv[k] = NAN;
+    memcpy(s->cuv + 2 * first, uv, 2 * n * sizeof(double));
+    return 1;
+}
+
+int bn__soup_add_texture(bn__soup *s, bn__texture *t)
+{
+    if (!bn__grow((void **)&s->tex, &s->tex_cap, s->ntex + 1, sizeof *s->tex))
+        return -1;
+    s->tex[s->ntex] = *t;
+    t->rgb = NULL;
+    return (int)s->ntex++;
+}
+
+int bn__soup_set_material_texture(bn__soup *s, unsigned mat, int tex)
+{
+    size_t old = s->mat_tex_cap;
+    if (!bn__grow((void **)&s->mat_tex, &s->mat_tex_cap, (size_t)mat + 1, sizeof(int)))
+        return 0;
+    for (size_t k = old; k < s->mat_tex_cap; k++)
+        s->mat_tex[k] = -1;
+    s->mat_tex[mat] = tex;
     return 1;
 }
 

@@ -1,4 +1,4 @@
-/* OpenImageIO, loaded when first needed: the previews' writer lives in the module
+/* OpenImageIO, loaded when first needed: the previews' writer and the texture reader live in the module
  * libbounce_oiio.so (src/adapters/oiio_io.cpp), looked up beside libbounce.so itself, so that a
  * process that writes no preview never loads OpenImageIO's ~260 shared libraries (0.4 s at every
  * start when they were linked directly). */
@@ -13,6 +13,7 @@
 
 static pthread_once_t bn__oiio_once = PTHREAD_ONCE_INIT;
 static bn__oiio_write_rgb8_fn *bn__oiio_fn;
+static bn__oiio_read_rgbf_fn *bn__oiio_read_fn;
 static char bn__oiio_why[3800];
 
 static void bn__oiio_open(void)
@@ -36,8 +37,9 @@ static void bn__oiio_open(void)
             return;
     }
     *(void **)&bn__oiio_fn = dlsym(h, "bn__oiio_module_write_rgb8");
-    if (!bn__oiio_fn)
-        snprintf(bn__oiio_why, sizeof bn__oiio_why, "%.3000s has no bn__oiio_module_write_rgb8", path);
+    *(void **)&bn__oiio_read_fn = dlsym(h, "bn__oiio_module_read_rgbf");
+    if (!bn__oiio_fn || !bn__oiio_read_fn)
+        snprintf(bn__oiio_why, sizeof bn__oiio_why, "%.3000s lacks bounce's entry points (an older module?)", path);
 }
 
 bn_status bn__oiio_write_rgb8(const char *path, int w, int h, const unsigned char *rgb, const bn__label *labels,
@@ -48,4 +50,14 @@ bn_status bn__oiio_write_rgb8(const char *path, int w, int h, const unsigned cha
     if (!bn__oiio_fn)
         return bn_error_set(err, BN_EIO, "%s", bn__oiio_why);
     return bn__oiio_fn(path, w, h, rgb, labels, nlabels, font, attrs, nattrs, labels_ok, err);
+}
+
+bn_status bn__oiio_read_rgbf(const char *path, const void *mem, size_t size, int *w, int *h, float **rgb, int *is_float,
+                             bn_error *err)
+{
+    pthread_once(&bn__oiio_once, bn__oiio_open);
+    *rgb = NULL;
+    if (!bn__oiio_read_fn)
+        return bn_error_set(err, BN_EIO, "%s: %s", path, bn__oiio_why);
+    return bn__oiio_read_fn(path, mem, size, w, h, rgb, is_float, err);
 }
