@@ -287,3 +287,88 @@ BN_TEST(checker_finer_than_the_patches_is_averaged)
     free(rho);
     bn_scene_destroy(s);
 }
+
+/* A textured model as Debian's sweethome3d-furniture ships it (BlendSwap-CC-0.sh3f, a zip of OBJ, MTL and
+ * JPEG): the rock, Kd 0.8 times map_Kd rock01.jpg, loads with its texture, and its patches' reflectance
+ * varies as the texture does (independently: Kd times the texture's own mean bounds their area mean). */
+#define SH3F "/usr/share/sweethome3d/furniture/BlendSwap-CC-0.sh3f"
+BN_TEST(sweethome3d_model_loads_with_its_texture)
+{
+    char cmd[1024];
+    if (!bn_test_file_exists(SH3F))
+        BN_SKIP("Debian's sweethome3d-furniture is not installed (" SH3F ")");
+    snprintf(cmd, sizeof cmd, "cd '%s' && python3 -c \"import zipfile; z = zipfile.ZipFile('%s'); "
+             "[z.extract(n) for n in z.namelist() if n.startswith('blendswap-cc-0/rock1/')]\"", bn_test_tmpdir(), SH3F);
+    BN_ASSERT_EQ(bn_test_run(cmd, NULL), 0);
+    bn_load_opts lo;
+    bn_mesh_opts mo;
+    bn_scene *s = NULL;
+    bn_error err;
+    bn_load_opts_default(&lo);
+    lo.log.quiet = 1;
+    if (bn_scene_load(bn_test_tmp("blendswap-cc-0/rock1/rock1.obj"), &lo, &s, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    const char *name;
+    int w, h;
+    double mean[3];
+    BN_ASSERT(bn_scene_material_texture(s, 0, &name, &w, &h, mean));
+    BN_ASSERT(strcmp(name, "rock01.jpg") == 0 && w == 512 && h == 512);
+    bn_mesh_opts_default(&mo);
+    BN_ASSERT_EQ(bn_scene_mesh(s, &mo, &err), BN_OK);
+    size_t np;
+    const bn_patch *p = bn_scene_patches(s, &np);
+    double *rho = malloc(3 * np * sizeof *rho), lo_r = 1, hi_r = 0, area = 0, sum = 0;
+    bn_scene_patch_reflectance(s, rho);
+    for (size_t i = 0; i < np; i++) {
+        lo_r = fmin(lo_r, rho[3 * i]), hi_r = fmax(hi_r, rho[3 * i]);
+        area += p[i].area, sum += p[i].area * rho[3 * i];
+    }
+    BN_ASSERT_GT(hi_r - lo_r, 0.05);            /* the texture shows */
+    BN_ASSERT_LE(hi_r, 0.8 + 1e-12);             /* Kd 0.8 times texels <= 1 */
+    BN_ASSERT_LT(fabs(sum / area - 0.8 * mean[0]), 0.8 * 0.5 * mean[0]);   /* about Kd x the mean */
+    free(rho);
+    bn_scene_destroy(s);
+}
+
+/* glTF's KHR_texture_transform (rotation a quarter turn, scale 1/2, offset (0.25, 0.75)) maps the floor onto
+ * the gradient's middle as worked out by hand: u = z / 2 + 1/4, v = 3/4 - x / 2. */
+BN_TEST(texture_transform_maps_as_the_extension_says)
+{
+    quad q[2];
+    memset(q, 0, sizeof q);
+    write_gradient_floor();   /* its gradient.exr */
+    float fl[12] = {0, 0, 0, 0, 0, 1, 1, 0, 1, 1, 0, 0}, fuv[8] = {0, 0, 0, 1, 1, 1, 1, 0};
+    float li[12] = {0.4f, 1, 0.4f, 0.6f, 1, 0.4f, 0.6f, 1, 0.6f, 0.4f, 1, 0.6f};
+    memcpy(q[0].p, fl, sizeof fl), memcpy(q[0].uv, fuv, sizeof fuv), memcpy(q[1].p, li, sizeof li), q[1].mat = 2;
+    const char *path = quads_gltf("transform.gltf", q, 2, "{\"name\":\"floor\",\"pbrMetallicRoughness\":{\"baseColorTexture\":"
+                                  "{\"index\":0,\"extensions\":{\"KHR_texture_transform\":{\"offset\":[0.25,0.75],"
+                                  "\"rotation\":1.5707963267948966,\"scale\":[0.5,0.5]}}}}}," WHITE "," LIGHT,
+                                  ",\"textures\":[{\"source\":0}],\"images\":[{\"uri\":\"gradient.exr\"}]");
+    bn_load_opts lo;
+    bn_mesh_opts mo;
+    bn_scene *s = NULL;
+    bn_error err;
+    bn_load_opts_default(&lo);
+    lo.log.quiet = 1;
+    if (bn_scene_load(path, &lo, &s, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    bn_mesh_opts_default(&mo);
+    mo.patch_size = 0.13;
+    mo.no_contacts = 1;
+    BN_ASSERT_EQ(bn_scene_mesh(s, &mo, &err), BN_OK);
+    size_t np, nfloor = 0;
+    const bn_patch *p = bn_scene_patches(s, &np);
+    double *rho = malloc(3 * np * sizeof *rho), worst = 0;
+    bn_scene_patch_reflectance(s, rho);
+    for (size_t i = 0; i < np; i++)
+        if (p[i].normal[1] > 0.5) {
+            double u = 0.5 * p[i].centroid[2] + 0.25, v = 0.75 - 0.5 * p[i].centroid[0];
+            nfloor++;
+            worst = fmax(worst, fabs(rho[3 * i] - grad(0, u * GW - 0.5, 0)));
+            worst = fmax(worst, fabs(rho[3 * i + 1] - grad(1, 0, v * GH - 0.5)));
+        }
+    BN_ASSERT_GE(nfloor, 49);
+    BN_ASSERT_LE(worst, 1e-6);
+    free(rho);
+    bn_scene_destroy(s);
+}

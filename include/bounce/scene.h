@@ -184,6 +184,9 @@ void bn_scene_patch_reflectance(const bn_scene *s, double *rho);
  * (glTF baseColorTexture, MTL map_Kd) when it has one; what the final gather's pixels use. */
 void bn_scene_reflectance_at(const bn_scene *s, size_t face, const double x[3], double rho[3]);
 int  bn_scene_textured(const bn_scene *s);   /* 1: some material has a reflectance texture */
+/* 1 if material m has a reflectance texture: its name (the file's, borrowed), size in texels and mean
+ * value (linear, before the material's factor). */
+int  bn_scene_material_texture(const bn_scene *s, size_t m, const char **name, int *w, int *h, double mean[3]);
 
 #ifdef __cplusplus
 }

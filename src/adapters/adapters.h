@@ -96,7 +96,11 @@ typedef struct bn__gltf_material {
     int base_tex, base_uv, emissive_tex, double_sided, unlit, has_strength;
     /* KHR_materials_pbrSpecularGlossiness (older exporters): its diffuseFactor is the diffuse colour */
     int specgloss, diffuse_tex;
-    int tex_transform;                    /* its reflectance texture uses KHR_texture_transform */
+    /* its reflectance texture's KHR_texture_transform: offset, rotation (radians), scale; texcoord: the
+     * set it overrides with (-1: none); ntt_* count what the file gave */
+    int tex_transform, tt_texcoord;
+    unsigned ntt_offset, ntt_scale;
+    double tt_offset[2], tt_rotation, tt_scale[2];
     unsigned ndiffuse;
     double diffuse[4];
 } bn__gltf_material;

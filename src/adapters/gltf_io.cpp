@@ -8,6 +8,7 @@
 #include <tiny_gltf.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <new>
@@ -133,6 +134,34 @@ void mirror_meshes(Impl &m)
     }
 }
 
+unsigned copy_numbers(const tinygltf::Value &v, double *out, size_t n)
+{
+    if (!v.IsArray())
+        return v.Type() == tinygltf::NULL_TYPE ? 0 : 1000;   // present but not an array: refused above
+    for (size_t i = 0; i < n && i < v.ArrayLen(); i++)
+        out[i] = v.Get((int)i).IsNumber() ? v.Get((int)i).GetNumberAsDouble() : NAN;
+    return (unsigned)std::min<size_t>(v.ArrayLen(), 1000);
+}
+
+// KHR_texture_transform on a texture reference: defaults offset 0, rotation 0, scale 1.
+void mirror_transform(const tinygltf::ExtensionMap &ext, bn__gltf_material &x)
+{
+    x.tt_texcoord = -1;
+    x.tt_scale[0] = x.tt_scale[1] = 1;
+    auto it = ext.find("KHR_texture_transform");
+    if (it == ext.end())
+        return;
+    const tinygltf::Value &t = it->second;
+    x.tex_transform = 1;
+    x.ntt_offset = copy_numbers(t.Get("offset"), x.tt_offset, 2);
+    x.ntt_scale = copy_numbers(t.Get("scale"), x.tt_scale, 2);
+    if (!x.ntt_scale)
+        x.tt_scale[0] = x.tt_scale[1] = 1;
+    const tinygltf::Value &r = t.Get("rotation"), &c = t.Get("texCoord");
+    x.tt_rotation = r.IsNumber() ? r.GetNumberAsDouble() : r.Type() == tinygltf::NULL_TYPE ? 0.0 : NAN;
+    x.tt_texcoord = c.IsNumber() ? (int)c.GetNumberAsDouble() : -1;
+}
+
 void mirror_material(const tinygltf::Material &mt, bn__gltf_material &x)
 {
     x.name = mt.name.c_str();
@@ -142,7 +171,7 @@ void mirror_material(const tinygltf::Material &mt, bn__gltf_material &x)
     x.base_tex = mt.pbrMetallicRoughness.baseColorTexture.index;
     x.base_uv = mt.pbrMetallicRoughness.baseColorTexture.texCoord;
     x.emissive_tex = mt.emissiveTexture.index;
-    x.tex_transform = mt.pbrMetallicRoughness.baseColorTexture.extensions.count("KHR_texture_transform") != 0;
+    mirror_transform(mt.pbrMetallicRoughness.baseColorTexture.extensions, x);
     x.double_sided = mt.doubleSided;
     x.strength = 1.0;
     auto es = mt.extensions.find("KHR_materials_emissive_strength");

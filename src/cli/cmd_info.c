@@ -140,7 +140,7 @@ static void bn__info_tables(const bn_scene *s, int all_faces)
     const bn_face *faces = bn_scene_faces(s, &nf);
     const bn_material *mats = bn_scene_materials(s, &nm);
     printf("\nmaterials   %zu\n", nm);
-    printf("  %-3s %-20s %-26s %-26s %6s %14s\n", "id", "name", "rho (Kd)", "Le (Ke, W m^-2 sr^-1)", "faces", "area");
+    printf("  %-3s %-20s %-26s %-26s %6s %14s\n", "id", "name", "rho", "Le (W m^-2 sr^-1)", "faces", "area");
     for (size_t i = 0; i < nm; i++) {
         size_t count = 0;
         double a = 0;
@@ -151,6 +151,14 @@ static void bn__info_tables(const bn_scene *s, int all_faces)
             }
         printf("  %-3zu %-20s %-8.4g %-8.4g %-8.4g %-8.4g %-8.4g %-8.4g %6zu %14.10g\n", i, mats[i].name,
                mats[i].rho[0], mats[i].rho[1], mats[i].rho[2], mats[i].Le[0], mats[i].Le[1], mats[i].Le[2], count, a);
+    }
+    for (size_t i = 0; i < nm; i++) {
+        const char *tn;
+        int w, h;
+        double mean[3];
+        if (bn_scene_material_texture(s, i, &tn, &w, &h, mean))
+            printf("  %-3zu %-20s x texture %s (%d x %d, mean %.4g %.4g %.4g): each patch takes its mean over the patch\n",
+                   i, mats[i].name, tn, w, h, mean[0], mean[1], mean[2]);
     }
     printf("\nfaces       (front = right-hand rule of the vertex order; triangles of a split polygon share its line)\n");
     printf("  %-5s %-6s %-20s %-5s %18s  %s\n", "face", "line", "material", "verts", "area", "normal");

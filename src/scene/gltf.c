@@ -206,7 +206,8 @@ static int bn__decode_texture(bn__gr *r, int ti, size_t mat)
         t.wrap[a] = w == 33071 ? BN__WRAP_CLAMP : w == 33648 ? BN__WRAP_MIRROR : BN__WRAP_REPEAT;
     }
     t.nearest = g->textures[ti].mag == 9728;
-    snprintf(t.name, sizeof t.name, "image %d", im);
+    snprintf(t.name, sizeof t.name, "/images/%d%s%.40s", im, I->uri[0] && strncmp(I->uri, "data:", 5) ? " " : "",
+             strncmp(I->uri, "data:", 5) ? I->uri : "");
     if ((r->tex_of[ti] = bn__soup_add_texture(r->s, &t)) < 0) {
         free(t.rgb);
         bn_error_set(r->err, BN_ENOMEM, "out of memory");
@@ -228,7 +229,10 @@ static bn_status bn__material_texture(bn__gr *r, size_t i, const bn__gltf_materi
         return r->err->status;
     if (!bn__soup_set_material_texture(r->s, r->mat_of[i], t))
         return bn_error_set(r->err, BN_ENOMEM, "out of memory");
-    r->mat_uv[i] = m->specgloss ? 0 : m->base_uv;
+    r->mat_uv[i] = m->specgloss ? 0 : m->tt_texcoord >= 0 ? m->tt_texcoord : m->base_uv;
+    if (r->mat_uv[i] > 1)
+        return bn_error_set(r->err, BN_EINPUT, "%s: /materials/%zu: its texture reads TEXCOORD_%d (bounce reads TEXCOORD_0 "
+                            "and TEXCOORD_1)", r->path, i, r->mat_uv[i]);
     return BN_OK;
 }
 
@@ -252,6 +256,12 @@ static bn_status bn__material_check(bn__gr *r, size_t i, const bn__gltf_material
             return bn_error_set(r->err, BN_EINPUT, "%s: /materials/%zu/extensions/KHR_materials_pbrSpecularGlossiness/"
                                 "diffuseFactor: %u values, the %dth %g (4 in [0, 1] expected)", r->path, i, m->ndiffuse,
                                 c, m->diffuse[c]);
+    if (m->tex_transform && ((m->ntt_offset != 0 && m->ntt_offset != 2) || (m->ntt_scale != 0 && m->ntt_scale != 2) ||
+                             !isfinite(m->tt_offset[0] + m->tt_offset[1] + m->tt_scale[0] + m->tt_scale[1] + m->tt_rotation)))
+        return bn_error_set(r->err, BN_EINPUT, "%s: /materials/%zu/pbrMetallicRoughness/baseColorTexture/extensions/"
+                            "KHR_texture_transform: offset and scale need 2 numbers and rotation 1 (offset %g %g, "
+                            "rotation %g, scale %g %g)", r->path, i, m->tt_offset[0], m->tt_offset[1], m->tt_rotation,
+                            m->tt_scale[0], m->tt_scale[1]);
     if (!(m->strength >= 0 && isfinite(m->strength)))
         return bn_error_set(r->err, BN_EINPUT, "%s: /materials/%zu/extensions/KHR_materials_emissive_strength/"
                             "emissiveStrength: %g is not a finite number >= 0", r->path, i, m->strength);
@@ -264,9 +274,6 @@ static void bn__material_notes(bn__gr *r, size_t i, const bn__gltf_material *m, 
     if (m->specgloss)
         bn_logf(r->log, BN_LOG_INFO, "%s: /materials/%zu ('%s'): KHR_materials_pbrSpecularGlossiness: its diffuseFactor "
                 "is the reflectance", r->path, i, name);
-    if (m->tex_transform)
-        bn_warnf(r->log, BN_W_MATERIAL, NAN, "%s: /materials/%zu ('%s'): KHR_texture_transform is not applied: the "
-                 "texture is read with its coordinates as they are", r->path, i, name);
     if (m->emissive_tex >= 0)
         bn_warnf(r->log, BN_W_MATERIAL, NAN, "%s: /materials/%zu ('%s'): its emissiveTexture is not applied (bounce "
                  "reads reflectance textures only): emissiveFactor alone is used", r->path, i, name);
@@ -521,6 +528,13 @@ static bn_status bn__texcoords(bn__gr *r, const bn__gltf_prim *p, size_t m, size
     }
     if (!(*uv = bn__accessor(r, p->texcoord[set], 2, ref, &n)))
         return r->err->status;
+    const bn__gltf_material *mt = &r->g->materials[p->material];
+    double c = cos(mt->tt_rotation), sn = sin(mt->tt_rotation);
+    for (size_t i = 0; mt->tex_transform && i < n; i++) {   /* KHR_texture_transform: T x R x S */
+        double u = (*uv)[2 * i] * mt->tt_scale[0], v = (*uv)[2 * i + 1] * mt->tt_scale[1];
+        (*uv)[2 * i] = c * u + sn * v + mt->tt_offset[0];
+        (*uv)[2 * i + 1] = -sn * u + c * v + mt->tt_offset[1];
+    }
     for (size_t i = 0; i < 2 * n; i++)
         if (!isfinite((*uv)[i]) || n != np) {
             bn_error_set(r->err, BN_EINPUT, "%s: %s: %s", r->path, ref, n != np ? "not one per position" : "not finite");
@@ -694,7 +708,8 @@ static bn_status bn__walk(bn__gr *r, const int *roots, size_t nroots, const char
 /* Required extensions bounce does not read, punctual lights, and the scene to load: refused or chosen. */
 static bn_status bn__check_file(bn__gr *r, const int **roots, size_t *nroots, char *where, size_t wsize)
 {
-    static const char *known[] = {"KHR_materials_emissive_strength", "KHR_materials_unlit", "KHR_mesh_quantization"};
+    static const char *known[] = {"KHR_materials_emissive_strength", "KHR_materials_unlit", "KHR_mesh_quantization",
+                                  "KHR_texture_transform", "KHR_materials_pbrSpecularGlossiness"};
     const bn__gltf *g = r->g;
     for (size_t i = 0; i < g->nrequired; i++) {
         int ok = 0;
@@ -702,8 +717,9 @@ static bn_status bn__check_file(bn__gr *r, const int **roots, size_t *nroots, ch
             ok |= strcmp(g->required[i], known[k]) == 0;
         if (!ok)
             return bn_error_set(r->err, BN_EINPUT, "%s: /extensionsRequired/%zu: the file requires '%s', which bounce "
-                                "does not read (it reads KHR_materials_emissive_strength, KHR_materials_unlit and "
-                                "KHR_mesh_quantization)", r->path, i, g->required[i]);
+                                "does not read (it reads KHR_materials_emissive_strength, KHR_materials_unlit, "
+                                "KHR_mesh_quantization, KHR_texture_transform and KHR_materials_pbrSpecularGlossiness)",
+                                r->path, i, g->required[i]);
     }
     if (g->nlights > 0)
         return bn_error_set(r->err, BN_EINPUT, "%s: /extensions/KHR_lights_punctual: %zu punctual light%s; bounce takes "

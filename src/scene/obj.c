@@ -301,6 +301,7 @@ typedef struct bn__objr {
     double *vt;             /* texture coordinates read (vt u v), v turned to glTF's (row 0 at v = 0) */
     size_t nvt, vt_cap;
     int any_uv;             /* the face being read has texture coordinates */
+    int vt_said;            /* a vt index out of range was said */
     unsigned line;
     int cur, default_mat;   /* the material in use (-1: none yet), the default one (-1: not made) */
 } bn__objr;
@@ -349,9 +350,13 @@ static bn_status bn__obj_corner_uv(bn__objr *R, const char *t, unsigned k, bn_er
     i = strtoll(p + 1, NULL, 10);
     if (i < 0)
         i += (long long)R->nvt + 1;
-    if (i < 1 || (unsigned long long)i > R->nvt)
-        return bn_error_set(err, BN_EINPUT, "%s:%u: texture coordinate index in '%s' is out of range (%zu vt so far)",
-                            R->path, R->line, t, R->nvt);
+    if (i < 1 || (unsigned long long)i > R->nvt) {   /* said once: only a texture needs them */
+        if (!R->vt_said++)
+            bn_warnf(R->log, BN_W_MATERIAL, NAN, "%s:%u: texture coordinate index in '%s' is out of range (%zu vt so far): "
+                     "such corners have no texture coordinates (a texture is not applied to their faces)", R->path,
+                     R->line, t, R->nvt);
+        return BN_OK;
+    }
     R->fuv[2 * k] = R->vt[2 * (size_t)(i - 1)];
     R->fuv[2 * k + 1] = R->vt[2 * (size_t)(i - 1) + 1];
     R->any_uv = 1;
@@ -487,7 +492,7 @@ static int bn__obj_ignored(const char *kw)
 
 bn_status bn__read_obj_stream(FILE *fp, const char *path, bn__soup *s, const bn_log *log, bn_error *err)
 {
-    bn__objr R = {path, s, log, NULL, NULL, 0, NULL, NULL, 0, 0, 0, 0, -1, -1};
+    bn__objr R = {path, s, log, NULL, NULL, 0, NULL, NULL, 0, 0, 0, 0, 0, -1, -1};
     const char *slash = strrchr(path, '/');
     char *buf = NULL;
     size_t cap = 0;

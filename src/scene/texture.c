@@ -221,3 +221,18 @@ bn_status bn__scene_patch_textures(bn_scene *sc, bn_error *err)
     }
     return BN_OK;
 }
+
+int bn_scene_material_texture(const bn_scene *s, size_t m, const char **name, int *w, int *h, double mean[3])
+{
+    int t = s->mat_tex && m < s->nmats ? s->mat_tex[m] : -1;
+    if (t < 0)
+        return 0;
+    const bn__texture *x = &s->tex[t];
+    size_t n = (size_t)x->w * (size_t)x->h;
+    *name = x->name, *w = x->w, *h = x->h;
+    mean[0] = mean[1] = mean[2] = 0;
+    for (size_t k = 0; k < n; k++)
+        for (int c = 0; c < 3; c++)
+            mean[c] += x->rgb[3 * k + c] / (double)n;
+    return 1;
+}
