@@ -152,7 +152,7 @@ def check_against_solve(bounce, scene, unit, outdir):
     cols = ["area"] + ["%s_%s" % (t, c) for t in ("L", "E", "KE", "K2E", "K3E") for c in "RGB"]
     want = [[float(r[head.index(c)]) for c in cols] for r in rows]
     gl, binary = read_glb(glb)
-    attrs = gl["meshes"][0]["primitives"][0]["attributes"]
+    attrs = [q for m in gl["meshes"] for q in m["primitives"]][0]["attributes"]
     pos, _ = accessor(gl, binary, attrs["POSITION"])
     terms = [accessor(gl, binary, attrs[n])[0] for n in ("_L", "_E", "_KE", "_K2E", "_K3E")]
     nv = len(pos) // 3
@@ -165,7 +165,7 @@ def check_against_solve(bounce, scene, unit, outdir):
         return i
 
     tris = []
-    for p in gl["meshes"][0]["primitives"]:
+    for p in [q for m in gl["meshes"] for q in m["primitives"]]:
         idx, _ = accessor(gl, binary, p["indices"])
         for t in range(0, len(idx), 3):
             a, b, c = idx[t:t + 3]
@@ -218,7 +218,7 @@ def main():
 
     gl, binary = read_glb(glb)
     verts, faces = read_ply(ply)
-    prim = gl["meshes"][0]["primitives"]
+    prim = [q for m in gl["meshes"] for q in m["primitives"]]
     attrs = prim[0]["attributes"]
     for p in prim:
         check(p["attributes"] == attrs, "every primitive shares the vertex attributes")
@@ -274,7 +274,7 @@ def main():
     check("bake" in extras["provenance"].get("command line", ""), "provenance records the command line")
 
     gi, bi = read_gltf(gltf)
-    pa = gi["meshes"][0]["primitives"][0]["attributes"]
+    pa = [q for m in gi["meshes"] for q in m["primitives"]][0]["attributes"]
     check("COLOR_1" in pa and "_L" in pa and "_E" not in pa, ".gltf: COLOR_1 (--ldr) and _L, no terms")
     c1 = gi["accessors"][pa["COLOR_1"]]
     check(c1["componentType"] == 5121 and c1.get("normalized"), "COLOR_1 is normalized bytes")

@@ -20,6 +20,10 @@ typedef struct bn__bake_out {
     const unsigned char *c8;
     double exposure_ev;
     const double *power;      /* nlayers x 3: each layer's power pi sum_p A_p x_p over the patches (W) */
+    /* each face's object and the objects' names (glTF: a node and mesh each); NULL or nobjects 1: one */
+    const unsigned *face_object;
+    size_t nobjects;
+    const char *const *object_names;
 } bn__bake_out;
 
 /* glTF 2.0: binary .glb (binary = 1), or .gltf with a .bin of the same stem beside it. Atomic per

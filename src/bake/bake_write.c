@@ -310,22 +310,30 @@ static bn_status bn__bake_gltf(const bn_bake *b, const char *path, int is_glb, c
     size_t np, nl = j->nlayers;
     const bn_patch *patches = bn_scene_patches(s, &np);
     const bn_face *faces = bn_scene_faces(s, &(size_t){0});
-    unsigned *fm = bn__malloc_array(j->nf + 1, sizeof *fm);
-    const char **lnames = bn__malloc_array(nl, sizeof *lnames);
+    size_t nobj = bn_scene_object_count(s);
+    unsigned *fm = bn__malloc_array(j->nf + 1, sizeof *fm), *fo = bn__malloc_array(j->nf + 1, sizeof *fo);
+    const char **lnames = bn__malloc_array(nl, sizeof *lnames), **onames = bn__malloc_array(nobj + 1, sizeof *onames);
     double *power = bn__calloc(3 * nl, sizeof(double));
-    bn_status st = fm && lnames && power ? BN_OK : bn__bake_oom(j->nv, err);
-    for (size_t k = 0; st == BN_OK && k < j->nf; k++)
+    bn_status st = fm && fo && lnames && onames && power ? BN_OK : bn__bake_oom(j->nv, err);
+    for (size_t k = 0; st == BN_OK && k < j->nf; k++) {
         fm[k] = o->input_mesh ? faces[k].material : patches[k].material;
+        fo[k] = faces[o->input_mesh ? k : patches[k].face].object;
+    }
+    for (size_t k = 0; st == BN_OK && k < nobj; k++)
+        onames[k] = bn_scene_object_name(s, k);
     for (size_t l = 0; st == BN_OK && l < nl; l++) {
         lnames[l] = layers[l].name;
         bn_scene_power(s, layers[l].patch_values, power + 3 * l);
     }
     if (st == BN_OK) {
         bn__bake_out g = {j->nv,  j->pos, j->nf,          j->face_n, j->face_idx, fm,
-                          nl,     (const float *const *)j->vals, lnames, j->c8, o->exposure_ev, power};
+                          nl,     (const float *const *)j->vals, lnames, j->c8, o->exposure_ev, power,
+                          fo, nobj, onames};
         st = bn__write_gltf(path, is_glb, &g, s, o, err);
     }
     free(fm);
+    free(fo);
+    free(onames);
     free(lnames);
     free(power);
     return st;

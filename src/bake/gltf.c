@@ -148,40 +148,48 @@ typedef struct bn__gltf {
     size_t nmat;
     double unit, scale;        /* metres per scene unit; COLOR_0's 2^exposure_ev */
     float lo[3], hi[3];        /* the positions' bounds (metres) */
-    uint32_t *idx;             /* 3 per triangle, material by material */
-    size_t *mat_tris, *mat_first;
+    uint32_t *idx;             /* 3 per triangle, group by group */
+    size_t nobj, ngroups;      /* objects (a node and mesh each), and groups: object x material */
+    size_t *mat_tris, *mat_first;   /* per group (object o, material k: o nmat + k) */
     bn__view *views;
     size_t nviews;
     bn__blob blob;
     bn__str js;
 } bn__gltf;
 
-/* Triangles grouped by material, one primitive each, all sharing the vertex attributes: a fan from
- * each face's first corner (faces are convex). */
+/* Face f's group: its object's and material's. */
+static size_t bn__group(const bn__gltf *g, size_t f)
+{
+    size_t o = g->nobj > 1 ? g->m->face_object[f] : 0;
+    return o * g->nmat + g->m->face_material[f];
+}
+
+/* Triangles grouped by object and material, one primitive each, all sharing the vertex attributes: a fan
+ * from each face's first corner (faces are convex). */
 static bn_status bn__gltf_triangles(bn__gltf *g, const char *path, bn_error *err)
 {
     const bn__bake_out *m = g->m;
     size_t ntri = 0, *fill;
     for (size_t f = 0; f < m->nf; f++) {
-        if (m->face_material[f] >= g->nmat)
+        if (m->face_material[f] >= g->nmat || (g->nobj > 1 && m->face_object[f] >= g->nobj))
             return bn_error_set(err, BN_EINTERNAL, "%s: face %zu has material %u of %zu", path, f, m->face_material[f],
                                 g->nmat);
-        g->mat_tris[m->face_material[f]] += m->face_n[f] - 2;
+        g->mat_tris[bn__group(g, f)] += m->face_n[f] - 2;
         ntri += m->face_n[f] - 2;
     }
     g->idx = bn__malloc_array(3 * ntri + 1, sizeof(uint32_t));
-    fill = bn__malloc_array(g->nmat + 1, sizeof(size_t));
+    fill = bn__malloc_array(g->ngroups + 1, sizeof(size_t));
     if (!g->idx || !fill) {
         free(fill);
         return BN_ENOMEM;
     }
-    for (size_t k = 0, acc = 0; k < g->nmat; k++) {
+    for (size_t k = 0, acc = 0; k < g->ngroups; k++) {
         g->mat_first[k] = fill[k] = acc;
         acc += 3 * g->mat_tris[k];
     }
     for (size_t f = 0; f < m->nf; f++) {
         const size_t *c = m->face_idx + 4 * f;
-        size_t *w = &fill[m->face_material[f]];
+        size_t *w = &fill[bn__group(g, f)];
         for (unsigned t = 0; t + 2 < m->face_n[f]; t++) {
             g->idx[(*w)++] = (uint32_t)c[0];
             g->idx[(*w)++] = (uint32_t)c[t + 1];
@@ -236,11 +244,11 @@ static bn_status bn__gltf_vertices(bn__gltf *g)
     return g->blob.oom ? BN_ENOMEM : BN_OK;
 }
 
-/* The index views, one per material with triangles. Every view is whole 4-byte words (floats,
+/* The index views, one per group with triangles. Every view is whole 4-byte words (floats,
  * 32-bit indices, 4-byte colours), so the buffer is too, as the GLB chunk needs. */
 static bn_status bn__gltf_indices(bn__gltf *g)
 {
-    for (size_t k = 0; k < g->nmat; k++)
+    for (size_t k = 0; k < g->ngroups; k++)
         if (g->mat_tris[k])
             bn__gltf_view(g, g->idx + g->mat_first[k], 3 * g->mat_tris[k] * sizeof(uint32_t), 34963);
     return g->blob.oom ? BN_ENOMEM : BN_OK;
@@ -327,7 +335,7 @@ static void bn__gltf_json_accessors(bn__gltf *g, const char *binname)
         bn__str_add(js, ",{\"bufferView\":%zu,\"componentType\":5121,\"normalized\":true,\"count\":%zu,"
                         "\"type\":\"VEC4\"}",
                     2 + m->nlayers, m->nv);
-    for (size_t k = 0; k < g->nmat; k++)
+    for (size_t k = 0; k < g->ngroups; k++)
         if (g->mat_tris[k]) {
             const uint32_t *t = g->idx + g->mat_first[k];
             uint32_t imin = UINT32_MAX, imax = 0;
@@ -342,29 +350,43 @@ static void bn__gltf_json_accessors(bn__gltf *g, const char *binname)
     bn__str_add(js, "]");
 }
 
-/* One mesh with a primitive per material; the materials unlit (an engine shows COLOR_0, the
- * radiance itself; a lit material would shade it twice), the reflectance and emitted radiance as
+/* A mesh per object (node), with a primitive per material; the materials unlit (an engine shows COLOR_0,
+ * the radiance itself; a lit material would shade it twice), the reflectance and emitted radiance as
  * data. */
 static void bn__gltf_json_meshes(bn__gltf *g)
 {
     const bn__bake_out *m = g->m;
     bn__str *js = &g->js;
-    size_t acc = 2 + m->nlayers + (m->c8 ? 1 : 0), p = 0;
-    bn__str_add(js, ",\"meshes\":[{\"primitives\":[");
-    for (size_t k = 0; k < g->nmat; k++) {
-        if (!g->mat_tris[k])
-            continue;
-        bn__str_add(js, "%s{\"attributes\":{\"POSITION\":0,\"COLOR_0\":1", p++ ? "," : "");
-        for (size_t l = 0; l < m->nlayers; l++) {
-            char an[64];
-            bn__attr_name(m->names[l], an, sizeof an);
-            bn__str_add(js, ",\"%s\":%zu", an, 2 + l);
+    size_t acc = 2 + m->nlayers + (m->c8 ? 1 : 0), nmesh = 0;
+    bn__str_add(js, ",\"meshes\":[");
+    for (size_t o = 0; o < g->nobj; o++) {
+        size_t p = 0;
+        for (size_t k = 0; k < g->nmat; k++) {
+            if (!g->mat_tris[o * g->nmat + k])
+                continue;
+            if (p == 0) {
+                bn__str_add(js, "%s{", nmesh++ ? "," : "");
+                if (g->nobj > 1) {
+                    bn__str_add(js, "\"name\":");
+                    bn__str_json(js, m->object_names[o]);
+                    bn__str_add(js, ",");
+                }
+                bn__str_add(js, "\"primitives\":[");
+            }
+            bn__str_add(js, "%s{\"attributes\":{\"POSITION\":0,\"COLOR_0\":1", p++ ? "," : "");
+            for (size_t l = 0; l < m->nlayers; l++) {
+                char an[64];
+                bn__attr_name(m->names[l], an, sizeof an);
+                bn__str_add(js, ",\"%s\":%zu", an, 2 + l);
+            }
+            if (m->c8)
+                bn__str_add(js, ",\"COLOR_1\":%zu", 2 + m->nlayers);
+            bn__str_add(js, "},\"indices\":%zu,\"material\":%zu,\"mode\":4}", acc++, k);
         }
-        if (m->c8)
-            bn__str_add(js, ",\"COLOR_1\":%zu", 2 + m->nlayers);
-        bn__str_add(js, "},\"indices\":%zu,\"material\":%zu,\"mode\":4}", acc++, k);
+        if (p)
+            bn__str_add(js, "]}");
     }
-    bn__str_add(js, "]}],\"materials\":[");
+    bn__str_add(js, "],\"materials\":[");
     for (size_t k = 0; k < g->nmat; k++) {
         bn__str_add(js, "%s{\"name\":", k ? "," : "");
         bn__str_json(js, g->mat[k].name);
@@ -379,6 +401,31 @@ static void bn__gltf_json_meshes(bn__gltf *g)
     bn__str_add(js, "]");
 }
 
+/* The scene's nodes: one per object with triangles, named as the object (the file's node or group, or
+ * the material-name prefix), each with its mesh; a single node named after the scene file when there is
+ * one object. Positions are in world space: the nodes carry no transform. */
+static void bn__gltf_json_nodes(bn__gltf *g, const bn_scene *scene)
+{
+    bn__str *js = &g->js;
+    size_t n = 0;
+    bn__str_add(js, ",\"nodes\":[");
+    for (size_t o = 0; o < g->nobj; o++) {
+        size_t tris = 0;
+        for (size_t k = 0; k < g->nmat; k++)
+            tris += g->mat_tris[o * g->nmat + k];
+        if (!tris)
+            continue;
+        bn__str_add(js, "%s{\"mesh\":%zu,\"name\":", n ? "," : "", n);
+        bn__str_json(js, g->nobj > 1 ? g->m->object_names[o] : bn_scene_path(scene));
+        bn__str_add(js, "}");
+        n++;
+    }
+    bn__str_add(js, "],\"scenes\":[{\"nodes\":[");
+    for (size_t k = 0; k < n; k++)
+        bn__str_add(js, "%s%zu", k ? "," : "", k);
+    bn__str_add(js, "]}]");
+}
+
 /* The whole JSON, padded with spaces to 4-byte words. */
 static bn_status bn__gltf_json(bn__gltf *g, const bn_scene *scene, const bn_bake_write_opts *o, const char *binname)
 {
@@ -387,10 +434,8 @@ static bn_status bn__gltf_json(bn__gltf *g, const bn_scene *scene, const bn_bake
     bn__str_add(&g->js, "{\"asset\":{\"version\":\"2.0\",\"generator\":");
     bn__str_json(&g->js, gen);
     bn__gltf_json_extras(g, o);
-    bn__str_add(&g->js, "},\"extensionsUsed\":[\"KHR_materials_unlit\"],\"scene\":0,\"scenes\":[{\"nodes\":[0]}],"
-                        "\"nodes\":[{\"mesh\":0,\"name\":");
-    bn__str_json(&g->js, bn_scene_path(scene));
-    bn__str_add(&g->js, "}]");
+    bn__str_add(&g->js, "},\"extensionsUsed\":[\"KHR_materials_unlit\"],\"scene\":0");
+    bn__gltf_json_nodes(g, scene);
     bn__gltf_json_accessors(g, binname);
     bn__gltf_json_meshes(g);
     bn__str_add(&g->js, "}");
@@ -440,9 +485,11 @@ bn_status bn__write_gltf(const char *path, int binary, const bn__bake_out *m, co
     if (m->nv > UINT32_MAX)
         st = bn_error_set(err, BN_EUSAGE, "%s: %zu vertices are more than glTF's 32-bit indices address", path, m->nv);
     g.mat = bn_scene_materials(scene, &g.nmat);
-    g.mat_tris = bn__calloc(g.nmat + 1, sizeof(size_t));
-    g.mat_first = bn__calloc(g.nmat + 1, sizeof(size_t));
-    g.views = bn__calloc(m->nlayers + 5 + g.nmat, sizeof *g.views);
+    g.nobj = m->face_object && m->nobjects > 1 ? m->nobjects : 1;
+    g.ngroups = g.nobj * g.nmat;
+    g.mat_tris = bn__calloc(g.ngroups + 1, sizeof(size_t));
+    g.mat_first = bn__calloc(g.ngroups + 1, sizeof(size_t));
+    g.views = bn__calloc(m->nlayers + 5 + g.ngroups, sizeof *g.views);
     if (st == BN_OK && (!g.mat_tris || !g.mat_first || !g.views || (!binary && !binpath)))
         st = BN_ENOMEM;
     if (st == BN_OK)
