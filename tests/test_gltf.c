@@ -3,6 +3,7 @@
  * the same box read from its OBJ (a second reader), real files from Debian's assimp-testmodels (good
  * and broken ones), and every refusal naming its JSON pointer. */
 #include "bn_test.h"
+#include "bounce/bake.h"
 #include "bounce/scene.h"
 
 #include <stdint.h>
@@ -634,4 +635,18 @@ BN_TEST(millimetres_under_a_scaling_node_solve_as_the_obj)
                 worst = k;
     }
     BN_ASSERT_NEAR(La[worst], Lb[worst], 1e-6);
+}
+
+/* `bounce view` of a .glb: a bake of bounce's is embedded as it is, any other glTF is a scene to bake first
+ * (both a .glb; the bake's asset says bounce wrote it). */
+BN_TEST(view_tells_a_bake_from_a_scene)
+{
+    char args[1024], *out = NULL;
+    BN_ASSERT_EQ(bn_view_is_bake(bn_test_path("meshes/cornell-box-blender.glb")), 0);
+    BN_ASSERT_EQ(bn_view_is_bake(bn_test_tmp("missing.glb")), -1);
+    snprintf(args, sizeof args, "bake '%s' --two-sided none --patches 60 --ff-visibility rays -q -o '%s'",
+             bn_test_path("meshes/cornell-box-blender.glb"), bn_test_tmp("baked.glb"));
+    BN_ASSERT_EQ(bn_test_bounce(args, &out), 0);
+    free(out);
+    BN_ASSERT_EQ(bn_view_is_bake(bn_test_tmp("baked.glb")), 1);
 }

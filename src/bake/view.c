@@ -68,6 +68,25 @@ bn_status bn__glb_check(const unsigned char *glb, size_t len, const char *path, 
     return BN_OK;
 }
 
+int bn_view_is_bake(const char *glb_path)
+{
+    unsigned char head[20];
+    char json[4097];
+    FILE *f = fopen(glb_path, "rb");
+    size_t n = 0;
+    if (!f)
+        return -1;
+    if (fread(head, 1, 20, f) == 20 && memcmp(head, "glTF", 4) == 0 && memcmp(head + 16, "JSON", 4) == 0) {
+        unsigned long jlen = bn__le32(head + 12);
+        n = fread(json, 1, jlen < sizeof json - 1 ? jlen : sizeof json - 1, f);
+    }
+    fclose(f);
+    if (n == 0)
+        return -1;
+    json[n] = '\0';   /* the asset object comes first in bounce's bakes: its generator within 4 KiB */
+    return strstr(json, "\"generator\":\"bounce") != NULL;
+}
+
 bn_status bn_view_write(const char *glb_path, const char *title, const char *out, bn_error *err)
 {
     FILE *in;

@@ -16,7 +16,7 @@ static const char *bn__view_help =
     "that shows the baked radiance in a browser: orbit the camera (drag, wheel), show each term\n"
     "E, KE, K2E, ..., rest alone ('alone') or summed (check boxes; 'L' shows them all), set the\n"
     "exposure, switch to false colour (log10 radiance, with its scale), and read the power of each\n"
-    "term. A .glb from `bounce bake --per-bounce` is embedded as it is; a scene (.obj, .ply, .off) is\n"
+    "term. A .glb from `bounce bake --per-bounce` is embedded as it is; a scene (.obj, .ply, .off, a glTF) is\n"
     "baked first with `bounce bake --per-bounce` and the options given (see bounce bake --help).\n"
     "The page's URL may carry #terms=E,KE&ev=1.5&fc=1 (terms shown, exposure, false colour).\n\n"
     "options:\n"
@@ -118,7 +118,7 @@ int bn_cmd_view(int argc, char **argv, bn_cli_common *c)
     }
     title = strrchr(v.in, '/') ? strrchr(v.in, '/') + 1 : v.in;
     size_t n = strlen(v.in);
-    if (n > 4 && strcasecmp(v.in + n - 4, ".glb") == 0) {
+    if (n > 4 && strcasecmp(v.in + n - 4, ".glb") == 0 && bn_view_is_bake(v.in) != 0) {   /* a bake (or unreadable) */
         if (v.bargc > 2) {
             fprintf(stderr, "bounce: error: view of a .glb takes no bake options (only -o): %s\n", v.bargv[2]);
             free(v.bargv);
