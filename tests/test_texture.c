@@ -50,7 +50,8 @@ static double expected(int c, double x, double z)
     return kd * grad(c, u * GW - 0.5, v * GH - 0.5);
 }
 
-BN_TEST(exr_gradient_gives_each_patch_its_mean)
+/* `path` loaded quietly and meshed at patch size `size` without contact cuts (0: the default mesh). */
+static bn_scene *load_meshed(const char *path, double size)
 {
     bn_load_opts lo;
     bn_mesh_opts mo;
@@ -58,11 +59,19 @@ BN_TEST(exr_gradient_gives_each_patch_its_mean)
     bn_error err;
     bn_load_opts_default(&lo);
     lo.log.quiet = 1;
-    if (bn_scene_load(write_gradient_floor(), &lo, &s, &err) != BN_OK)
+    if (bn_scene_load(path, &lo, &s, &err) != BN_OK)
         BN_FAIL("%s", err.msg);
     bn_mesh_opts_default(&mo);
-    mo.patch_size = 0.13;   /* patches that do not line up with texels */
-    BN_ASSERT_EQ(bn_scene_mesh(s, &mo, &err), BN_OK);
+    if (size > 0)
+        mo.patch_size = size, mo.no_contacts = 1;
+    if (bn_scene_mesh(s, &mo, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    return s;
+}
+
+BN_TEST(exr_gradient_gives_each_patch_its_mean)
+{
+    bn_scene *s = load_meshed(write_gradient_floor(), 0.13);   /* patches that do not line up with texels */
     BN_ASSERT(bn_scene_textured(s));
     size_t np, nfloor = 0;
     const bn_patch *p = bn_scene_patches(s, &np);
@@ -258,22 +267,12 @@ BN_TEST(checker_finer_than_the_patches_is_averaged)
 {
     quad q[32], f[16];
     double mean = 0.5 * ((float)srgb((float)(230 / 255.0)) + (float)srgb((float)(40 / 255.0)));
-    bn_load_opts lo;
-    bn_mesh_opts mo;
-    bn_scene *s = NULL;
-    bn_error err;
     write_checker("checker.ppm", 8);
     size_t n = box_quads(q, f, floor_quads(f, 0));
     const char *path = quads_gltf("fine.gltf", q, n, "{\"name\":\"floor\",\"pbrMetallicRoughness\":{\"baseColorTexture\":"
                                   "{\"index\":0}}}," WHITE "," LIGHT, ",\"textures\":[{\"source\":0,\"sampler\":0}],"
                                   "\"samplers\":[{\"magFilter\":9728}],\"images\":[{\"uri\":\"checker.ppm\"}]");
-    bn_load_opts_default(&lo);
-    lo.log.quiet = 1;
-    BN_ASSERT_EQ(bn_scene_load(path, &lo, &s, &err), BN_OK);
-    bn_mesh_opts_default(&mo);
-    mo.patch_size = 0.25;
-    mo.no_contacts = 1;
-    BN_ASSERT_EQ(bn_scene_mesh(s, &mo, &err), BN_OK);
+    bn_scene *s = load_meshed(path, 0.25);
     size_t np, nfloor = 0;
     const bn_patch *p = bn_scene_patches(s, &np);
     double *rho = malloc(3 * np * sizeof *rho);
@@ -300,21 +299,12 @@ BN_TEST(sweethome3d_model_loads_with_its_texture)
     snprintf(cmd, sizeof cmd, "cd '%s' && python3 -c \"import zipfile; z = zipfile.ZipFile('%s'); "
              "[z.extract(n) for n in z.namelist() if n.startswith('blendswap-cc-0/rock1/')]\"", bn_test_tmpdir(), SH3F);
     BN_ASSERT_EQ(bn_test_run(cmd, NULL), 0);
-    bn_load_opts lo;
-    bn_mesh_opts mo;
-    bn_scene *s = NULL;
-    bn_error err;
-    bn_load_opts_default(&lo);
-    lo.log.quiet = 1;
-    if (bn_scene_load(bn_test_tmp("blendswap-cc-0/rock1/rock1.obj"), &lo, &s, &err) != BN_OK)
-        BN_FAIL("%s", err.msg);
+    bn_scene *s = load_meshed(bn_test_tmp("blendswap-cc-0/rock1/rock1.obj"), 0);
     const char *name;
     int w, h;
     double mean[3];
     BN_ASSERT(bn_scene_material_texture(s, 0, &name, &w, &h, mean));
     BN_ASSERT(strcmp(name, "rock01.jpg") == 0 && w == 512 && h == 512);
-    bn_mesh_opts_default(&mo);
-    BN_ASSERT_EQ(bn_scene_mesh(s, &mo, &err), BN_OK);
     size_t np;
     const bn_patch *p = bn_scene_patches(s, &np);
     double *rho = malloc(3 * np * sizeof *rho), lo_r = 1, hi_r = 0, area = 0, sum = 0;
@@ -344,18 +334,7 @@ BN_TEST(texture_transform_maps_as_the_extension_says)
                                   "{\"index\":0,\"extensions\":{\"KHR_texture_transform\":{\"offset\":[0.25,0.75],"
                                   "\"rotation\":1.5707963267948966,\"scale\":[0.5,0.5]}}}}}," WHITE "," LIGHT,
                                   ",\"textures\":[{\"source\":0}],\"images\":[{\"uri\":\"gradient.exr\"}]");
-    bn_load_opts lo;
-    bn_mesh_opts mo;
-    bn_scene *s = NULL;
-    bn_error err;
-    bn_load_opts_default(&lo);
-    lo.log.quiet = 1;
-    if (bn_scene_load(path, &lo, &s, &err) != BN_OK)
-        BN_FAIL("%s", err.msg);
-    bn_mesh_opts_default(&mo);
-    mo.patch_size = 0.13;
-    mo.no_contacts = 1;
-    BN_ASSERT_EQ(bn_scene_mesh(s, &mo, &err), BN_OK);
+    bn_scene *s = load_meshed(path, 0.13);
     size_t np, nfloor = 0;
     const bn_patch *p = bn_scene_patches(s, &np);
     double *rho = malloc(3 * np * sizeof *rho), worst = 0;
