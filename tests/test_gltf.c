@@ -4,6 +4,7 @@
  * and broken ones), and every refusal naming its JSON pointer. */
 #include "bn_test.h"
 #include "bounce/bake.h"
+#include "bounce/image.h"
 #include "bounce/scene.h"
 
 #include <stdint.h>
@@ -649,4 +650,32 @@ BN_TEST(view_tells_a_bake_from_a_scene)
     BN_ASSERT_EQ(bn_test_bounce(args, &out), 0);
     free(out);
     BN_ASSERT_EQ(bn_view_is_bake(bn_test_tmp("baked.glb")), 1);
+}
+
+/* A glTF camera places the images' default camera: eye at its node, looking down the node's -z with +y up,
+ * its field of view and aspect ratio (512 wide); under a parent turned a quarter about y it looks down -x. */
+BN_TEST(the_files_camera_is_the_default_camera)
+{
+    const char *json =
+        "{\"asset\":{\"version\":\"2.0\"}," SQUARE_BUFFERS
+        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0},\"indices\":1}]}],"
+        "\"cameras\":[{\"name\":\"shot\",\"type\":\"perspective\",\"perspective\":{\"yfov\":0.6,\"aspectRatio\":2,"
+        "\"znear\":0.01}}],"
+        "\"nodes\":[{\"mesh\":0},{\"rotation\":[0,0.70710678118654752,0,0.70710678118654752],\"children\":[2]},"
+        "{\"camera\":0,\"translation\":[0,1,5]}],\"scenes\":[{\"nodes\":[0,1]}]}";
+    counted_log c;
+    memset(&c, 0, sizeof c);
+    bn_scene *s = load(bn_test_write_gltf("camera.gltf", json, &square, sizeof square), &c);
+    bn_camera cam;
+    bn_camera_default(s, &cam);
+    /* the parent turns +z to +x and -z to -x: eye (5, 1, 0), looking down -x */
+    BN_ASSERT_NEAR(cam.eye[0], 5, 1e-12);
+    BN_ASSERT_NEAR(cam.eye[1], 1, 1e-12);
+    BN_ASSERT_NEAR(cam.eye[2], 0, 1e-12);
+    BN_ASSERT_NEAR(cam.look[0] - cam.eye[0], -1, 1e-12);
+    BN_ASSERT_NEAR(cam.up[1], 1, 1e-12);
+    BN_ASSERT_NEAR(cam.fov_deg, 0.6 * 180 / 3.14159265358979323846, 1e-9);
+    BN_ASSERT_EQ(cam.width, 512);
+    BN_ASSERT_EQ(cam.height, 256);
+    bn_scene_destroy(s);
 }

@@ -22,8 +22,9 @@ typedef struct bn_camera {
     int    width, height;    /* pixels */
     int    spp;              /* supersamples per pixel (stratified, jittered), 1 = pixel centres */
 } bn_camera;
-/* Default: looks at the bounding box's centre from outside its front (-z side), up +y, fov 40,
- * 512x512, spp 1; the eye is far enough back for the whole box to fit the view. */
+/* Default: the scene file's camera when it has one (bn_scene_camera; its aspect ratio at 512 pixels
+ * wide), else looking at the bounding box's centre from outside its front (-z side), up +y, fov 40,
+ * 512x512, spp 1, the eye far enough back for the whole box to fit the view. */
 void bn_camera_default(const bn_scene *s, bn_camera *cam);
 /* Reads NAME.camera beside the scene (scene path with its extension replaced by .camera) if it
  * exists. Format: one `key value` per line, '#' comments; keys eye X,Y,Z / look X,Y,Z / up X,Y,Z /

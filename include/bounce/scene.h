@@ -147,6 +147,12 @@ typedef struct bn_scene_stats {
     size_t contact_segments, contact_faces, contact_patches_split, contact_patches_made;
 } bn_scene_stats;
 bn_scene_stats     bn_scene_stats_get(const bn_scene *s);
+/* The camera the scene file holds (glTF: the first perspective camera among the default scene's nodes,
+ * placed by its node's world transform): 1 and its eye, a point it looks at, its up direction, vertical
+ * field of view (degrees) and aspect ratio (width / height, 0 when the file gives none), and its name;
+ * 0 when the file has none. */
+int bn_scene_camera(const bn_scene *s, double eye[3], double look[3], double up[3], double *fov_deg, double *aspect,
+                    const char **name);
 /* Axis-aligned bounding box of the faces, scene units. */
 void               bn_scene_bounds(const bn_scene *s, double lo[3], double hi[3]);
 /* A digest of geometry, materials and patches (FNV-1a 64), for cache keys. */

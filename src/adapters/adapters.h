@@ -106,15 +106,18 @@ typedef struct bn__gltf_material {
 } bn__gltf_material;
 typedef struct bn__gltf_node {
     const char *name;
-    int mesh, skin;
+    int mesh, skin, camera;
     size_t first, n;                      /* children[first..] */
     unsigned nmatrix, nt, nr, ns;
     double matrix[16], t[3], r[4], s[3];
 } bn__gltf_node;
 typedef struct bn__gltf_scene { size_t first, n; } bn__gltf_scene;       /* roots[first..] */
+/* A camera: perspective (1) or not, its vertical field of view (radians) and aspect ratio (0: none). */
+typedef struct bn__gltf_camera { const char *name; int perspective; double yfov, aspect; } bn__gltf_camera;
 typedef struct bn__gltf {
     size_t nbuffers, nviews, naccessors, nprims, nmeshes, nmaterials, nnodes, nscenes, nlights, ntextures;
-    size_t nchildren, nroots, nrequired, nimages;
+    size_t nchildren, nroots, nrequired, nimages, ncameras;
+    const bn__gltf_camera *cameras;
     const bn__gltf_image *images;
     const bn__gltf_texture *textures;
     const bn__gltf_buffer *buffers;

@@ -30,6 +30,7 @@ struct Impl {
     std::vector<bn__gltf_scene> scenes;
     std::vector<bn__gltf_image> images;
     std::vector<bn__gltf_texture> textures;
+    std::vector<bn__gltf_camera> cameras;
     std::vector<int> children, roots;
     std::vector<const char *> required;
     bn__gltf c;
@@ -229,6 +230,7 @@ void mirror_scene(Impl &m)
         x.name = n.name.c_str();
         x.mesh = n.mesh;
         x.skin = n.skin;
+        x.camera = n.camera;
         x.first = m.children.size();
         x.n = n.children.size();
         m.children.insert(m.children.end(), n.children.begin(), n.children.end());
@@ -244,6 +246,8 @@ void mirror_scene(Impl &m)
     }
     for (const auto &r : m.model.extensionsRequired)
         m.required.push_back(r.c_str());
+    for (const auto &c : m.model.cameras)
+        m.cameras.push_back({c.name.c_str(), c.type == "perspective", c.perspective.yfov, c.perspective.aspectRatio});
 }
 
 void publish(Impl &m)
@@ -264,6 +268,7 @@ void publish(Impl &m)
     c.nlights = m.model.lights.size();
     c.ntextures = m.textures.size(), c.textures = m.textures.data();
     c.nimages = m.images.size(), c.images = m.images.data();
+    c.ncameras = m.cameras.size(), c.cameras = m.cameras.data();
     c.default_scene = m.model.defaultScene;
     c.warnings = m.warnings.c_str();
     c.impl = &m;

@@ -76,13 +76,16 @@ int bn_view_is_bake(const char *glb_path)
     size_t n = 0;
     if (!f)
         return -1;
-    if (fread(head, 1, 20, f) == 20 && memcmp(head, "glTF", 4) == 0 && memcmp(head + 16, "JSON", 4) == 0) {
+    long size = fseek(f, 0, SEEK_END) == 0 ? ftell(f) : -1;
+    rewind(f);
+    if (fread(head, 1, 20, f) == 20 && memcmp(head, "glTF", 4) == 0 && memcmp(head + 16, "JSON", 4) == 0 &&
+        size == (long)bn__le32(head + 8)) {   /* whole: its header's length is the file's */
         unsigned long jlen = bn__le32(head + 12);
         n = fread(json, 1, jlen < sizeof json - 1 ? jlen : sizeof json - 1, f);
     }
     fclose(f);
     if (n == 0)
-        return -1;
+        return -1;   /* not a whole .glb: bn_view_write says what is wrong with it */
     json[n] = '\0';   /* the asset object comes first in bounce's bakes: its generator within 4 KiB */
     return strstr(json, "\"generator\":\"bounce") != NULL;
 }

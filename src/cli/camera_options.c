@@ -24,6 +24,7 @@ bn_status bn_cli_make_camera(const bn_optset *s, const bn_cli_camera *o, const c
 {
     bn_status st;
     int found = 0;
+    const char *name;
     bn_log lg = {bn_cli_log, (void *)c, c->quiet};
     bn_camera_default(scene, cam);
     st = bn_camera_load_sidecar(scene_path, cam, &found, err);
@@ -34,6 +35,10 @@ bn_status bn_cli_make_camera(const bn_optset *s, const bn_cli_camera *o, const c
     else if (found)
         bn_logf(&lg, BN_LOG_INFO, "camera: the scene's .camera sidecar (eye %g, %g, %g)", cam->eye[0], cam->eye[1],
                 cam->eye[2]);
+    else if (bn_scene_camera(scene, (double[3]){0}, (double[3]){0}, (double[3]){0}, &(double){0}, &(double){0}, &name))
+        bn_logf(&lg, BN_LOG_INFO, "camera: the scene file's camera '%s' (eye %g, %g, %g, fov %g, %dx%d; --eye/--look, "
+                "--size or a .camera sidecar override it)", name, cam->eye[0], cam->eye[1], cam->eye[2], cam->fov_deg,
+                cam->width, cam->height);
     else
         bn_logf(&lg, BN_LOG_INFO, "camera: the default, in front of the scene's box looking at its centre (no .camera "
                 "sidecar; --eye/--look place it, inside a closed room for an interior)");

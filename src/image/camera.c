@@ -29,6 +29,13 @@ void bn_camera_default(const bn_scene *s, bn_camera *cam)
     memcpy(cam->look, c, sizeof c);
     memcpy(cam->eye, c, sizeof c);
     cam->eye[2] = lo[2] - dist;
+    double aspect;
+    const char *name;
+    if (bn_scene_camera(s, cam->eye, cam->look, cam->up, &cam->fov_deg, &aspect, &name) && aspect > 0) {
+        /* the file's camera (glTF): its pose and field of view, its aspect at 512 pixels wide */
+        int h = (int)lround(512 / aspect);
+        cam->height = h < 1 ? 1 : h > 32768 ? 32768 : h;
+    }
 }
 
 bn_status bn_camera_validate(const bn_camera *cam, bn_error *err)

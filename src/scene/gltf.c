@@ -622,6 +622,31 @@ static double bn__det3(const double M[16])
     return M[0] * (M[5] * M[10] - M[9] * M[6]) - M[4] * (M[1] * M[10] - M[9] * M[2]) + M[8] * (M[1] * M[6] - M[5] * M[2]);
 }
 
+/* Node i's camera, the first perspective one met: its eye at the node's origin, looking down its -z with
+ * +y up (glTF's camera convention), in world space. */
+static void bn__node_camera(bn__gr *r, size_t i, const double W[16])
+{
+    const bn__gltf_node *n = &r->g->nodes[i];
+    bn__file_camera *c = &r->s->cam;
+    double f[3], u[3];
+    if (c->has || n->camera < 0 || (size_t)n->camera >= r->g->ncameras || !r->g->cameras[n->camera].perspective)
+        return;
+    const bn__gltf_camera *k = &r->g->cameras[n->camera];
+    for (int a = 0; a < 3; a++) {
+        c->eye[a] = W[12 + a];
+        f[a] = -W[8 + a];
+        u[a] = W[4 + a];
+    }
+    if (!(bn_v3_normalize(f) > 0) || !(bn_v3_normalize(u) > 0) || !(k->yfov > 0 && k->yfov < 3.14))
+        return;
+    for (int a = 0; a < 3; a++)
+        c->look[a] = c->eye[a] + f[a], c->up[a] = u[a];
+    c->yfov_deg = k->yfov * 180 / 3.14159265358979323846;
+    c->aspect = k->aspect > 0 && isfinite(k->aspect) ? k->aspect : 0;
+    snprintf(c->name, sizeof c->name, "%s", k->name && k->name[0] ? k->name : n->name && n->name[0] ? n->name : "camera");
+    c->has = 1;
+}
+
 /* Node i's mesh, if any, under world transform W: its primitives into the soup, as one object. */
 static bn_status bn__node_mesh(bn__gr *r, size_t i, const double W[16])
 {
@@ -684,6 +709,7 @@ static bn_status bn__walk(bn__gr *r, const int *roots, size_t nroots, const char
         if ((st = bn__local(r, f.node, L)) != BN_OK)
             break;
         bn__mat4_mul(f.W, L, W);
+        bn__node_camera(r, f.node, W);
         if ((st = bn__node_mesh(r, f.node, W)) != BN_OK)
             break;
         for (size_t c = n->n; st == BN_OK && c-- > 0;) {

@@ -562,6 +562,7 @@ bn_status bn__scene_build(const char *path, bn__soup *s, const bn_load_opts *o, 
         st = bn__scene_finish(sc, path, o, P.degenerate, err);
     if (st == BN_OK && bn__scene_objects(sc, s) != BN_OK)
         st = bn_error_set(err, BN_ENOMEM, "out of memory for the objects of %s", path);
+    sc->cam = s->cam;
     if (st == BN_OK && bn__scene_textures(sc, s) != BN_OK)
         st = bn_error_set(err, BN_ENOMEM, "out of memory for the texture coordinates of %s", path);
     if (st != BN_OK) {
@@ -781,3 +782,15 @@ void bn_scene_patch_reflectance(const bn_scene *s, double *rho)
 }
 
 int bn_scene_textured(const bn_scene *s) { return s->mat_tex != NULL; }
+
+int bn_scene_camera(const bn_scene *s, double eye[3], double look[3], double up[3], double *fov_deg, double *aspect,
+                    const char **name)
+{
+    if (!s->cam.has)
+        return 0;
+    memcpy(eye, s->cam.eye, sizeof s->cam.eye);
+    memcpy(look, s->cam.look, sizeof s->cam.look);
+    memcpy(up, s->cam.up, sizeof s->cam.up);
+    *fov_deg = s->cam.yfov_deg, *aspect = s->cam.aspect, *name = s->cam.name;
+    return 1;
+}

@@ -26,6 +26,13 @@ bn_status bn__texture_decode(const char *name, const void *mem, size_t size, bn_
 /* Texture t at (u, v): rgb (linear). */
 void bn__texture_sample(const bn__texture *t, double u, double v, double rgb[3]);
 
+/* A camera the scene file holds (glTF: the first perspective camera of the default scene's nodes). */
+typedef struct bn__file_camera {
+    int has;
+    double eye[3], look[3], up[3], yfov_deg, aspect;   /* aspect 0: not given */
+    char name[BN_NAME_MAX];
+} bn__file_camera;
+
 /* A polygon soup as a reader produces it, before validation. */
 typedef struct bn__soup {
     double   *verts;      /* xyz */
@@ -60,6 +67,7 @@ typedef struct bn__soup {
     size_t    ntex, tex_cap;
     int      *mat_tex;
     size_t    mat_tex_cap;
+    bn__file_camera cam;   /* the file's camera (glTF), if any */
 } bn__soup;
 
 void bn__soup_free(bn__soup *s);
@@ -156,6 +164,7 @@ struct bn_scene {
     int         *mat_tex;                 /* per material: its texture, -1 none; NULL: no textures */
     double      *fuv;                     /* 2 per face index entry (NaN: none); NULL: no textures */
     double      *prho;                    /* 3 per patch: the patch's mean reflectance; NULL: none */
+    bn__file_camera cam;                  /* the file's camera, if any (bn_scene_camera) */
 };
 
 #ifdef __cplusplus
