@@ -264,12 +264,16 @@ static void bn__str_vec3(bn__str *js, const double *v)
     bn__str_add(js, "]");
 }
 
-/* asset.extras: units, exposure, what each attribute holds, each layer's power, provenance. */
-static void bn__gltf_json_extras(bn__gltf *g, const bn_bake_write_opts *o)
+/* asset.extras: whether the colours include the albedo, units, exposure, what each attribute holds, each
+ * layer's power, provenance. */
+static void bn__gltf_json_extras(bn__gltf *g, const bn_scene *scene, const bn_bake_write_opts *o)
 {
     const bn__bake_out *m = g->m;
     bn__str *js = &g->js;
-    bn__str_add(js, ",\"extras\":{\"radiance_unit\":\"W m^-2 sr^-1\",\"exposure_ev\":");
+    bn__str_add(js, ",\"extras\":{\"albedo\":\"included: the colours are the radiance leaving each vertex, the "
+                    "reflectance applied%s (multiply by no albedo texture again)\"",
+                bn_scene_textured(scene) ? ", textured materials at each patch's mean over their texture" : "");
+    bn__str_add(js, ",\"radiance_unit\":\"W m^-2 sr^-1\",\"exposure_ev\":");
     bn__str_num(js, m->exposure_ev);
     bn__str_add(js, ",\"colour_scale\":");
     bn__str_num(js, g->scale);
@@ -433,7 +437,7 @@ static bn_status bn__gltf_json(bn__gltf *g, const bn_scene *scene, const bn_bake
     snprintf(gen, sizeof gen, "bounce %s", bn_version());
     bn__str_add(&g->js, "{\"asset\":{\"version\":\"2.0\",\"generator\":");
     bn__str_json(&g->js, gen);
-    bn__gltf_json_extras(g, o);
+    bn__gltf_json_extras(g, scene, o);
     bn__str_add(&g->js, "},\"extensionsUsed\":[\"KHR_materials_unlit\"],\"scene\":0");
     bn__gltf_json_nodes(g, scene);
     bn__gltf_json_accessors(g, binname);
