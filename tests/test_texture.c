@@ -351,3 +351,36 @@ BN_TEST(texture_transform_maps_as_the_extension_says)
     free(rho);
     bn_scene_destroy(s);
 }
+
+/* An emissive texture enters as its mean (emission is uniform over a face): a checker of 255 and 0 (sRGB 1
+ * and 0) under emissiveFactor 1 and strength 10 emits 5, and says so. */
+BN_TEST(emissive_texture_enters_as_its_mean)
+{
+    quad q[2];
+    memset(q, 0, sizeof q);
+    FILE *f = fopen(bn_test_tmp("glow.ppm"), "wb");
+    BN_ASSERT(f);
+    fprintf(f, "P6\n2 2\n255\n");
+    for (int k = 0; k < 4; k++)
+        for (int c = 0; c < 3; c++)
+            fputc(k == 0 || k == 3 ? 255 : 0, f);
+    BN_ASSERT(fclose(f) == 0);
+    float fl[12] = {0, 0, 0, 0, 0, 1, 1, 0, 1, 1, 0, 0};
+    float li[12] = {0.4f, 1, 0.4f, 0.6f, 1, 0.4f, 0.6f, 1, 0.6f, 0.4f, 1, 0.6f};
+    memcpy(q[0].p, fl, sizeof fl), memcpy(q[1].p, li, sizeof li), q[1].mat = 2;
+    const char *path = quads_gltf("glow.gltf", q, 2, WHITE "," WHITE ",{\"name\":\"lamp\",\"emissiveFactor\":[1,1,1],"
+                                  "\"emissiveTexture\":{\"index\":0},\"extensions\":{\"KHR_materials_emissive_strength\":"
+                                  "{\"emissiveStrength\":10}}}", ",\"textures\":[{\"source\":0}],\"images\":[{\"uri\":\"glow.ppm\"}]");
+    bn_load_opts lo;
+    bn_scene *s = NULL;
+    bn_error err;
+    size_t nm;
+    bn_load_opts_default(&lo);
+    lo.log.quiet = 1;
+    BN_ASSERT_EQ(bn_scene_load(path, &lo, &s, &err), BN_OK);
+    const bn_material *m = bn_scene_materials(s, &nm);
+    BN_ASSERT(nm == 3 && strcmp(m[2].name, "lamp") == 0);
+    for (int c = 0; c < 3; c++)
+        BN_ASSERT_NEAR(m[2].Le[c], 5, 1e-6);
+    bn_scene_destroy(s);
+}

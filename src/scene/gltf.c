@@ -236,6 +236,35 @@ static bn_status bn__material_texture(bn__gr *r, size_t i, const bn__gltf_materi
     return BN_OK;
 }
 
+/* The mean of material i's emissiveTexture (sRGB decoded, as glTF says; 1 without one): bounce's
+ * emission is uniform over a face, so the texture enters as its mean, the face's power kept. */
+static bn_status bn__emissive_mean(bn__gr *r, size_t i, const bn__gltf_material *m, double mean[3])
+{
+    const bn__gltf *g = r->g;
+    bn__texture t;
+    char name[256];
+    mean[0] = mean[1] = mean[2] = 1;
+    if (m->emissive_tex < 0 || !(m->emissive[0] > 0 || m->emissive[1] > 0 || m->emissive[2] > 0))
+        return BN_OK;
+    int ti = m->emissive_tex, im = (size_t)ti < g->ntextures ? g->textures[ti].source : -1;
+    if ((size_t)ti >= g->ntextures || im < 0 || (size_t)im >= g->nimages || !g->images[im].bytes)
+        return bn_error_set(r->err, BN_EINPUT, "%s: /materials/%zu/emissiveTexture: texture %d has no readable image",
+                            r->path, i, ti);
+    const bn__gltf_image *I = &g->images[im];
+    snprintf(name, sizeof name, "%s (/images/%d)%s", r->path, im,
+             strstr(I->mime, "jpeg") ? ".jpg" : strstr(I->mime, "png") || !strrchr(I->uri, '.') ? ".png" : strrchr(I->uri, '.'));
+    if (bn__texture_decode(name, I->bytes, I->size, &t, r->err) != BN_OK)
+        return r->err->status;
+    mean[0] = mean[1] = mean[2] = 0;
+    for (size_t k = 0, n = (size_t)t.w * (size_t)t.h; k < n; k++)
+        for (int c = 0; c < 3; c++)
+            mean[c] += t.rgb[3 * k + c] / (double)n;
+    free(t.rgb);
+    bn_warnf(r->log, BN_W_MATERIAL, NAN, "%s: /materials/%zu/emissiveTexture: applied as its mean (%.3g %.3g %.3g): "
+             "bounce's emission is uniform over each face", r->path, i, mean[0], mean[1], mean[2]);
+    return BN_OK;
+}
+
 /* Material i's values, each checked against the schema's ranges. */
 static bn_status bn__material_check(bn__gr *r, size_t i, const bn__gltf_material *m)
 {
@@ -274,9 +303,6 @@ static void bn__material_notes(bn__gr *r, size_t i, const bn__gltf_material *m, 
     if (m->specgloss)
         bn_logf(r->log, BN_LOG_INFO, "%s: /materials/%zu ('%s'): KHR_materials_pbrSpecularGlossiness: its diffuseFactor "
                 "is the reflectance", r->path, i, name);
-    if (m->emissive_tex >= 0)
-        bn_warnf(r->log, BN_W_MATERIAL, NAN, "%s: /materials/%zu ('%s'): its emissiveTexture is not applied (bounce "
-                 "reads reflectance textures only): emissiveFactor alone is used", r->path, i, name);
     if (m->unlit)
         bn_warnf(r->log, BN_W_MATERIAL, NAN, "%s: /materials/%zu ('%s') is KHR_materials_unlit (shown at its base "
                  "colour whatever the light): bounce reflects light off it as a Lambertian surface of that colour",
@@ -318,11 +344,14 @@ static bn_status bn__materials(bn__gr *r)
         bn_status st = bn__material_check(r, i, m);
         if (st != BN_OK)
             return st;
+        double emean[3];
+        if ((st = bn__emissive_mean(r, i, m, emean)) != BN_OK)
+            return st;
         memset(&mt, 0, sizeof mt);
         bn__material_name(r->s, i, m->name, mt.name);
         for (int c = 0; c < 3; c++) {
             mt.rho[c] = m->specgloss ? m->diffuse[c] : m->base[c];
-            mt.Le[c] = m->emissive[c] * m->strength;
+            mt.Le[c] = m->emissive[c] * m->strength * emean[c];
         }
         bn__material_notes(r, i, m, mt.name);
         r->mat_of[i] = (unsigned)r->s->nmats;
