@@ -384,3 +384,22 @@ BN_TEST(emissive_texture_enters_as_its_mean)
         BN_ASSERT_NEAR(m[2].Le[c], 5, 1e-6);
     bn_scene_destroy(s);
 }
+
+/* The tracer takes the same per-patch means as K (like with like): the crosscheck of the textured box
+ * passes (it would not if either side read the texture differently: the checker's colours are 0.79 and
+ * 0.02). */
+BN_TEST(textured_box_passes_the_crosscheck)
+{
+    quad q[32], f[16];
+    char args[1024], *out = NULL;
+    write_checker("checker.ppm", 4);
+    size_t n = box_quads(q, f, floor_quads(f, 0));
+    const char *path = quads_gltf("textured.gltf", q, n, "{\"name\":\"floor\",\"pbrMetallicRoughness\":{\"baseColorTexture\":"
+                                  "{\"index\":0}}}," WHITE "," LIGHT, ",\"textures\":[{\"source\":0,\"sampler\":0}],"
+                                  "\"samplers\":[{\"magFilter\":9728}],\"images\":[{\"uri\":\"checker.ppm\"}]");
+    snprintf(args, sizeof args, "crosscheck '%s' --patch-size 0.25 --no-contacts -q", path);
+    int rc = bn_test_bounce(args, &out);
+    if (rc != 0 || !strstr(out, "verdict: pass"))
+        BN_FAIL("crosscheck exit %d: %s", rc, out ? out : "");
+    free(out);
+}
