@@ -41,9 +41,13 @@ static void bn__trace_pixel(const bn__tracer *t, const bn_rt *rt, const bn_camer
         if (bn_rt_intersect(rt, org, dir, 0, INFINITY, &h) && h.front) {
             for (int c = 0; c < 3; c++)
                 sample[c] = t->Le[3 * h.patch + c];
+            double rho0[3];
+            int at_point = o->model != BN_TRACE_PATCH && bn_scene_textured(t->scene);
             if (o->model == BN_TRACE_PATCH)
                 bn__tracer_restart(t, h.patch, &rng, h.p);   /* each patch shows its mean, as radiosity's flat images */
-            bn__tracer_path(t, h.p, h.patch, &rng, sample, rays);
+            if (at_point)   /* the texture at the point seen, as the gather's pixels; patch means beyond */
+                bn_scene_reflectance_at(t->scene, t->patches[h.patch].face, h.p, rho0);
+            bn__tracer_path(t, h.p, h.patch, at_point ? rho0 : NULL, &rng, sample, rays);
         }
         for (size_t l = 0; l + 1 < nl; l++)
             for (int c = 0; c < 3; c++)

@@ -46,7 +46,7 @@ static void bn__trace_item(const bn__tracer *t, const bn_partition *part, const 
         /* Bin 0: the patch's own emission, seen directly. */
         for (int c = 0; c < 3; c++)
             sample[c] = t->Le[3 * p + c];
-        bn__tracer_path(t, x, p, &rng, sample, rays);
+        bn__tracer_path(t, x, p, NULL, &rng, sample, rays);
         for (size_t l = 0; l + 1 < nl; l++)
             for (int c = 0; c < 3; c++)
                 L[c] += sample[3 * l + c];

@@ -241,8 +241,8 @@ void bn__tracer_restart(const bn__tracer *t, size_t p, bn__rng *rng, double x[3]
 
 static double bn__max3(const double *v) { return fmax(v[0], fmax(v[1], v[2])); }
 
-void bn__tracer_path(const bn__tracer *t, const double x0[3], size_t p0, bn__rng *rng, double *bins,
-                     unsigned long long *rays)
+void bn__tracer_path(const bn__tracer *t, const double x0[3], size_t p0, const double *rho0, bn__rng *rng,
+                     double *bins, unsigned long long *rays)
 {
     double beta[3] = {1, 1, 1}, x[3];
     size_t p = p0;
@@ -251,7 +251,7 @@ void bn__tracer_path(const bn__tracer *t, const double x0[3], size_t p0, bn__rng
     const int mis = t->o.strategy == BN_TRACE_MIS;
     memcpy(x, x0, sizeof x);
     for (int r = 1;; r++) {
-        const double *rho = t->rho + 3 * p, *n = t->patches[p].normal;
+        const double *rho = r == 1 && rho0 ? rho0 : t->rho + 3 * p, *n = t->patches[p].normal;
         double bx[3], o[3], t1[3], t2[3], w[3], u1, u2, cz, rr = bn__max3(rho);
         int bin = r <= t->o.bounces ? r : t->o.bounces + 1;
         bn_hit h;

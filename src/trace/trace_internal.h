@@ -59,8 +59,10 @@ void bn__tracer_restart(const bn__tracer *t, size_t p, bn__rng *rng, double x[3]
 /* Radiance reflected at x (on the front of patch p) towards any direction, for a Lambertian
  * surface: one path starting with the reflection at x (reflection 1), with NEE/BSDF/MIS at each
  * vertex and Russian roulette after rr_depth. Adds each contribution (already weighted) to
- * bins[3 * min(k, bounces + 1) + c], k = reflections. *rays counts rays cast. */
-void bn__tracer_path(const bn__tracer *t, const double x[3], size_t p, bn__rng *rng, double *bins,
+ * bins[3 * min(k, bounces + 1) + c], k = reflections. *rays counts rays cast. rho0: the reflectance at
+ * x (a texture's there, for camera paths), NULL for the patch's (its mean, as K has it); every later
+ * vertex takes its patch's. */
+void bn__tracer_path(const bn__tracer *t, const double x[3], size_t p, const double *rho0, bn__rng *rng, double *bins,
                      unsigned long long *rays);
 
 /* Running mean, M2 and M3 (central moment sums; Welford, Terriberry's third-moment update) of one
