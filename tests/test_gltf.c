@@ -679,3 +679,37 @@ BN_TEST(the_files_camera_is_the_default_camera)
     BN_ASSERT_EQ(cam.height, 256);
     bn_scene_destroy(s);
 }
+
+/* Malformed files as they come: a .glb cut short, JSON cut short, a count far past its buffer, a count
+ * with no buffer at all: bad input named, never a crash. */
+BN_TEST(malformed_files_are_bad_input)
+{
+    static const struct {
+        const char *name, *text, *says;
+    } cases[] = {
+        {"bad.gltf", "{\"asset\":{\"version\":\"2.0\"},", "parse error"},
+        {"huge.gltf", "{\"asset\":{\"version\":\"2.0\"},\"buffers\":[{\"byteLength\":4,\"uri\":\"data:application/"
+                      "octet-stream;base64,AAAAAA==\"}],\"bufferViews\":[{\"buffer\":0,\"byteLength\":4}],\"accessors\":"
+                      "[{\"bufferView\":0,\"componentType\":5126,\"count\":4000000000000,\"type\":\"VEC3\"}],\"meshes\":"
+                      "[{\"primitives\":[{\"attributes\":{\"POSITION\":0}}]}],\"nodes\":[{\"mesh\":0}],\"scenes\":"
+                      "[{\"nodes\":[0]}]}", "4000000000000 elements of 12 bytes at offset 0 overrun bufferView 0"},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
+        FILE *f = fopen(bn_test_tmp(cases[i].name), "w");
+        BN_ASSERT(f && fputs(cases[i].text, f) >= 0 && fclose(f) == 0);
+        char args[512], *out = NULL;
+        snprintf(args, sizeof args, "info '%s'", bn_test_tmp(cases[i].name));
+        BN_ASSERT_EQ(bn_test_bounce(args, &out), 3);
+        ASSERT_CONTAINS(out, cases[i].says);
+        free(out);
+    }
+    /* Blender's .glb cut to 3000 bytes */
+    size_t n = 0;
+    char *glb = bn_test_read_file(bn_test_path("meshes/cornell-box-blender.glb"), &n), args[512], *out = NULL;
+    FILE *f = fopen(bn_test_tmp("cut.glb"), "wb");
+    BN_ASSERT(glb && n > 3000 && f && fwrite(glb, 1, 3000, f) == 3000 && fclose(f) == 0);
+    snprintf(args, sizeof args, "info '%s'", bn_test_tmp("cut.glb"));
+    BN_ASSERT_EQ(bn_test_bounce(args, &out), 3);
+    ASSERT_CONTAINS(out, "cut short or with trailing bytes: its header says");
+    free(out), free(glb);
+}

@@ -46,15 +46,18 @@ bool keep_image(tinygltf::Image *image, const int, std::string *, std::string *,
     return true;
 }
 
-bool is_glb(const char *path)
+// 1 for a .glb (its magic), 0 for anything else; *total: its header's length, *size: the file's.
+bool is_glb(const char *path, unsigned long *total, long *size)
 {
     FILE *f = std::fopen(path, "rb");
+    unsigned char h[12] = {0};
     if (!f)
         return false;
-    char magic[4] = {0, 0, 0, 0};
-    size_t got = std::fread(magic, 1, 4, f);
+    size_t got = std::fread(h, 1, 12, f);
+    *size = std::fseek(f, 0, SEEK_END) == 0 ? std::ftell(f) : -1;
     std::fclose(f);
-    return got == 4 && std::memcmp(magic, "glTF", 4) == 0;
+    *total = (unsigned long)h[8] | (unsigned long)h[9] << 8 | (unsigned long)h[10] << 16 | (unsigned long)h[11] << 24;
+    return got >= 4 && std::memcmp(h, "glTF", 4) == 0;
 }
 
 // tinygltf fails on compressed geometry before anything else can look: name the extension, if the
@@ -285,8 +288,16 @@ extern "C" bn_status bn__gltf_parse(const char *path, bn__gltf **out, bn_error *
         tinygltf::TinyGLTF loader;
         loader.SetImageLoader(keep_image, nullptr);
         std::string error;
-        bool ok = is_glb(path) ? loader.LoadBinaryFromFile(&m->model, &error, &m->warnings, path)
-                               : loader.LoadASCIIFromFile(&m->model, &error, &m->warnings, path);
+        unsigned long total = 0;
+        long size = 0;
+        bool glb = is_glb(path, &total, &size);
+        if (glb && (long)total != size) {
+            delete m;
+            return bn_error_set(err, BN_EINPUT, "%s: a .glb cut short or with trailing bytes: its header says %lu bytes, "
+                                "the file holds %ld", path, total, size);
+        }
+        bool ok = glb ? loader.LoadBinaryFromFile(&m->model, &error, &m->warnings, path)
+                      : loader.LoadASCIIFromFile(&m->model, &error, &m->warnings, path);
         if (!ok || !error.empty()) {   // tinygltf can go on past a part it refused (a 3-value baseColorFactor)
             while (!error.empty() && (error.back() == '\n' || error.back() == ' '))
                 error.pop_back();
