@@ -93,7 +93,8 @@ static const unsigned char *bn__view_span(bn__gr *r, const char *ref, int v, siz
                      r->path, ref, count, esize, off, v, w->length);
         return NULL;
     }
-    return g->buffers[w->buffer].data + w->offset + off;
+    static const unsigned char none[1];   /* an empty buffer's data may be NULL: no arithmetic on it */
+    return g->buffers[w->buffer].data ? g->buffers[w->buffer].data + w->offset + off : none;
 }
 
 /* A sparse accessor's substitutions over its dense values (count x ncomp). */
@@ -787,7 +788,7 @@ static bn_status bn__check_file(bn__gr *r, const int **roots, size_t *nroots, ch
         size_t s = g->default_scene >= 0 ? (size_t)g->default_scene : 0;
         if (g->scenes[s].first > g->nroots || g->scenes[s].n > g->nroots - g->scenes[s].first)
             return bn_error_set(r->err, BN_EINPUT, "%s: /scenes/%zu/nodes: malformed", r->path, s);
-        *roots = g->roots + g->scenes[s].first;
+        *roots = g->scenes[s].n ? g->roots + g->scenes[s].first : NULL;   /* no arithmetic on an empty array */
         *nroots = g->scenes[s].n;
         snprintf(where, wsize, "/scenes/%zu/nodes", s);
     }
