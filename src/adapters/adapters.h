@@ -29,14 +29,15 @@ bn_status bn__oiio_write_rgb8(const char *path, int w, int h, const unsigned cha
                               size_t nlabels, const char *font, const bn_attr *attrs, size_t nattrs, int *labels_ok,
                               bn_error *err);
 
-/* Reads an image as stored (RGB floats, row 0 on top, 8- and 16-bit values scaled to [0, 1], no colour
- * conversion; *rgb malloc'd) from `path`, or from mem[0 .. size) when mem is not NULL (`path` then names
- * the format by its extension, and the image in messages); *is_float: float or half values (linear by
- * convention). Through the OpenImageIO module as bn__oiio_write_rgb8 (bn__oiio_module_read_rgbf). */
-typedef bn_status bn__oiio_read_rgbf_fn(const char *path, const void *mem, size_t size, int *w, int *h, float **rgb,
-                                        int *is_float, bn_error *err);
-bn_status bn__oiio_read_rgbf(const char *path, const void *mem, size_t size, int *w, int *h, float **rgb, int *is_float,
-                             bn_error *err);
+/* Reads an image as stored (RGB, row 0 on top, no colour conversion): an 8-bit image as bytes in *rgb8
+ * (3 per texel; *rgb NULL), any other as floats in *rgb (16-bit values scaled to [0, 1]; *rgb8 NULL),
+ * malloc'd; from `path`, or from mem[0 .. size) when mem is not NULL (`path` then names the format by its
+ * extension, and the image in messages); *is_float: float or half values (linear by convention).
+ * Through the OpenImageIO module as bn__oiio_write_rgb8 (bn__oiio_module_read_rgb). */
+typedef bn_status bn__oiio_read_rgb_fn(const char *path, const void *mem, size_t size, int *w, int *h, float **rgb,
+                                       unsigned char **rgb8, int *is_float, bn_error *err);
+bn_status bn__oiio_read_rgb(const char *path, const void *mem, size_t size, int *w, int *h, float **rgb,
+                            unsigned char **rgb8, int *is_float, bn_error *err);
 
 /* Where a reader puts the mesh it reads: vertices in order, then polygons of vertex indices; each
  * returns 0 when out of memory. (The scene module passes its soup in; the adapter calls back, so

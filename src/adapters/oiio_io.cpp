@@ -51,50 +51,80 @@ extern "C" bn_status bn__oiio_module_write_rgb8(const char *path, int w, int h, 
     }
 }
 
-// An image as stored (no colour conversion): RGB floats, row 0 on top; 8- and 16-bit values scaled to
-// [0, 1]. From `path`, or from mem[0 .. size) when mem is not NULL (`path` then only names the format
-// by its extension and the image in messages). *is_float: the file holds float or half values.
-extern "C" bn_status bn__oiio_module_read_rgbf(const char *path, const void *mem, size_t size, int *w, int *h,
-                                               float **rgb, int *is_float, bn_error *err)
+// Which channels are R, G and B: by name ("R" or "layer.R": EXR stores channels sorted), else by position
+// (grey, and grey + alpha, to RGB; alpha dropped).
+static void rgb_channels(const OIIO::ImageSpec &spec, int ch[3])
+{
+    int nc = spec.nchannels;
+    for (int c = 0; c < 3; c++) {
+        ch[c] = nc >= 3 ? c : 0;
+        for (int k = 0; nc >= 3 && k < nc; k++) {
+            const std::string &n = spec.channelnames[k];
+            if (!n.empty() && std::toupper((unsigned char)n.back()) == "RGB"[c] && (n.size() == 1 || n[n.size() - 2] == '.'))
+                ch[c] = k;
+        }
+    }
+}
+
+// The image's pixels as type T (unsigned char or float), 3 per texel, malloc'd.
+template <typename T>
+static T *read_rgb(OIIO::ImageInput &in, OIIO::TypeDesc type, const char *path, bn_error *err)
+{
+    const OIIO::ImageSpec &spec = in.spec();
+    size_t n = (size_t)spec.width * (size_t)spec.height, nc = (size_t)spec.nchannels;
+    int ch[3];
+    std::vector<T> px(n * nc);
+    if (!in.read_image(0, 0, 0, (int)nc, type, px.data())) {
+        bn_error_set(err, BN_EINPUT, "%s: cannot read the image: %s", path, in.geterror().c_str());
+        return nullptr;
+    }
+    T *out = static_cast<T *>(std::malloc(sizeof(T) * 3 * n));
+    if (!out) {
+        bn_error_set(err, BN_ENOMEM, "%s: out of memory for the image", path);
+        return nullptr;
+    }
+    rgb_channels(spec, ch);
+    for (size_t i = 0; i < n; i++)
+        for (int c = 0; c < 3; c++)
+            out[3 * i + c] = px[i * nc + (size_t)ch[c]];
+    return out;
+}
+
+// An image as stored (no colour conversion): 8-bit images as bytes, others as floats, 3 per texel, row 0 on
+// top. From `path`, or from mem[0 .. size) when mem is not NULL (`path` then only names the format by its
+// extension and the image in messages). *is_float: the file holds float or half values.
+extern "C" bn_status bn__oiio_module_read_rgb(const char *path, const void *mem, size_t size, int *w, int *h,
+                                              float **rgb, unsigned char **rgb8, int *is_float, bn_error *err)
 {
     *rgb = nullptr;
+    *rgb8 = nullptr;
     try {
         OIIO::Filesystem::IOMemReader proxy(mem, mem ? size : 0);
         auto in = OIIO::ImageInput::open(path, nullptr, mem ? &proxy : nullptr);
         if (!in)
             return bn_error_set(err, BN_EINPUT, "%s: cannot read the image: %s", path, OIIO::geterror().c_str());
         const OIIO::ImageSpec &spec = in->spec();
-        int nc = spec.nchannels;
-        if (spec.width <= 0 || spec.height <= 0 || nc <= 0 || (size_t)spec.width * spec.height > ((size_t)1 << 28))
+        if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0 ||
+            (size_t)spec.width * spec.height > ((size_t)1 << 28))
             return bn_error_set(err, BN_EINPUT, "%s: an image of %d x %d pixels and %d channels is not a texture bounce "
-                                "reads", path, spec.width, spec.height, nc);
-        std::vector<float> px((size_t)spec.width * spec.height * nc);
-        if (!in->read_image(0, 0, 0, nc, OIIO::TypeDesc::FLOAT, px.data()))
-            return bn_error_set(err, BN_EINPUT, "%s: cannot read the image: %s", path, in->geterror().c_str());
-        float *out = static_cast<float *>(std::malloc(sizeof(float) * 3 * (size_t)spec.width * spec.height));
-        if (!out)
-            return bn_error_set(err, BN_ENOMEM, "%s: out of memory for the image", path);
-        int ch[3];   // R, G, B by name ("R" or "layer.R": EXR stores channels sorted), else by position
-        for (int c = 0; c < 3; c++) {
-            ch[c] = nc >= 3 ? c : 0;   // grey (and grey + alpha) to RGB; alpha dropped
-            for (int k = 0; nc >= 3 && k < nc; k++) {
-                const std::string &n = spec.channelnames[k];
-                if (!n.empty() && std::toupper((unsigned char)n.back()) == "RGB"[c] &&
-                    (n.size() == 1 || n[n.size() - 2] == '.'))
-                    ch[c] = k;
-            }
-        }
-        for (size_t i = 0; i < (size_t)spec.width * spec.height; i++)
-            for (int c = 0; c < 3; c++)
-                out[3 * i + c] = px[i * nc + ch[c]];
+                                "reads", path, spec.width, spec.height, spec.nchannels);
+        OIIO::TypeDesc::BASETYPE b = (OIIO::TypeDesc::BASETYPE)spec.format.basetype;
+        *is_float = b == OIIO::TypeDesc::FLOAT || b == OIIO::TypeDesc::HALF || b == OIIO::TypeDesc::DOUBLE;
+        if (b == OIIO::TypeDesc::UINT8)
+            *rgb8 = read_rgb<unsigned char>(*in, OIIO::TypeDesc::UINT8, path, err);
+        else
+            *rgb = read_rgb<float>(*in, OIIO::TypeDesc::FLOAT, path, err);
+        if (!*rgb8 && !*rgb)
+            return err ? err->status : BN_EINPUT;
         *w = spec.width, *h = spec.height;
-        *is_float = spec.format.basetype == OIIO::TypeDesc::FLOAT || spec.format.basetype == OIIO::TypeDesc::HALF ||
-                    spec.format.basetype == OIIO::TypeDesc::DOUBLE;
-        *rgb = out;
         return BN_OK;
     } catch (const std::bad_alloc &) {
+        std::free(*rgb8), std::free(*rgb);
+        *rgb = nullptr, *rgb8 = nullptr;
         return bn_error_set(err, BN_ENOMEM, "%s: out of memory reading the image", path);
     } catch (const std::exception &e) {
+        std::free(*rgb8), std::free(*rgb);
+        *rgb = nullptr, *rgb8 = nullptr;
         return bn_error_set(err, BN_EINPUT, "%s: cannot read the image: %s", path, e.what());
     }
 }

@@ -13,7 +13,7 @@
 
 static pthread_once_t bn__oiio_once = PTHREAD_ONCE_INIT;
 static bn__oiio_write_rgb8_fn *bn__oiio_fn;
-static bn__oiio_read_rgbf_fn *bn__oiio_read_fn;
+static bn__oiio_read_rgb_fn *bn__oiio_read_fn;
 static char bn__oiio_why[3800];
 
 static void bn__oiio_open(void)
@@ -37,7 +37,7 @@ static void bn__oiio_open(void)
             return;
     }
     *(void **)&bn__oiio_fn = dlsym(h, "bn__oiio_module_write_rgb8");
-    *(void **)&bn__oiio_read_fn = dlsym(h, "bn__oiio_module_read_rgbf");
+    *(void **)&bn__oiio_read_fn = dlsym(h, "bn__oiio_module_read_rgb");
     if (!bn__oiio_fn || !bn__oiio_read_fn)
         snprintf(bn__oiio_why, sizeof bn__oiio_why, "%.3000s lacks bounce's entry points (an older module?)", path);
 }
@@ -52,12 +52,13 @@ bn_status bn__oiio_write_rgb8(const char *path, int w, int h, const unsigned cha
     return bn__oiio_fn(path, w, h, rgb, labels, nlabels, font, attrs, nattrs, labels_ok, err);
 }
 
-bn_status bn__oiio_read_rgbf(const char *path, const void *mem, size_t size, int *w, int *h, float **rgb, int *is_float,
-                             bn_error *err)
+bn_status bn__oiio_read_rgb(const char *path, const void *mem, size_t size, int *w, int *h, float **rgb,
+                            unsigned char **rgb8, int *is_float, bn_error *err)
 {
     pthread_once(&bn__oiio_once, bn__oiio_open);
     *rgb = NULL;
+    *rgb8 = NULL;
     if (!bn__oiio_read_fn)
         return bn_error_set(err, BN_EIO, "%s: %s", path, bn__oiio_why);
-    return bn__oiio_read_fn(path, mem, size, w, h, rgb, is_float, err);
+    return bn__oiio_read_fn(path, mem, size, w, h, rgb, rgb8, is_float, err);
 }

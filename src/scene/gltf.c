@@ -211,6 +211,7 @@ static int bn__decode_texture(bn__gr *r, int ti, size_t mat)
              strncmp(I->uri, "data:", 5) ? I->uri : "");
     if ((r->tex_of[ti] = bn__soup_add_texture(r->s, &t)) < 0) {
         free(t.rgb);
+        free(t.rgb8);
         bn_error_set(r->err, BN_ENOMEM, "out of memory");
     }
     return r->tex_of[ti];
@@ -259,8 +260,9 @@ static bn_status bn__emissive_mean(bn__gr *r, size_t i, const bn__gltf_material 
     mean[0] = mean[1] = mean[2] = 0;
     for (size_t k = 0, n = (size_t)t.w * (size_t)t.h; k < n; k++)
         for (int c = 0; c < 3; c++)
-            mean[c] += t.rgb[3 * k + c] / (double)n;
+            mean[c] += bn__texel(&t, 3 * k + c) / (double)n;
     free(t.rgb);
+    free(t.rgb8);
     bn_warnf(r->log, BN_W_MATERIAL, NAN, "%s: /materials/%zu/emissiveTexture: applied as its mean (%.3g %.3g %.3g): "
              "bounce's emission is uniform over each face", r->path, i, mean[0], mean[1], mean[2]);
     return BN_OK;

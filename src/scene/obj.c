@@ -202,6 +202,7 @@ static bn_status bn__mtl_map(const char *path, unsigned line, char *c, bn__soup 
     tx.wrap[0] = tx.wrap[1] = clamp ? BN__WRAP_CLAMP : BN__WRAP_REPEAT;
     if ((tex = bn__soup_add_texture(s, &tx)) < 0 || !bn__soup_set_material_texture(s, (unsigned)cur, tex)) {
         free(tx.rgb);
+        free(tx.rgb8);
         return bn_error_set(err, BN_ENOMEM, "out of memory for %s", file);
     }
     return BN_OK;

@@ -14,10 +14,14 @@ extern "C" {
 enum { BN__WRAP_REPEAT, BN__WRAP_CLAMP, BN__WRAP_MIRROR };
 typedef struct bn__texture {
     int w, h;
-    float *rgb;            /* w * h * 3, owned */
+    float *rgb;            /* w * h * 3 linear values, owned; or, for an 8-bit image (a quarter of the memory): */
+    unsigned char *rgb8;   /* w * h * 3 bytes as stored, owned, their linear values lut[byte] */
+    float lut[256];
     int wrap[2], nearest;
     char name[BN_NAME_MAX];
 } bn__texture;
+/* Texel component k (3 per texel) of t, linear. */
+static inline double bn__texel(const bn__texture *t, size_t k) { return t->rgb8 ? t->lut[t->rgb8[k]] : t->rgb[k]; }
 void bn__texture_free(bn__texture *t, size_t n);   /* the texels of t[0 .. n), and t */
 /* An image file (mem NULL), or encoded bytes mem[0 .. size) whose format `name`'s extension says, as a
  * reflectance texture (repeat, bilinear): 8- and 16-bit images are sRGB (decoded to linear, as glTF and

@@ -160,6 +160,7 @@ int bn__soup_add_texture(bn__soup *s, bn__texture *t)
         return -1;
     s->tex[s->ntex] = *t;
     t->rgb = NULL;
+    t->rgb8 = NULL;
     return (int)s->ntex++;
 }
 

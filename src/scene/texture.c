@@ -24,12 +24,16 @@ bn_status bn__texture_decode(const char *name, const void *mem, size_t size, bn_
 {
     int is_float = 0;
     bn_status st;
+    size_t n;
     memset(t, 0, sizeof *t);
-    if ((st = bn__oiio_read_rgbf(name, mem, size, &t->w, &t->h, &t->rgb, &is_float, err)) != BN_OK)
+    if ((st = bn__oiio_read_rgb(name, mem, size, &t->w, &t->h, &t->rgb, &t->rgb8, &is_float, err)) != BN_OK)
         return st;
-    for (size_t k = 0; !is_float && k < 3 * (size_t)t->w * (size_t)t->h; k++)
+    n = 3 * (size_t)t->w * (size_t)t->h;
+    for (int b = 0; b < 256; b++)   /* 8-bit images are sRGB: bytes stay bytes, decoded through the table */
+        t->lut[b] = (float)bn__srgb_to_linear(b / 255.0);
+    for (size_t k = 0; t->rgb && !is_float && k < n; k++)
         t->rgb[k] = (float)bn__srgb_to_linear(t->rgb[k]);
-    for (size_t k = 0; k < 3 * (size_t)t->w * (size_t)t->h; k++)
+    for (size_t k = 0; t->rgb && k < n; k++)
         if (!(t->rgb[k] >= 0 && t->rgb[k] <= 1)) {
             bn_error_set(err, BN_EINPUT, "%s: texel %zu, %zu holds %g: a reflectance texture's values lie in [0, 1]", name,
                          k / 3 % (size_t)t->w, k / 3 / (size_t)t->w, t->rgb[k]);
@@ -43,8 +47,10 @@ bn_status bn__texture_decode(const char *name, const void *mem, size_t size, bn_
 
 void bn__texture_free(bn__texture *t, size_t n)
 {
-    for (size_t i = 0; t && i < n; i++)
+    for (size_t i = 0; t && i < n; i++) {
         free(t[i].rgb);
+        free(t[i].rgb8);
+    }
     free(t);
 }
 
@@ -65,9 +71,9 @@ void bn__texture_sample(const bn__texture *t, double u, double v, double rgb[3])
     if (!isfinite(x) || !isfinite(y) || fabs(x) > 1e9 || fabs(y) > 1e9)
         x = y = 0;
     if (t->nearest) {
-        const float *p = t->rgb + 3 * ((size_t)bn__wrap((int)floor(y), t->h, t->wrap[1]) * (size_t)t->w +
-                                       (size_t)bn__wrap((int)floor(x), t->w, t->wrap[0]));
-        rgb[0] = p[0], rgb[1] = p[1], rgb[2] = p[2];
+        size_t k = 3 * ((size_t)bn__wrap((int)floor(y), t->h, t->wrap[1]) * (size_t)t->w +
+                        (size_t)bn__wrap((int)floor(x), t->w, t->wrap[0]));
+        rgb[0] = bn__texel(t, k), rgb[1] = bn__texel(t, k + 1), rgb[2] = bn__texel(t, k + 2);
         return;
     }
     x -= 0.5, y -= 0.5;   /* texel centres at half-integers, as GPUs and glTF sample */
@@ -76,8 +82,8 @@ void bn__texture_sample(const bn__texture *t, double u, double v, double rgb[3])
     int i[2] = {bn__wrap(i0, t->w, t->wrap[0]), bn__wrap(i0 + 1, t->w, t->wrap[0])};
     int j[2] = {bn__wrap(j0, t->h, t->wrap[1]), bn__wrap(j0 + 1, t->h, t->wrap[1])};
     for (int c = 0; c < 3; c++) {
-        double a = t->rgb[3 * ((size_t)j[0] * t->w + i[0]) + c], b = t->rgb[3 * ((size_t)j[0] * t->w + i[1]) + c],
-               d = t->rgb[3 * ((size_t)j[1] * t->w + i[0]) + c], e = t->rgb[3 * ((size_t)j[1] * t->w + i[1]) + c];
+        double a = bn__texel(t, 3 * ((size_t)j[0] * t->w + i[0]) + c), b = bn__texel(t, 3 * ((size_t)j[0] * t->w + i[1]) + c),
+               d = bn__texel(t, 3 * ((size_t)j[1] * t->w + i[0]) + c), e = bn__texel(t, 3 * ((size_t)j[1] * t->w + i[1]) + c);
         rgb[c] = (1 - fy) * ((1 - fx) * a + fx * b) + fy * ((1 - fx) * d + fx * e);
     }
 }
@@ -233,6 +239,6 @@ int bn_scene_material_texture(const bn_scene *s, size_t m, const char **name, in
     mean[0] = mean[1] = mean[2] = 0;
     for (size_t k = 0; k < n; k++)
         for (int c = 0; c < 3; c++)
-            mean[c] += x->rgb[3 * k + c] / (double)n;
+            mean[c] += bn__texel(x, 3 * k + c) / (double)n;
     return 1;
 }
