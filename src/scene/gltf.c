@@ -366,6 +366,10 @@ static bn_status bn__materials(bn__gr *r)
     size_t two = 0;
     for (size_t i = 0; i < g->nmaterials; i++)
         two += g->materials[i].double_sided != 0;
+    if (g->nmaterials > 1 && two == g->nmaterials)
+        bn_warnf(r->log, BN_W_MATERIAL, (double)two, "%s: every material is doubleSided (as Blender writes them by "
+                 "default): every face gets a back side, twice the patches; where the surfaces are one-sided (closed "
+                 "objects, walls), two-sided \"none\" halves the work", r->path);
     if (g->nmaterials > 0)
         bn_logf(r->log, BN_LOG_INFO, "%s: %zu materials: baseColorFactor as the diffuse reflectance (metallic and "
                 "roughness are not part of a Lambertian model: ignored), emissiveFactor x emissiveStrength as the "
