@@ -111,7 +111,8 @@ static void assert_object(const bn_scene *s, const char *name, double area, cons
     }
 }
 
-/* Nodes place one square five ways; each object's area, facing and vertex centroid worked out by hand. */
+/* Nodes place one square six ways (two nodes named alike: two objects); each object's area, facing and
+ * vertex centroid worked out by hand. */
 BN_TEST(node_transforms_place_and_mirror_the_mesh)
 {
     const char *json =
@@ -122,16 +123,17 @@ BN_TEST(node_transforms_place_and_mirror_the_mesh)
         "{\"name\":\"m\",\"mesh\":0,\"scale\":[-1,1,1]},"
         "{\"name\":\"M\",\"mesh\":0,\"matrix\":[2,0,0,0, 0,2,0,0, 0,0,2,0, 10,0,0,1]},"
         "{\"name\":\"parent\",\"translation\":[0,0,1],\"scale\":[1,1,3],\"children\":[5]},"
-        "{\"name\":\"child\",\"mesh\":0,\"translation\":[0,0,1]}],"
-        "\"scenes\":[{\"nodes\":[0,1,2,3,4]}],\"scene\":0}";
+        "{\"name\":\"child\",\"mesh\":0,\"translation\":[0,0,1]},{\"name\":\"t\",\"mesh\":0,\"translation\":[0,0,7]}],"
+        "\"scenes\":[{\"nodes\":[0,1,2,3,4,6]}],\"scene\":0}";
     counted_log c;
     memset(&c, 0, sizeof c);
     bn_scene *s = load(bn_test_write_gltf("nodes.gltf", json, &square, sizeof square), &c);
     size_t nf;
     bn_scene_faces(s, &nf);
-    BN_ASSERT_EQ(nf, 5);   /* each square's two triangles are one quad again */
-    BN_ASSERT_EQ(bn_scene_object_count(s), 5);
+    BN_ASSERT_EQ(nf, 6);   /* each square's two triangles are one quad again */
+    BN_ASSERT_EQ(bn_scene_object_count(s), 6);
     assert_object(s, "t", 1, (double[]){0, 0, 1}, (double[]){0.5, 0.5, 5});
+    assert_object(s, "t#6", 1, (double[]){0, 0, 1}, (double[]){0.5, 0.5, 7});   /* a second node named t */
     /* 90 degrees about x: y goes to z, +z to -y */
     assert_object(s, "r", 1, (double[]){0, -1, 0}, (double[]){0.5, 0, 0.5});
     /* a mirror keeps the front where the geometry's front went: +z, wound the other way */

@@ -683,7 +683,9 @@ static void bn__node_camera(bn__gr *r, size_t i, const double W[16])
     c->has = 1;
 }
 
-/* Node i's mesh, if any, under world transform W: its primitives into the soup, as one object. */
+/* Node i's mesh, if any, under world transform W: its primitives into the soup, as one object named as the
+ * node (else its mesh; a name an earlier node took gets "#i": every node its own object, so two chairs
+ * of one mesh are two objects, their contacts cut and their bakes two nodes). */
 static bn_status bn__node_mesh(bn__gr *r, size_t i, const double W[16])
 {
     const bn__gltf_node *n = &r->g->nodes[i];
@@ -701,6 +703,13 @@ static bn_status bn__node_mesh(bn__gr *r, size_t i, const double W[16])
         snprintf(name, sizeof name, "%s", r->g->meshes[n->mesh].name);
     else
         snprintf(name, sizeof name, "node%zu", i);
+    for (size_t k = 0; k < r->s->nobjs; k++)   /* a name an earlier node took: this node's own object */
+        if (strcmp(r->s->objnames[k], name) == 0) {
+            char base[BN_NAME_MAX];
+            memcpy(base, name, sizeof base);
+            snprintf(name, sizeof name, "%.40s#%zu", base, i);
+            break;
+        }
     if (!bn__soup_use_object(r->s, name))
         return bn_error_set(r->err, BN_ENOMEM, "out of memory");
     for (size_t k = 0; st == BN_OK && k < r->g->meshes[n->mesh].n; k++)
