@@ -549,6 +549,12 @@ BN_TEST(blender_export_reads_as_the_obj)
     bn_scene_faces(one, &nf1);
     bn_scene_faces(two, &nf2);
     BN_ASSERT_EQ(nf2, 2 * nf1);
+    /* none,NAMES: the file's marks dropped, only the light two-sided (its one face gets a back side) */
+    bn_scene *lit = load_with(bn_test_path("meshes/cornell-box-blender.glb"), BN_UNIT_M, "none,light");
+    size_t nfl;
+    bn_scene_faces(lit, &nfl);
+    BN_ASSERT_EQ(nfl, nf1 + 1);
+    bn_scene_destroy(lit);
     bn_scene_emitted_power(one, p1);
     bn_scene_emitted_power(two, p2);
     BN_ASSERT_REL(p2[0], 2 * p1[0], 1e-12);

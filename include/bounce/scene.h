@@ -66,7 +66,8 @@ typedef struct bn_load_opts {
     bn_orient orient;        /* default BN_ORIENT_NORMALS */
     /* Materials whose faces reflect and emit on both sides, each side a surface of its own with its
      * own radiance: "all", or material names separated by commas, besides those the file marks (glTF
-     * doubleSided); NULL or "": the file's marks only; "none": every surface one-sided. */
+     * doubleSided); NULL or "": the file's marks only; "none": every surface one-sided; "none,NAMES":
+     * these materials only, the file's marks dropped. */
     const char *two_sided;
     double  planar_tol;      /* non-planarity allowed, relative to the face's diameter (default 1e-6) */
     bn_log  log;             /* warnings: dropped faces, triangulated faces, no emitter */

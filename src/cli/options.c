@@ -304,7 +304,7 @@ void bn_cli_add_scene(bn_optset *s, bn_cli_scene *o)
     bn_optset_add(s, (bn_opt){"contact-gap", 0, BN_OPT_DOUBLE, &o->contact_gap, NULL, 0, 1e300, "G",
                               "distance from a face's plane that still counts as touching it, scene units (default 1e-6 of the scene's diameter)"});
     bn_optset_add(s, (bn_opt){"two-sided", 0, BN_OPT_STRING, &o->two_sided, NULL, 0, 0, "MATERIALS|all|none",
-                              "materials (names separated by commas, or all) whose faces reflect and emit on both sides, each side with its own radiance, besides those the file marks (glTF doubleSided); none: every surface one-sided, the file's marks too (default: only the file's; OBJ, PLY and OFF have none)"});
+                              "materials (names separated by commas, or all) whose faces reflect and emit on both sides, each side with its own radiance, besides those the file marks (glTF doubleSided); none: every surface one-sided, the file's marks too; none,NAMES: only these (default: only the file's; OBJ, PLY and OFF have none)"});
     bn_optset_add(s, (bn_opt){"orient", 0, BN_OPT_CHOICE, &o->orient, "normals|winding", 0, 0, "normals|winding",
                               "which side of a face is its front where the file gives vertex normals (OBJ vn): the side they point to, faces wound against them turned (default), or the winding's (right-hand rule)"});
     bn_optset_add(s, (bn_opt){"planar-tol", 0, BN_OPT_DOUBLE, &o->planar_tol, NULL, 0, 1, "T",

@@ -57,8 +57,12 @@ bn_status bn__scene_two_sided(bn_scene *sc, const char *path, const unsigned cha
     unsigned char *two;
     size_t nf = sc->nfaces, faces_cap = sc->nfaces, fidx_cap = sc->nfidx;
     bn_status st = BN_OK;
-    if (((!spec || !spec[0]) && !file_two) || (spec && strcmp(spec, "none") == 0))
-        return BN_OK;   /* "none": one-sided everywhere, whatever the file says */
+    if (spec && strncmp(spec, "none", 4) == 0 && (spec[4] == '\0' || spec[4] == ',')) {
+        file_two = NULL;   /* "none": the file's marks dropped; "none,NAMES": only these */
+        spec += spec[4] ? 5 : 4;
+    }
+    if ((!spec || !spec[0]) && !file_two)
+        return BN_OK;
     if (!(two = bn__calloc(sc->nmats + 1, 1)))
         return bn_error_set(err, BN_ENOMEM, "out of memory");
     if (file_two)
