@@ -154,6 +154,24 @@ bn_scene_stats     bn_scene_stats_get(const bn_scene *s);
  * 0 when the file has none. */
 int bn_scene_camera(const bn_scene *s, double eye[3], double look[3], double up[3], double *fov_deg, double *aspect,
                     const char **name);
+/* The node tree of the scene file (glTF: the default scene's nodes, in the file's order), kept so a bake
+ * can be written back under it. Each node: its name and its mesh's ("" when the file gives none), the
+ * scene object its mesh's faces became (bn_scene_object_name; NULL: no mesh, or no triangles), its local
+ * transform as the file gives it (nmatrix 16 values, or nt, nr, ns of translation, rotation, scale: 0 when
+ * absent), its world transform (column-major, in the file's units), its perspective camera if it has one
+ * (camera 1: vertical field of view in radians, aspect 0 when none, znear, zfar 0 when infinite), and its
+ * children (indices into the tree). */
+typedef struct bn_scene_node {
+    const char *name, *mesh_name, *object, *camera_name;
+    unsigned nmatrix, nt, nr, ns;
+    double matrix[16], t[3], r[4], s[3], world[16];
+    int camera;
+    double yfov, aspect, znear, zfar;
+    size_t nchildren;
+    const size_t *children;
+} bn_scene_node;
+/* The tree's nodes and roots; NULL and 0 for a file without one (OBJ, PLY, OFF). */
+const bn_scene_node *bn_scene_nodes(const bn_scene *s, size_t *n, const size_t **roots, size_t *nroots);
 /* Axis-aligned bounding box of the faces, scene units. */
 void               bn_scene_bounds(const bn_scene *s, double lo[3], double hi[3]);
 /* A digest of geometry, materials and patches (FNV-1a 64), for cache keys. */

@@ -113,8 +113,13 @@ typedef struct bn__gltf_node {
     double matrix[16], t[3], r[4], s[3];
 } bn__gltf_node;
 typedef struct bn__gltf_scene { size_t first, n; } bn__gltf_scene;       /* roots[first..] */
-/* A camera: perspective (1) or not, its vertical field of view (radians) and aspect ratio (0: none). */
-typedef struct bn__gltf_camera { const char *name; int perspective; double yfov, aspect; } bn__gltf_camera;
+/* A camera: perspective (1) or not, its vertical field of view (radians), aspect ratio (0: none) and
+ * near and far planes (zfar 0: infinite). */
+typedef struct bn__gltf_camera {
+    const char *name;
+    int perspective;
+    double yfov, aspect, znear, zfar;
+} bn__gltf_camera;
 typedef struct bn__gltf {
     size_t nbuffers, nviews, naccessors, nprims, nmeshes, nmaterials, nnodes, nscenes, nlights, ntextures;
     size_t nchildren, nroots, nrequired, nimages, ncameras;

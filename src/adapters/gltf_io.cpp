@@ -250,7 +250,8 @@ void mirror_scene(Impl &m)
     for (const auto &r : m.model.extensionsRequired)
         m.required.push_back(r.c_str());
     for (const auto &c : m.model.cameras)
-        m.cameras.push_back({c.name.c_str(), c.type == "perspective", c.perspective.yfov, c.perspective.aspectRatio});
+        m.cameras.push_back({c.name.c_str(), c.type == "perspective", c.perspective.yfov, c.perspective.aspectRatio,
+                             c.perspective.znear, c.perspective.zfar});
 }
 
 void publish(Impl &m)

@@ -106,6 +106,7 @@ static size_t bn__blob_add(bn__blob *b, const void *src, size_t n)
 typedef struct bn__view {
     size_t offset, length;
     int target;   /* 34962 ARRAY_BUFFER, 34963 ELEMENT_ARRAY_BUFFER */
+    int stride;   /* vertex views: bytes per vertex (glTF wants it when accessors share the view); 0 none */
 } bn__view;
 
 /* The attribute of a layer: _NAME, upper case (glTF's application-specific attributes). */
@@ -140,38 +141,181 @@ static void bn__le32_put(unsigned char *b, uint32_t w)
     b[3] = (unsigned char)(w >> 24 & 0xFFu);
 }
 
-/* The writer's state: the mesh, its triangles grouped by material, the binary buffer and its views,
- * the JSON. */
+/* The writer's state: the mesh, its triangles grouped by mesh and material, the vertices each mesh
+ * uses, the binary buffer and its views, the JSON. Two layouts: flat (a mesh per object, every mesh on
+ * one shared set of world-space vertices, the nodes untransformed) and, for a scene read from a glTF
+ * file, the input's node tree (each node with a mesh gets the bake of its faces, on vertices of its own
+ * in the node's local frame, so its transform, kept as the file gave it, puts them back). */
 typedef struct bn__gltf {
     const bn__bake_out *m;
     const bn_material *mat;
     size_t nmat;
-    double unit, scale;        /* metres per scene unit; COLOR_0's 2^exposure_ev */
-    float lo[3], hi[3];        /* the positions' bounds (metres) */
-    uint32_t *idx;             /* 3 per triangle, group by group */
-    size_t nobj, ngroups;      /* objects (a node and mesh each), and groups: object x material */
-    size_t *mat_tris, *mat_first;   /* per group (object o, material k: o nmat + k) */
+    double unit, scale;            /* metres per scene unit; COLOR_0's 2^exposure_ev */
+    const bn_scene_node *tree;     /* the input's nodes (NULL: flat) */
+    size_t ntree, nroots;
+    const size_t *roots;
+    size_t nmesh;                  /* objects (flat) or tree nodes: a mesh each when it has triangles */
+    size_t *obj_mesh;              /* per object: its mesh */
+    double (*inv)[16];             /* tree: per node, its world transform's inverse */
+    unsigned char *flip;           /* tree: per node, 1 when it mirrors (the winding written reversed) */
+    size_t nslice;                 /* vertex slices: 1 (flat), else one per mesh */
+    size_t *slice_v, *slice_nv;    /* per slice: its first output vertex, and count */
+    size_t *vsrc;                  /* per output vertex: the bake's vertex it copies */
+    size_t nvout;
+    const char *flat_why;          /* flat: why the input's tree is not kept (NULL: it is) */
+    float (*lo)[3], (*hi)[3];      /* per slice: its positions' bounds */
+    uint32_t *idx;                 /* 3 per triangle, group by group, in its slice's numbering */
+    size_t ngroups;                /* mesh x material */
+    size_t *mat_tris, *mat_first;  /* per group (mesh s, material k: s nmat + k) */
     bn__view *views;
     size_t nviews;
     bn__blob blob;
     bn__str js;
 } bn__gltf;
 
-/* Face f's group: its object's and material's. */
+/* Face f's group: its mesh's and material's. */
 static size_t bn__group(const bn__gltf *g, size_t f)
 {
-    size_t o = g->nobj > 1 ? g->m->face_object[f] : 0;
-    return o * g->nmat + g->m->face_material[f];
+    size_t o = g->m->face_object && g->m->nobjects > 1 ? g->m->face_object[f] : 0;
+    return g->obj_mesh[o] * g->nmat + g->m->face_material[f];
 }
 
-/* Triangles grouped by object and material, one primitive each, all sharing the vertex attributes: a fan
- * from each face's first corner (faces are convex). */
+static size_t bn__slice_of(const bn__gltf *g, size_t mesh) { return g->nslice == 1 ? 0 : mesh; }
+
+static double bn__det3(const double A[16])
+{
+    return A[0] * (A[5] * A[10] - A[9] * A[6]) - A[4] * (A[1] * A[10] - A[9] * A[2]) + A[8] * (A[1] * A[6] - A[5] * A[2]);
+}
+
+/* The inverse of affine A (column-major) into B; 0 when A is singular. */
+static int bn__affine_inverse(const double A[16], double B[16])
+{
+    double d = bn__det3(A);
+    double s = fabs(A[0]) + fabs(A[5]) + fabs(A[10]) + fabs(A[1]) + fabs(A[2]) + fabs(A[4]) + fabs(A[6]) +
+               fabs(A[8]) + fabs(A[9]);
+    if (!(fabs(d) > 1e-12 * s * s * s) || !isfinite(d))
+        return 0;
+    B[0] = (A[5] * A[10] - A[6] * A[9]) / d, B[4] = (A[8] * A[6] - A[4] * A[10]) / d, B[8] = (A[4] * A[9] - A[8] * A[5]) / d;
+    B[1] = (A[9] * A[2] - A[1] * A[10]) / d, B[5] = (A[0] * A[10] - A[8] * A[2]) / d, B[9] = (A[8] * A[1] - A[0] * A[9]) / d;
+    B[2] = (A[1] * A[6] - A[5] * A[2]) / d, B[6] = (A[4] * A[2] - A[0] * A[6]) / d, B[10] = (A[0] * A[5] - A[4] * A[1]) / d;
+    B[3] = B[7] = B[11] = 0, B[15] = 1;
+    for (int r = 0; r < 3; r++)
+        B[12 + r] = -(B[r] * A[12] + B[4 + r] * A[13] + B[8 + r] * A[14]);
+    return 1;
+}
+
+/* The tree node of object o: the node whose mesh became it (by name), or the one node with a mesh when
+ * the objects came from elsewhere (material prefixes); SIZE_MAX: none. */
+static size_t bn__object_node(const bn__gltf *g, size_t o)
+{
+    size_t only = SIZE_MAX, with = 0;
+    for (size_t k = 0; k < g->ntree; k++) {
+        const char *ob = g->tree[k].object;
+        if (ob && g->m->object_names && g->m->nobjects > 1 && strcmp(ob, g->m->object_names[o]) == 0)
+            return k;
+        if (ob)
+            only = k, with++;
+    }
+    return with == 1 ? only : SIZE_MAX;
+}
+
+/* Which layout, and each object's mesh: the input's tree when every object with faces has a node of its
+ * own with an invertible transform, else flat (its reason in *why). */
+static bn_status bn__gltf_layout(bn__gltf *g, const bn_scene *scene, const char **why)
+{
+    size_t nobj = g->m->face_object && g->m->nobjects > 1 ? g->m->nobjects : 1;
+    g->tree = bn_scene_nodes(scene, &g->ntree, &g->roots, &g->nroots);
+    g->obj_mesh = bn__calloc(nobj, sizeof *g->obj_mesh);
+    if (!g->obj_mesh)
+        return BN_ENOMEM;
+    *why = g->tree ? NULL : "flat: the scene file has no node tree (world-space vertices, untransformed nodes)";
+    if (g->tree && (!(g->inv = bn__calloc(g->ntree, sizeof *g->inv)) || !(g->flip = bn__calloc(g->ntree, 1))))
+        return BN_ENOMEM;
+    for (size_t k = 0; g->tree && !*why && k < g->ntree; k++) {
+        int ok = bn__affine_inverse(g->tree[k].world, g->inv[k]);
+        g->flip[k] = ok && bn__det3(g->tree[k].world) < 0;
+        if (g->tree[k].object && !ok)
+            *why = "flat: a node with a mesh has a singular transform (world-space vertices, untransformed nodes)";
+    }
+    for (size_t o = 0; g->tree && !*why && o < nobj; o++)
+        if ((g->obj_mesh[o] = bn__object_node(g, o)) == SIZE_MAX)
+            *why = "flat: an object is no node's (world-space vertices, untransformed nodes)";
+    if (*why) {
+        g->tree = NULL;
+        for (size_t o = 0; o < nobj; o++)
+            g->obj_mesh[o] = o;
+    }
+    g->nmesh = g->tree ? g->ntree : nobj;
+    g->nslice = g->tree ? g->nmesh : 1;
+    return BN_OK;
+}
+
+/* The triangles, grouped by mesh and material, each slice's vertices numbered as its faces first use
+ * them (flat: the one slice is every vertex in order). */
+static bn_status bn__gltf_number(bn__gltf *g, size_t *stamp, size_t *loc, size_t *fill)
+{
+    const bn__bake_out *m = g->m;
+    for (size_t f = 0; f < m->nf; f++) {
+        size_t grp = bn__group(g, f), sl = bn__slice_of(g, grp / g->nmat);
+        const size_t *c = m->face_idx + 4 * f;
+        for (unsigned q = 0; q < m->face_n[f]; q++) {
+            size_t v = c[q];
+            if (g->nslice == 1)
+                loc[v] = v;
+            else if (stamp[v] != sl + 1) {
+                stamp[v] = sl + 1;
+                loc[v] = g->slice_nv[sl]++;
+            }
+        }
+        int flip = g->tree && g->flip[grp / g->nmat];
+        size_t *w = &fill[grp];
+        for (unsigned t = 0; t + 2 < m->face_n[f]; t++) {
+            g->idx[(*w)++] = (uint32_t)loc[c[0]];
+            g->idx[(*w)++] = (uint32_t)loc[c[flip ? t + 2 : t + 1]];
+            g->idx[(*w)++] = (uint32_t)loc[c[flip ? t + 1 : t + 2]];
+        }
+    }
+    return BN_OK;
+}
+
+/* Each slice's vertices: where it starts, and the bake's vertex each output vertex copies. */
+static bn_status bn__gltf_slices(bn__gltf *g, size_t *stamp)
+{
+    const bn__bake_out *m = g->m;
+    if (g->nslice == 1) {
+        g->slice_nv[0] = m->nv;
+        for (size_t v = 0; v < m->nv; v++)
+            g->vsrc[v] = v;
+        g->nvout = m->nv;
+        return BN_OK;
+    }
+    for (size_t s = 0, acc = 0; s < g->nslice; s++) {
+        g->slice_v[s] = acc;
+        acc += g->slice_nv[s];
+        g->nvout = acc;
+        g->slice_nv[s] = 0;   /* counted again as they are placed */
+    }
+    for (size_t v = 0; v < m->nv; v++)
+        stamp[v] = 0;
+    for (size_t f = 0; f < m->nf; f++) {   /* the same first-use order as bn__gltf_number */
+        size_t sl = bn__group(g, f) / g->nmat, *c = (size_t *)m->face_idx + 4 * f;
+        for (unsigned q = 0; q < m->face_n[f]; q++)
+            if (stamp[c[q]] != sl + 1) {
+                stamp[c[q]] = sl + 1;
+                g->vsrc[g->slice_v[sl] + g->slice_nv[sl]++] = c[q];
+            }
+    }
+    return BN_OK;
+}
+
+/* Triangles grouped by mesh and material, one primitive each (a fan from each face's first corner:
+ * faces are convex), and the vertices each slice holds. */
 static bn_status bn__gltf_triangles(bn__gltf *g, const char *path, bn_error *err)
 {
     const bn__bake_out *m = g->m;
-    size_t ntri = 0, *fill;
+    size_t ntri = 0, *fill, *stamp, *loc, nobj = m->face_object && m->nobjects > 1 ? m->nobjects : 1;
     for (size_t f = 0; f < m->nf; f++) {
-        if (m->face_material[f] >= g->nmat || (g->nobj > 1 && m->face_object[f] >= g->nobj))
+        if (m->face_material[f] >= g->nmat || (nobj > 1 && m->face_object[f] >= nobj))
             return bn_error_set(err, BN_EINTERNAL, "%s: face %zu has material %u of %zu", path, f, m->face_material[f],
                                 g->nmat);
         g->mat_tris[bn__group(g, f)] += m->face_n[f] - 2;
@@ -179,66 +323,84 @@ static bn_status bn__gltf_triangles(bn__gltf *g, const char *path, bn_error *err
     }
     g->idx = bn__malloc_array(3 * ntri + 1, sizeof(uint32_t));
     fill = bn__malloc_array(g->ngroups + 1, sizeof(size_t));
-    if (!g->idx || !fill) {
-        free(fill);
-        return BN_ENOMEM;
-    }
-    for (size_t k = 0, acc = 0; k < g->ngroups; k++) {
+    stamp = bn__calloc(m->nv + 1, sizeof(size_t));
+    loc = bn__malloc_array(m->nv + 1, sizeof(size_t));
+    g->vsrc = bn__malloc_array(g->nslice == 1 ? m->nv + 1 : 4 * m->nf + 1, sizeof(size_t));
+    bn_status st = g->idx && fill && stamp && loc && g->vsrc ? BN_OK : BN_ENOMEM;
+    for (size_t k = 0, acc = 0; st == BN_OK && k < g->ngroups; k++) {
         g->mat_first[k] = fill[k] = acc;
         acc += 3 * g->mat_tris[k];
     }
-    for (size_t f = 0; f < m->nf; f++) {
-        const size_t *c = m->face_idx + 4 * f;
-        size_t *w = &fill[bn__group(g, f)];
-        for (unsigned t = 0; t + 2 < m->face_n[f]; t++) {
-            g->idx[(*w)++] = (uint32_t)c[0];
-            g->idx[(*w)++] = (uint32_t)c[t + 1];
-            g->idx[(*w)++] = (uint32_t)c[t + 2];
-        }
-    }
+    if (st == BN_OK)
+        st = bn__gltf_number(g, stamp, loc, fill);
+    if (st == BN_OK)
+        st = bn__gltf_slices(g, stamp);
     free(fill);
-    return BN_OK;
+    free(stamp);
+    free(loc);
+    return st;
 }
 
-static void bn__gltf_view(bn__gltf *g, const void *src, size_t n, int target)
+static void bn__gltf_view(bn__gltf *g, const void *src, size_t n, int target, int stride)
 {
     size_t off = bn__blob_add(&g->blob, src, n);
-    g->views[g->nviews++] = (bn__view){off, n, target};
+    g->views[g->nviews++] = (bn__view){off, n, target, stride};
 }
 
-/* The binary buffer's vertex views: positions in metres (glTF's unit) as float, with their bounds
+/* Output vertex j's position: world-space metres (flat), or its node's local frame in the file's units
+ * (tree: the node's transform, as the file gave it, puts it back; a root scales the file's unit to
+ * metres). */
+static void bn__gltf_position(const bn__gltf *g, size_t sl, size_t j, float out[3])
+{
+    const double *p = g->m->pos + 3 * g->vsrc[j];
+    if (!g->tree) {
+        for (int c = 0; c < 3; c++)
+            out[c] = (float)(p[c] * g->unit);
+        return;
+    }
+    const double *B = g->inv[sl];
+    for (int c = 0; c < 3; c++)
+        out[c] = (float)(B[c] * p[0] + B[4 + c] * p[1] + B[8 + c] * p[2] + B[12 + c]);
+}
+
+/* The binary buffer's vertex views, slice after slice: positions as float, with each slice's bounds
  * (required for POSITION); COLOR_0, what an engine shows: L x 2^EV clamped to [0, 1] as glTF
  * requires (the light and the brightest spots saturate); each layer's radiance itself; the 8-bit
  * display set as VEC4 (alpha 255: vertex attributes keep 4-byte strides). */
 static bn_status bn__gltf_vertices(bn__gltf *g)
 {
     const bn__bake_out *m = g->m;
-    size_t nv = m->nv, n3 = nv * 3 * sizeof(float);
+    size_t nv = g->nvout, n3 = nv * 3 * sizeof(float);
     float *f3 = bn__malloc_array(nv + 1, 3 * sizeof(float));
     unsigned char *c4 = m->c8 ? bn__malloc_array(nv + 1, 4) : NULL;
     if (!f3 || (m->c8 && !c4)) {
         free(f3);
         return BN_ENOMEM;
     }
-    for (size_t v = 0; v < nv; v++)
-        for (int c = 0; c < 3; c++) {
-            float x = (float)(m->pos[3 * v + c] * g->unit);
-            f3[3 * v + c] = x;
-            g->lo[c] = fminf(g->lo[c], x);
-            g->hi[c] = fmaxf(g->hi[c], x);
+    for (size_t sl = 0; sl < g->nslice; sl++)
+        for (size_t j = g->slice_v[sl]; j < g->slice_v[sl] + g->slice_nv[sl]; j++) {
+            bn__gltf_position(g, sl, j, f3 + 3 * j);
+            for (int c = 0; c < 3; c++) {
+                g->lo[sl][c] = fminf(g->lo[sl][c], f3[3 * j + c]);
+                g->hi[sl][c] = fmaxf(g->hi[sl][c], f3[3 * j + c]);
+            }
         }
-    bn__gltf_view(g, f3, n3, 34962);
-    for (size_t i = 0; i < 3 * nv; i++)
-        f3[i] = (float)fmin(1.0, fmax(0.0, (double)m->vals[0][i] * g->scale));
-    bn__gltf_view(g, f3, n3, 34962);
-    for (size_t l = 0; l < m->nlayers; l++)
-        bn__gltf_view(g, m->vals[l], n3, 34962);
-    for (size_t v = 0; c4 && v < nv; v++) {
-        memcpy(c4 + 4 * v, m->c8 + 3 * v, 3);
-        c4[4 * v + 3] = 255;
+    bn__gltf_view(g, f3, n3, 34962, 12);
+    for (size_t j = 0; j < nv; j++)
+        for (int c = 0; c < 3; c++)
+            f3[3 * j + c] = (float)fmin(1.0, fmax(0.0, (double)m->vals[0][3 * g->vsrc[j] + c] * g->scale));
+    bn__gltf_view(g, f3, n3, 34962, 12);
+    for (size_t l = 0; l < m->nlayers; l++) {
+        for (size_t j = 0; j < nv; j++)
+            memcpy(f3 + 3 * j, m->vals[l] + 3 * g->vsrc[j], 3 * sizeof(float));
+        bn__gltf_view(g, f3, n3, 34962, 12);
+    }
+    for (size_t j = 0; c4 && j < nv; j++) {
+        memcpy(c4 + 4 * j, m->c8 + 3 * g->vsrc[j], 3);
+        c4[4 * j + 3] = 255;
     }
     if (c4)
-        bn__gltf_view(g, c4, nv * 4, 34962);
+        bn__gltf_view(g, c4, nv * 4, 34962, 4);
     free(f3);
     free(c4);
     return g->blob.oom ? BN_ENOMEM : BN_OK;
@@ -250,7 +412,7 @@ static bn_status bn__gltf_indices(bn__gltf *g)
 {
     for (size_t k = 0; k < g->ngroups; k++)
         if (g->mat_tris[k])
-            bn__gltf_view(g, g->idx + g->mat_first[k], 3 * g->mat_tris[k] * sizeof(uint32_t), 34963);
+            bn__gltf_view(g, g->idx + g->mat_first[k], 3 * g->mat_tris[k] * sizeof(uint32_t), 34963, 0);
     return g->blob.oom ? BN_ENOMEM : BN_OK;
 }
 
@@ -273,6 +435,9 @@ static void bn__gltf_json_extras(bn__gltf *g, const bn_scene *scene, const bn_ba
     bn__str_add(js, ",\"extras\":{\"albedo\":\"included: the colours are the radiance leaving each vertex, the "
                     "reflectance applied%s (multiply by no albedo texture again)\"",
                 bn_scene_textured(scene) ? ", textured materials at each patch's mean over their texture" : "");
+    bn__str_add(js, ",\"nodes\":");
+    bn__str_json(js, g->flat_why ? g->flat_why : "the input's node tree: names, transforms, cameras and children as "
+                 "the file gave them, each mesh replaced by the bake of its faces in the node's frame");
     bn__str_add(js, ",\"radiance_unit\":\"W m^-2 sr^-1\",\"exposure_ev\":");
     bn__str_num(js, m->exposure_ev);
     bn__str_add(js, ",\"colour_scale\":");
@@ -313,32 +478,40 @@ static void bn__gltf_json_extras(bn__gltf *g, const bn_scene *scene, const bn_ba
     bn__str_add(js, "}}");
 }
 
-/* The buffer, its views and the accessors: 0 positions, 1 COLOR_0, 2.. the layers, then the display
- * set, then the indices. */
+/* The buffer, its views and the accessors: per slice with vertices, its positions, COLOR_0, the layers
+ * and the display set (each slice at its offset in the shared views); then the indices, group by group. */
 static void bn__gltf_json_accessors(bn__gltf *g, const char *binname)
 {
     const bn__bake_out *m = g->m;
     bn__str *js = &g->js;
-    size_t v = 2 + m->nlayers + (m->c8 ? 1 : 0);
+    size_t v = 2 + m->nlayers + (m->c8 ? 1 : 0), nacc = 0;
     bn__str_add(js, ",\"buffers\":[{\"byteLength\":%zu", g->blob.n);
     if (binname) {
         bn__str_add(js, ",\"uri\":");
         bn__str_json(js, binname);
     }
     bn__str_add(js, "}],\"bufferViews\":[");
-    for (size_t k = 0; k < g->nviews; k++)
-        bn__str_add(js, "%s{\"buffer\":0,\"byteOffset\":%zu,\"byteLength\":%zu,\"target\":%d}", k ? "," : "",
+    for (size_t k = 0; k < g->nviews; k++) {
+        bn__str_add(js, "%s{\"buffer\":0,\"byteOffset\":%zu,\"byteLength\":%zu,\"target\":%d", k ? "," : "",
                     g->views[k].offset, g->views[k].length, g->views[k].target);
-    bn__str_add(js, "],\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":%zu,\"type\":\"VEC3\","
-                    "\"min\":[%.9g,%.9g,%.9g],\"max\":[%.9g,%.9g,%.9g]}",
-                m->nv, (double)g->lo[0], (double)g->lo[1], (double)g->lo[2], (double)g->hi[0], (double)g->hi[1],
-                (double)g->hi[2]);
-    for (size_t l = 0; l <= m->nlayers; l++)   /* COLOR_0, then the layers */
-        bn__str_add(js, ",{\"bufferView\":%zu,\"componentType\":5126,\"count\":%zu,\"type\":\"VEC3\"}", 1 + l, m->nv);
-    if (m->c8)
-        bn__str_add(js, ",{\"bufferView\":%zu,\"componentType\":5121,\"normalized\":true,\"count\":%zu,"
-                        "\"type\":\"VEC4\"}",
-                    2 + m->nlayers, m->nv);
+        bn__str_add(js, g->views[k].stride && g->nslice > 1 ? ",\"byteStride\":%d}" : "}", g->views[k].stride);
+    }
+    bn__str_add(js, "],\"accessors\":[");
+    for (size_t sl = 0; sl < g->nslice; sl++) {
+        size_t n = g->slice_nv[sl], o = g->slice_v[sl];
+        if (!n)
+            continue;
+        bn__str_add(js, "%s{\"bufferView\":0,\"byteOffset\":%zu,\"componentType\":5126,\"count\":%zu,\"type\":\"VEC3\","
+                        "\"min\":[%.9g,%.9g,%.9g],\"max\":[%.9g,%.9g,%.9g]}", nacc++ ? "," : "", 12 * o, n,
+                    (double)g->lo[sl][0], (double)g->lo[sl][1], (double)g->lo[sl][2], (double)g->hi[sl][0],
+                    (double)g->hi[sl][1], (double)g->hi[sl][2]);
+        for (size_t l = 0; l <= m->nlayers; l++)   /* COLOR_0, then the layers */
+            bn__str_add(js, ",{\"bufferView\":%zu,\"byteOffset\":%zu,\"componentType\":5126,\"count\":%zu,"
+                            "\"type\":\"VEC3\"}", 1 + l, 12 * o, n);
+        if (m->c8)
+            bn__str_add(js, ",{\"bufferView\":%zu,\"byteOffset\":%zu,\"componentType\":5121,\"normalized\":true,"
+                            "\"count\":%zu,\"type\":\"VEC4\"}", 2 + m->nlayers, 4 * o, n);
+    }
     for (size_t k = 0; k < g->ngroups; k++)
         if (g->mat_tris[k]) {
             const uint32_t *t = g->idx + g->mat_first[k];
@@ -354,41 +527,72 @@ static void bn__gltf_json_accessors(bn__gltf *g, const char *binname)
     bn__str_add(js, "]");
 }
 
-/* A mesh per object (node), with a primitive per material; the materials unlit (an engine shows COLOR_0,
- * the radiance itself; a lit material would shade it twice), the reflectance and emitted radiance as
- * data. */
+/* Triangles of mesh s. */
+static size_t bn__mesh_tris(const bn__gltf *g, size_t s)
+{
+    size_t tris = 0;
+    for (size_t k = 0; k < g->nmat; k++)
+        tris += g->mat_tris[s * g->nmat + k];
+    return tris;
+}
+
+/* Mesh s's name: its node's mesh's (else the node's) in the tree, else its object's (none for one). */
+static void bn__mesh_name(bn__gltf *g, size_t s)
+{
+    const char *name = NULL;
+    if (g->tree)
+        name = g->tree[s].mesh_name[0] ? g->tree[s].mesh_name : g->tree[s].name;
+    else if (g->nmesh > 1)
+        name = g->m->object_names[s];
+    if (name && name[0]) {
+        bn__str_add(&g->js, "\"name\":");
+        bn__str_json(&g->js, name);
+        bn__str_add(&g->js, ",");
+    }
+}
+
+/* One mesh's primitives (a primitive per material) on the attributes of its slice (from accessor a0);
+ * *acc: the next index accessor. */
+static void bn__gltf_json_prims(bn__gltf *g, size_t s, size_t a0, size_t *acc)
+{
+    const bn__bake_out *m = g->m;
+    bn__str *js = &g->js;
+    size_t p = 0;
+    bn__str_add(js, "\"primitives\":[");
+    for (size_t k = 0; k < g->nmat; k++) {
+        if (!g->mat_tris[s * g->nmat + k])
+            continue;
+        bn__str_add(js, "%s{\"attributes\":{\"POSITION\":%zu,\"COLOR_0\":%zu", p++ ? "," : "", a0, a0 + 1);
+        for (size_t l = 0; l < m->nlayers; l++) {
+            char an[64];
+            bn__attr_name(m->names[l], an, sizeof an);
+            bn__str_add(js, ",\"%s\":%zu", an, a0 + 2 + l);
+        }
+        if (m->c8)
+            bn__str_add(js, ",\"COLOR_1\":%zu", a0 + 2 + m->nlayers);
+        bn__str_add(js, "},\"indices\":%zu,\"material\":%zu,\"mode\":4}", (*acc)++, k);
+    }
+    bn__str_add(js, "]");
+}
+
+/* A mesh per object or tree node with triangles; the materials unlit (an engine shows COLOR_0, the
+ * radiance itself; a lit material would shade it twice), the reflectance and emitted radiance as data. */
 static void bn__gltf_json_meshes(bn__gltf *g)
 {
     const bn__bake_out *m = g->m;
     bn__str *js = &g->js;
-    size_t acc = 2 + m->nlayers + (m->c8 ? 1 : 0), nmesh = 0;
+    size_t nattr = 2 + m->nlayers + (m->c8 ? 1 : 0), nmesh = 0, acc = 0;
+    for (size_t sl = 0; sl < g->nslice; sl++)
+        acc += g->slice_nv[sl] ? nattr : 0;
     bn__str_add(js, ",\"meshes\":[");
-    for (size_t o = 0; o < g->nobj; o++) {
-        size_t p = 0;
-        for (size_t k = 0; k < g->nmat; k++) {
-            if (!g->mat_tris[o * g->nmat + k])
-                continue;
-            if (p == 0) {
-                bn__str_add(js, "%s{", nmesh++ ? "," : "");
-                if (g->nobj > 1) {
-                    bn__str_add(js, "\"name\":");
-                    bn__str_json(js, m->object_names[o]);
-                    bn__str_add(js, ",");
-                }
-                bn__str_add(js, "\"primitives\":[");
-            }
-            bn__str_add(js, "%s{\"attributes\":{\"POSITION\":0,\"COLOR_0\":1", p++ ? "," : "");
-            for (size_t l = 0; l < m->nlayers; l++) {
-                char an[64];
-                bn__attr_name(m->names[l], an, sizeof an);
-                bn__str_add(js, ",\"%s\":%zu", an, 2 + l);
-            }
-            if (m->c8)
-                bn__str_add(js, ",\"COLOR_1\":%zu", 2 + m->nlayers);
-            bn__str_add(js, "},\"indices\":%zu,\"material\":%zu,\"mode\":4}", acc++, k);
-        }
-        if (p)
-            bn__str_add(js, "]}");
+    for (size_t s = 0, a0 = 0; s < g->nmesh; s++) {
+        if (!bn__mesh_tris(g, s))
+            continue;
+        bn__str_add(js, "%s{", nmesh++ ? "," : "");
+        bn__mesh_name(g, s);
+        bn__gltf_json_prims(g, s, g->nslice == 1 ? 0 : a0, &acc);
+        bn__str_add(js, "}");
+        a0 += g->nslice == 1 ? 0 : nattr;
     }
     bn__str_add(js, "],\"materials\":[");
     for (size_t k = 0; k < g->nmat; k++) {
@@ -405,22 +609,19 @@ static void bn__gltf_json_meshes(bn__gltf *g)
     bn__str_add(js, "]");
 }
 
-/* The scene's nodes: one per object with triangles, named as the object (the file's node or group, or
- * the material-name prefix), each with its mesh; a single node named after the scene file when there is
+/* Flat: one node per object with triangles, named as the object (the file's node or group, or the
+ * material-name prefix), each with its mesh; a single node named after the scene file when there is
  * one object. Positions are in world space: the nodes carry no transform. */
-static void bn__gltf_json_nodes(bn__gltf *g, const bn_scene *scene)
+static void bn__gltf_json_flat_nodes(bn__gltf *g, const bn_scene *scene)
 {
     bn__str *js = &g->js;
     size_t n = 0;
     bn__str_add(js, ",\"nodes\":[");
-    for (size_t o = 0; o < g->nobj; o++) {
-        size_t tris = 0;
-        for (size_t k = 0; k < g->nmat; k++)
-            tris += g->mat_tris[o * g->nmat + k];
-        if (!tris)
+    for (size_t o = 0; o < g->nmesh; o++) {
+        if (!bn__mesh_tris(g, o))
             continue;
         bn__str_add(js, "%s{\"mesh\":%zu,\"name\":", n ? "," : "", n);
-        bn__str_json(js, g->nobj > 1 ? g->m->object_names[o] : bn_scene_path(scene));
+        bn__str_json(js, g->nmesh > 1 ? g->m->object_names[o] : bn_scene_path(scene));
         bn__str_add(js, "}");
         n++;
     }
@@ -428,6 +629,106 @@ static void bn__gltf_json_nodes(bn__gltf *g, const bn_scene *scene)
     for (size_t k = 0; k < n; k++)
         bn__str_add(js, "%s%zu", k ? "," : "", k);
     bn__str_add(js, "]}]");
+}
+
+/* A JSON array of n numbers. */
+static void bn__str_nums(bn__str *js, const double *v, size_t n)   /* %.17g: the file's doubles kept */
+{
+    for (size_t c = 0; c < n; c++) {
+        bn__str_add(js, "%s", c ? "," : "[");
+        bn__str_add(js, "%.17g", isfinite(v[c]) ? v[c] : 0.0);
+    }
+    bn__str_add(js, "]");
+}
+
+/* Tree node k as the file gave it (name, transform, children, camera ordinal *cam), with mesh `mesh`
+ * (SIZE_MAX: none). */
+static void bn__gltf_json_node(bn__gltf *g, size_t k, size_t mesh, size_t *cam)
+{
+    static const char *trs[3] = {"translation", "rotation", "scale"};
+    const bn_scene_node *n = &g->tree[k];
+    const double *v[3] = {n->t, n->r, n->s};
+    unsigned nv[3] = {n->nt, n->nr, n->ns};
+    bn__str *js = &g->js;
+    const char *sep = "";
+    bn__str_add(js, "{");
+    if (n->name[0]) {
+        bn__str_add(js, "\"name\":");
+        bn__str_json(js, n->name);
+        sep = ",";
+    }
+    if (n->nmatrix == 16) {
+        bn__str_add(js, "%s\"matrix\":", sep);
+        bn__str_nums(js, n->matrix, 16);
+        sep = ",";
+    }
+    for (int q = 0; q < 3 && n->nmatrix != 16; q++)
+        if (nv[q]) {
+            bn__str_add(js, "%s\"%s\":", sep, trs[q]);
+            bn__str_nums(js, v[q], nv[q]);
+            sep = ",";
+        }
+    if (mesh != SIZE_MAX)
+        bn__str_add(js, "%s\"mesh\":%zu", sep, mesh), sep = ",";
+    if (n->camera)
+        bn__str_add(js, "%s\"camera\":%zu", sep, (*cam)++), sep = ",";
+    for (size_t c = 0; c < n->nchildren; c++)
+        bn__str_add(js, "%s%zu", c ? "," : *sep ? ",\"children\":[" : "\"children\":[", n->children[c]);
+    bn__str_add(js, "%s}", n->nchildren ? "]" : "");
+}
+
+/* The tree's cameras, in node order. */
+static void bn__gltf_json_cameras(bn__gltf *g)
+{
+    bn__str *js = &g->js;
+    size_t c = 0;
+    for (size_t k = 0; k < g->ntree; k++) {
+        const bn_scene_node *n = &g->tree[k];
+        if (!n->camera)
+            continue;
+        bn__str_add(js, "%s{", c++ ? "," : ",\"cameras\":[");
+        if (n->camera_name[0]) {
+            bn__str_add(js, "\"name\":");
+            bn__str_json(js, n->camera_name);
+            bn__str_add(js, ",");
+        }
+        bn__str_add(js, "\"type\":\"perspective\",\"perspective\":{\"yfov\":%.17g,\"znear\":%.17g", n->yfov, n->znear);
+        if (n->zfar > 0)
+            bn__str_add(js, ",\"zfar\":%.17g", n->zfar);
+        if (n->aspect > 0)
+            bn__str_add(js, ",\"aspectRatio\":%.17g", n->aspect);
+        bn__str_add(js, "}}");
+    }
+    if (c)
+        bn__str_add(js, "]");
+}
+
+/* The input's tree: every node as the file gave it, those with a mesh holding their bake's; when the
+ * scene's unit is not the metre, a root scaling the file's unit to metres above the file's roots. */
+static void bn__gltf_json_tree(bn__gltf *g)
+{
+    bn__str *js = &g->js;
+    size_t mesh = 0, cam = 0;
+    int wrap = g->unit != 1.0;
+    bn__str_add(js, ",\"nodes\":[");
+    for (size_t k = 0; k < g->ntree; k++) {
+        bn__str_add(js, "%s", k ? "," : "");
+        bn__gltf_json_node(g, k, bn__mesh_tris(g, k) ? mesh++ : SIZE_MAX, &cam);
+    }
+    if (wrap) {
+        bn__str_add(js, "%s{\"name\":\"bounce: the file's unit in metres\",\"scale\":[%.17g,%.17g,%.17g],\"children\":[",
+                    g->ntree ? "," : "", g->unit, g->unit, g->unit);
+        for (size_t r = 0; r < g->nroots; r++)
+            bn__str_add(js, "%s%zu", r ? "," : "", g->roots[r]);
+        bn__str_add(js, "]}");
+    }
+    bn__str_add(js, "],\"scenes\":[{\"nodes\":[");
+    if (wrap)
+        bn__str_add(js, "%zu", g->ntree);
+    for (size_t r = 0; !wrap && r < g->nroots; r++)
+        bn__str_add(js, "%s%zu", r ? "," : "", g->roots[r]);
+    bn__str_add(js, "]}]");
+    bn__gltf_json_cameras(g);
 }
 
 /* The whole JSON, padded with spaces to 4-byte words. */
@@ -439,7 +740,10 @@ static bn_status bn__gltf_json(bn__gltf *g, const bn_scene *scene, const bn_bake
     bn__str_json(&g->js, gen);
     bn__gltf_json_extras(g, scene, o);
     bn__str_add(&g->js, "},\"extensionsUsed\":[\"KHR_materials_unlit\"],\"scene\":0");
-    bn__gltf_json_nodes(g, scene);
+    if (g->tree)
+        bn__gltf_json_tree(g);
+    else
+        bn__gltf_json_flat_nodes(g, scene);
     bn__gltf_json_accessors(g, binname);
     bn__gltf_json_meshes(g);
     bn__str_add(&g->js, "}");
@@ -468,6 +772,7 @@ static bn_status bn__gltf_write_glb(const char *path, const bn__gltf *g, bn_erro
     return bn__write_pieces(path, 4, p, len, err);
 }
 
+
 static void bn__gltf_free(bn__gltf *g)
 {
     free(g->idx);
@@ -476,36 +781,63 @@ static void bn__gltf_free(bn__gltf *g)
     free(g->views);
     free(g->blob.p);
     free(g->js.s);
+    free(g->obj_mesh);
+    free(g->inv);
+    free(g->flip);
+    free(g->slice_v);
+    free(g->slice_nv);
+    free(g->vsrc);
+    free(g->lo);
+    free(g->hi);
+}
+
+/* The layout, the per-mesh and per-slice arrays, the triangles, the buffer and the JSON. */
+static bn_status bn__gltf_build(bn__gltf *g, const bn_scene *scene, const bn_bake_write_opts *o, const char *path,
+                                const char *binname, bn_error *err)
+{
+    const char *why = NULL;
+    bn_status st = bn__gltf_layout(g, scene, &why);
+    if (st != BN_OK)
+        return st;
+    g->flat_why = why;
+    g->ngroups = g->nmesh * g->nmat;
+    g->mat_tris = bn__calloc(g->ngroups + 1, sizeof(size_t));
+    g->mat_first = bn__calloc(g->ngroups + 1, sizeof(size_t));
+    g->views = bn__calloc(g->m->nlayers + 5 + g->ngroups, sizeof *g->views);
+    g->slice_v = bn__calloc(g->nslice, sizeof(size_t));
+    g->slice_nv = bn__calloc(g->nslice, sizeof(size_t));
+    g->lo = bn__malloc_array(g->nslice, sizeof *g->lo);
+    g->hi = bn__malloc_array(g->nslice, sizeof *g->hi);
+    if (!g->mat_tris || !g->mat_first || !g->views || !g->slice_v || !g->slice_nv || !g->lo || !g->hi)
+        return BN_ENOMEM;
+    for (size_t sl = 0; sl < g->nslice; sl++)
+        for (int c = 0; c < 3; c++)
+            g->lo[sl][c] = INFINITY, g->hi[sl][c] = -INFINITY;
+    if ((st = bn__gltf_triangles(g, path, err)) != BN_OK)
+        return st;
+    if (g->nvout > UINT32_MAX)
+        return bn_error_set(err, BN_EUSAGE, "%s: %zu vertices are more than glTF's 32-bit indices address", path,
+                            g->nvout);
+    if ((st = bn__gltf_vertices(g)) == BN_OK && (st = bn__gltf_indices(g)) == BN_OK)
+        st = bn__gltf_json(g, scene, o, binname);
+    return st;
 }
 
 bn_status bn__write_gltf(const char *path, int binary, const bn__bake_out *m, const bn_scene *scene,
                          const bn_bake_write_opts *o, bn_error *err)
 {
-    bn__gltf g = {.m = m, .unit = bn_unit_to_metres(bn_scene_unit(scene)), .scale = exp2(m->exposure_ev),
-                  .lo = {INFINITY, INFINITY, INFINITY}, .hi = {-INFINITY, -INFINITY, -INFINITY}};
+    bn__gltf g = {.m = m, .unit = bn_unit_to_metres(bn_scene_unit(scene)), .scale = exp2(m->exposure_ev)};
     size_t len = strlen(path);
     char *binpath = binary ? NULL : malloc(len + 8);   /* .gltf: the .bin beside it, same stem */
     bn_status st = BN_OK;
-    if (m->nv > UINT32_MAX)
-        st = bn_error_set(err, BN_EUSAGE, "%s: %zu vertices are more than glTF's 32-bit indices address", path, m->nv);
     g.mat = bn_scene_materials(scene, &g.nmat);
-    g.nobj = m->face_object && m->nobjects > 1 ? m->nobjects : 1;
-    g.ngroups = g.nobj * g.nmat;
-    g.mat_tris = bn__calloc(g.ngroups + 1, sizeof(size_t));
-    g.mat_first = bn__calloc(g.ngroups + 1, sizeof(size_t));
-    g.views = bn__calloc(m->nlayers + 5 + g.ngroups, sizeof *g.views);
-    if (st == BN_OK && (!g.mat_tris || !g.mat_first || !g.views || (!binary && !binpath)))
+    if (!binary && !binpath)
         st = BN_ENOMEM;
-    if (st == BN_OK)
-        st = bn__gltf_triangles(&g, path, err);
-    if (st == BN_OK)
-        st = bn__gltf_vertices(&g);
-    if (st == BN_OK)
-        st = bn__gltf_indices(&g);
     if (st == BN_OK && binpath)
         snprintf(binpath, len + 8, "%.*s.bin", (int)(len - 5), path);
     if (st == BN_OK)
-        st = bn__gltf_json(&g, scene, o, binpath ? (strrchr(binpath, '/') ? strrchr(binpath, '/') + 1 : binpath) : NULL);
+        st = bn__gltf_build(&g, scene, o, path,
+                            binpath ? (strrchr(binpath, '/') ? strrchr(binpath, '/') + 1 : binpath) : NULL, err);
     if (st == BN_ENOMEM)
         st = bn_error_set(err, BN_ENOMEM, "%s: out of memory writing the glTF of %zu vertices", path, m->nv);
     if (st == BN_OK && binary)

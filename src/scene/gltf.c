@@ -5,8 +5,7 @@
  * world space (a transform that mirrors turns the winding, as the specification says), one material per
  * glTF material (reflectance: baseColorFactor's RGB; emitted radiance: emissiveFactor x
  * KHR_materials_emissive_strength, in W m^-2 sr^-1; doubleSided: two-sided), one object per node. */
-#include "scene/scene_internal.h"
-#include "adapters/adapters.h"
+#include "scene/gltf_tree.h"
 #include "base/vec.h"
 
 #include <math.h>
@@ -26,6 +25,8 @@ typedef struct bn__gr {
     unsigned *mat_of;        /* glTF material -> soup material */
     unsigned default_mat;    /* UINT32_MAX until a primitive without a material needs it */
     unsigned char *seen;     /* per node: reached by the walk */
+    double *world;           /* per node: its world transform (16), kept for the tree */
+    char **objname;          /* per node: the object its mesh became (owned; NULL: none) */
     int *tex_of;             /* glTF texture -> soup texture (-1: not decoded yet) */
     int *mat_uv;             /* per glTF material: the TEXCOORD set of its texture, -1: untextured */
     size_t skipped, skinned, triangles;
@@ -710,8 +711,9 @@ static bn_status bn__node_mesh(bn__gr *r, size_t i, const double W[16])
             snprintf(name, sizeof name, "%.40s#%zu", base, i);
             break;
         }
-    if (!bn__soup_use_object(r->s, name))
+    if (!bn__soup_use_object(r->s, name) || !(r->objname[i] = malloc(strlen(name) + 1)))
         return bn_error_set(r->err, BN_ENOMEM, "out of memory");
+    memcpy(r->objname[i], name, strlen(name) + 1);
     for (size_t k = 0; st == BN_OK && k < r->g->meshes[n->mesh].n; k++)
         st = bn__primitive(r, (size_t)n->mesh, k, W, bn__det3(W) < 0);
     return st;
@@ -754,6 +756,7 @@ static bn_status bn__walk(bn__gr *r, const int *roots, size_t nroots, const char
         if ((st = bn__local(r, f.node, L)) != BN_OK)
             break;
         bn__mat4_mul(f.W, L, W);
+        memcpy(r->world + 16 * f.node, W, sizeof W);
         bn__node_camera(r, f.node, W);
         if ((st = bn__node_mesh(r, f.node, W)) != BN_OK)
             break;
@@ -843,7 +846,9 @@ static bn_status bn__read(bn__gr *r)
     bn_status st = bn__check_file(r, &roots, &nroots, where, sizeof where);
     if (st == BN_OK && r->g->warnings[0])
         bn_logf(r->log, BN_LOG_INFO, "%s: tinygltf: %s", r->path, r->g->warnings);
-    if (st == BN_OK && !(r->seen = bn__calloc(r->g->nnodes + 1, 1)))
+    if (st == BN_OK && (!(r->seen = bn__calloc(r->g->nnodes + 1, 1)) ||
+                        !(r->world = bn__malloc_array(r->g->nnodes + 1, 16 * sizeof(double))) ||
+                        !(r->objname = bn__calloc(r->g->nnodes + 1, sizeof(char *)))))
         st = bn_error_set(r->err, BN_ENOMEM, "out of memory");
     if (st == BN_OK)
         st = bn__materials(r);
@@ -851,6 +856,11 @@ static bn_status bn__read(bn__gr *r)
         st = bn_error_set(r->err, BN_ENOMEM, "out of memory");
     if (st == BN_OK)
         st = bn__walk(r, roots, nroots, where);
+    if (st == BN_OK) {   /* the tree, for a bake written back under the same nodes */
+        bn__tree_capture c = {r->seen, r->world, r->objname, roots, nroots};
+        if (bn__gltf_tree(r->g, &c, &r->s->tree) != BN_OK)
+            st = bn_error_set(r->err, BN_ENOMEM, "out of memory");
+    }
     free(orphans);
     if (st == BN_OK && r->triangles == 0)
         return bn_error_set(r->err, BN_EINPUT, "%s: %s: no triangles under these nodes (%zu primitives of points or "
@@ -883,6 +893,10 @@ bn_status bn__read_gltf(const char *path, bn__soup *out, const bn_log *log, bn_e
     free(r.mat_uv);
     free(r.tex_of);
     free(r.seen);
+    free(r.world);
+    for (size_t i = 0; r.objname && i < g->nnodes; i++)
+        free(r.objname[i]);
+    free(r.objname);
     bn__gltf_free(g);
     return st;
 }

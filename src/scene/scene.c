@@ -563,6 +563,8 @@ bn_status bn__scene_build(const char *path, bn__soup *s, const bn_load_opts *o, 
     if (st == BN_OK && bn__scene_objects(sc, s) != BN_OK)
         st = bn_error_set(err, BN_ENOMEM, "out of memory for the objects of %s", path);
     sc->cam = s->cam;
+    sc->tree = s->tree;   /* the scene takes the tree */
+    s->tree = NULL;
     if (st == BN_OK && bn__scene_textures(sc, s) != BN_OK)
         st = bn_error_set(err, BN_ENOMEM, "out of memory for the texture coordinates of %s", path);
     if (st != BN_OK) {
@@ -668,7 +670,17 @@ void bn_scene_destroy(bn_scene *s)
     free(s->mat_tex);
     free(s->fuv);
     free(s->prho);
+    bn__file_tree_free(s->tree);
     free(s);
+}
+
+const bn_scene_node *bn_scene_nodes(const bn_scene *s, size_t *n, const size_t **roots, size_t *nroots)
+{
+    const bn__file_tree *t = s->tree;
+    *n = t ? t->nnodes : 0;
+    *roots = t ? t->roots : NULL;
+    *nroots = t ? t->nroots : 0;
+    return t ? t->nodes : NULL;
 }
 
 const char *bn_scene_path(const bn_scene *s) { return s->path; }

@@ -37,6 +37,16 @@ typedef struct bn__file_camera {
     char name[BN_NAME_MAX];
 } bn__file_camera;
 
+/* The scene file's node tree (bn_scene_nodes): the nodes with their strings and children owned. */
+typedef struct bn__file_tree {
+    bn_scene_node *nodes;
+    size_t nnodes;
+    size_t *children;   /* every node's, node after node */
+    size_t *roots;
+    size_t nroots;
+} bn__file_tree;
+void bn__file_tree_free(bn__file_tree *t);   /* NULL is fine */
+
 /* A polygon soup as a reader produces it, before validation. */
 typedef struct bn__soup {
     double   *verts;      /* xyz */
@@ -72,6 +82,7 @@ typedef struct bn__soup {
     int      *mat_tex;
     size_t    mat_tex_cap;
     bn__file_camera cam;   /* the file's camera (glTF), if any */
+    bn__file_tree *tree;   /* the file's node tree (glTF), if any: the scene takes it */
 } bn__soup;
 
 void bn__soup_free(bn__soup *s);
@@ -169,6 +180,7 @@ struct bn_scene {
     double      *fuv;                     /* 2 per face index entry (NaN: none); NULL: no textures */
     double      *prho;                    /* 3 per patch: the patch's mean reflectance; NULL: none */
     bn__file_camera cam;                  /* the file's camera, if any (bn_scene_camera) */
+    bn__file_tree *tree;                  /* the file's node tree, if any (bn_scene_nodes) */
 };
 
 #ifdef __cplusplus

@@ -23,6 +23,7 @@ void bn__soup_free(bn__soup *s)
     free(s->cuv);
     bn__texture_free(s->tex, s->ntex);
     free(s->mat_tex);
+    bn__file_tree_free(s->tree);
     memset(s, 0, sizeof *s);
 }
 
