@@ -352,36 +352,71 @@ BN_TEST(texture_transform_maps_as_the_extension_says)
     bn_scene_destroy(s);
 }
 
-/* An emissive texture enters as its mean (emission is uniform over a face): a checker of 255 and 0 (sRGB 1
- * and 0) under emissiveFactor 1 and strength 10 emits 5, and says so. */
-BN_TEST(emissive_texture_enters_as_its_mean)
+/* An emissive texture enters per face as its mean over the face (emission is uniform over a face): an
+ * atlas of two texels, 255 and 0 (sRGB 1 and 0, NEAREST), under emissiveFactor 1 and strength 10; a lamp
+ * mapped on the bright texel alone emits 10, one straddling both 5, and the scene's power is their sum
+ * (the whole image's mean, 5 for both, would be wrong for the first). */
+BN_TEST(emissive_texture_enters_as_its_mean_over_each_face)
 {
-    quad q[2];
+    quad q[3];
     memset(q, 0, sizeof q);
     FILE *f = fopen(bn_test_tmp("glow.ppm"), "wb");
     BN_ASSERT(f);
-    fprintf(f, "P6\n2 2\n255\n");
-    for (int k = 0; k < 4; k++)
+    fprintf(f, "P6\n2 1\n255\n");
+    for (int k = 0; k < 2; k++)
         for (int c = 0; c < 3; c++)
-            fputc(k == 0 || k == 3 ? 255 : 0, f);
+            fputc(k == 0 ? 255 : 0, f);
     BN_ASSERT(fclose(f) == 0);
     float fl[12] = {0, 0, 0, 0, 0, 1, 1, 0, 1, 1, 0, 0};
-    float li[12] = {0.4f, 1, 0.4f, 0.6f, 1, 0.4f, 0.6f, 1, 0.6f, 0.4f, 1, 0.6f};
-    memcpy(q[0].p, fl, sizeof fl), memcpy(q[1].p, li, sizeof li), q[1].mat = 2;
-    const char *path = quads_gltf("glow.gltf", q, 2, WHITE "," WHITE ",{\"name\":\"lamp\",\"emissiveFactor\":[1,1,1],"
+    float a[12] = {0.2f, 1, 0.4f, 0.4f, 1, 0.4f, 0.4f, 1, 0.6f, 0.2f, 1, 0.6f};
+    float b[12] = {0.6f, 1, 0.4f, 0.8f, 1, 0.4f, 0.8f, 1, 0.6f, 0.6f, 1, 0.6f};
+    float ua[8] = {0, 0, 0.5f, 0, 0.5f, 1, 0, 1}, ub[8] = {0.25f, 0, 0.75f, 0, 0.75f, 1, 0.25f, 1};
+    memcpy(q[0].p, fl, sizeof fl), memcpy(q[1].p, a, sizeof a), memcpy(q[2].p, b, sizeof b);
+    memcpy(q[1].uv, ua, sizeof ua), memcpy(q[2].uv, ub, sizeof ub);
+    q[1].mat = q[2].mat = 2;
+    const char *path = quads_gltf("glow.gltf", q, 3, WHITE "," WHITE ",{\"name\":\"lamp\",\"emissiveFactor\":[1,1,1],"
                                   "\"emissiveTexture\":{\"index\":0},\"extensions\":{\"KHR_materials_emissive_strength\":"
-                                  "{\"emissiveStrength\":10}}}", ",\"textures\":[{\"source\":0}],\"images\":[{\"uri\":\"glow.ppm\"}]");
+                                  "{\"emissiveStrength\":10}}}", ",\"textures\":[{\"source\":0,\"sampler\":0}],"
+                                  "\"samplers\":[{\"magFilter\":9728}],\"images\":[{\"uri\":\"glow.ppm\"}]");
     bn_load_opts lo;
     bn_scene *s = NULL;
     bn_error err;
-    size_t nm;
+    size_t nf, np;
     bn_load_opts_default(&lo);
     lo.log.quiet = 1;
     BN_ASSERT_EQ(bn_scene_load(path, &lo, &s, &err), BN_OK);
-    const bn_material *m = bn_scene_materials(s, &nm);
-    BN_ASSERT(nm == 3 && strcmp(m[2].name, "lamp") == 0);
-    for (int c = 0; c < 3; c++)
-        BN_ASSERT_NEAR(m[2].Le[c], 5, 1e-6);
+    const bn_face *faces = bn_scene_faces(s, &nf);
+    double want = 0, watts[3], Le[3];
+    int seen = 0;
+    for (size_t k = 0; k < nf; k++) {
+        if (strcmp(bn_scene_materials(s, NULL)[faces[k].material].name, "lamp") != 0)
+            continue;
+        double x = bn_scene_vertices(s, NULL)[3 * bn_scene_face_indices(s, NULL)[faces[k].first]];
+        double expect = x < 0.5 ? 10 : 5;   /* the lamp on the bright texel, or straddling both */
+        bn_scene_face_emission(s, k, Le);
+        for (int c = 0; c < 3; c++)
+            BN_ASSERT_NEAR(Le[c], expect, 1e-9);
+        want += 3.14159265358979323846 * faces[k].area * expect;
+        seen++;
+    }
+    BN_ASSERT_EQ(seen, 2);
+    bn_scene_emitted_power(s, watts);
+    BN_ASSERT_NEAR(watts[0], want, 1e-9 * want);
+    bn_mesh_opts mo;
+    bn_mesh_opts_default(&mo);
+    mo.patch_size = 0.1;
+    BN_ASSERT_EQ(bn_scene_mesh(s, &mo, &err), BN_OK);
+    const bn_patch *pa = bn_scene_patches(s, &np);
+    double *E = malloc(3 * np * sizeof *E), pw[3];
+    bn_scene_patch_emission(s, E);
+    bn_scene_power(s, E, pw);
+    BN_ASSERT_NEAR(pw[1], want, 1e-9 * want);   /* the patches emit what their faces do */
+    for (size_t k = 0; k < np; k++)
+        if (E[3 * k] > 0) {
+            bn_scene_face_emission(s, pa[k].face, Le);
+            BN_ASSERT_NEAR(E[3 * k], Le[0], 0);
+        }
+    free(E);
     bn_scene_destroy(s);
 }
 

@@ -204,6 +204,9 @@ int         bn_scene_object_is_assembly(const bn_scene *s, size_t k);
  * arrays of N*3 doubles (patch-major, channel-minor: a[3*i + c]). A textured material's patches get
  * its factor times the texture's mean over the patch. */
 void bn_scene_patch_emission(const bn_scene *s, double *E);
+/* Face f's emitted radiance: its material's Le, times the mean of its emission texture (glTF
+ * emissiveTexture) over the face when it has one. Uniform over each face. */
+void bn_scene_face_emission(const bn_scene *s, size_t f, double Le[3]);
 void bn_scene_patch_reflectance(const bn_scene *s, double *rho);
 /* The reflectance at point x of face `face` (on its plane): the material's, times its texture there
  * (glTF baseColorTexture, MTL map_Kd) when it has one; what the final gather's pixels use. */

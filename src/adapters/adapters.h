@@ -94,7 +94,7 @@ typedef struct bn__gltf_material {
     const char *name, *alpha_mode;
     unsigned nbase, nemissive;
     double base[4], emissive[3], strength;    /* strength: KHR_materials_emissive_strength, else 1 */
-    int base_tex, base_uv, emissive_tex, double_sided, unlit, has_strength;
+    int base_tex, base_uv, emissive_tex, emissive_uv, emissive_transform, double_sided, unlit, has_strength;
     /* KHR_materials_pbrSpecularGlossiness (older exporters): its diffuseFactor is the diffuse colour */
     int specgloss, diffuse_tex;
     /* its reflectance texture's KHR_texture_transform: offset, rotation (radians), scale; texcoord: the

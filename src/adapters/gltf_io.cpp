@@ -175,6 +175,8 @@ void mirror_material(const tinygltf::Material &mt, bn__gltf_material &x)
     x.base_tex = mt.pbrMetallicRoughness.baseColorTexture.index;
     x.base_uv = mt.pbrMetallicRoughness.baseColorTexture.texCoord;
     x.emissive_tex = mt.emissiveTexture.index;
+    x.emissive_uv = mt.emissiveTexture.texCoord;
+    x.emissive_transform = mt.emissiveTexture.extensions.count("KHR_texture_transform") > 0;
     mirror_transform(mt.pbrMetallicRoughness.baseColorTexture.extensions, x);
     x.double_sided = mt.doubleSided;
     x.strength = 1.0;

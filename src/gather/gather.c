@@ -459,8 +459,9 @@ static bn_status bn__gather_emitters(bn__gather *G, bn_error *err)
     if (!G->em)
         return bn_error_set(err, BN_ENOMEM, "out of memory");
     for (size_t f = 0; f < nf; f++) {
-        const double *Le = G->mat[faces[f].material].Le;
+        double Le[3];
         bn__emitter *e = &G->em[G->nem];
+        bn_scene_face_emission(G->scene, f, Le);
         if (!(Le[0] > 0 || Le[1] > 0 || Le[2] > 0))
             continue;
         e->nv = faces[f].nverts;

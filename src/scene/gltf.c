@@ -239,33 +239,31 @@ static bn_status bn__material_texture(bn__gr *r, size_t i, const bn__gltf_materi
     return BN_OK;
 }
 
-/* The mean of material i's emissiveTexture (sRGB decoded, as glTF says; 1 without one): bounce's
- * emission is uniform over a face, so the texture enters as its mean, the face's power kept. */
-static bn_status bn__emissive_mean(bn__gr *r, size_t i, const bn__gltf_material *m, double mean[3])
+/* Material i's emissiveTexture (sRGB decoded, as glTF says): each face of the material emits the
+ * texture's mean over the face (bounce's emission is uniform over a face). It reads the material's
+ * texture coordinates; where it would need another set or a transform of its own than the base colour's,
+ * it enters as the mean over the whole image instead, said. *scale: that mean (1 otherwise). */
+static bn_status bn__emissive_texture(bn__gr *r, size_t i, const bn__gltf_material *m, double scale[3])
 {
-    const bn__gltf *g = r->g;
-    bn__texture t;
-    char name[256];
-    mean[0] = mean[1] = mean[2] = 1;
+    int t, own = r->mat_uv[i] < 0 ? 1 : 0;
+    scale[0] = scale[1] = scale[2] = 1;
     if (m->emissive_tex < 0 || !(m->emissive[0] > 0 || m->emissive[1] > 0 || m->emissive[2] > 0))
         return BN_OK;
-    int ti = m->emissive_tex, im = (size_t)ti < g->ntextures ? g->textures[ti].source : -1;
-    if ((size_t)ti >= g->ntextures || im < 0 || (size_t)im >= g->nimages || !g->images[im].bytes)
-        return bn_error_set(r->err, BN_EINPUT, "%s: /materials/%zu/emissiveTexture: texture %d has no readable image",
-                            r->path, i, ti);
-    const bn__gltf_image *I = &g->images[im];
-    snprintf(name, sizeof name, "%s (/images/%d)%s", r->path, im,
-             strstr(I->mime, "jpeg") ? ".jpg" : strstr(I->mime, "png") || !strrchr(I->uri, '.') ? ".png" : strrchr(I->uri, '.'));
-    if (bn__texture_decode(name, I->bytes, I->size, &t, r->err) != BN_OK)
+    if ((t = bn__decode_texture(r, m->emissive_tex, i)) < 0)
         return r->err->status;
-    mean[0] = mean[1] = mean[2] = 0;
-    for (size_t k = 0, n = (size_t)t.w * (size_t)t.h; k < n; k++)
-        for (int c = 0; c < 3; c++)
-            mean[c] += bn__texel(&t, 3 * k + c) / (double)n;
-    free(t.rgb);
-    free(t.rgb8);
-    bn_warnf(r->log, BN_W_MATERIAL, NAN, "%s: /materials/%zu/emissiveTexture: applied as its mean (%.3g %.3g %.3g): "
-             "bounce's emission is uniform over each face", r->path, i, mean[0], mean[1], mean[2]);
+    if (m->emissive_uv < 0 || m->emissive_uv > 1 || m->emissive_transform ||
+        (!own && (r->mat_uv[i] != m->emissive_uv || m->tex_transform))) {
+        bn__texture_mean(&r->s->tex[t], scale);
+        bn_warnf(r->log, BN_W_MATERIAL, NAN, "%s: /materials/%zu/emissiveTexture: applied as its mean over the whole "
+                 "image (%.3g %.3g %.3g): it reads TEXCOORD_%d%s, not the coordinates bounce reads for the material",
+                 r->path, i, scale[0], scale[1], scale[2], m->emissive_uv,
+                 m->emissive_transform || m->tex_transform ? " or a texture transform" : "");
+        return BN_OK;
+    }
+    if (own)
+        r->mat_uv[i] = m->emissive_uv;
+    if (!bn__soup_set_material_emissive(r->s, r->mat_of[i], t))
+        return bn_error_set(r->err, BN_ENOMEM, "out of memory");
     return BN_OK;
 }
 
@@ -348,21 +346,22 @@ static bn_status bn__materials(bn__gr *r)
         bn_status st = bn__material_check(r, i, m);
         if (st != BN_OK)
             return st;
-        double emean[3];
-        if ((st = bn__emissive_mean(r, i, m, emean)) != BN_OK)
-            return st;
         memset(&mt, 0, sizeof mt);
         bn__material_name(r->s, i, m->name, mt.name);
         for (int c = 0; c < 3; c++) {
             mt.rho[c] = m->specgloss ? m->diffuse[c] : m->base[c];
-            mt.Le[c] = m->emissive[c] * m->strength * emean[c];
+            mt.Le[c] = m->emissive[c] * m->strength;
         }
         bn__material_notes(r, i, m, mt.name);
         r->mat_of[i] = (unsigned)r->s->nmats;
         if (!bn__soup_add_material(r->s, &mt) || (m->double_sided && !bn__soup_set_two_sided(r->s, r->mat_of[i])))
             return bn_error_set(r->err, BN_ENOMEM, "out of memory");
-        if ((st = bn__material_texture(r, i, m)) != BN_OK)
+        double scale[3];
+        if ((st = bn__material_texture(r, i, m)) != BN_OK || (st = bn__emissive_texture(r, i, m, scale)) != BN_OK)
             return st;
+        bn_material *sm = &r->s->mats[r->mat_of[i]];
+        for (int c = 0; c < 3; c++)
+            sm->Le[c] *= scale[c];
     }
     size_t two = 0;
     for (size_t i = 0; i < g->nmaterials; i++)

@@ -668,6 +668,8 @@ void bn_scene_destroy(bn_scene *s)
     free(s->mat_two_sided);
     bn__texture_free(s->tex, s->ntex);
     free(s->mat_tex);
+    free(s->mat_etex);
+    free(s->femit);
     free(s->fuv);
     free(s->prho);
     bn__file_tree_free(s->tree);
@@ -725,9 +727,12 @@ void bn_scene_emitted_power(const bn_scene *s, double watts[3])
 {
     double m = bn_unit_to_metres(s->unit);
     watts[0] = watts[1] = watts[2] = 0;
-    for (size_t f = 0; f < s->nfaces; f++)
+    for (size_t f = 0; f < s->nfaces; f++) {
+        double Le[3];
+        bn_scene_face_emission(s, f, Le);
         for (int c = 0; c < 3; c++)
-            watts[c] += BN_PI * s->faces[f].area * m * m * s->mats[s->faces[f].material].Le[c];
+            watts[c] += BN_PI * s->faces[f].area * m * m * Le[c];
+    }
 }
 
 void bn_scene_power(const bn_scene *s, const double *radiance, double watts[3])
@@ -776,14 +781,15 @@ unsigned long long bn_scene_digest(const bn_scene *s)
         h = bn__fnv1a(h, s->patches[p].corner, sizeof s->patches[p].corner);
     if (s->prho)   /* textured reflectance per patch */
         h = bn__fnv1a(h, s->prho, 3 * s->npatches * sizeof *s->prho);
+    if (s->femit)   /* textured emission per face */
+        h = bn__fnv1a(h, s->femit, 3 * s->nfaces * sizeof *s->femit);
     return (unsigned long long)h;
 }
 
 void bn_scene_patch_emission(const bn_scene *s, double *E)
 {
     for (size_t i = 0; i < s->npatches; i++)
-        for (int c = 0; c < 3; c++)
-            E[3 * i + c] = s->mats[s->patches[i].material].Le[c];
+        bn_scene_face_emission(s, s->patches[i].face, E + 3 * i);
 }
 
 void bn_scene_patch_reflectance(const bn_scene *s, double *rho)

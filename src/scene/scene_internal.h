@@ -27,6 +27,8 @@ void bn__texture_free(bn__texture *t, size_t n);   /* the texels of t[0 .. n), a
  * reflectance texture (repeat, bilinear): 8- and 16-bit images are sRGB (decoded to linear, as glTF and
  * MTL maps are), float images linear; every value must lie in [0, 1]. Through OpenImageIO's module. */
 bn_status bn__texture_decode(const char *name, const void *mem, size_t size, bn__texture *t, bn_error *err);
+/* The mean of texture t's texels (linear). */
+void bn__texture_mean(const bn__texture *t, double mean[3]);
 /* Texture t at (u, v): rgb (linear). */
 void bn__texture_sample(const bn__texture *t, double u, double v, double rgb[3]);
 
@@ -81,6 +83,8 @@ typedef struct bn__soup {
     size_t    ntex, tex_cap;
     int      *mat_tex;
     size_t    mat_tex_cap;
+    int      *mat_etex;     /* per material its emission texture (-1: none; NULL: none has) */
+    size_t    mat_etex_cap;
     bn__file_camera cam;   /* the file's camera (glTF), if any */
     bn__file_tree *tree;   /* the file's node tree (glTF), if any: the scene takes it */
 } bn__soup;
@@ -98,6 +102,8 @@ int bn__soup_set_corner_uv(bn__soup *s, const double *uv, unsigned n);
 int bn__soup_add_texture(bn__soup *s, bn__texture *t);
 /* Texture tex (an index from bn__soup_add_texture) as material mat's reflectance texture; 0 on OOM. */
 int bn__soup_set_material_texture(bn__soup *s, unsigned mat, int tex);
+/* Material mat's emission texture (glTF emissiveTexture): soup texture tex. 0 on OOM. */
+int bn__soup_set_material_emissive(bn__soup *s, unsigned mat, int tex);
 /* Name key's index in (*names)[0 .. *n) (capacity *cap), appended when new; SIZE_MAX on OOM. */
 size_t bn__name_index(char (**names)[BN_NAME_MAX], size_t *n, size_t *cap, const char *key);
 /* The object the next polygons belong to, by name (a new one, or the one of that name); 0 on OOM. */
@@ -177,6 +183,8 @@ struct bn_scene {
     bn__texture *tex;                     /* reflectance textures (src/scene/texture.c) */
     size_t       ntex;
     int         *mat_tex;                 /* per material: its texture, -1 none; NULL: no textures */
+    int         *mat_etex;                /* per material: its emission texture, -1 none; NULL: none */
+    double      *femit;                   /* 3 per face: its emission texture's mean over it; NULL: none */
     double      *fuv;                     /* 2 per face index entry (NaN: none); NULL: no textures */
     double      *prho;                    /* 3 per patch: the patch's mean reflectance; NULL: none */
     bn__file_camera cam;                  /* the file's camera, if any (bn_scene_camera) */

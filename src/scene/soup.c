@@ -23,6 +23,7 @@ void bn__soup_free(bn__soup *s)
     free(s->cuv);
     bn__texture_free(s->tex, s->ntex);
     free(s->mat_tex);
+    free(s->mat_etex);
     bn__file_tree_free(s->tree);
     memset(s, 0, sizeof *s);
 }
@@ -165,15 +166,25 @@ int bn__soup_add_texture(bn__soup *s, bn__texture *t)
     return (int)s->ntex++;
 }
 
+static int bn__soup_set_tex(int **arr, size_t *cap, unsigned mat, int tex)
+{
+    size_t old = *cap;
+    if (!bn__grow((void **)arr, cap, (size_t)mat + 1, sizeof(int)))
+        return 0;
+    for (size_t k = old; k < *cap; k++)
+        (*arr)[k] = -1;
+    (*arr)[mat] = tex;
+    return 1;
+}
+
 int bn__soup_set_material_texture(bn__soup *s, unsigned mat, int tex)
 {
-    size_t old = s->mat_tex_cap;
-    if (!bn__grow((void **)&s->mat_tex, &s->mat_tex_cap, (size_t)mat + 1, sizeof(int)))
-        return 0;
-    for (size_t k = old; k < s->mat_tex_cap; k++)
-        s->mat_tex[k] = -1;
-    s->mat_tex[mat] = tex;
-    return 1;
+    return bn__soup_set_tex(&s->mat_tex, &s->mat_tex_cap, mat, tex);
+}
+
+int bn__soup_set_material_emissive(bn__soup *s, unsigned mat, int tex)
+{
+    return bn__soup_set_tex(&s->mat_etex, &s->mat_etex_cap, mat, tex);
 }
 
 /* Materials from per-polygon keys (reflectance RGB, emission RGB: 6 values a polygon): one material

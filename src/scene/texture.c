@@ -96,6 +96,8 @@ static void bn__corner_uv(const bn__soup *s, size_t first, size_t k, double uv[2
     uv[1] = s->cuv && e + 1 < s->cuv_cap ? s->cuv[e + 1] : NAN;
 }
 
+static bn_status bn__scene_face_emission(bn_scene *sc, const bn__soup *s);
+
 bn_status bn__scene_textures(bn_scene *sc, bn__soup *s)
 {
     size_t *first;
@@ -125,7 +127,7 @@ bn_status bn__scene_textures(bn_scene *sc, bn__soup *s)
     free(first);
     sc->tex = s->tex, sc->ntex = s->ntex;   /* the soup's textures become the scene's */
     s->tex = NULL, s->ntex = s->tex_cap = 0;
-    return BN_OK;
+    return bn__scene_face_emission(sc, s);
 }
 
 /* Texture coordinates at x (in face f's plane): barycentric over the face's triangle that holds x (a
@@ -228,17 +230,62 @@ bn_status bn__scene_patch_textures(bn_scene *sc, bn_error *err)
     return BN_OK;
 }
 
+void bn__texture_mean(const bn__texture *t, double mean[3])
+{
+    size_t n = (size_t)t->w * (size_t)t->h;
+    mean[0] = mean[1] = mean[2] = 0;
+    for (size_t k = 0; k < n; k++)
+        for (int c = 0; c < 3; c++)
+            mean[c] += bn__texel(t, 3 * k + c) / (double)n;
+}
+
 int bn_scene_material_texture(const bn_scene *s, size_t m, const char **name, int *w, int *h, double mean[3])
 {
     int t = s->mat_tex && m < s->nmats ? s->mat_tex[m] : -1;
     if (t < 0)
         return 0;
     const bn__texture *x = &s->tex[t];
-    size_t n = (size_t)x->w * (size_t)x->h;
     *name = x->name, *w = x->w, *h = x->h;
-    mean[0] = mean[1] = mean[2] = 0;
-    for (size_t k = 0; k < n; k++)
-        for (int c = 0; c < 3; c++)
-            mean[c] += bn__texel(x, 3 * k + c) / (double)n;
+    bn__texture_mean(x, mean);
     return 1;
+}
+
+/* Each face of a material with an emission texture: the texture's mean over the face (a fan of its
+ * triangles, each integrated as the patches' reflectance is): emission stays uniform over a face (the
+ * final gather's closed-form direct light needs it), its power as the texture gives it there. */
+static bn_status bn__scene_face_emission(bn_scene *sc, const bn__soup *s)
+{
+    int any = 0;
+    for (size_t m = 0; m < sc->nmats && m < s->mat_etex_cap; m++)
+        any |= s->mat_etex[m] >= 0;
+    if (!any)
+        return BN_OK;
+    if (!(sc->mat_etex = bn__malloc_array(sc->nmats + 1, sizeof *sc->mat_etex)) ||
+        !(sc->femit = bn__malloc_array(3 * sc->nfaces + 1, sizeof *sc->femit)))
+        return BN_ENOMEM;
+    for (size_t m = 0; m < sc->nmats; m++)
+        sc->mat_etex[m] = m < s->mat_etex_cap ? s->mat_etex[m] : -1;
+    for (size_t f = 0; f < sc->nfaces; f++) {
+        const bn_face *fc = &sc->faces[f];
+        const size_t *vi = sc->fidx + fc->first;
+        int t = sc->mat_etex[fc->material];
+        double acc[3] = {0, 0, 0}, wsum = 0, mean[3];
+        for (unsigned k = 1; t >= 0 && k + 1 < fc->nverts; k++) {
+            double w = bn__tri_texture(sc, f, &sc->tex[t], sc->verts + 3 * vi[0], sc->verts + 3 * vi[k],
+                                       sc->verts + 3 * vi[k + 1], mean);
+            wsum += w;
+            for (int c = 0; c < 3; c++)
+                acc[c] += w * mean[c];
+        }
+        for (int c = 0; c < 3; c++)
+            sc->femit[3 * f + c] = wsum > 0 ? acc[c] / wsum : 1;
+    }
+    return BN_OK;
+}
+
+void bn_scene_face_emission(const bn_scene *s, size_t f, double Le[3])
+{
+    const double *m = s->mats[s->faces[f].material].Le;
+    for (int c = 0; c < 3; c++)
+        Le[c] = s->femit ? m[c] * s->femit[3 * f + c] : m[c];
 }
