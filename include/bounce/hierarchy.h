@@ -70,6 +70,8 @@ typedef struct bn_hierarchy_opts {
     size_t max_memory;   /* bytes for links and nodes; 0 = 80% of physical memory */
     int    threads;      /* 0 = the caller's; results do not depend on it */
     int    quiet;        /* no progress bars */
+    const double *direct;   /* the punctual lights' direct radiance per patch (N x 3; NULL: none): part of the
+                               source the links are refined for (bn_solve_opts.direct) */
     bn_log log;
 } bn_hierarchy_opts;
 void bn_hierarchy_opts_default(bn_hierarchy_opts *o);

@@ -93,6 +93,7 @@ typedef struct bn_pipeline {
      * the checked ones); an exact F's balance is within a few of it. */
     double power_arriving[3], power_towards[3], power_emitted[3], balance[3], balance_se[3];
     double *E;                 /* N*3 emitted radiance */
+    double *D;                 /* N*3 radiance the punctual lights give directly (bounce 1); NULL: no lights */
     bn_solve_result res;       /* L and the terms K^0 E .. K^b E (b = solve.bounces) */
     bn_solve_method method_used;  /* the solver that ran (method_auto may have chosen it) */
     double *rest;              /* N*3: L - sum of the kept terms (NULL when none are kept) */
@@ -107,7 +108,11 @@ typedef struct bn_pipeline {
 
 /* Loads and meshes `path`. */
 bn_status bn_pipeline_scene(const char *path, const bn_pipeline_opts *o, bn_pipeline *p, bn_error *err);
-/* Builds the ray scene and K for p->scene; fills p->ff. */
+/* The punctual lights' direct light on every patch of s, as the radiance it reflects (rho E / pi, N x 3,
+ * owned by the caller): each patch's mean irradiance with visibility (src/pipeline/punctual.c). *out is
+ * NULL when the scene has no punctual light. */
+bn_status bn_punctual_direct(const bn_scene *s, const bn_rt *rt, int threads, double **out, bn_error *err);
+/* Builds the ray scene, the punctual lights' direct light (p->D) and K for p->scene; fills p->ff. */
 bn_status bn_pipeline_operator(const bn_pipeline_opts *o, bn_pipeline *p, bn_error *err);
 /* The method the solve stage will use (after bn_pipeline_operator): solve.method, or under method_auto
  * jacobi in place of gauss-seidel when K has no rows. */

@@ -172,6 +172,35 @@ typedef struct bn_scene_node {
 } bn_scene_node;
 /* The tree's nodes and roots; NULL and 0 for a file without one (OBJ, PLY, OFF). */
 const bn_scene_node *bn_scene_nodes(const bn_scene *s, size_t *n, const size_t **roots, size_t *nroots);
+/* Punctual lights (glTF KHR_lights_punctual): light from a point (point, spot) or from a direction
+ * (directional), not from a surface. A punctual light is not seen: E holds none of it, and the light it
+ * sends straight to a surface is part of bounce 1 (K E). glTF's photometric numbers are read as
+ * radiometric ones, as its emissive values are: colour x intensity is the radiant intensity in W sr^-1
+ * (glTF's candela) of a point or spot light, and the irradiance in W m^-2 (glTF's lux) that a
+ * directional light gives a surface facing it. A spot's intensity falls off between its inner and
+ * outer cones as glTF's reference implementation does: t^2, t = (cos a - cos outer) / (cos inner -
+ * cos outer) clamped to [0, 1]. `range` is not applied (the light falls off as 1 / d^2 to any
+ * distance). */
+typedef enum bn_light_type { BN_LIGHT_POINT, BN_LIGHT_SPOT, BN_LIGHT_DIRECTIONAL } bn_light_type;
+typedef struct bn_light {
+    char name[BN_NAME_MAX];
+    bn_light_type type;
+    double pos[3];                  /* scene units (point, spot) */
+    double dir[3];                  /* unit: the direction it shines (spot's axis, directional) */
+    double I[3];                    /* W sr^-1 (point, spot); W m^-2 (directional) */
+    double cos_inner, cos_outer;    /* spot */
+} bn_light;
+const bn_light *bn_scene_lights(const bn_scene *s, size_t *n);
+/* The irradiance (W m^-2, per channel) that light l gives a surface at x (scene units, m metres each)
+ * with unit normal n, unoccluded (0 from behind the surface or outside a spot's cone); wi: the unit
+ * direction from x to the light; *dist: the distance to it in scene units (INFINITY: directional).
+ * Returns 1 when some channel is > 0. */
+int bn_light_irradiance(const bn_light *l, double m, const double x[3], const double n[3], double E[3], double wi[3],
+                        double *dist);
+/* The power light l emits (W per channel): 4 pi I for a point light, the integral of its profile over
+ * the sphere for a spot; 0 for a directional light (unbounded). */
+void bn_light_power(const bn_light *l, double watts[3]);
+
 /* Axis-aligned bounding box of the faces, scene units. */
 void               bn_scene_bounds(const bn_scene *s, double lo[3], double hi[3]);
 /* A digest of geometry, materials and patches (FNV-1a 64), for cache keys. */

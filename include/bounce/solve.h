@@ -90,6 +90,10 @@ typedef struct bn_solve_opts {
     void  *monitor_user;
     bn_log log_sink;          /* notes (prediction, warnings); NULL fn: warnings to stderr */
     int    threads;           /* for K's applications; 0 = the caller's; results do not depend on it */
+    /* The radiance that light from punctual lights gives the patches where it arrives directly (N x 3,
+     * rho E_direct / pi; NULL: none): part of the source (L = E + direct + K L) but of bounce 1, not 0
+     * (a point light is not seen): the terms are E, K E + direct, K (K E + direct), ... */
+    const double *direct;
 } bn_solve_opts;
 void bn_solve_opts_default(bn_solve_opts *o);
 /* Each term is a whole N x 3 vector (and an image layer, a bake attribute): past this many, the
@@ -149,6 +153,10 @@ bn_status bn_solve_spectral_radius(const bn_transport *k, size_t max_steps, doub
 /* Fills terms[k] = K^k E for k = 0..nterms-1 (caller-allocated, N*3 each); stops with the
  * operator's status if an application of K fails. */
 bn_status bn_solve_terms(const bn_transport *k, const double *E, int nterms, double **terms, bn_error *err);
+/* The same with the punctual lights' direct radiance D (NULL: none) in bounce 1: terms[0] = E,
+ * terms[1] = K E + D, terms[k] = K terms[k-1]. */
+bn_status bn_solve_terms_direct(const bn_transport *k, const double *E, const double *D, int nterms, double **terms,
+                                bn_error *err);
 
 /* The column names of the convergence table. */
 #define BN_SOLVE_LOG_COLUMNS "iteration,residual_max,residual_rms,residual_max_R,residual_max_G,residual_max_B,change,bound,error_bound,seconds"

@@ -107,7 +107,7 @@ typedef struct bn__gltf_material {
 } bn__gltf_material;
 typedef struct bn__gltf_node {
     const char *name;
-    int mesh, skin, camera;
+    int mesh, skin, camera, light;   /* light: its KHR_lights_punctual light, -1 none, -2 malformed */
     size_t first, n;                      /* children[first..] */
     unsigned nmatrix, nt, nr, ns;
     double matrix[16], t[3], r[4], s[3];
@@ -120,10 +120,18 @@ typedef struct bn__gltf_camera {
     int perspective;
     double yfov, aspect, znear, zfar;
 } bn__gltf_camera;
+/* A KHR_lights_punctual light: its type as given ("point", "spot", "directional"), colour (ncolor values),
+ * intensity, range (0: none) and the spot's cone angles (radians). */
+typedef struct bn__gltf_light {
+    const char *name, *type;
+    unsigned ncolor;
+    double color[3], intensity, range, inner, outer;
+} bn__gltf_light;
 typedef struct bn__gltf {
     size_t nbuffers, nviews, naccessors, nprims, nmeshes, nmaterials, nnodes, nscenes, nlights, ntextures;
     size_t nchildren, nroots, nrequired, nimages, ncameras;
     const bn__gltf_camera *cameras;
+    const bn__gltf_light *lights;
     const bn__gltf_image *images;
     const bn__gltf_texture *textures;
     const bn__gltf_buffer *buffers;

@@ -31,6 +31,7 @@ struct Impl {
     std::vector<bn__gltf_image> images;
     std::vector<bn__gltf_texture> textures;
     std::vector<bn__gltf_camera> cameras;
+    std::vector<bn__gltf_light> lights;
     std::vector<int> children, roots;
     std::vector<const char *> required;
     bn__gltf c;
@@ -223,6 +224,16 @@ void mirror_images(Impl &m)
     }
 }
 
+// A node's KHR_lights_punctual light index: -1 none, -2 when the extension is there but not a light index.
+int node_light(const tinygltf::Node &n)
+{
+    auto e = n.extensions.find("KHR_lights_punctual");
+    if (e == n.extensions.end())
+        return -1;
+    const tinygltf::Value &v = e->second.Get("light");
+    return v.IsNumber() && v.GetNumberAsDouble() >= 0 && v.GetNumberAsDouble() < 2e9 ? (int)v.GetNumberAsDouble() : -2;
+}
+
 void mirror_scene(Impl &m)
 {
     for (const auto &mt : m.model.materials) {
@@ -236,6 +247,7 @@ void mirror_scene(Impl &m)
         x.mesh = n.mesh;
         x.skin = n.skin;
         x.camera = n.camera;
+        x.light = node_light(n);
         x.first = m.children.size();
         x.n = n.children.size();
         m.children.insert(m.children.end(), n.children.begin(), n.children.end());
@@ -251,6 +263,15 @@ void mirror_scene(Impl &m)
     }
     for (const auto &r : m.model.extensionsRequired)
         m.required.push_back(r.c_str());
+    for (const auto &l : m.model.lights) {
+        bn__gltf_light x{};
+        x.name = l.name.c_str();
+        x.type = l.type.c_str();
+        x.ncolor = copy_n(x.color, l.color);
+        x.intensity = l.intensity, x.range = l.range;
+        x.inner = l.spot.innerConeAngle, x.outer = l.spot.outerConeAngle;
+        m.lights.push_back(x);
+    }
     for (const auto &c : m.model.cameras)
         m.cameras.push_back({c.name.c_str(), c.type == "perspective", c.perspective.yfov, c.perspective.aspectRatio,
                              c.perspective.znear, c.perspective.zfar});
@@ -271,7 +292,7 @@ void publish(Impl &m)
     c.nchildren = m.children.size(), c.children = m.children.data();
     c.nroots = m.roots.size(), c.roots = m.roots.data();
     c.nrequired = m.required.size(), c.required = m.required.data();
-    c.nlights = m.model.lights.size();
+    c.nlights = m.lights.size(), c.lights = m.lights.data();
     c.ntextures = m.textures.size(), c.textures = m.textures.data();
     c.nimages = m.images.size(), c.images = m.images.data();
     c.ncameras = m.cameras.size(), c.cameras = m.cameras.data();

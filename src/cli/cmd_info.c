@@ -69,7 +69,29 @@ static void bn__info_orientation(const bn_scene *s)
     free(count);
 }
 
-/* Faces, vertices, bounds, area, emitters, patches, contacts and dense K's size. */
+/* The punctual lights: each with its place, its intensity and its power. */
+static void bn__info_lights(const bn_scene *s)
+{
+    static const char *type[] = {"point", "spot", "directional"};
+    size_t n;
+    const bn_light *l = bn_scene_lights(s, &n);
+    for (size_t k = 0; k < n; k++) {
+        double w[3];
+        bn_light_power(&l[k], w);
+        printf("light       %s '%s'", type[l[k].type], l[k].name);
+        if (l[k].type != BN_LIGHT_DIRECTIONAL)
+            printf(" at (%.6g, %.6g, %.6g)", l[k].pos[0], l[k].pos[1], l[k].pos[2]);
+        if (l[k].type != BN_LIGHT_POINT)
+            printf(" towards (%.4g, %.4g, %.4g)", l[k].dir[0] + 0.0, l[k].dir[1] + 0.0, l[k].dir[2] + 0.0);
+        if (l[k].type == BN_LIGHT_DIRECTIONAL)
+            printf("; %.6g %.6g %.6g W m^-2 on a surface facing it\n", l[k].I[0], l[k].I[1], l[k].I[2]);
+        else
+            printf("; %.6g %.6g %.6g W sr^-1%s; power %.6g %.6g %.6g W\n", l[k].I[0], l[k].I[1], l[k].I[2],
+                   l[k].type == BN_LIGHT_SPOT ? " on its axis" : "", w[0], w[1], w[2]);
+    }
+}
+
+/* Faces, vertices, bounds, area, emitters, punctual lights, patches, contacts and dense K's size. */
 static void bn__info_summary(const bn_scene *s, const bn_cli_scene *so)
 {
     size_t nf, np, nv;
@@ -95,6 +117,7 @@ static void bn__info_summary(const bn_scene *s, const bn_cli_scene *so)
     printf("total area  %.10g %s^2 (%.6g m^2)\n", total, unit, total * m * m);
     printf("emitters    %zu face%s; emitted power %.6g %.6g %.6g W (R G B; pi * sum A Le)\n",
            bn_scene_emitter_count(s), bn_scene_emitter_count(s) == 1 ? "" : "s", watts[0], watts[1], watts[2]);
+    bn__info_lights(s);
     printf("patches     %zu (largest patch edge %.6g %s)\n", np, bn_scene_largest_patch_edge(s), unit);
     printf("contacts    %zu segments on %zu faces split %zu patches into %zu%s\n", st.contact_segments,
            st.contact_faces, st.contact_patches_split, st.contact_patches_made,

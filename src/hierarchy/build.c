@@ -128,6 +128,8 @@ static bn_status bn__build_buffers(bn__build *B, bn_error *err)
         if (!(B->W[k].ff = bn__ff_worker_create(B->R.pairs)))
             return bn_error_set(err, BN_ENOMEM, "out of memory for per-thread buffers");
     bn_scene_patch_emission(B->R.scene, B->E);
+    for (size_t k = 0; B->R.o->direct && k < 3 * np; k++)
+        B->E[k] += B->R.o->direct[k];   /* the punctual lights' direct light: part of the source */
     bn_scene_patch_reflectance(B->R.scene, B->rho);
     memcpy(B->L, B->E, 3 * np * sizeof(double));
     for (size_t k = 0; k < 3 * np; k++)

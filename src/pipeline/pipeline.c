@@ -400,6 +400,8 @@ bn_status bn_pipeline_operator(const bn_pipeline_opts *o, bn_pipeline *p, bn_err
                 "tolerance %g (`precision` float keeps float)", amp, o->solve.tol);
     }
     bn_status st = bn_rt_create(p->scene, o->threads, &p->rt, err);
+    if (st == BN_OK && !p->D)
+        st = bn_punctual_direct(p->scene, p->rt, o->threads, &p->D, err);
     if (!fo.threads)
         fo.threads = o->threads;
     if (st == BN_OK && p->hierarchical) {
@@ -411,6 +413,7 @@ bn_status bn_pipeline_operator(const bn_pipeline_opts *o, bn_pipeline *p, bn_err
         if (!ho.max_memory)
             ho.max_memory = fo.max_memory;
         ho.quiet = ho.quiet || fo.quiet;
+        ho.direct = p->D;
         if (!ho.log.fn)
             ho.log = fo.log;
         st = bn_hierarchy_build(p->scene, p->rt, &ho, &p->k, &p->hier, err);
@@ -436,6 +439,18 @@ bn_solve_method bn_pipeline_method(const bn_pipeline_opts *o, const bn_pipeline 
 
 /* The energy balance (bn_pipeline.balance): F L against the light leaving towards surfaces, each
  * in watts. */
+/* The power the source puts out: the emission, and the punctual lights' light where it first leaves a
+ * surface (pi sum A (E + D)). */
+static void bn__source_power(const bn_pipeline *p, double w[3])
+{
+    double d[3] = {0, 0, 0};
+    bn_scene_power(p->scene, p->E, w);
+    if (p->D)
+        bn_scene_power(p->scene, p->D, d);
+    for (int c = 0; c < 3; c++)
+        w[c] += d[c];
+}
+
 static bn_status bn__energy_balance(const bn_pipeline_opts *o, bn_pipeline *p, bn_error *err)
 {
     const bn_patch *pa = bn_scene_patches(p->scene, &(size_t){0});
@@ -457,7 +472,7 @@ static bn_status bn__energy_balance(const bn_pipeline_opts *o, bn_pipeline *p, b
     free(y);
     if (st != BN_OK)
         return st;
-    bn_scene_power(p->scene, p->E, p->power_emitted);
+    bn__source_power(p, p->power_emitted);
     for (int c = 0; c < 3; c++) {
         p->power_arriving[c] = arriving[c];
         p->power_towards[c] = towards[c] - escape[c];
@@ -509,6 +524,7 @@ bn_status bn_pipeline_solve(const bn_pipeline_opts *o, bn_pipeline *p, bn_error 
                 bn_solve_method_name(so.method), bn_transport_name(p->k));
     }
     p->method_used = so.method;
+    so.direct = p->D;
     st = bn_solve(p->k, p->E, &so, &p->res, err);
     if ((st == BN_OK || st == BN_ENOTCONV) && p->res.nterms > 0) {
         p->rest = bn__malloc_array(3 * p->n + 1, sizeof(double));
@@ -540,6 +556,7 @@ void bn_pipeline_free(bn_pipeline *p)
     bn_solve_result_free(&p->res);
     free(p->rest);
     free(p->E);
+    free(p->D);
     free(p->row_exact);
     free(p->emit_patch);
     free(p->emit_exact);

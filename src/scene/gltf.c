@@ -29,7 +29,7 @@ typedef struct bn__gr {
     char **objname;          /* per node: the object its mesh became (owned; NULL: none) */
     int *tex_of;             /* glTF texture -> soup texture (-1: not decoded yet) */
     int *mat_uv;             /* per glTF material: the TEXCOORD set of its texture, -1: untextured */
-    size_t skipped, skinned, triangles;
+    size_t skipped, skinned, triangles, ranged;
 } bn__gr;
 
 static size_t bn__ctype_size(int ct)
@@ -718,6 +718,56 @@ static bn_status bn__node_mesh(bn__gr *r, size_t i, const double W[16])
     return st;
 }
 
+/* Light k's values against the extension's schema: NULL, or what is wrong. */
+static const char *bn__light_bad(const bn__gltf_light *l)
+{
+    int spot = strcmp(l->type, "spot") == 0;
+    if (!spot && strcmp(l->type, "point") != 0 && strcmp(l->type, "directional") != 0)
+        return "type is not point, spot or directional";
+    if (l->ncolor != 0 && l->ncolor != 3)
+        return "color has not 3 values";
+    for (unsigned c = 0; c < l->ncolor; c++)
+        if (!(l->color[c] >= 0 && l->color[c] <= 1))
+            return "a color value is outside [0, 1]";
+    if (!(l->intensity >= 0 && isfinite(l->intensity)))
+        return "intensity is not a finite number >= 0";
+    if (spot && !(l->inner >= 0 && l->inner < l->outer && l->outer <= 1.5707963267948966))
+        return "the cone angles are not 0 <= innerConeAngle < outerConeAngle <= pi/2";
+    return NULL;
+}
+
+/* Node i's punctual light, if any, placed by its world transform W: at the node's origin, shining down
+ * its -z (glTF's light convention). */
+static bn_status bn__node_light(bn__gr *r, size_t i, const double W[16])
+{
+    const bn__gltf_node *n = &r->g->nodes[i];
+    const char *bad;
+    bn_light l = {0};
+    if (n->light == -1)
+        return BN_OK;
+    if (n->light < 0 || (size_t)n->light >= r->g->nlights)
+        return bn_error_set(r->err, BN_EINPUT, "%s: /nodes/%zu/extensions/KHR_lights_punctual/light: %s (the file has %zu "
+                            "lights)", r->path, i, n->light < 0 ? "not a light index" : "no such light", r->g->nlights);
+    const bn__gltf_light *g = &r->g->lights[n->light];
+    if ((bad = bn__light_bad(g)))
+        return bn_error_set(r->err, BN_EINPUT, "%s: /extensions/KHR_lights_punctual/lights/%d: %s", r->path, n->light, bad);
+    l.type = g->type[0] == 'p' ? BN_LIGHT_POINT : g->type[0] == 's' ? BN_LIGHT_SPOT : BN_LIGHT_DIRECTIONAL;
+    for (int a = 0; a < 3; a++) {
+        l.pos[a] = W[12 + a];
+        l.dir[a] = -W[8 + a];
+        l.I[a] = (g->ncolor ? g->color[a] : 1.0) * g->intensity;
+    }
+    if (l.type != BN_LIGHT_POINT && !(bn_v3_normalize(l.dir) > 0))
+        return bn_error_set(r->err, BN_EINPUT, "%s: /nodes/%zu: light %d's node has no direction (a singular transform)",
+                            r->path, i, n->light);
+    l.cos_inner = cos(g->inner), l.cos_outer = cos(g->outer);
+    snprintf(l.name, sizeof l.name, "%s", g->name && g->name[0] ? g->name : n->name && n->name[0] ? n->name : "light");
+    r->ranged += g->range > 0;
+    if (!bn__soup_add_light(r->s, &l))
+        return bn_error_set(r->err, BN_ENOMEM, "out of memory");
+    return BN_OK;
+}
+
 typedef struct bn__gltf_frame {
     size_t node;
     double W[16];   /* the parent's world transform */
@@ -757,7 +807,7 @@ static bn_status bn__walk(bn__gr *r, const int *roots, size_t nroots, const char
         bn__mat4_mul(f.W, L, W);
         memcpy(r->world + 16 * f.node, W, sizeof W);
         bn__node_camera(r, f.node, W);
-        if ((st = bn__node_mesh(r, f.node, W)) != BN_OK)
+        if ((st = bn__node_mesh(r, f.node, W)) != BN_OK || (st = bn__node_light(r, f.node, W)) != BN_OK)
             break;
         for (size_t c = n->n; st == BN_OK && c-- > 0;) {
             int ch = n->first + c < g->nchildren ? g->children[n->first + c] : -1;
@@ -782,7 +832,7 @@ static bn_status bn__walk(bn__gr *r, const int *roots, size_t nroots, const char
 static bn_status bn__check_file(bn__gr *r, const int **roots, size_t *nroots, char *where, size_t wsize)
 {
     static const char *known[] = {"KHR_materials_emissive_strength", "KHR_materials_unlit", "KHR_mesh_quantization",
-                                  "KHR_texture_transform", "KHR_materials_pbrSpecularGlossiness"};
+                                  "KHR_texture_transform", "KHR_materials_pbrSpecularGlossiness", "KHR_lights_punctual"};
     const bn__gltf *g = r->g;
     for (size_t i = 0; i < g->nrequired; i++) {
         int ok = 0;
@@ -791,13 +841,9 @@ static bn_status bn__check_file(bn__gr *r, const int **roots, size_t *nroots, ch
         if (!ok)
             return bn_error_set(r->err, BN_EINPUT, "%s: /extensionsRequired/%zu: the file requires '%s', which bounce "
                                 "does not read (it reads KHR_materials_emissive_strength, KHR_materials_unlit, "
-                                "KHR_mesh_quantization, KHR_texture_transform and KHR_materials_pbrSpecularGlossiness)",
+                                "KHR_mesh_quantization, KHR_texture_transform, KHR_materials_pbrSpecularGlossiness and KHR_lights_punctual)",
                                 r->path, i, g->required[i]);
     }
-    if (g->nlights > 0)
-        return bn_error_set(r->err, BN_EINPUT, "%s: /extensions/KHR_lights_punctual: %zu punctual light%s; bounce takes "
-                            "light from emitting surfaces only (emissiveFactor): give each lamp an emissive mesh and "
-                            "remove the lights", r->path, g->nlights, g->nlights == 1 ? "" : "s");
     if (g->default_scene >= 0 && (size_t)g->default_scene >= g->nscenes)
         return bn_error_set(r->err, BN_EINPUT, "%s: /scene: %d does not exist (the file has %zu scenes)", r->path,
                             g->default_scene, g->nscenes);
@@ -866,6 +912,10 @@ static bn_status bn__read(bn__gr *r)
                             "lines, which have no area)", r->path, where, r->skipped);
     if (st == BN_OK && r->skipped)
         bn_logf(r->log, BN_LOG_INFO, "%s: %zu primitives of points or lines skipped (no area)", r->path, r->skipped);
+    if (st == BN_OK && r->s->nlights)
+        bn_logf(r->log, BN_LOG_INFO, "%s: %zu punctual lights (KHR_lights_punctual): colour x intensity read as W sr^-1 "
+                "(point, spot; glTF's candela) or W m^-2 (directional; lux); not seen, their direct light counted in "
+                "bounce 1%s", r->path, r->s->nlights, r->ranged ? "; range not applied (light falls off as 1/d^2)" : "");
     if (st == BN_OK && r->skinned)
         bn_logf(r->log, BN_LOG_INFO, "%s: %zu skinned meshes read in their bind pose (skins and morph targets are not "
                 "applied)", r->path, r->skinned);

@@ -515,7 +515,7 @@ static bn_status bn__scene_finish(bn_scene *sc, const char *path, const bn_load_
     if (sc->nfaces == 0)
         return bn_error_set(err, BN_EINPUT, "%s: no face with a non-zero area", path);
     bn__orient_said(sc, path, o);
-    if (bn_scene_emitter_count(sc) == 0)
+    if (bn_scene_emitter_count(sc) == 0 && sc->nlights == 0)
         bn_warnf(&o->log, BN_W_NO_EMITTER, NAN, "%s: no emitter (no material emits: Ke in MTL, emissiveFactor in glTF): the result will be black", path);
     return BN_OK;
 }
@@ -542,6 +542,10 @@ bn_status bn__scene_build(const char *path, bn__soup *s, const bn_load_opts *o, 
     sc = bn__scene_new(path, s, o, lo, hi);
     if (!sc)
         return bn_error_set(err, BN_ENOMEM, "out of memory");
+    sc->tree = s->tree;   /* the scene takes the tree and the lights */
+    s->tree = NULL;
+    sc->lights = s->lights, sc->nlights = s->nlights;
+    s->lights = NULL, s->nlights = s->lights_cap = 0;
     memset(&b, 0, sizeof b);
     b.sc = sc;
     memset(&P, 0, sizeof P);
@@ -563,8 +567,6 @@ bn_status bn__scene_build(const char *path, bn__soup *s, const bn_load_opts *o, 
     if (st == BN_OK && bn__scene_objects(sc, s) != BN_OK)
         st = bn_error_set(err, BN_ENOMEM, "out of memory for the objects of %s", path);
     sc->cam = s->cam;
-    sc->tree = s->tree;   /* the scene takes the tree */
-    s->tree = NULL;
     if (st == BN_OK && bn__scene_textures(sc, s) != BN_OK)
         st = bn_error_set(err, BN_ENOMEM, "out of memory for the texture coordinates of %s", path);
     if (st != BN_OK) {
@@ -673,6 +675,7 @@ void bn_scene_destroy(bn_scene *s)
     free(s->fuv);
     free(s->prho);
     bn__file_tree_free(s->tree);
+    free(s->lights);
     free(s);
 }
 
@@ -783,6 +786,15 @@ unsigned long long bn_scene_digest(const bn_scene *s)
         h = bn__fnv1a(h, s->prho, 3 * s->npatches * sizeof *s->prho);
     if (s->femit)   /* textured emission per face */
         h = bn__fnv1a(h, s->femit, 3 * s->nfaces * sizeof *s->femit);
+    for (size_t k = 0; k < s->nlights; k++) {   /* punctual lights: what they are, not their names */
+        const bn_light *l = &s->lights[k];
+        h = bn__fnv1a(h, &l->type, sizeof l->type);
+        h = bn__fnv1a(h, l->pos, sizeof l->pos);
+        h = bn__fnv1a(h, l->dir, sizeof l->dir);
+        h = bn__fnv1a(h, l->I, sizeof l->I);
+        h = bn__fnv1a(h, &l->cos_inner, sizeof l->cos_inner);
+        h = bn__fnv1a(h, &l->cos_outer, sizeof l->cos_outer);
+    }
     return (unsigned long long)h;
 }
 

@@ -87,6 +87,8 @@ typedef struct bn__soup {
     size_t    mat_etex_cap;
     bn__file_camera cam;   /* the file's camera (glTF), if any */
     bn__file_tree *tree;   /* the file's node tree (glTF), if any: the scene takes it */
+    bn_light *lights;      /* punctual lights (glTF), world space */
+    size_t    nlights, lights_cap;
 } bn__soup;
 
 void bn__soup_free(bn__soup *s);
@@ -102,6 +104,8 @@ int bn__soup_set_corner_uv(bn__soup *s, const double *uv, unsigned n);
 int bn__soup_add_texture(bn__soup *s, bn__texture *t);
 /* Texture tex (an index from bn__soup_add_texture) as material mat's reflectance texture; 0 on OOM. */
 int bn__soup_set_material_texture(bn__soup *s, unsigned mat, int tex);
+/* A punctual light, copied; 0 on OOM. */
+int bn__soup_add_light(bn__soup *s, const bn_light *l);
 /* Material mat's emission texture (glTF emissiveTexture): soup texture tex. 0 on OOM. */
 int bn__soup_set_material_emissive(bn__soup *s, unsigned mat, int tex);
 /* Name key's index in (*names)[0 .. *n) (capacity *cap), appended when new; SIZE_MAX on OOM. */
@@ -189,6 +193,8 @@ struct bn_scene {
     double      *prho;                    /* 3 per patch: the patch's mean reflectance; NULL: none */
     bn__file_camera cam;                  /* the file's camera, if any (bn_scene_camera) */
     bn__file_tree *tree;                  /* the file's node tree, if any (bn_scene_nodes) */
+    bn_light    *lights;                  /* punctual lights (bn_scene_lights) */
+    size_t       nlights;
 };
 
 #ifdef __cplusplus

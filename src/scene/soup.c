@@ -25,6 +25,7 @@ void bn__soup_free(bn__soup *s)
     free(s->mat_tex);
     free(s->mat_etex);
     bn__file_tree_free(s->tree);
+    free(s->lights);
     memset(s, 0, sizeof *s);
 }
 
@@ -174,6 +175,14 @@ static int bn__soup_set_tex(int **arr, size_t *cap, unsigned mat, int tex)
     for (size_t k = old; k < *cap; k++)
         (*arr)[k] = -1;
     (*arr)[mat] = tex;
+    return 1;
+}
+
+int bn__soup_add_light(bn__soup *s, const bn_light *l)
+{
+    if (!bn__grow((void **)&s->lights, &s->lights_cap, s->nlights + 1, sizeof *s->lights))
+        return 0;
+    s->lights[s->nlights++] = *l;
     return 1;
 }
 

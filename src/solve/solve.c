@@ -66,7 +66,8 @@ void bn_solve_result_free(bn_solve_result *res)
     res->nterms = 0;
 }
 
-bn_status bn_solve_terms(const bn_transport *k, const double *E, int nterms, double **terms, bn_error *err)
+bn_status bn_solve_terms_direct(const bn_transport *k, const double *E, const double *D, int nterms, double **terms,
+                                bn_error *err)
 {
     size_t m = 3 * bn_transport_size(k);
     if (nterms <= 0)
@@ -76,8 +77,15 @@ bn_status bn_solve_terms(const bn_transport *k, const double *E, int nterms, dou
         bn_status st = bn_transport_apply(k, terms[q - 1], terms[q], err);   /* K^q E <- K (K^(q-1) E) */
         if (st != BN_OK)
             return st;
+        for (size_t i = 0; q == 1 && D && i < m; i++)
+            terms[1][i] += D[i];   /* the punctual lights' direct light: bounce 1 */
     }
     return BN_OK;
+}
+
+bn_status bn_solve_terms(const bn_transport *k, const double *E, int nterms, double **terms, bn_error *err)
+{
+    return bn_solve_terms_direct(k, E, NULL, nterms, terms, err);
 }
 
 /* One power step per channel: y = K x, then x = y / ||y_c||_inf. ratio[c]: ||K_c x||_inf / ||x_c||_inf
@@ -299,7 +307,9 @@ static int bn__emit_row(const bn_solve_opts *o, const bn_solve_row *row, const d
 /* Everything one solve holds; each stage below reads and fills its part. */
 typedef struct bn__solve {
     const bn_transport *k;
-    const double *E;
+    const double *E;                /* the source: the emission, plus the punctual lights' direct light */
+    const double *Esurf;            /* the emission alone (bounce 0) */
+    double *src;                    /* owned when E is Esurf + o->direct */
     const bn_solve_opts *o;
     const bn_solver_type *type;
     bn_solve_result *res;
@@ -672,7 +682,20 @@ static bn_status bn__solve_keep_terms(bn__solve *S)
         if (!(res->terms[q] = bn__malloc_array(S->m ? S->m : 1, sizeof(double))))
             return bn_error_set(S->err, BN_ENOMEM, "solve: out of memory for %d bounce terms of %zu patches",
                                 S->o->bounces + 1, S->n);
-    return bn_solve_terms(S->k, S->E, res->nterms, res->terms, S->err);
+    return bn_solve_terms_direct(S->k, S->Esurf, S->o->direct, res->nterms, res->terms, S->err);
+}
+
+/* The source E + direct when punctual lights give some (the emission alone otherwise). */
+static bn_status bn__solve_source(bn__solve *S)
+{
+    if (!S->o->direct)
+        return BN_OK;
+    if (!(S->src = bn__malloc_array(S->m ? S->m : 1, sizeof(double))))
+        return bn_error_set(S->err, BN_ENOMEM, "solve: out of memory for the source of %zu patches", S->n);
+    for (size_t i = 0; i < S->m; i++)
+        S->src[i] = S->Esurf[i] + S->o->direct[i];
+    S->E = S->src;
+    return BN_OK;
 }
 
 static void bn__solve_record(bn__solve *S)
@@ -694,7 +717,7 @@ static bn_status bn__solve_body(const bn_transport *k, const double *E, const bn
     memset(&S, 0, sizeof S);
     memset(res, 0, sizeof *res);
     S.k = k;
-    S.E = E;
+    S.E = S.Esurf = E;
     S.o = o;
     S.res = res;
     S.err = err;
@@ -707,7 +730,9 @@ static bn_status bn__solve_body(const bn_transport *k, const double *E, const bn
     res->bad_patch = SIZE_MAX;
     res->reason = BN_STOP_NONE;
 
-    st = bn__solve_check(&S);
+    st = bn__solve_source(&S);
+    if (st == BN_OK)
+        st = bn__solve_check(&S);
     if (st == BN_OK)
         st = bn__solve_analyse(&S);
     if (st == BN_OK) {
@@ -730,6 +755,7 @@ static bn_status bn__solve_body(const bn_transport *k, const double *E, const bn
         res->bad_patch = bn_transport_nonfinite_patch(k);
         res->reason = BN_STOP_DIVERGED_NAN;
     }
+    free(S.src);
     free(S.diag);
     free(S.r);
     free(S.y);

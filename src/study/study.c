@@ -176,6 +176,7 @@ static bn_status bn__build_k(const bn_scene *s, const bn_formfactor_opts *ffo, c
     bn_scene_patches(s, &p.n);
     st = bn_pipeline_operator(&po, &p, err);
     free(p.row_exact);   /* what the pipeline made beside K (none with row_sum_rays 0) */
+    free(p.D);
     free(p.emit_patch);
     free(p.emit_exact);
     *K = p.k;
@@ -1481,6 +1482,12 @@ static bn_status bn__study_surfaces(const char *path, const bn_load_opts *load, 
     bn_status st = bn_scene_load(path, load, &probe, err);
     if (st != BN_OK)
         return st;
+    bn_scene_lights(probe, &nm);
+    if (nm > 0) {   /* the sweeps' reference and truncations are of E alone */
+        bn_scene_destroy(probe);
+        return bn_error_set(err, BN_EUSAGE, "%s: %zu punctual lights: a study's sweeps take their light from emitting "
+                            "surfaces only (solve, bounces, bake and crosscheck read punctual lights)", path, nm);
+    }
     mats = bn_scene_materials(probe, &nm);
     f = bn_scene_faces(probe, &nf);
     u = bn_unit_to_metres(bn_scene_unit(probe));

@@ -81,6 +81,8 @@ bn_status bn__tracer_init(bn__tracer *t, const bn_rt *rt, const bn_trace_opts *o
     t->o = *o;
     t->nbins = o->bounces + 2;
     t->eps = bn_rt_epsilon(rt);
+    t->pl = bn_scene_lights(t->scene, &t->npl);
+    t->unit = bn_unit_to_metres(bn_scene_unit(t->scene));
     if (o->spp < 1 || o->bounces < 0 || o->rr_depth < 1 || o->max_depth < 1)
         return bn_error_set(err, BN_EUSAGE, "trace: spp %zu, bounces %d, rr_depth %d, max_depth %d: each must be >= 1 "
                             "(bounces >= 0)", o->spp, o->bounces, o->rr_depth, o->max_depth);
@@ -233,6 +235,23 @@ static void bn__nee(const bn__tracer *t, const double x[3], const double n[3], c
         bins[3 * bin + c] += bx[c] * t->Le[3 * j + c] * g;
 }
 
+/* The punctual lights' light at x (normal n, ray origin o) times the throughput bx, added to bins[3 bin ..]:
+ * one shadow ray to each (a delta light: no other strategy can reach it, whatever the strategy). */
+static void bn__nee_punctual(const bn__tracer *t, const double x[3], const double n[3], const double o[3],
+                             const double bx[3], double *bins, int bin, unsigned long long *rays)
+{
+    for (size_t k = 0; k < t->npl; k++) {
+        double E[3], wi[3], d;
+        if (!bn_light_irradiance(&t->pl[k], t->unit, x, n, E, wi, &d))
+            continue;
+        (*rays)++;
+        if (bn_rt_occluded(t->rt, o, wi, 0, isinf(d) ? INFINITY : d * (1 - 1e-9) - t->eps))
+            continue;
+        for (int c = 0; c < 3; c++)
+            bins[3 * bin + c] += bx[c] * E[c] / BN_PI;
+    }
+}
+
 void bn__tracer_restart(const bn__tracer *t, size_t p, bn__rng *rng, double x[3])
 {
     double u1 = bn__rng_uniform(rng), u2 = bn__rng_uniform(rng), u3 = bn__rng_uniform(rng);
@@ -269,6 +288,8 @@ void bn__tracer_path(const bn__tracer *t, const double x0[3], size_t p0, const d
         bn_v3_madd(x, t->eps, n, o);
         if (use_nee)
             bn__nee(t, x, n, o, bx, mis, rng, bins, bin, rays);
+        if (t->npl)
+            bn__nee_punctual(t, x, n, o, bx, bins, bin, rays);
         /* Cosine sampling: w = (r cos phi, r sin phi, sqrt(1 - u1)) around n. */
         u1 = bn__rng_uniform(rng);
         u2 = bn__rng_uniform(rng);

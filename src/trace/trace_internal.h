@@ -25,6 +25,9 @@ typedef struct bn__tracer {
     bn__lights     *tree;
     size_t         *em_index;
     double          eps;         /* ray offset, scene units */
+    const bn_light *pl;          /* punctual lights (bn_scene_lights): reached by next-event estimation alone */
+    size_t          npl;
+    double          unit;        /* metres per scene unit */
     bn_trace_opts   o;
     int             nbins;       /* bounces + 2: K^0 E .. K^bounces E, rest */
 } bn__tracer;
