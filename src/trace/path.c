@@ -260,6 +260,25 @@ void bn__tracer_restart(const bn__tracer *t, size_t p, bn__rng *rng, double x[3]
 
 static double bn__max3(const double *v) { return fmax(v[0], fmax(v[1], v[2])); }
 
+/* The emission the cosine-sampled ray from x (normal n, direction w, cosine cz) meets at h, times the
+ * throughput bx, MIS-weighted against next-event estimation with mis, added to bins[3 bin ..]. */
+static void bn__hit_emission(const bn__tracer *t, const double x[3], const double n[3], const double w[3], double cz,
+                             const bn_hit *h, int mis, const double bx[3], double *bins, int bin)
+{
+    const double *le = t->Le + 3 * h->patch;
+    double wgt = 1.0;
+    if (!(le[0] > 0 || le[1] > 0 || le[2] > 0))
+        return;
+    if (mis && t->pdf_area[h->patch] > 0) {
+        double cy = -bn_v3_dot(t->patches[h->patch].normal, w);
+        double dd = bn_v3_dist(h->p, x);
+        double pb = cz / BN_PI, pl = cy > 0 ? bn__emitter_pdf(t, x, n, h->patch) * dd * dd / cy : INFINITY;
+        wgt = isinf(pl) ? 0.0 : pb * pb / (pb * pb + pl * pl);
+    }
+    for (int c = 0; c < 3; c++)
+        bins[3 * bin + c] += bx[c] * le[c] * wgt;
+}
+
 void bn__tracer_path(const bn__tracer *t, const double x0[3], size_t p0, const double *rho0, bn__rng *rng,
                      double *bins, unsigned long long *rays)
 {
@@ -304,20 +323,8 @@ void bn__tracer_path(const bn__tracer *t, const double x0[3], size_t p0, const d
         (*rays)++;
         if (cz <= 0 || !bn_rt_intersect(t->rt, o, w, 0, INFINITY, &h) || !h.front)
             break;   /* escaped, grazing, or the black back of a surface */
-        if (use_hit) {
-            const double *le = t->Le + 3 * h.patch;
-            if (le[0] > 0 || le[1] > 0 || le[2] > 0) {
-                double wgt = 1.0;
-                if (mis && t->pdf_area[h.patch] > 0) {
-                    double cy = -bn_v3_dot(t->patches[h.patch].normal, w);
-                    double dd = bn_v3_dist(h.p, x);
-                    double pb = cz / BN_PI, pl = cy > 0 ? bn__emitter_pdf(t, x, n, h.patch) * dd * dd / cy : INFINITY;
-                    wgt = isinf(pl) ? 0.0 : pb * pb / (pb * pb + pl * pl);
-                }
-                for (int c = 0; c < 3; c++)
-                    bins[3 * bin + c] += bx[c] * le[c] * wgt;
-            }
-        }
+        if (use_hit)
+            bn__hit_emission(t, x, n, w, cz, &h, mis, bx, bins, bin);
         memcpy(beta, bx, sizeof beta);
         p = h.patch;
         if (t->o.model == BN_TRACE_PATCH)
