@@ -3,7 +3,8 @@
 untransformed), its area light switched off and lit instead by a point light (a bulb below the ceiling)
 and a spot shining down beside the tall block; `bounce crosscheck` (the radiosity side's source against
 the path tracer's next-event estimation, which share nothing but the scene) must pass, and the log must
-say how the lights were read.
+say how the lights were read; its bake keeps the lights on their nodes (type, colour x intensity, cones),
+and the Khronos validator (when installed) finds nothing wrong in it.
 
 usage: punctual_check.py BOUNCE CORNELL.obj OUTDIR
 """
@@ -15,7 +16,7 @@ import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import gltf_tree_check as tree  # noqa: E402
-from gltf_check import RAYS, check, failures  # noqa: E402
+from gltf_check import RAYS, check, failures, read_glb  # noqa: E402
 
 
 def write(obj, out):
@@ -42,6 +43,36 @@ def write(obj, out):
     json.dump(gl, open(out, "w"))
 
 
+def check_bake(bounce, scene, outdir):
+    glb = os.path.join(outdir, "lamp.glb")
+    r = subprocess.run([bounce, "bake", scene, "-q", "--patches", "300", "-o", glb] + RAYS, capture_output=True, text=True)
+    check(r.returncode == 0, "bake (exit %d: %s)" % (r.returncode, r.stderr.strip()[-200:]))
+    gin = json.load(open(scene))
+    gout, _ = read_glb(glb)
+    want = gin["extensions"]["KHR_lights_punctual"]["lights"]
+    got = gout.get("extensions", {}).get("KHR_lights_punctual", {}).get("lights", [])
+    check("KHR_lights_punctual" in gout.get("extensionsUsed", []), "the bake declares KHR_lights_punctual")
+    for n in gout["nodes"]:
+        if n.get("name") not in ("bulb", "spot"):
+            continue
+        k = n.get("extensions", {}).get("KHR_lights_punctual", {}).get("light")
+        w = [x for x in want if x["name"] == n["name"]][0]
+        g = got[k] if k is not None and k < len(got) else {}
+        same = g.get("type") == w["type"] and all(
+            abs(a * g.get("intensity", 0) - b * w["intensity"]) < 1e-12 for a, b in zip(g.get("color", []), w["color"]))
+        if w["type"] == "spot":
+            same = same and all(abs(g["spot"][c] - w["spot"][c]) < 1e-12 for c in ("innerConeAngle", "outerConeAngle"))
+        check(same, "node %s keeps its light: %s (got %s)" % (n["name"], w, g))
+    here = os.path.dirname(os.path.abspath(__file__))
+    env = dict(os.environ, NODE_PATH=os.path.join(here, "..", "web", "node_modules"))
+    try:
+        v = subprocess.run(["node", os.path.join(here, "gltf_validate.js"), glb], capture_output=True, text=True, env=env)
+        print(v.stdout.strip())
+        check(v.returncode in (0, 77), "the Khronos validator: nothing wrong in the bake with lights")
+    except FileNotFoundError:
+        print("SKIPPED PART: no node: the bake with lights not validated")
+
+
 def main():
     bounce, obj, outdir = sys.argv[1:4]
     os.makedirs(outdir, exist_ok=True)
@@ -53,6 +84,7 @@ def main():
     check(r.returncode == 0 and verdict and verdict[0].startswith("verdict: pass"),
           "crosscheck passes with a point and a spot light (exit %d)" % r.returncode)
     check("2 punctual lights" in r.stderr and "W sr^-1" in r.stderr, "the log says how the lights were read")
+    check_bake(bounce, scene, outdir)
     print("%d failures" % len(failures))
     sys.exit(1 if failures else 0)
 

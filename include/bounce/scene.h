@@ -167,6 +167,7 @@ typedef struct bn_scene_node {
     double matrix[16], t[3], r[4], s[3], world[16];
     int camera;
     double yfov, aspect, znear, zfar;
+    int light;                                 /* its punctual light (bn_scene_lights), -1 none */
     size_t nchildren;
     const size_t *children;
 } bn_scene_node;

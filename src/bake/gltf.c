@@ -670,11 +670,41 @@ static void bn__gltf_json_node(bn__gltf *g, size_t k, size_t mesh, size_t *cam)
         }
     if (mesh != SIZE_MAX)
         bn__str_add(js, "%s\"mesh\":%zu", sep, mesh), sep = ",";
+    if (n->light >= 0)
+        bn__str_add(js, "%s\"extensions\":{\"KHR_lights_punctual\":{\"light\":%d}}", sep, n->light), sep = ",";
     if (n->camera)
         bn__str_add(js, "%s\"camera\":%zu", sep, (*cam)++), sep = ",";
     for (size_t c = 0; c < n->nchildren; c++)
         bn__str_add(js, "%s%zu", c ? "," : *sep ? ",\"children\":[" : "\"children\":[", n->children[c]);
     bn__str_add(js, "%s}", n->nchildren ? "]" : "");
+}
+
+/* The scene's punctual lights (the tree's nodes refer to them by index), as the extension writes them:
+ * colour x intensity split as the largest channel's intensity and a colour at most 1. */
+static void bn__gltf_json_lights(bn__gltf *g, const bn_scene *scene)
+{
+    static const char *type[] = {"point", "spot", "directional"};
+    size_t n;
+    const bn_light *l = bn_scene_lights(scene, &n);
+    bn__str *js = &g->js;
+    if (!n)
+        return;
+    bn__str_add(js, ",\"extensions\":{\"KHR_lights_punctual\":{\"lights\":[");
+    for (size_t k = 0; k < n; k++) {
+        double I = fmax(l[k].I[0], fmax(l[k].I[1], l[k].I[2])), c[3];
+        for (int q = 0; q < 3; q++)
+            c[q] = I > 0 ? l[k].I[q] / I : 1;
+        bn__str_add(js, "%s{\"name\":", k ? "," : "");
+        bn__str_json(js, l[k].name);
+        bn__str_add(js, ",\"type\":\"%s\",\"color\":", type[l[k].type]);
+        bn__str_nums(js, c, 3);
+        bn__str_add(js, ",\"intensity\":%.17g", I);
+        if (l[k].type == BN_LIGHT_SPOT)
+            bn__str_add(js, ",\"spot\":{\"innerConeAngle\":%.17g,\"outerConeAngle\":%.17g}", acos(l[k].cos_inner),
+                        acos(l[k].cos_outer));
+        bn__str_add(js, "}");
+    }
+    bn__str_add(js, "]}}");
 }
 
 /* The tree's cameras, in node order. */
@@ -739,11 +769,17 @@ static bn_status bn__gltf_json(bn__gltf *g, const bn_scene *scene, const bn_bake
     bn__str_add(&g->js, "{\"asset\":{\"version\":\"2.0\",\"generator\":");
     bn__str_json(&g->js, gen);
     bn__gltf_json_extras(g, scene, o);
-    bn__str_add(&g->js, "},\"extensionsUsed\":[\"KHR_materials_unlit\"],\"scene\":0");
+    size_t nl;
+    bn_scene_lights(scene, &nl);
+    nl = g->tree ? nl : 0;   /* the lights go back on their nodes: only under the input's tree */
+    bn__str_add(&g->js, "},\"extensionsUsed\":[\"KHR_materials_unlit\"%s],\"scene\":0",
+                nl ? ",\"KHR_lights_punctual\"" : "");
     if (g->tree)
         bn__gltf_json_tree(g);
     else
         bn__gltf_json_flat_nodes(g, scene);
+    if (nl)
+        bn__gltf_json_lights(g, scene);
     bn__gltf_json_accessors(g, binname);
     bn__gltf_json_meshes(g);
     bn__str_add(&g->js, "}");

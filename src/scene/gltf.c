@@ -27,6 +27,7 @@ typedef struct bn__gr {
     unsigned char *seen;     /* per node: reached by the walk */
     double *world;           /* per node: its world transform (16), kept for the tree */
     char **objname;          /* per node: the object its mesh became (owned; NULL: none) */
+    int *light;              /* per node: its punctual light's index in the soup, -1 none */
     int *tex_of;             /* glTF texture -> soup texture (-1: not decoded yet) */
     int *mat_uv;             /* per glTF material: the TEXCOORD set of its texture, -1: untextured */
     size_t skipped, skinned, triangles, ranged;
@@ -763,6 +764,7 @@ static bn_status bn__node_light(bn__gr *r, size_t i, const double W[16])
     l.cos_inner = cos(g->inner), l.cos_outer = cos(g->outer);
     snprintf(l.name, sizeof l.name, "%s", g->name && g->name[0] ? g->name : n->name && n->name[0] ? n->name : "light");
     r->ranged += g->range > 0;
+    r->light[i] = (int)r->s->nlights;
     if (!bn__soup_add_light(r->s, &l))
         return bn_error_set(r->err, BN_ENOMEM, "out of memory");
     return BN_OK;
@@ -893,8 +895,11 @@ static bn_status bn__read(bn__gr *r)
         bn_logf(r->log, BN_LOG_INFO, "%s: tinygltf: %s", r->path, r->g->warnings);
     if (st == BN_OK && (!(r->seen = bn__calloc(r->g->nnodes + 1, 1)) ||
                         !(r->world = bn__malloc_array(r->g->nnodes + 1, 16 * sizeof(double))) ||
-                        !(r->objname = bn__calloc(r->g->nnodes + 1, sizeof(char *)))))
+                        !(r->objname = bn__calloc(r->g->nnodes + 1, sizeof(char *))) ||
+                        !(r->light = bn__malloc_array(r->g->nnodes + 1, sizeof(int)))))
         st = bn_error_set(r->err, BN_ENOMEM, "out of memory");
+    for (size_t i = 0; st == BN_OK && i < r->g->nnodes; i++)
+        r->light[i] = -1;
     if (st == BN_OK)
         st = bn__materials(r);
     if (st == BN_OK && r->g->nscenes == 0 && !(roots = orphans = bn__orphans(r, &nroots)))
@@ -902,7 +907,7 @@ static bn_status bn__read(bn__gr *r)
     if (st == BN_OK)
         st = bn__walk(r, roots, nroots, where);
     if (st == BN_OK) {   /* the tree, for a bake written back under the same nodes */
-        bn__tree_capture c = {r->seen, r->world, r->objname, roots, nroots};
+        bn__tree_capture c = {r->seen, r->world, r->objname, r->light, roots, nroots};
         if (bn__gltf_tree(r->g, &c, &r->s->tree) != BN_OK)
             st = bn_error_set(r->err, BN_ENOMEM, "out of memory");
     }
@@ -946,6 +951,7 @@ bn_status bn__read_gltf(const char *path, bn__soup *out, const bn_log *log, bn_e
     for (size_t i = 0; r.objname && i < g->nnodes; i++)
         free(r.objname[i]);
     free(r.objname);
+    free(r.light);
     bn__gltf_free(g);
     return st;
 }

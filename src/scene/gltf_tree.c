@@ -52,6 +52,7 @@ static int bn__node_copy(const bn__gltf *g, size_t i, const bn__tree_capture *c,
     out->name = bn__dup(n->name);
     out->mesh_name = bn__dup(mesh ? g->meshes[n->mesh].name : "");
     out->object = c->objname[i] ? bn__dup(c->objname[i]) : NULL;
+    out->light = c->light[i];
     if (cam) {
         const bn__gltf_camera *k = &g->cameras[n->camera];
         out->camera = 1;

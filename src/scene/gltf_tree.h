@@ -11,6 +11,7 @@ typedef struct bn__tree_capture {
     const unsigned char *seen;
     const double *world;
     char *const *objname;
+    const int *light;          /* per glTF node: its light's index in the soup, -1 none */
     const int *roots;
     size_t nroots;
 } bn__tree_capture;
