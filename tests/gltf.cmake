@@ -10,6 +10,10 @@ if(BN_PYTHON3)
   add_test(NAME gltf.round_trip_tree COMMAND ${BN_PYTHON3} ${CMAKE_CURRENT_LIST_DIR}/gltf_tree_check.py
     $<TARGET_FILE:bounce_cli> ${PROJECT_SOURCE_DIR}/meshes/cornell-box.obj ${CMAKE_CURRENT_BINARY_DIR}/tmp/gltf_tree)
   set_tests_properties(gltf.round_trip_tree PROPERTIES LABELS gltf TIMEOUT 600)
+  # a per-bounce bake as Blender 3.4 imports it (tests/blender_check.py; skipped without Blender)
+  add_test(NAME gltf.blender_imports_every_term COMMAND ${BN_PYTHON3} ${CMAKE_CURRENT_LIST_DIR}/blender_check.py
+    $<TARGET_FILE:bounce_cli> ${PROJECT_SOURCE_DIR}/meshes/cornell-box.obj ${CMAKE_CURRENT_BINARY_DIR}/tmp/blender)
+  set_tests_properties(gltf.blender_imports_every_term PROPERTIES LABELS gltf TIMEOUT 600 SKIP_RETURN_CODE 77)
   # punctual lights in the Cornell box: the crosscheck (tests/punctual_check.py)
   add_test(NAME gltf.punctual_lights_crosscheck COMMAND ${BN_PYTHON3} ${CMAKE_CURRENT_LIST_DIR}/punctual_check.py
     $<TARGET_FILE:bounce_cli> ${PROJECT_SOURCE_DIR}/meshes/cornell-box.obj ${CMAKE_CURRENT_BINARY_DIR}/tmp/punctual)

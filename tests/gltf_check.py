@@ -12,8 +12,10 @@ Checks, on the element mesh with --per-bounce:
 - COLOR_0 = min(1, _L x colour_scale) as the asset's extras state;
 - each primitive's material carries the MTL's Kd and Ke, and E is nonzero only on emitters;
 - the triangles are the PLY's faces fanned (same count, indices in range);
-and on the input mesh as .gltf + .bin with --ldr: the external buffer, COLOR_1 as bytes, fewer
-vertices than the element mesh, provenance naming the command;
+- COLOR_1 .. COLOR_5 = min(1, term x colour_scale) for E .. rest, each named in the extras;
+and on the input mesh as .gltf + .bin with --ldr: the external buffer, no sRGB-encoded colour set (glTF's
+vertex colours are linear: --ldr changes nothing there), fewer vertices than the element mesh, provenance
+naming the command;
 and against the solve: `bounce solve -n 3` writes every patch's area and terms to a CSV in a run of
 its own; a bake with --flat (no vertex shared between patches, so each vertex carries its patch's
 value) is grouped into patches by shared vertices here, and every CSV patch must have one group of its
@@ -252,6 +254,11 @@ def main():
     worst_c0 = max(abs(col0[k] - min(1.0, vals["_L"][k] * cs)) for k in range(3 * nv))
     check(worst_c0 < 1e-6, "COLOR_0 = min(1, L x colour_scale %.4g) (worst %.2e)" % (cs, worst_c0))
     check(0 <= min(col0) and max(col0) <= 1, "COLOR_0 in [0, 1]")
+    for k, n in enumerate(names[1:], start=1):   # COLOR_1 .. : the terms as COLOR_0 shows L, linear
+        ck, _ = accessor(gl, binary, attrs["COLOR_%d" % k])
+        worst = max(abs(ck[i] - min(1.0, vals[n][i] * cs)) for i in range(3 * nv))
+        check(worst < 1e-6 and extras["attributes"].get("COLOR_%d" % k) == n[1:].replace("REST", "rest"),
+              "COLOR_%d = min(1, %s x colour_scale), named in the extras (worst %.2e)" % (k, n, worst))
     mtl = read_mtl(scene)
     emitters = set()
     ntri = 0
@@ -275,12 +282,12 @@ def main():
 
     gi, bi = read_gltf(gltf)
     pa = [q for m in gi["meshes"] for q in m["primitives"]][0]["attributes"]
-    check("COLOR_1" in pa and "_L" in pa and "_E" not in pa, ".gltf: COLOR_1 (--ldr) and _L, no terms")
-    c1 = gi["accessors"][pa["COLOR_1"]]
-    check(c1["componentType"] == 5121 and c1.get("normalized"), "COLOR_1 is normalized bytes")
+    check("COLOR_1" not in pa and "_L" in pa and "_E" not in pa,
+          ".gltf with --ldr: COLOR_0 and _L, no sRGB-encoded set (glTF's colours are linear), no terms")
+    c0 = gi["accessors"][pa["COLOR_0"]]
+    check(c0["componentType"] == 5126, "COLOR_0 is float (linear)")
     n_in = gi["accessors"][pa["POSITION"]]["count"]
     check(0 < n_in < nv, "input mesh: %d vertices, fewer than the element mesh's %d" % (n_in, nv))
-    check("display" in gi["asset"]["extras"], "the display set's exposure is recorded")
 
     check_against_solve(bounce, scene, unit, outdir)
 

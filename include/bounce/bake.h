@@ -70,6 +70,8 @@ typedef struct bn_bake_write_opts {
                             faces are the patches (the element mesh) */
     int    ldr;          /* 1: 8-bit sRGB colours at `exposure_ev` instead of float radiance */
     double exposure_ev;  /* for ldr */
+    int    colour_sets;  /* glTF: the layers after the first also as colour sets COLOR_1 .. (display colours at
+                            the exposure, as COLOR_0 shows the first); 0: as float attributes only */
     const bn_attr *attrs;   /* provenance: PLY/OBJ comments, OM mesh property */
     size_t nattrs;
     const bn_log *log;

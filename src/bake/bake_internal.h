@@ -19,6 +19,7 @@ typedef struct bn__bake_out {
     const char *const *names;
     const unsigned char *c8;
     double exposure_ev;
+    int colour_sets;          /* layers 1 .. also as COLOR_1 .. */
     const double *power;      /* nlayers x 3: each layer's power pi sum_p A_p x_p over the patches (W) */
     /* each face's object and the objects' names (glTF: a node and mesh each); NULL or nobjects 1: one */
     const unsigned *face_object;

@@ -327,8 +327,8 @@ static bn_status bn__bake_gltf(const bn_bake *b, const char *path, int is_glb, c
     }
     if (st == BN_OK) {
         bn__bake_out g = {j->nv,  j->pos, j->nf,          j->face_n, j->face_idx, fm,
-                          nl,     (const float *const *)j->vals, lnames, j->c8, o->exposure_ev, power,
-                          fo, nobj, onames};
+                          nl,     (const float *const *)j->vals, lnames, j->c8, o->exposure_ev, o->colour_sets,
+                          power,  fo, nobj, onames};
         st = bn__write_gltf(path, is_glb, &g, s, o, err);
     }
     free(fm);

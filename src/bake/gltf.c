@@ -363,20 +363,33 @@ static void bn__gltf_position(const bn__gltf *g, size_t sl, size_t j, float out[
         out[c] = (float)(B[c] * p[0] + B[4 + c] * p[1] + B[8 + c] * p[2] + B[12 + c]);
 }
 
+/* The colour sets beside COLOR_0: COLOR_1 .. COLOR_n for the terms of a per-bounce bake (layers 1 ..;
+ * layer 0 is L, which COLOR_0 shows), none otherwise. */
+static size_t bn__ncolours(const bn__bake_out *m) { return m->colour_sets && m->nlayers > 1 ? m->nlayers - 1 : 0; }
+
+/* Vertex attributes per slice: POSITION, COLOR_0, the layers' radiance, COLOR_1 .. COLOR_n. */
+static size_t bn__nattr(const bn__bake_out *m) { return 2 + m->nlayers + bn__ncolours(m); }
+
+/* Layer l's values at the output vertices as what a display shows: x 2^EV, clamped to [0, 1], linear
+ * (glTF's COLOR_n are linear: the light and the brightest spots saturate). */
+static void bn__gltf_display(const bn__gltf *g, size_t l, float *f3)
+{
+    for (size_t j = 0; j < g->nvout; j++)
+        for (int c = 0; c < 3; c++)
+            f3[3 * j + c] = (float)fmin(1.0, fmax(0.0, (double)g->m->vals[l][3 * g->vsrc[j] + c] * g->scale));
+}
+
 /* The binary buffer's vertex views, slice after slice: positions as float, with each slice's bounds
- * (required for POSITION); COLOR_0, what an engine shows: L x 2^EV clamped to [0, 1] as glTF
- * requires (the light and the brightest spots saturate); each layer's radiance itself; the 8-bit
- * display set as VEC4 (alpha 255: vertex attributes keep 4-byte strides). */
+ * (required for POSITION); COLOR_0, what an engine shows (L); each layer's radiance itself; and in a
+ * per-bounce bake COLOR_1 .. COLOR_n, each term as COLOR_0 shows L (the same scale: they add up to it
+ * where nothing saturates), for tools that import colour sets only (Blender 3.4). */
 static bn_status bn__gltf_vertices(bn__gltf *g)
 {
     const bn__bake_out *m = g->m;
     size_t nv = g->nvout, n3 = nv * 3 * sizeof(float);
     float *f3 = bn__malloc_array(nv + 1, 3 * sizeof(float));
-    unsigned char *c4 = m->c8 ? bn__malloc_array(nv + 1, 4) : NULL;
-    if (!f3 || (m->c8 && !c4)) {
-        free(f3);
+    if (!f3)
         return BN_ENOMEM;
-    }
     for (size_t sl = 0; sl < g->nslice; sl++)
         for (size_t j = g->slice_v[sl]; j < g->slice_v[sl] + g->slice_nv[sl]; j++) {
             bn__gltf_position(g, sl, j, f3 + 3 * j);
@@ -386,23 +399,18 @@ static bn_status bn__gltf_vertices(bn__gltf *g)
             }
         }
     bn__gltf_view(g, f3, n3, 34962, 12);
-    for (size_t j = 0; j < nv; j++)
-        for (int c = 0; c < 3; c++)
-            f3[3 * j + c] = (float)fmin(1.0, fmax(0.0, (double)m->vals[0][3 * g->vsrc[j] + c] * g->scale));
+    bn__gltf_display(g, 0, f3);
     bn__gltf_view(g, f3, n3, 34962, 12);
     for (size_t l = 0; l < m->nlayers; l++) {
         for (size_t j = 0; j < nv; j++)
             memcpy(f3 + 3 * j, m->vals[l] + 3 * g->vsrc[j], 3 * sizeof(float));
         bn__gltf_view(g, f3, n3, 34962, 12);
     }
-    for (size_t j = 0; c4 && j < nv; j++) {
-        memcpy(c4 + 4 * j, m->c8 + 3 * g->vsrc[j], 3);
-        c4[4 * j + 3] = 255;
+    for (size_t k = 1; k <= bn__ncolours(m); k++) {
+        bn__gltf_display(g, k, f3);
+        bn__gltf_view(g, f3, n3, 34962, 12);
     }
-    if (c4)
-        bn__gltf_view(g, c4, nv * 4, 34962, 4);
     free(f3);
-    free(c4);
     return g->blob.oom ? BN_ENOMEM : BN_OK;
 }
 
@@ -443,10 +451,16 @@ static void bn__gltf_json_extras(bn__gltf *g, const bn_scene *scene, const bn_ba
     bn__str_add(js, ",\"colour_scale\":");
     bn__str_num(js, g->scale);
     bn__str_add(js, ",\"note\":\"per-vertex radiance baked from bounce's solution, positions in metres. COLOR_0 "
-                    "is L times colour_scale (2^exposure_ev), linear, clamped to [0, 1]: what an engine shows. The "
-                    "application-specific attributes hold radiance itself, unclamped: _L, and in a per-bounce bake "
-                    "the terms of the series (_E = E, _KE = K E, _K2E = K^2 E, ..., _REST the longer paths; "
-                    "their sum is _L)\",\"attributes\":{\"COLOR_0\":\"L x colour_scale, clamped to [0, 1]\"");
+                    "is L times colour_scale (2^exposure_ev), linear, clamped to [0, 1]: what an engine shows; in a "
+                    "per-bounce bake COLOR_1, COLOR_2, ... are the terms at the same scale (Blender imports them as "
+                    "the colour attributes Col.001, Col.002, ...). The application-specific attributes hold "
+                    "radiance itself, unclamped: _L, and in a per-bounce bake the terms of the series (_E = E, "
+                    "_KE = K E, _K2E = K^2 E, ..., _REST the longer paths; their sum is _L)\",\"attributes\":{"
+                    "\"COLOR_0\":\"L x colour_scale, clamped to [0, 1]\"");
+    for (size_t k = 1; k <= bn__ncolours(m); k++) {
+        bn__str_add(js, ",\"COLOR_%zu\":", k);
+        bn__str_json(js, m->names[k]);
+    }
     for (size_t l = 0; l < m->nlayers; l++) {
         char an[64];
         bn__attr_name(m->names[l], an, sizeof an);
@@ -463,11 +477,6 @@ static void bn__gltf_json_extras(bn__gltf *g, const bn_scene *scene, const bn_ba
         bn__str_vec3(js, m->power ? m->power + 3 * l : NULL);
     }
     bn__str_add(js, "}");
-    if (m->c8) {
-        bn__str_add(js, ",\"display\":{\"attribute\":\"COLOR_1\",\"encoding\":\"8-bit sRGB of L\",\"exposure_ev\":");
-        bn__str_num(js, m->exposure_ev);
-        bn__str_add(js, "}");
-    }
     bn__str_add(js, ",\"provenance\":{");
     for (size_t a = 0; a < o->nattrs; a++) {
         bn__str_add(js, "%s", a ? "," : "");
@@ -484,7 +493,7 @@ static void bn__gltf_json_accessors(bn__gltf *g, const char *binname)
 {
     const bn__bake_out *m = g->m;
     bn__str *js = &g->js;
-    size_t v = 2 + m->nlayers + (m->c8 ? 1 : 0), nacc = 0;
+    size_t v = bn__nattr(m), nacc = 0;
     bn__str_add(js, ",\"buffers\":[{\"byteLength\":%zu", g->blob.n);
     if (binname) {
         bn__str_add(js, ",\"uri\":");
@@ -508,9 +517,9 @@ static void bn__gltf_json_accessors(bn__gltf *g, const char *binname)
         for (size_t l = 0; l <= m->nlayers; l++)   /* COLOR_0, then the layers */
             bn__str_add(js, ",{\"bufferView\":%zu,\"byteOffset\":%zu,\"componentType\":5126,\"count\":%zu,"
                             "\"type\":\"VEC3\"}", 1 + l, 12 * o, n);
-        if (m->c8)
-            bn__str_add(js, ",{\"bufferView\":%zu,\"byteOffset\":%zu,\"componentType\":5121,\"normalized\":true,"
-                            "\"count\":%zu,\"type\":\"VEC4\"}", 2 + m->nlayers, 4 * o, n);
+        for (size_t k = 1; k <= bn__ncolours(m); k++)   /* COLOR_1 .. COLOR_n */
+            bn__str_add(js, ",{\"bufferView\":%zu,\"byteOffset\":%zu,\"componentType\":5126,\"count\":%zu,"
+                            "\"type\":\"VEC3\"}", 1 + m->nlayers + k, 12 * o, n);
     }
     for (size_t k = 0; k < g->ngroups; k++)
         if (g->mat_tris[k]) {
@@ -568,8 +577,8 @@ static void bn__gltf_json_prims(bn__gltf *g, size_t s, size_t a0, size_t *acc)
             bn__attr_name(m->names[l], an, sizeof an);
             bn__str_add(js, ",\"%s\":%zu", an, a0 + 2 + l);
         }
-        if (m->c8)
-            bn__str_add(js, ",\"COLOR_1\":%zu", a0 + 2 + m->nlayers);
+        for (size_t q = 1; q <= bn__ncolours(m); q++)
+            bn__str_add(js, ",\"COLOR_%zu\":%zu", q, a0 + 1 + m->nlayers + q);
         bn__str_add(js, "},\"indices\":%zu,\"material\":%zu,\"mode\":4}", (*acc)++, k);
     }
     bn__str_add(js, "]");
@@ -581,7 +590,7 @@ static void bn__gltf_json_meshes(bn__gltf *g)
 {
     const bn__bake_out *m = g->m;
     bn__str *js = &g->js;
-    size_t nattr = 2 + m->nlayers + (m->c8 ? 1 : 0), nmesh = 0, acc = 0;
+    size_t nattr = bn__nattr(m), nmesh = 0, acc = 0;
     for (size_t sl = 0; sl < g->nslice; sl++)
         acc += g->slice_nv[sl] ? nattr : 0;
     bn__str_add(js, ",\"meshes\":[");
@@ -591,7 +600,11 @@ static void bn__gltf_json_meshes(bn__gltf *g)
         bn__str_add(js, "%s{", nmesh++ ? "," : "");
         bn__mesh_name(g, s);
         bn__gltf_json_prims(g, s, g->nslice == 1 ? 0 : a0, &acc);
-        bn__str_add(js, "}");
+        for (size_t k = 0; k <= bn__ncolours(m) && bn__ncolours(m); k++) {   /* which term each colour set holds */
+            bn__str_add(js, "%s\"COLOR_%zu\":", k ? "," : ",\"extras\":{", k);
+            bn__str_json(js, m->names[k]);
+        }
+        bn__str_add(js, "%s}", bn__ncolours(m) ? "}" : "");
         a0 += g->nslice == 1 ? 0 : nattr;
     }
     bn__str_add(js, "],\"materials\":[");
@@ -839,7 +852,7 @@ static bn_status bn__gltf_build(bn__gltf *g, const bn_scene *scene, const bn_bak
     g->ngroups = g->nmesh * g->nmat;
     g->mat_tris = bn__calloc(g->ngroups + 1, sizeof(size_t));
     g->mat_first = bn__calloc(g->ngroups + 1, sizeof(size_t));
-    g->views = bn__calloc(g->m->nlayers + 5 + g->ngroups, sizeof *g->views);
+    g->views = bn__calloc(bn__nattr(g->m) + 4 + g->ngroups, sizeof *g->views);
     g->slice_v = bn__calloc(g->nslice, sizeof(size_t));
     g->slice_nv = bn__calloc(g->nslice, sizeof(size_t));
     g->lo = bn__malloc_array(g->nslice, sizeof *g->lo);

@@ -11,8 +11,8 @@ typedef struct bn__bake_cli {
     bn_cli_scene so;
     bn_cli_ff ff;
     bn_cli_solution sol;
-    const char *out;
-    int n, ldr, flat, per_bounce, mesh, is_gltf;
+    const char *out, *for_tool;
+    int n, ldr, flat, per_bounce, mesh, is_gltf, no_colour_sets;
     double ev, crease;
 } bn__bake_cli;
 
@@ -32,9 +32,11 @@ static void bn__bake_options(bn_optset *set, bn__bake_cli *a, bn_cli_common *c)
         "default, 8-bit sRGB with --ldr. .ply (binary) and .om are written through OpenMesh,\n"
         ".obj directly as `v x y z r g b`. --per-bounce adds float vertex properties E_red, E_green, E_blue,\n"
         "KE_red, ..., K{K}E_*, rest_* (PLY, OM) so engines can blend bounces; their sum is L.\n"
-        ".glb / .gltf (+ .bin): glTF 2.0 in metres, COLOR_0 = L as float radiance, --per-bounce adds the\n"
-        "attributes _E, _KE, ..., _REST, unlit materials with the reflectance in their extras, provenance in\n"
-        "the asset's extras; --ldr adds COLOR_1, the 8-bit sRGB display set, beside the float ones.";
+        ".glb / .gltf (+ .bin): glTF 2.0 in metres, COLOR_0 = L x 2^EV clamped to [0, 1] (linear, what an\n"
+        "engine shows), _L the radiance itself; --per-bounce adds the radiance attributes _E, _KE, ..., _REST\n"
+        "and the colour sets COLOR_1, COLOR_2, ... of the terms at COLOR_0's scale (Blender 3.4 imports those\n"
+        "as Col.001, Col.002, ...); unlit materials with the reflectance in their extras, provenance in the\n"
+        "asset's extras. --for blender: what Blender 3.4 shows as meant (PLY, OBJ: 8-bit sRGB as --ldr).";
     bn_optset_add(set, (bn_opt){"output", 'o', BN_OPT_STRING, &a->out, NULL, 0, 0, "FILE",
                                  "baked mesh: .ply, .om, .obj, .glb or .gltf (default baked.ply)"});
     bn_optset_add(set, (bn_opt){"crease", 0, BN_OPT_DOUBLE, &a->crease, NULL, 0, 180, "DEG",
@@ -44,6 +46,12 @@ static void bn__bake_options(bn_optset *set, bn__bake_cli *a, bn_cli_common *c)
                                  "as the solve sees them)"});
     bn_optset_add(set, (bn_opt){"ldr", 0, BN_OPT_FLAG, &a->ldr, NULL, 0, 0, NULL,
                                  "8-bit sRGB colours at --exposure instead of float radiance"});
+    bn_optset_add(set, (bn_opt){"no-colour-sets", 0, BN_OPT_FLAG, &a->no_colour_sets, NULL, 0, 0, NULL,
+                                 "glTF with --per-bounce: the terms as float attributes only, no COLOR_1 .. "
+                                 "(smaller; engines and the viewer read the float ones)"});
+    bn_optset_add(set, (bn_opt){"for", 0, BN_OPT_STRING, &a->for_tool, NULL, 0, 0, "TOOL",
+                                 "blender: colours as Blender 3.4 shows them (PLY, OBJ: --ldr; glTF as always), and "
+                                 "how to import the file"});
     bn_optset_add(set, (bn_opt){"exposure", 0, BN_OPT_DOUBLE, &a->ev, NULL, -64, 64, "EV",
                                  "--ldr: value * 2^EV before sRGB (default: auto, the 99th percentile of the "
                                  "patches' L at 0.9)"});
@@ -71,6 +79,12 @@ static bn_status bn__bake_check(const bn_optset *set, bn__bake_cli *a, bn_error 
                  strcmp(dot, ".gltf")))
         return bn_error_set(err, BN_EUSAGE, "-o %s: bake writes .ply, .om, .obj, .glb or .gltf", a->out);
     a->is_gltf = strcmp(dot, ".glb") == 0 || strcmp(dot, ".gltf") == 0;
+    if (a->for_tool && strcmp(a->for_tool, "blender") != 0)
+        return bn_error_set(err, BN_EUSAGE, "--for %s: the tool bounce knows is blender", a->for_tool);
+    if (a->for_tool && a->no_colour_sets)
+        return bn_error_set(err, BN_EUSAGE, "--for blender and --no-colour-sets: Blender imports colour sets only");
+    if (a->for_tool && !a->is_gltf)
+        a->ldr = 1;   /* Blender reads a PLY's colours as 8-bit sRGB: the display colours */
     if (a->per_bounce && strcmp(dot, ".obj") == 0)
         return bn_error_set(err, BN_EUSAGE, "--per-bounce needs .ply or .om (OBJ holds one colour per vertex)");
     return BN_OK;
@@ -98,8 +112,8 @@ static bn_status bn__bake_layers(const bn__bake_cli *a, const bn_pipeline *p, bn
 static void bn__bake_colours(const bn__bake_cli *a, char *buf, size_t n)
 {
     if (a->is_gltf)
-        snprintf(buf, n, "COLOR_0 L x 2^%+.4f clamped to [0, 1]; _L radiance W m^-2 sr^-1%s", a->ev,
-                 a->ldr ? "; COLOR_1 8-bit sRGB" : "");
+        snprintf(buf, n, "COLOR_0 L x 2^%+.4f clamped to [0, 1], linear%s; _L radiance W m^-2 sr^-1", a->ev,
+                 a->per_bounce && !a->no_colour_sets ? ", COLOR_1 .. the terms alike" : "");
     else if (a->ldr)
         snprintf(buf, n, "8-bit sRGB at %+.4f EV", a->ev);
     else
@@ -138,6 +152,7 @@ static bn_status bn__bake_write(const bn__bake_cli *a, const bn_cli_common *c, c
     memset(&wo, 0, sizeof wo);
     wo.input_mesh = !elements;
     wo.ldr = a->ldr;
+    wo.colour_sets = !a->no_colour_sets;
     wo.exposure_ev = a->ev;
     wo.attrs = attrs;
     wo.nattrs = sizeof attrs / sizeof attrs[0];
@@ -156,6 +171,25 @@ static void bn__bake_summary(const bn__bake_cli *a, const bn_pipeline *p, const 
     else
         printf("wrote %s (the input mesh: %zu polygons; %s%s)\n", a->out, nf, evbuf,
                a->per_bounce ? "; per-bounce properties E .. rest" : "");
+}
+
+/* What the file needs to show as meant where it is opened (Blender 3.4 as Debian ships it). */
+static void bn__bake_hints(const bn__bake_cli *a)
+{
+    if (a->is_gltf && a->for_tool)
+        printf("Blender 3.4: File > Import > glTF 2.0 with Shading: Flat (Debian's Blender fails in the default "
+               "shading path: numpy has no attribute bool); headless: bpy.ops.import_scene.gltf(filepath='%s', "
+               "import_shading='FLAT'). L is the colour attribute Col%s\n", a->out,
+               a->per_bounce ? ", the terms Col.001, Col.002, ... in the order E, KE, K2E, ..., rest" : "");
+    else if (a->is_gltf && a->ldr)
+        printf("note: --ldr changes nothing in glTF: its colour sets are linear display colours already (COLOR_0 = L "
+               "x 2^EV, clamped)\n");
+    else if (a->for_tool)
+        printf("Blender 3.4: File > Import > Stanford (.ply): the colours are 8-bit sRGB at the exposure, as Blender "
+               "shows vertex colours\n");
+    else if (!a->ldr && !strcmp(strrchr(a->out, '.'), ".ply"))
+        printf("note: a float PLY imports into Blender as 8-bit colours, clamped and dark; --for blender writes the "
+               "display colours it shows as meant (or bake to .glb)\n");
 }
 
 /* The bake's vertices, leaving out patches inside closed objects, and the exposure. */
@@ -205,8 +239,10 @@ int bn_cmd_bake(int argc, char **argv, bn_cli_common *c)
              bn__bake_make(&a, &set, c, &p, &bake, &err) != BN_OK ||
              bn__bake_write(&a, c, &p, bake, layers, nl, solver, &err) != BN_OK)
         rc = bn_cli_fail(&err);
-    else if (!c->quiet && !c->no_summary)
+    else if (!c->quiet && !c->no_summary) {
         bn__bake_summary(&a, &p, bake);
+        bn__bake_hints(&a);
+    }
     free(layers);
     free(names);
     bn_bake_destroy(bake);

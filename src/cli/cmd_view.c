@@ -36,7 +36,7 @@ static int bn__view_args(int argc, char **argv, bn__view_cli *v, int *done)
 {
     *done = 0;
     v->out = "view.html";
-    if (!(v->bargv = calloc((size_t)argc + 6, sizeof *v->bargv))) {
+    if (!(v->bargv = calloc((size_t)argc + 7, sizeof *v->bargv))) {
         fprintf(stderr, "bounce: error: out of memory\n");
         return bn_status_exit_code(BN_ENOMEM);
     }
@@ -86,6 +86,7 @@ static int bn__view_bake(bn__view_cli *v, const char *title, bn_cli_common *c, b
         return bn_status_exit_code(BN_ENOMEM);
     snprintf(tmp, len, "%s.%ld.bake.glb", v->out, (long)getpid());
     v->bargv[v->bargc++] = "--per-bounce";
+    v->bargv[v->bargc++] = "--no-colour-sets";   /* the page reads the float terms: half the bytes */
     v->bargv[v->bargc++] = "-o";
     v->bargv[v->bargc++] = tmp;
     if (v->quiet)

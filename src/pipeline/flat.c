@@ -572,6 +572,7 @@ bn_status bn_flat_bake(const bn_flat *f, const char *out, int per_bounce, const 
         memset(&wo, 0, sizeof wo);
         wo.input_mesh = input_mesh;
         wo.ldr = ldr;
+        wo.colour_sets = 1;   /* as bounce bake writes them */
         wo.exposure_ev = isfinite(exposure_ev) ? exposure_ev : bn_bake_auto_exposure(f->p.res.L, f->p.n);
         wo.attrs = attrs;
         wo.nattrs = sizeof attrs / sizeof attrs[0];
