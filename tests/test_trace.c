@@ -428,3 +428,59 @@ BN_TEST(light_tree_nee_matches_power_nee)
             BN_ASSERT_LE(fabs(m1[l][c] - mc[l][c]), tol);
         }
 }
+
+/* Points (bounce trace --points): in the furnace every point's layers are rho^k Le whatever its place
+ * (centres, near edges and corners, every wall); each estimate within 5 standard errors of it; a file
+ * line that is not six numbers, a zero normal and a point with no face whose front agrees are refused
+ * naming the line. */
+BN_TEST(points_in_the_furnace_are_exact)
+{
+    bn_scene *s = furnace(0.6, 1.5, 300);
+    bn_rt *rt = make_rt(s);
+    bn_trace_opts o;
+    bn_trace_patches r;
+    bn_trace_point *pts = NULL;
+    size_t n;
+    bn_error err;
+    const char *path = bn_test_tmp("points.txt");
+    FILE *f = fopen(path, "w");
+    BN_ASSERT(f);
+    fprintf(f, "# x y z nx ny nz\n0.5 0 0.5 0 1 0\n\n0.01 1 0.02 0 -1 0\n1 0.5 0.3 -1 0 0\n0.2 0.7 0 0 0 2\n");
+    BN_ASSERT(fclose(f) == 0);
+    BN_ASSERT_STATUS(bn_trace_points_read(path, rt, &pts, &n, &err), BN_OK);
+    BN_ASSERT_EQ(n, 4);
+    BN_ASSERT_EQ(pts[1].line, 4);
+    bn_trace_opts_default(&o);
+    o.spp = 2048;
+    o.bounces = 3;
+    BN_ASSERT_STATUS(bn_trace_points_run(rt, pts, n, &o, &r, &err), BN_OK);
+    double zmax = 0;
+    for (int l = 0; l < r.nlayers; l++)
+        for (size_t i = 0; i < n; i++) {
+            double want = furnace_exact(l, 3, 0.6, 1.5), got = r.mean[((size_t)l * n + i) * 3];
+            double se = r.se[((size_t)l * n + i) * 3];
+            zmax = fmax(zmax, se > 0 ? fabs(got - want) / se : (fabs(got - want) < 1e-12 ? 0 : INFINITY));
+        }
+    printf("furnace points: worst |z| %.2f over %d layers x %zu points\n", zmax, r.nlayers, n);
+    BN_ASSERT_LE(zmax, 5);
+    bn_trace_patches_free(&r);
+    free(pts);
+    static const struct {
+        const char *text, *says;
+    } bad[] = {{"0.5 0 0.5 0 1\n", ":1: expected six numbers"},
+               {"\n0.5 0 0.5 0 0 0\n", ":2: the normal (0, 0, 0) is zero"},
+               {"0.5 0 0.5 0 -1 0\n", ":1: no face within"},
+               {"0.5 0.5 0.5 0 1 0\n", ":1: no face within"},
+               {"# nothing\n", "no points"}};
+    for (size_t k = 0; k < sizeof bad / sizeof *bad; k++) {
+        f = fopen(path, "w");
+        BN_ASSERT(f);
+        fputs(bad[k].text, f);
+        BN_ASSERT(fclose(f) == 0);
+        BN_ASSERT_STATUS(bn_trace_points_read(path, rt, &pts, &n, &err), BN_EINPUT);
+        if (!strstr(err.msg, bad[k].says) || !strstr(err.msg, "points.txt"))
+            BN_FAIL("'%s' does not say '%s'", err.msg, bad[k].says);
+    }
+    bn_rt_destroy(rt);
+    bn_scene_destroy(s);
+}

@@ -125,6 +125,29 @@ void bn_partition_mean(const bn_partition *p, const bn_scene *s, const double *l
 bn_status bn_trace_regions_run(const bn_rt *rt, const bn_partition *part, const bn_trace_opts *o,
                                bn_trace_patches *out, bn_error *err);
 
+/* Points the tracer estimates at (an independent reference for per-vertex values, bounce bake's): a
+ * place on a patch, on the side its normal faces. */
+typedef struct bn_trace_point {
+    double x[3];
+    size_t patch;
+    unsigned line;   /* the line of the points file it came from */
+} bn_trace_point;
+/* Reads `path`: one point a line, `x y z nx ny nz` in scene units (blank lines and `#` comments skipped),
+ * the normal pointing to the side whose outgoing radiance is wanted. Each point takes the face nearest to
+ * it within 1e-6 of the scene's diameter whose normal agrees with n (found by a short ray along -n), and
+ * the patch of that face there. *pts (owned by the caller), *n; a line that is not six finite numbers, a
+ * zero normal, or a point with no such face: BN_EINPUT naming the file and the line. */
+bn_status bn_trace_points_read(const char *path, const bn_rt *rt, bn_trace_point **pts, size_t *n, bn_error *err);
+/* The tracer's estimate at each point: the radiance leaving the surface there, per layer (its emission in
+ * E, each path's reflections binned as for patches; the reflectance at the point, textures included),
+ * with standard errors; the layout of bn_trace_patches with n = points. */
+bn_status bn_trace_points_run(const bn_rt *rt, const bn_trace_point *pts, size_t n, const bn_trace_opts *o,
+                              bn_trace_patches *out, bn_error *err);
+/* Per-point estimates as CSV: `header`, then point,line,face,patch,x,y,z and each layer's R, G, B and
+ * their standard errors (`<layer>.R ... <layer>.B_se`), one row per point in the file's order. Atomic. */
+bn_status bn_trace_points_write_csv(const char *path, const bn_scene *s, const bn_trace_point *pts,
+                                    const bn_trace_patches *r, const char *header, bn_error *err);
+
 /* Camera images: per pixel the mean over `spp` independent jittered samples of the radiance leaving
  * the surface seen, per layer, and the variance of that mean (unbiased sample variance / spp). */
 typedef struct bn_trace_image {

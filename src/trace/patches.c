@@ -12,12 +12,49 @@
 #include <string.h>
 
 #define BN__TRACE_TAG_REGION 0x726567696f6eULL   /* "region" */
+#define BN__TRACE_TAG_POINT 0x706f696e74ULL      /* "point" */
 
-/* Item i's spp samples (a patch, or a region's patches by area) into out's mean and se. */
-static void bn__trace_item(const bn__tracer *t, const bn_partition *part, const bn_trace_opts *o, size_t i, size_t n,
+/* What one item is: a patch (both NULL), a region of a partition, or a point. */
+typedef struct bn__trace_what {
+    const bn_partition *part;
+    const bn_trace_point *pts;
+} bn__trace_what;
+
+/* Sample s's start for item i: the patch, the point on it, and the reflectance there (NULL: the patch's). */
+static size_t bn__trace_start(const bn__tracer *t, const bn__trace_what *w, size_t i, bn__rng *rng, double x[3],
+                              double rho[3], const double **rho0)
+{
+    size_t p = i;
+    *rho0 = NULL;
+    if (w->pts) {
+        memcpy(x, w->pts[i].x, 3 * sizeof *x);
+        bn_scene_reflectance_at(t->scene, t->patches[w->pts[i].patch].face, x, rho);
+        *rho0 = rho;
+        return w->pts[i].patch;
+    }
+    if (w->part) {   /* the region's patch by area (independent draws: se from the samples) */
+        double u0 = bn__rng_uniform(rng);
+        size_t lo = w->part->start[i], hi = w->part->start[i + 1] - 1;
+        while (lo < hi) {
+            size_t mid = lo + (hi - lo) / 2;
+            if (w->part->cum[mid] > u0)
+                hi = mid;
+            else
+                lo = mid + 1;
+        }
+        p = w->part->patch[lo];
+    }
+    double u1 = bn__rng_uniform(rng), u2 = bn__rng_uniform(rng), u3 = bn__rng_uniform(rng);
+    bn__tracer_patch_point(t, p, u1, u2, u3, x);
+    return p;
+}
+
+/* Item i's spp samples (a patch, a region's patches by area, or a point) into out's mean and se. */
+static void bn__trace_item(const bn__tracer *t, const bn__trace_what *w, const bn_trace_opts *o, size_t i, size_t n,
                            size_t nl, double *sample, double *mean, double *m2, bn_trace_patches *out,
                            unsigned long long *rays)
 {
+    const uint64_t tag = w->pts ? BN__TRACE_TAG_POINT : w->part ? BN__TRACE_TAG_REGION : BN__TRACE_TAG_PATCH;
     size_t m = nl * 3;
     double *m3 = m2 + m;
     memset(mean, 0, m * sizeof(double));
@@ -25,28 +62,15 @@ static void bn__trace_item(const bn__tracer *t, const bn_partition *part, const 
     for (size_t s = 0; s < o->spp; s++) {
         if ((s & 4095) == 4095 && bn_interrupted() != BN_OK)
             break;   /* an item of 1e6 samples takes seconds: stop within one batch (discarded) */
-        bn__rng rng = bn__rng_make(o->seed ^ (part ? BN__TRACE_TAG_REGION : BN__TRACE_TAG_PATCH), i, s);
-        size_t p = i;
-        if (part) {   /* the region's patch by area (independent draws: se from the samples) */
-            double u0 = bn__rng_uniform(&rng);
-            size_t lo = part->start[i], hi = part->start[i + 1] - 1;
-            while (lo < hi) {
-                size_t mid = lo + (hi - lo) / 2;
-                if (part->cum[mid] > u0)
-                    hi = mid;
-                else
-                    lo = mid + 1;
-            }
-            p = part->patch[lo];
-        }
-        double x[3], u1 = bn__rng_uniform(&rng), u2 = bn__rng_uniform(&rng), u3 = bn__rng_uniform(&rng);
-        double *L = sample + 3 * (nl - 1);
+        bn__rng rng = bn__rng_make(o->seed ^ tag, i, s);
+        double x[3], rho[3], *L = sample + 3 * (nl - 1);
+        const double *rho0;
+        size_t p = bn__trace_start(t, w, i, &rng, x, rho, &rho0);
         memset(sample, 0, m * sizeof(double));
-        bn__tracer_patch_point(t, p, u1, u2, u3, x);
         /* Bin 0: the patch's own emission, seen directly. */
         for (int c = 0; c < 3; c++)
             sample[c] = t->Le[3 * p + c];
-        bn__tracer_path(t, x, p, NULL, &rng, sample, rays);
+        bn__tracer_path(t, x, p, rho0, &rng, sample, rays);
         for (size_t l = 0; l + 1 < nl; l++)
             for (int c = 0; c < 3; c++)
                 L[c] += sample[3 * l + c];
@@ -64,7 +88,7 @@ static void bn__trace_item(const bn__tracer *t, const bn_partition *part, const 
 
 typedef struct bn__trace_items_ctx {
     const bn__tracer *t;
-    const bn_partition *part;
+    const bn__trace_what *what;
     const bn_trace_opts *o;
     size_t n, nl;
     bn_trace_patches *out;
@@ -73,13 +97,15 @@ typedef struct bn__trace_items_ctx {
 static void bn__trace_item_run(void *ctx, size_t i, double *sample, double *mean, double *m2, unsigned long long *rays)
 {
     const bn__trace_items_ctx *c = ctx;
-    bn__trace_item(c->t, c->part, c->o, i, c->n, c->nl, sample, mean, m2, c->out, rays);
+    bn__trace_item(c->t, c->what, c->o, i, c->n, c->nl, sample, mean, m2, c->out, rays);
 }
 
-/* part NULL: one item per patch; else one per region, its points uniform in area over the region. */
-static bn_status bn__trace_items_run_body(const bn_rt *rt, const bn_partition *part, const bn_trace_opts *o,
+/* One item per patch; per region of w->part, its points uniform in area over the region; or per point of
+ * w->pts (n of them). */
+static bn_status bn__trace_items_run_body(const bn_rt *rt, const bn__trace_what *w, size_t npts, const bn_trace_opts *o,
                                           bn_trace_patches *out, bn_error *err)
 {
+    const bn_partition *part = w->part;
     bn__tracer t;
     bn_status st;
     size_t n, nl, bytes;
@@ -92,7 +118,7 @@ static bn_status bn__trace_items_run_body(const bn_rt *rt, const bn_partition *p
     st = bn__tracer_init(&t, rt, o, err);
     if (st != BN_OK)
         return st;
-    n = part ? part->n : t.np;
+    n = w->pts ? npts : part ? part->n : t.np;
     if (part && part->npatch != t.np) {
         bn__tracer_free(&t);
         return bn_error_set(err, BN_EINTERNAL, "trace: a partition of %zu patches for a scene of %zu", part->npatch, t.np);
@@ -114,9 +140,10 @@ static bn_status bn__trace_items_run_body(const bn_rt *rt, const bn_partition *p
         bn_trace_patches_free(out);
         return bn_error_set(err, BN_ENOMEM, "trace: out of memory for 3 x %zu bytes of per-patch estimates", bytes);
     }
-    bn__progress_begin(&prog, part ? "path tracing regions" : "path tracing", n, o->quiet);
+    bn__progress_begin(&prog, w->pts ? "path tracing points" : part ? "path tracing regions" : "path tracing", n,
+                       o->quiet);
 
-    bn__trace_items_ctx ctx = {&t, part, o, n, nl, out};
+    bn__trace_items_ctx ctx = {&t, w, o, n, nl, out};
     no_buffers = bn__trace_parallel(n, nl * 3, 3, bn__trace_item_run, &ctx, &prog, &rays);
     bn__progress_end(&prog);
     bn__tracer_free(&t);
@@ -134,7 +161,7 @@ static bn_status bn__trace_items_run_body(const bn_rt *rt, const bn_partition *p
                 if (!isfinite(out->mean[k]) || !isfinite(out->se[k])) {
                     char name[16];
                     bn_error_set(err, BN_ENUMERIC, "trace: non-finite estimate %g (se %g) for %s %zu, layer %s, "
-                                 "channel %d", out->mean[k], out->se[k], part ? "region" : "patch", i,
+                                 "channel %d", out->mean[k], out->se[k], w->pts ? "point" : part ? "region" : "patch", i,
                                  bn_layer_name((int)l, o->bounces, name, sizeof name), c);
                     bn_trace_patches_free(out);
                     return BN_ENUMERIC;
@@ -146,7 +173,18 @@ static bn_status bn__trace_items_run_body(const bn_rt *rt, const bn_partition *p
 bn_status bn_trace_patches_run(const bn_rt *rt, const bn_trace_opts *o, bn_trace_patches *out, bn_error *err)
 {
     int prev = bn__threads_begin(o->threads);
-    bn_status st = bn__trace_items_run_body(rt, NULL, o, out, err);
+    bn__trace_what w = {NULL, NULL};
+    bn_status st = bn__trace_items_run_body(rt, &w, 0, o, out, err);
+    bn__threads_end(prev);
+    return st;
+}
+
+bn_status bn_trace_points_run(const bn_rt *rt, const bn_trace_point *pts, size_t n, const bn_trace_opts *o,
+                              bn_trace_patches *out, bn_error *err)
+{
+    int prev = bn__threads_begin(o->threads);
+    bn__trace_what w = {NULL, pts};
+    bn_status st = bn__trace_items_run_body(rt, &w, n, o, out, err);
     bn__threads_end(prev);
     return st;
 }
@@ -155,7 +193,8 @@ bn_status bn_trace_regions_run(const bn_rt *rt, const bn_partition *part, const 
                                bn_trace_patches *out, bn_error *err)
 {
     int prev = bn__threads_begin(o->threads);
-    bn_status st = bn__trace_items_run_body(rt, part, o, out, err);
+    bn__trace_what w = {part, NULL};
+    bn_status st = bn__trace_items_run_body(rt, &w, 0, o, out, err);
     bn__threads_end(prev);
     return st;
 }

@@ -1,0 +1,135 @@
+/* Points for the tracer (bn_trace_points_read, _write_csv): a file of `x y z nx ny nz` lines placed on
+ * the scene's faces, and the per-point estimates written back in the file's order. */
+#include "trace/trace_internal.h"
+#include "base/vec.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* The front of the face within tol of x along n: a ray from x + tol n towards -n, 2 tol long, that
+ * arrives on a patch's front side. 1 and the patch, or 0. */
+static int bn__point_patch(const bn_rt *rt, const double x[3], const double n[3], double tol, size_t *patch)
+{
+    double o[3], d[3] = {-n[0], -n[1], -n[2]};
+    bn_hit h;
+    bn_v3_madd(x, tol, n, o);
+    if (!bn_rt_intersect(rt, o, d, 0, 2 * tol, &h) || !h.front)
+        return 0;
+    *patch = h.patch;
+    return 1;
+}
+
+/* One line's point: 1 placed, 0 blank or a comment, -1 bad (err set). */
+static int bn__point_line(const char *path, unsigned line, char *buf, const bn_rt *rt, double tol, bn_trace_point *pt,
+                          bn_error *err)
+{
+    double v[6];
+    char *p = buf, *end;
+    while (*p == ' ' || *p == '\t')
+        p++;
+    if (*p == '\0' || *p == '\n' || *p == '\r' || *p == '#')
+        return 0;
+    for (int k = 0; k < 6; k++, p = end) {
+        errno = 0;
+        v[k] = strtod(p, &end);
+        if (end == p || errno == ERANGE || !isfinite(v[k])) {
+            bn_error_set(err, BN_EINPUT, "%s:%u: expected six numbers (x y z nx ny nz), value %d is not a finite number",
+                         path, line, k + 1);
+            return -1;
+        }
+    }
+    double n[3] = {v[3], v[4], v[5]};
+    if (!(bn_v3_normalize(n) > 0)) {
+        bn_error_set(err, BN_EINPUT, "%s:%u: the normal (%g, %g, %g) is zero", path, line, v[3], v[4], v[5]);
+        return -1;
+    }
+    memcpy(pt->x, v, 3 * sizeof *v);
+    pt->line = line;
+    if (!bn__point_patch(rt, pt->x, n, tol, &pt->patch)) {
+        bn_error_set(err, BN_EINPUT, "%s:%u: no face within %g of (%g, %g, %g) whose front faces (%g, %g, %g)", path, line,
+                     tol, v[0], v[1], v[2], n[0], n[1], n[2]);
+        return -1;
+    }
+    return 1;
+}
+
+static int bn__points_grow(bn_trace_point **pts, size_t *cap)
+{
+    size_t nc = *cap ? 2 * *cap : 256;
+    bn_trace_point *q = nc < SIZE_MAX / sizeof *q ? realloc(*pts, nc * sizeof *q) : NULL;
+    if (!q)
+        return 0;
+    *pts = q;
+    *cap = nc;
+    return 1;
+}
+
+bn_status bn_trace_points_read(const char *path, const bn_rt *rt, bn_trace_point **pts, size_t *n, bn_error *err)
+{
+    const bn_scene *s = bn_rt_scene(rt);
+    double lo[3], hi[3], d[3];
+    size_t cap = 0;
+    unsigned line = 0;
+    char buf[1024];
+    bn_status st = BN_OK;
+    FILE *f = fopen(path, "r");
+    *pts = NULL;
+    *n = 0;
+    if (!f)
+        return bn_error_set(err, BN_EIO, "%s: %s", path, strerror(errno));
+    bn_scene_bounds(s, lo, hi);
+    bn_v3_sub(hi, lo, d);
+    double tol = fmax(1e-6 * bn_v3_len(d), 4 * bn_rt_epsilon(rt));
+    while (st == BN_OK && fgets(buf, sizeof buf, f)) {
+        bn_trace_point pt;
+        int r = bn__point_line(path, ++line, buf, rt, tol, &pt, err);
+        if (r < 0)
+            st = BN_EINPUT;
+        else if (r > 0 && *n == cap && !bn__points_grow(pts, &cap))
+            st = bn_error_set(err, BN_ENOMEM, "%s: out of memory for %zu points", path, *n + 1);
+        else if (r > 0)
+            (*pts)[(*n)++] = pt;
+    }
+    if (st == BN_OK && ferror(f))
+        st = bn_error_set(err, BN_EIO, "%s: read error", path);
+    if (st == BN_OK && *n == 0)
+        st = bn_error_set(err, BN_EINPUT, "%s: no points (one a line: x y z nx ny nz)", path);
+    fclose(f);
+    if (st != BN_OK) {
+        free(*pts);
+        *pts = NULL;
+        *n = 0;
+    }
+    return st;
+}
+
+bn_status bn_trace_points_write_csv(const char *path, const bn_scene *s, const bn_trace_point *pts,
+                                    const bn_trace_patches *r, const char *header, bn_error *err)
+{
+    bn__outfile f;
+    bn_status st = bn__outfile_open(&f, path, "w", err);
+    const bn_patch *p = bn_scene_patches(s, NULL);
+    char name[16];
+    if (st != BN_OK)
+        return st;
+    fputs(header, f.fp);
+    fprintf(f.fp, "point,line,face,patch,x,y,z");
+    for (int l = 0; l < r->nlayers; l++) {
+        bn_layer_name(l, r->bounces, name, sizeof name);
+        fprintf(f.fp, ",%s.R,%s.G,%s.B,%s.R_se,%s.G_se,%s.B_se", name, name, name, name, name, name);
+    }
+    fputc('\n', f.fp);
+    for (size_t i = 0; i < r->n; i++) {
+        fprintf(f.fp, "%zu,%u,%zu,%zu,%.10g,%.10g,%.10g", i, pts[i].line, p[pts[i].patch].face, pts[i].patch,
+                pts[i].x[0], pts[i].x[1], pts[i].x[2]);
+        for (int l = 0; l < r->nlayers; l++) {
+            const double *v = r->mean + ((size_t)l * r->n + i) * 3, *e = r->se + ((size_t)l * r->n + i) * 3;
+            fprintf(f.fp, ",%.9g,%.9g,%.9g,%.6g,%.6g,%.6g", v[0], v[1], v[2], e[0], e[1], e[2]);
+        }
+        fputc('\n', f.fp);
+    }
+    return bn__outfile_commit(&f, err);
+}
