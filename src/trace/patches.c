@@ -100,6 +100,26 @@ static void bn__trace_item_run(void *ctx, size_t i, double *sample, double *mean
     bn__trace_item(c->t, c->what, c->o, i, c->n, c->nl, sample, mean, m2, c->out, rays);
 }
 
+/* Every estimate finite, or BN_ENUMERIC naming the first that is not (out freed). */
+static bn_status bn__trace_finite(const bn__trace_what *w, const bn_trace_opts *o, bn_trace_patches *out,
+                                  bn_error *err)
+{
+    for (size_t l = 0; l < (size_t)out->nlayers; l++)
+        for (size_t i = 0; i < out->n; i++)
+            for (int c = 0; c < 3; c++) {
+                size_t k = (l * out->n + i) * 3 + (size_t)c;
+                if (!isfinite(out->mean[k]) || !isfinite(out->se[k])) {
+                    char name[16];
+                    bn_error_set(err, BN_ENUMERIC, "trace: non-finite estimate %g (se %g) for %s %zu, layer %s, "
+                                 "channel %d", out->mean[k], out->se[k], w->pts ? "point" : w->part ? "region" : "patch",
+                                 i, bn_layer_name((int)l, o->bounces, name, sizeof name), c);
+                    bn_trace_patches_free(out);
+                    return BN_ENUMERIC;
+                }
+            }
+    return BN_OK;
+}
+
 /* One item per patch; per region of w->part, its points uniform in area over the region; or per point of
  * w->pts (n of them). */
 static bn_status bn__trace_items_run_body(const bn_rt *rt, const bn__trace_what *w, size_t npts, const bn_trace_opts *o,
@@ -154,20 +174,7 @@ static bn_status bn__trace_items_run_body(const bn_rt *rt, const bn__trace_what 
     }
     out->rays = rays;
     out->seconds = bn__now() - t0;
-    for (size_t l = 0; l < nl; l++)
-        for (size_t i = 0; i < n; i++)
-            for (int c = 0; c < 3; c++) {
-                size_t k = (l * n + i) * 3 + (size_t)c;
-                if (!isfinite(out->mean[k]) || !isfinite(out->se[k])) {
-                    char name[16];
-                    bn_error_set(err, BN_ENUMERIC, "trace: non-finite estimate %g (se %g) for %s %zu, layer %s, "
-                                 "channel %d", out->mean[k], out->se[k], w->pts ? "point" : part ? "region" : "patch", i,
-                                 bn_layer_name((int)l, o->bounces, name, sizeof name), c);
-                    bn_trace_patches_free(out);
-                    return BN_ENUMERIC;
-                }
-            }
-    return BN_OK;
+    return bn__trace_finite(w, o, out, err);
 }
 
 bn_status bn_trace_patches_run(const bn_rt *rt, const bn_trace_opts *o, bn_trace_patches *out, bn_error *err)
