@@ -14,6 +14,10 @@ if(BN_PYTHON3)
   add_test(NAME gltf.blender_imports_every_term COMMAND ${BN_PYTHON3} ${CMAKE_CURRENT_LIST_DIR}/blender_check.py
     $<TARGET_FILE:bounce_cli> ${PROJECT_SOURCE_DIR}/meshes/cornell-box.obj ${CMAKE_CURRENT_BINARY_DIR}/tmp/blender)
   set_tests_properties(gltf.blender_imports_every_term PROPERTIES LABELS gltf TIMEOUT 600 SKIP_RETURN_CODE 77)
+  # gathered bakes against the furnace's exact values and the tracer at the bake's vertices
+  add_test(NAME bake.gathered_against_the_tracer COMMAND ${BN_PYTHON3} ${CMAKE_CURRENT_LIST_DIR}/bake_gather_check.py
+    $<TARGET_FILE:bounce_cli> ${PROJECT_SOURCE_DIR} ${CMAKE_CURRENT_BINARY_DIR}/tmp/bake_gather)
+  set_tests_properties(bake.gathered_against_the_tracer PROPERTIES LABELS gltf TIMEOUT 600)
   # punctual lights in the Cornell box: the crosscheck (tests/punctual_check.py)
   add_test(NAME gltf.punctual_lights_crosscheck COMMAND ${BN_PYTHON3} ${CMAKE_CURRENT_LIST_DIR}/punctual_check.py
     $<TARGET_FILE:bounce_cli> ${PROJECT_SOURCE_DIR}/meshes/cornell-box.obj ${CMAKE_CURRENT_BINARY_DIR}/tmp/punctual)

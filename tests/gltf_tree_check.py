@@ -164,7 +164,7 @@ def write_scene(obj, out):
 
 
 def bake(bounce, args):
-    r = subprocess.run([bounce, "bake"] + args + ["-q", "--patches", "400", "--mesh", "input", "--per-bounce"] + RAYS,
+    r = subprocess.run([bounce, "bake"] + args + ["-q", "--patches", "400", "--mesh", "input", "--per-bounce", "--gather", "none"] + RAYS,
                        capture_output=True, text=True)
     if r.returncode != 0:
         print(r.stderr)

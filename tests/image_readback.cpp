@@ -110,7 +110,7 @@ static void baked_ply_openmesh()
     size_t nv = bn_bake_vertex_count(b);
     std::vector<double> vv(nv * 3);
     bn_bake_vertex_values(b, x.data(), vv.data());
-    bn_bake_layer layer = {"L", x.data()};
+    bn_bake_layer layer = {"L", x.data(), nullptr};
     bn_bake_write_opts wo;
     std::memset(&wo, 0, sizeof wo);
     wo.ldr = 1;

@@ -195,7 +195,7 @@ BN_TEST(ply_colours_are_patch_averages)
             x[3 * i + c] = 0.1 + 0.01 * (double)((i * 7 + c * 3) % 101);   /* distinct per patch */
             x2[3 * i + c] = 2 * x[3 * i + c];
         }
-    bn_bake_layer layers[2] = {{"L", x}, {"KE", x2}};
+    bn_bake_layer layers[2] = {{"L", x, NULL}, {"KE", x2, NULL}};
     bn_attr attr = {"command line", "bounce bake test"};
     bn_bake_write_opts wo;
     memset(&wo, 0, sizeof wo);
@@ -539,7 +539,7 @@ BN_TEST(cli_bake)
     ply_data d;
     int rc, ie, ir;
     size_t lit = 0;
-    snprintf(cmd, sizeof cmd, "bake '%s' -o '%s' --per-bounce -n 2 --patches 150 --quiet",
+    snprintf(cmd, sizeof cmd, "bake '%s' -o '%s' --per-bounce -n 2 --patches 150 --gather none --quiet",
              bn_test_path("meshes/furnace-box.obj"), bn_test_tmp("fb.ply"));
     rc = bn_test_bounce(cmd, &out);
     if (rc != 0)
@@ -556,7 +556,7 @@ BN_TEST(cli_bake)
     free(d.v);
     free(d.fn);
     free(d.fi);
-    snprintf(cmd, sizeof cmd, "bake '%s' -o '%s' --per-bounce -n 2 --patches 150 --ff hemisphere --samples 256 --quiet",
+    snprintf(cmd, sizeof cmd, "bake '%s' -o '%s' --per-bounce -n 2 --patches 150 --gather none --ff hemisphere --samples 256 --quiet",
              bn_test_path("meshes/cornell-box.obj"), bn_test_tmp("cb.ply"));
     rc = bn_test_bounce(cmd, &out);
     if (rc != 0)
@@ -610,7 +610,7 @@ BN_TEST(ply_input_mesh)
     for (size_t i = 0; i < np; i++)
         for (int c = 0; c < 3; c++)
             x[3 * i + c] = 0.1 + 0.01 * (double)((i * 7 + c * 3) % 101);
-    bn_bake_layer layer = {"L", x};
+    bn_bake_layer layer = {"L", x, NULL};
     bn_bake_write_opts wo;
     memset(&wo, 0, sizeof wo);
     wo.input_mesh = 1;

@@ -110,7 +110,7 @@ BN_TEST(refinement_out_of_address_space_fails_cleanly)
 
 static void bake_write_fails(const bn_bake *b, const double *x, const char *name, size_t nlayers)
 {
-    bn_bake_layer layers[2] = {{"L", x}, {"KE", x}};
+    bn_bake_layer layers[2] = {{"L", x, NULL}, {"KE", x, NULL}};
     bn_bake_write_opts wo;
     bn_error err;
     memset(&wo, 0, sizeof wo);
@@ -173,7 +173,7 @@ BN_TEST(bake_interrupted_writes_nothing)
     BN_ASSERT_STATUS(bn_bake_create(s, 30, &b, &err), BN_OK);
     double *x = calloc(np * 3, sizeof *x);
     BN_ASSERT(x);
-    bn_bake_layer layer = {"L", x};
+    bn_bake_layer layer = {"L", x, NULL};
     bn_bake_write_opts wo;
     memset(&wo, 0, sizeof wo);
     for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {

@@ -14,6 +14,9 @@ extern "C" {
 typedef struct bn_bake bn_bake;   /* opaque: the output vertices and their patch groups */
 
 #define BN_BAKE_DEFAULT_CREASE 30.0
+#define BN_BAKE_GATHER_RAYS 2048   /* hemisphere rays per vertex of a gathered bake (bounce bake --gather) */
+#define BN_BAKE_GATHER_LIGHT 256   /* shadow rays per emitting face per vertex: a vertex has no neighbours to
+                                      average a penumbra's noise with, as a pixel has */
 #define BN_BAKE_FLAT (-1.0)   /* as crease_deg: no two patches share a vertex (each carries its own value) */
 /* Builds the baking mesh of `scene`'s patches (borrowed: it must outlive *out and not be
  * re-meshed). Patch vertices at the same position (within a tolerance scaled to the scene) are
@@ -37,6 +40,12 @@ size_t bn_bake_corner_vertex(const bn_bake *b, size_t patch, unsigned corner);
  * bn_bake_vertex_count()*3, caller-allocated. */
 void bn_bake_vertex_values(const bn_bake *b, const double *patch_values, double *vertex_values);
 size_t bn_bake_tjunction_count(const bn_bake *b);   /* T-junctions found (0 for a flat bake) */
+/* Vertex values from elsewhere (a gather at each vertex) made crack-free: each T-junction takes its
+ * edge's value, as bn_bake_vertex_values does. */
+void bn_bake_vertex_tjunctions(const bn_bake *b, double *vertex_values);
+/* A patch of vertex v's group whose front the vertex lies on (one outside every closed object when it
+ * has one): where a gather at the vertex takes its normal, face and reflectance. */
+size_t bn_bake_vertex_patch(const bn_bake *b, size_t v);
 /* Patches inside a closed object (the floor under a block standing on it: no light reaches them and no
  * eye sees them) are left out of the vertex averages wherever a vertex also has patches outside, so
  * the darkness under the block does not bleed into the floor around it (bn_rt_enclosed_patches says
@@ -54,7 +63,9 @@ unsigned bn_bake_weights(const bn_bake *b, size_t patch, const double p[3], size
 /* A named per-patch value set to write (name used for extra PLY properties: <name>_red...). */
 typedef struct bn_bake_layer {
     const char *name;
-    const double *patch_values;   /* N*3 (borrowed) */
+    const double *patch_values;   /* N*3 (borrowed): the layer's power, and its vertex values unless given */
+    const double *vertex_values;  /* bn_bake_vertex_count()*3 or NULL: the vertices' own values (a final gather
+                                     at each vertex) in place of the patches' means */
 } bn_bake_layer;
 
 /* The mesh a bake is written on (bn_bake_write_opts.input_mesh is one of these). */

@@ -90,6 +90,18 @@ bn_status bn_gather_render(const bn_rt *rt, const bn_camera *cam, const double *
                            const double *rest, const bn_gather_opts *o, bn_image *out, bn_gather_stats *stats,
                            bn_error *err);
 
+/* The final gather at points on the surfaces (a bake's vertices): point i at x[3 i ..] on patch patch[i],
+ * seen from the patch's front, gets what a pixel's sample meeting the surface there gets: E from its
+ * patch, KE from the emitting faces (closed form with visibility, o->light_samples each) and the
+ * punctual lights, K^k E for k >= 2 and rest as rho at the point times a hemisphere gather
+ * (o->hemi_samples rays) of the solved K^(k-1) E (and rest) at the hits (no pixel filter: ask for more
+ * rays than an image's pixel does). terms[0..n], 1 <= n <= 20, and rest as for bn_gather_render. out:
+ * (n + 3) layers E, KE, ..., K^n E, rest, L, layer-major: out[(l * npts + i) * 3 + c], each at least 0
+ * (a hit's direct light is estimated without bias, so near a shadow's edge a mean can dip below 0: held
+ * at 0). Deterministic: point i's streams are keyed by i. */
+bn_status bn_gather_points(const bn_rt *rt, const double *const *terms, int n, const double *rest, const double *x,
+                           const size_t *patch, size_t npts, const bn_gather_opts *o, double *out, bn_error *err);
+
 #ifdef __cplusplus
 }
 #endif

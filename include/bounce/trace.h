@@ -127,6 +127,7 @@ bn_status bn_trace_regions_run(const bn_rt *rt, const bn_partition *part, const 
 
 /* Points the tracer estimates at (an independent reference for per-vertex values, bounce bake's): a
  * place on a patch, on the side its normal faces. */
+#define BN_TRACE_POINT_INSET 0.01
 typedef struct bn_trace_point {
     double x[3];
     size_t patch;
@@ -135,7 +136,9 @@ typedef struct bn_trace_point {
 /* Reads `path`: one point a line, `x y z nx ny nz` in scene units (blank lines and `#` comments skipped),
  * the normal pointing to the side whose outgoing radiance is wanted. Each point takes the face nearest to
  * it within 1e-6 of the scene's diameter whose normal agrees with n (found by a short ray along -n), and
- * the patch of that face there. *pts (owned by the caller), *n; a line that is not six finite numbers, a
+ * the patch of that face there, and is moved BN_TRACE_POINT_INSET of the way to that patch's centroid (a
+ * point exactly on an edge, a bake's vertex, would send rays along the neighbouring surface's plane: a
+ * block's foot on the floor; bounce bake's gather at vertices moves its points the same way). *pts (owned by the caller), *n; a line that is not six finite numbers, a
  * zero normal, or a point with no such face: BN_EINPUT naming the file and the line. */
 bn_status bn_trace_points_read(const char *path, const bn_rt *rt, bn_trace_point **pts, size_t *n, bn_error *err);
 /* The tracer's estimate at each point: the radiance leaving the surface there, per layer (its emission in

@@ -329,6 +329,19 @@ void bn_bake_vertex_values(const bn_bake *b, const double *x, double *out)
         for (int c = 0; c < 3; c++)
             out[3 * v + c] = a > 0 ? s[c] / a : 0;
     }
+    bn_bake_vertex_tjunctions(b, out);
+}
+
+size_t bn_bake_vertex_patch(const bn_bake *b, size_t v)
+{
+    for (size_t i = b->vstart[v]; b->enclosed && i < b->vstart[v + 1]; i++)
+        if (!b->enclosed[b->vpatch[i]])
+            return b->vpatch[i];
+    return b->vpatch[b->vstart[v]];
+}
+
+void bn_bake_vertex_tjunctions(const bn_bake *b, double *out)
+{
     /* T-junctions take their edge's value, longest edges first (their ends may be T-junctions of
      * longer edges). Two faces cut at different sizes along one line make each other's vertices
      * T-junctions in a chain: the sweeps (Gauss-Seidel, each a convex combination) converge to the one

@@ -212,7 +212,10 @@ static bn_status bn__job_values(const bn_bake *b, const char *path, const bn_bak
     for (size_t l = 0; vv && j->vals && l < j->nlayers; l++) {
         if (!(j->vals[l] = bn__malloc_array(nv, 3 * sizeof(float))))
             break;
-        bn_bake_vertex_values(b, layers[l].patch_values, vv);
+        if (layers[l].vertex_values)
+            memcpy(vv, layers[l].vertex_values, nv * 3 * sizeof *vv);
+        else
+            bn_bake_vertex_values(b, layers[l].patch_values, vv);
         for (size_t i = 0; i < 3 * nv; i++) {
             j->vals[l][i] = (float)vv[i];
             nbad += !isfinite(j->vals[l][i]);

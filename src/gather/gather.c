@@ -1,7 +1,7 @@
 /* The final gather (include/bounce/gather.h): per pixel, direct light from the emitting faces by
  * Lambert's closed form times a visibility ratio, and the higher terms gathered from the solution
  * over the hemisphere. */
-#include "bounce/gather.h"
+#include "gather/gather_internal.h"
 #include "bounce/bake.h"
 #include "bounce/dist.h"
 #include "base/internal.h"
@@ -28,42 +28,11 @@ void bn_gather_opts_default(bn_gather_opts *o)
     o->seed = 1;
 }
 
-/* An emitting face: its corners (counter-clockwise from the front), normal and radiance. */
-typedef struct bn__emitter {
-    double v[3 * 4];
-    size_t nv, face;
-    double n[3], Le[3];
-    double area, c[3], diam;   /* area, vertex mean, largest distance between two corners */
-} bn__emitter;
-
-typedef struct bn__gather {
-    const bn_rt *rt;
-    const bn_scene *scene;
-    const bn_patch *patch;
-    const bn_material *mat;
-    const double *const *terms;
-    const double *rest;
-    double **vv;             /* smooth: vertex values of K^1 E .. K^n E, rest (n + 1 layers) */
-    const bn_bake *smooth;
-    int n, gl, gh;           /* terms kept; light and gather strata per side */
-    bn__emitter *em;
-    size_t nem;
-    double eps;
-    int hit_direct;          /* the hits' KE from the emitters (nem <= hit_emitters, or the tree), not the patches */
-    int textured;            /* some material has a reflectance texture: rho per point (bn__rho_at) */
-    bn__lights *tree;        /* more than tree_emitters emitting faces: picked from this tree */
-    const bn_light *pl;      /* punctual lights (bn_scene_lights): their direct light in closed form */
-    size_t npl;
-    double unit;             /* metres per scene unit */
-} bn__gather;
-
-/* Streams: the camera's jitter, then the light and gather samples, keyed by pixel and sample. */
-#define BN__GATHER_STREAM 0x67617468ULL
 /* Doubles per pixel between the per-pixel pass and the composition: the face seen plus one, the mean
  * reflectance at the samples' points, the gathered means of K^1 E .. K^n E and rest. */
 #define BN__AUX(n) (4 + 3 * ((size_t)(n) + 1))
 
-static int bn__side(int samples)
+int bn__side(int samples)
 {
     int g = (int)ceil(sqrt((double)samples) - 1e-9);
     return g < 1 ? 1 : g;
@@ -361,15 +330,20 @@ static long bn__sample(const bn__gather *G, const double o[3], const double d[3]
                        double *hv, double rho[3], bn_gather_stats *st)
 {
     bn_hit h;
-    const bn_patch *p;
-    double ke[3], s[3], t[3], xo[3], inv = 1.0 / ((double)G->gh * G->gh);
-    int nl = G->n + 1;   /* gathered layers: K^1 E .. K^n E, rest */
     st->camera_rays += 1;
-    memset(hv, 0, (size_t)nl * 3 * sizeof(double));
+    memset(hv, 0, (size_t)(G->n + 1) * 3 * sizeof(double));
     if (!bn_rt_intersect(G->rt, o, d, 0, INFINITY, &h) || !h.front)
         return -1;
     st->front_hits += 1;
-    p = &G->patch[h.patch];
+    return bn__shade(G, &h, r, acc, hv, rho, st);
+}
+
+long bn__shade(const bn__gather *G, const bn_hit *hit, bn__rng *r, double *acc, double *hv, double rho[3],
+               bn_gather_stats *st)
+{
+    const bn_hit h = *hit;
+    const bn_patch *p = &G->patch[h.patch];
+    double ke[3], s[3], t[3], xo[3], inv = 1.0 / ((double)G->gh * G->gh);
     bn__rho_at(G, p, h.p, rho);
     bn__direct(G, h.p, p->normal, p->face, r, G->gl, ke, &st->shadow_rays);
     for (int c = 0; c < 3; c++) {
@@ -540,7 +514,7 @@ static bn_status bn__gather_smooth(bn__gather *G, const bn_bake *smooth, bn_erro
 
 /* G from the ray caster, the terms and the options: the emitters, and the vertex values with
  * --smooth. */
-static bn_status bn__gather_init(bn__gather *G, const bn_rt *rt, const double *const *terms, int n, const double *rest,
+bn_status bn__gather_init(bn__gather *G, const bn_rt *rt, const double *const *terms, int n, const double *rest,
                                  const bn_gather_opts *o, bn_error *err)
 {
     size_t nm, np;
@@ -734,14 +708,20 @@ static bn_status bn__gather_body(const bn_rt *rt, const bn_camera *cam, const do
         goto done;
     st = bn__gather_finish(&G, cam, aux, o->filter, c, t0, out, stats, err);
 done:
-    if (G.vv)
-        for (int l = 0; l <= n; l++)
-            free(G.vv[l]);
-    free(G.vv);
-    free(G.em);
-    bn__lights_free(G.tree);
+    bn__gather_free(&G);
     free(aux);
     return st;
+}
+
+void bn__gather_free(bn__gather *G)
+{
+    if (G->vv)
+        for (int l = 0; l <= G->n; l++)
+            free(G->vv[l]);
+    free(G->vv);
+    free(G->em);
+    bn__lights_free(G->tree);
+    memset(G, 0, sizeof *G);
 }
 
 bn_status bn_gather_render(const bn_rt *rt, const bn_camera *cam, const double *const *terms, int n,

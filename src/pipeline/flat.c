@@ -550,11 +550,11 @@ bn_status bn_flat_bake(const bn_flat *f, const char *out, int per_bounce, const 
     st = bn__flat_name("bake: mesh", mesh, bn_bake_mesh_names(), bn__bake_mesh_index, &input_mesh, msg, msglen);
     if (st != BN_OK)
         return st;
-    layers[0] = (bn_bake_layer){"L", f->p.res.L};
+    layers[0] = (bn_bake_layer){"L", f->p.res.L, NULL};
     for (size_t l = 1; l < nl; l++) {
         int layer = (int)l - 1;
         bn_layer_name(layer, nb, names[l], sizeof names[l]);
-        layers[l] = (bn_bake_layer){names[l], layer <= nb ? f->p.res.terms[layer] : f->p.rest};
+        layers[l] = (bn_bake_layer){names[l], layer <= nb ? f->p.res.terms[layer] : f->p.rest, NULL};
     }
     bn_error_clear(&err);
     st = bn_bake_create(f->p.scene, crease_deg > 0 ? crease_deg : BN_BAKE_DEFAULT_CREASE, &b, &err);

@@ -9,17 +9,29 @@
 #include <stdlib.h>
 #include <string.h>
 
+#define BN__POINT_AGREE 0.95   /* a face's normal agrees with a point's within about 18 degrees */
+
 /* The front of the face within tol of x along n: a ray from x + tol n towards -n, 2 tol long, that
- * arrives on a patch's front side. 1 and the patch, or 0. */
+ * arrives on a patch's front side; a point on a face's edge or corner (a bake's vertex) may slip past
+ * it, so eight more rays around it, tol / 2 aside, look for the face it bounds; at a convex corner a ray may
+ * graze the other face there, so the face's normal must agree with n (BN__POINT_AGREE). 1 and the patch,
+ * or 0. */
 static int bn__point_patch(const bn_rt *rt, const double x[3], const double n[3], double tol, size_t *patch)
 {
-    double o[3], d[3] = {-n[0], -n[1], -n[2]};
-    bn_hit h;
-    bn_v3_madd(x, tol, n, o);
-    if (!bn_rt_intersect(rt, o, d, 0, 2 * tol, &h) || !h.front)
-        return 0;
-    *patch = h.patch;
-    return 1;
+    double d[3] = {-n[0], -n[1], -n[2]}, s[3], t[3];
+    bn_v3_basis(n, s, t);
+    for (int k = 0; k < 9; k++) {
+        double o[3], a = 2 * 3.14159265358979323846 * (k - 1) / 8, r = k ? 0.5 * tol : 0;
+        bn_hit h;
+        for (int c = 0; c < 3; c++)
+            o[c] = x[c] + tol * n[c] + r * (cos(a) * s[c] + sin(a) * t[c]);
+        if (bn_rt_intersect(rt, o, d, 0, 2 * tol, &h) && h.front &&
+            bn_v3_dot(bn_scene_patches(bn_rt_scene(rt), NULL)[h.patch].normal, n) >= BN__POINT_AGREE) {
+            *patch = h.patch;
+            return 1;
+        }
+    }
+    return 0;
 }
 
 /* One line's point: 1 placed, 0 blank or a comment, -1 bad (err set). */
@@ -53,6 +65,9 @@ static int bn__point_line(const char *path, unsigned line, char *buf, const bn_r
                      tol, v[0], v[1], v[2], n[0], n[1], n[2]);
         return -1;
     }
+    const double *c = bn_scene_patches(bn_rt_scene(rt), NULL)[pt->patch].centroid;
+    for (int k = 0; k < 3; k++)   /* off an edge: rays from a point exactly on one leave along the neighbour's plane */
+        pt->x[k] += BN_TRACE_POINT_INSET * (c[k] - pt->x[k]);
     return 1;
 }
 
