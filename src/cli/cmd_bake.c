@@ -29,8 +29,9 @@ static void bn__bake_options(bn_optset *set, bn__bake_cli *a, bn_cli_common *c)
     set->usage = "bounce bake SCENE [-o baked.ply|.om|.obj|.glb|.gltf] [--ldr] [--per-bounce -n K] [options]";
     set->summary =
         "Solves L = E + K L and bakes L to vertex colours on the patches (--mesh input: on the input\n"
-        "polygons alone): each vertex takes the area-weighted mean of the patches around it within one\n"
-        "smooth surface (adjacent faces of one material whose normals differ by less than --crease);\n"
+        "polygons alone): each vertex's values come from the final gather at the vertex, as the images'\n"
+        "pixels get theirs (--gather none: the area-weighted mean of the patches around it within one\n"
+        "smooth surface, adjacent faces of one material whose normals differ by less than --crease);\n"
         "vertices are split at creases and material seams. Colours are float radiance (W m^-2 sr^-1) by\n"
         "default, 8-bit sRGB with --ldr. .ply (binary) and .om are written through OpenMesh,\n"
         ".obj directly as `v x y z r g b`. --per-bounce adds float vertex properties E_red, E_green, E_blue,\n"
@@ -137,7 +138,7 @@ static bn_status bn__bake_write(const bn__bake_cli *a, const bn_cli_common *c, c
                                 const bn_bake *bake, const bn_bake_layer *layers, size_t nl, const char *solver,
                                 bn_error *err)
 {
-    char ffdesc[256], patches[32], evbuf[160], creasebuf[32], verts[32], tolbuf[64];
+    char ffdesc[256], patches[32], evbuf[160], creasebuf[32], verts[32], tolbuf[64], gatherbuf[256];
     int elements = a->mesh == BN_BAKE_ELEMENTS;
     bn_formfactor_opts fo;
     bn_bake_write_opts wo;
@@ -154,12 +155,17 @@ static bn_status bn__bake_write(const bn__bake_cli *a, const bn_cli_common *c, c
         snprintf(creasebuf, sizeof creasebuf, "%g degrees", a->crease);
     bn__bake_colours(a, evbuf, sizeof evbuf);
     snprintf(tolbuf, sizeof tolbuf, "%g", a->sol.tol > 0 ? a->sol.tol : 1e-6);
+    snprintf(gatherbuf, sizeof gatherbuf, "each layer by the final gather at the vertex, 1%% into one of its patches: KE in "
+             "closed form (%d shadow rays a face), K2E and beyond from %d hemisphere rays, seed %llu", BN_BAKE_GATHER_LIGHT,
+             a->gather_rays, (unsigned long long)c->seed);
     bn_attr attrs[] = {
         {"command line", c->cmdline}, {"scene", bn_scene_path(p->scene)}, {"solver", solver}, {"tolerance", tolbuf},
         {"form factors", ffdesc},      {"patches", patches},          {"vertices", verts}, {"crease", creasebuf},
         {"colours", evbuf},           {"faces", elements ? "the patches (element mesh)" : "the input polygons"},
         {"vertex colour", a->flat ? "L of the vertex's own patch (flat: no vertex shared between patches)"
-                                  : "L, area-weighted mean of the patches around the vertex within its smooth surface"},
+                          : a->gather == BN_GATHER_FINAL ? gatherbuf
+                                                         : "L, area-weighted mean of the patches around the vertex within "
+                                                           "its smooth surface (gather none)"},
     };
     memset(&wo, 0, sizeof wo);
     wo.input_mesh = !elements;
