@@ -433,6 +433,62 @@ static const bn_transport_ops bn__flat_op_ops = {.name = "caller", .caps = 0, .a
 static const bn_transport_ops bn__flat_op_rows = {
     .name = "caller", .caps = BN_OP_ROWS, .apply = bn__flat_op_apply, .row = bn__flat_op_row};
 
+/* The solve options of an operator solve, checked: BN_OK, or the failure with msg set. */
+static bn_status bn__flat_op_opts(size_t n, int rows, const bn_flat_opts *o, bn_solve_opts *so, char *msg, size_t msglen)
+{
+    bn_error err;
+    bn_status st;
+    bn_error_clear(&err);
+    if (bn__flat_ranges(o, msg, msglen) != BN_OK)
+        return BN_EUSAGE;
+    bn_solve_opts_default(so);
+    so->method = rows ? BN_SOLVE_GAUSS_SEIDEL : BN_SOLVE_JACOBI;
+    if (o->method && strcmp(o->method, "auto") != 0 && (st = bn__flat_method(o->method, &so->method, msg, msglen)) != BN_OK)
+        return st;
+    so->bounces = o->bounces < 0 ? -1 : o->bounces;
+    so->tol = o->tol;
+    so->quiet = o->quiet;
+    so->log_sink.quiet = 1;
+    so->threads = o->threads;
+    if (n > BN_PIPELINE_MAX_PATCHES)
+        bn_error_set(&err, BN_EUSAGE, "patches %zu is above %.0e (a negative number converted?)", n,
+                     (double)BN_PIPELINE_MAX_PATCHES);
+    else if (bn_solve_opts_check(so, &err) == BN_OK)
+        err.status = BN_OK;
+    return err.status != BN_OK ? bn__flat_fail(err.status, err.msg, msg, msglen) : BN_OK;
+}
+
+/* The result holding a copy of E and the caller's operator as K (no reflectance on top: K is the
+ * caller's); *out NULL on failure. */
+static bn_status bn__flat_op_make(size_t n, const double *E, bn_flat_apply_fn apply, bn_flat_row_fn row, void *user,
+                                  bn_flat **out, bn_error *err)
+{
+    bn_flat *f = bn__calloc(1, sizeof *f);
+    bn__flat_op *op = bn__malloc_array(1, sizeof *op);
+    double *ones = bn__malloc_array(3 * n, sizeof(double));
+    bn_status st = BN_ENOMEM;
+    *out = NULL;
+    if (f && op && ones && (f->p.E = bn__malloc_array(3 * n, sizeof(double)))) {
+        for (size_t i = 0; i < 3 * n; i++)
+            ones[i] = 1;
+        memcpy(f->p.E, E, 3 * n * sizeof(double));
+        *op = (bn__flat_op){.fn = apply, .row = row, .user = user};
+        st = bn_transport_create(n, ones, row ? &bn__flat_op_rows : &bn__flat_op_ops, op, &f->p.k, err);
+    } else
+        bn_error_set(err, BN_ENOMEM, "out of memory");
+    free(ones);
+    if (st != BN_OK) {
+        free(op);
+        bn_flat_free(f);
+        return st;
+    }
+    f->op = op;
+    f->p.n = n;
+    snprintf(f->transport, sizeof f->transport, "caller");
+    *out = f;
+    return BN_OK;
+}
+
 bn_status bn_flat_solve_operator(size_t n, const double *E, bn_flat_apply_fn apply, bn_flat_row_fn row, void *user,
                                  const bn_flat_opts *o, bn_flat **out, char *msg, size_t msglen)
 {
@@ -440,8 +496,6 @@ bn_status bn_flat_solve_operator(size_t n, const double *E, bn_flat_apply_fn app
     bn_solve_opts so;
     bn_error err;
     bn_flat *f;
-    bn__flat_op *op;
-    double *ones;
     bn_status st;
     if (out)
         *out = NULL;
@@ -456,78 +510,27 @@ bn_status bn_flat_solve_operator(size_t n, const double *E, bn_flat_apply_fn app
         bn_flat_opts_default(&d);
         o = &d;
     }
-    if (bn__flat_ranges(o, msg, msglen) != BN_OK)
-        return BN_EUSAGE;
-    bn_solve_opts_default(&so);
-    so.method = row ? BN_SOLVE_GAUSS_SEIDEL : BN_SOLVE_JACOBI;
-    if (o->method && strcmp(o->method, "auto") != 0 && (st = bn__flat_method(o->method, &so.method, msg, msglen)) != BN_OK)
+    if ((st = bn__flat_op_opts(n, row != NULL, o, &so, msg, msglen)) != BN_OK)
         return st;
-    so.bounces = o->bounces < 0 ? -1 : o->bounces;
-    so.tol = o->tol;
-    so.quiet = o->quiet;
-    so.log_sink.quiet = 1;
-    so.threads = o->threads;
-    if (n > BN_PIPELINE_MAX_PATCHES)
-        bn_error_set(&err, BN_EUSAGE, "patches %zu is above %.0e (a negative number converted?)", n,
-                     (double)BN_PIPELINE_MAX_PATCHES);
-    else if (bn_solve_opts_check(&so, &err) == BN_OK)
-        err.status = BN_OK;
-    if (err.status != BN_OK)
-        return bn__flat_fail(err.status, err.msg, msg, msglen);
-    f = bn__calloc(1, sizeof *f);
-    op = bn__malloc_array(1, sizeof *op);
-    ones = bn__malloc_array(3 * n, sizeof(double));
-    if (f)
-        f->p.E = bn__malloc_array(3 * n, sizeof(double));
-    if (!f || !op || !ones || !f->p.E) {
-        if (f)
-            free(f->p.E);
-        free(f);
-        free(op);
-        free(ones);
-        return bn__flat_fail(BN_ENOMEM, "out of memory", msg, msglen);
-    }
-    for (size_t i = 0; i < 3 * n; i++)
-        ones[i] = 1;   /* K itself is the caller's: no reflectance applied on top */
-    memcpy(f->p.E, E, 3 * n * sizeof(double));
-    op->fn = apply;
-    op->row = row;
-    op->user = user;
-    bn_error_clear(&err);
-    st = bn_transport_create(n, ones, row ? &bn__flat_op_rows : &bn__flat_op_ops, op, &f->p.k, &err);
-    free(ones);
-    if (st == BN_OK) {
-        f->p.n = n;
-        bn__flat_sig sg;
-        f->op = op;
-        op = NULL;
-        so.monitor = bn__flat_monitor;
-        so.monitor_user = f;
-        bn__flat_sig_begin(&sg, o->sigint);
-        st = bn_solve(f->p.k, f->p.E, &so, &f->p.res, &err);
-        bn__flat_sig_end(&sg);
-        f->p.method_used = so.method;
-    }
-    free(op);
-    if (st == BN_OK || st == BN_ENOTCONV) {
-        if (f->p.res.nterms > 0) {   /* rest = L - the kept terms */
-            f->p.rest = bn__malloc_array(3 * n, sizeof(double));
-            if (f->p.rest)
-                for (size_t i = 0; i < 3 * n; i++) {
-                    double r = f->p.res.L[i];
-                    for (int k = 0; k < f->p.res.nterms; k++)
-                        r -= f->p.res.terms[k][i];
-                    f->p.rest[i] = r;
-                }
-        }
-        snprintf(f->transport, sizeof f->transport, "caller");
-        if (st == BN_ENOTCONV)
-            bn__flat_fail(st, err.msg, msg, msglen);
-        *out = f;
+    if ((st = bn__flat_op_make(n, E, apply, row, user, &f, &err)) != BN_OK)
+        return bn__flat_fail(st, err.msg, msg, msglen);
+    bn__flat_sig sg;
+    so.monitor = bn__flat_monitor;
+    so.monitor_user = f;
+    bn__flat_sig_begin(&sg, o->sigint);
+    st = bn_solve(f->p.k, f->p.E, &so, &f->p.res, &err);
+    bn__flat_sig_end(&sg);
+    f->p.method_used = so.method;
+    if (st != BN_OK && st != BN_ENOTCONV) {
+        bn__flat_fail(st, err.msg, msg, msglen);
+        bn_flat_free(f);
         return st;
     }
-    bn__flat_fail(st, err.msg, msg, msglen);
-    bn_flat_free(f);
+    if (f->p.res.nterms > 0 && (f->p.rest = bn__malloc_array(3 * n, sizeof(double))))   /* rest = L - the kept terms */
+        bn_layers_rest((const double *const *)f->p.res.terms, f->p.res.nterms, f->p.res.L, 3 * n, f->p.rest);
+    if (st == BN_ENOTCONV)
+        bn__flat_fail(st, err.msg, msg, msglen);
+    *out = f;
     return st;
 }
 

@@ -5,6 +5,25 @@
 
 #include <string.h>
 
+void bn__trace_csv_layer_head(FILE *fp, const bn_trace_patches *r)
+{
+    char name[16];
+    for (int l = 0; l < r->nlayers; l++) {
+        bn_layer_name(l, r->bounces, name, sizeof name);
+        fprintf(fp, ",%s.R,%s.G,%s.B,%s.R_se,%s.G_se,%s.B_se", name, name, name, name, name, name);
+    }
+    fputc('\n', fp);
+}
+
+void bn__trace_csv_layer_row(FILE *fp, const bn_trace_patches *r, size_t i)
+{
+    for (int l = 0; l < r->nlayers; l++) {
+        const double *v = r->mean + ((size_t)l * r->n + i) * 3, *e = r->se + ((size_t)l * r->n + i) * 3;
+        fprintf(fp, ",%.9g,%.9g,%.9g,%.6g,%.6g,%.6g", v[0], v[1], v[2], e[0], e[1], e[2]);
+    }
+    fputc('\n', fp);
+}
+
 bn_status bn_trace_patches_write_csv(const char *path, const bn_scene *s, const bn_trace_patches *r,
                                      const char *header, bn_error *err)
 {
@@ -14,24 +33,15 @@ bn_status bn_trace_patches_write_csv(const char *path, const bn_scene *s, const 
     const bn_patch *p = bn_scene_patches(s, &n);
     const bn_material *mats = bn_scene_materials(s, NULL);
     double m = bn_unit_to_metres(bn_scene_unit(s));
-    char name[16];
     if (st != BN_OK)
         return st;
     fputs(header, f.fp);
     fprintf(f.fp, "patch,face,material,area_m2,cx,cy,cz");
-    for (int l = 0; l < r->nlayers; l++) {
-        bn_layer_name(l, r->bounces, name, sizeof name);
-        fprintf(f.fp, ",%s.R,%s.G,%s.B,%s.R_se,%s.G_se,%s.B_se", name, name, name, name, name, name);
-    }
-    fputc('\n', f.fp);
+    bn__trace_csv_layer_head(f.fp, r);
     for (size_t i = 0; i < r->n; i++) {
         fprintf(f.fp, "%zu,%zu,%s,%.10g,%.10g,%.10g,%.10g", i, p[i].face, mats[p[i].material].name, p[i].area * m * m,
                 p[i].centroid[0], p[i].centroid[1], p[i].centroid[2]);
-        for (int l = 0; l < r->nlayers; l++) {
-            const double *v = r->mean + ((size_t)l * r->n + i) * 3, *e = r->se + ((size_t)l * r->n + i) * 3;
-            fprintf(f.fp, ",%.9g,%.9g,%.9g,%.6g,%.6g,%.6g", v[0], v[1], v[2], e[0], e[1], e[2]);
-        }
-        fputc('\n', f.fp);
+        bn__trace_csv_layer_row(f.fp, r, i);
     }
     return bn__outfile_commit(&f, err);
 }

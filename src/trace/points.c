@@ -127,24 +127,15 @@ bn_status bn_trace_points_write_csv(const char *path, const bn_scene *s, const b
     bn__outfile f;
     bn_status st = bn__outfile_open(&f, path, "w", err);
     const bn_patch *p = bn_scene_patches(s, NULL);
-    char name[16];
     if (st != BN_OK)
         return st;
     fputs(header, f.fp);
     fprintf(f.fp, "point,line,face,patch,x,y,z");
-    for (int l = 0; l < r->nlayers; l++) {
-        bn_layer_name(l, r->bounces, name, sizeof name);
-        fprintf(f.fp, ",%s.R,%s.G,%s.B,%s.R_se,%s.G_se,%s.B_se", name, name, name, name, name, name);
-    }
-    fputc('\n', f.fp);
+    bn__trace_csv_layer_head(f.fp, r);
     for (size_t i = 0; i < r->n; i++) {
         fprintf(f.fp, "%zu,%u,%zu,%zu,%.10g,%.10g,%.10g", i, pts[i].line, p[pts[i].patch].face, pts[i].patch,
                 pts[i].x[0], pts[i].x[1], pts[i].x[2]);
-        for (int l = 0; l < r->nlayers; l++) {
-            const double *v = r->mean + ((size_t)l * r->n + i) * 3, *e = r->se + ((size_t)l * r->n + i) * 3;
-            fprintf(f.fp, ",%.9g,%.9g,%.9g,%.6g,%.6g,%.6g", v[0], v[1], v[2], e[0], e[1], e[2]);
-        }
-        fputc('\n', f.fp);
+        bn__trace_csv_layer_row(f.fp, r, i);
     }
     return bn__outfile_commit(&f, err);
 }

@@ -2,6 +2,7 @@
 #ifndef BOUNCE_TRACE_INTERNAL_H
 #define BOUNCE_TRACE_INTERNAL_H
 
+#include <stdio.h>
 #include "bounce/trace.h"
 #include "base/internal.h"
 #include "rt/lights.h"
@@ -94,5 +95,10 @@ static inline void bn__welford_add(double *mean, double *m2, const double *x, si
 /* Stream tags, so the patch and camera estimators never share a stream. */
 #define BN__TRACE_TAG_PATCH 0x7061746368ULL   /* "patch" */
 #define BN__TRACE_TAG_PIXEL 0x706978656cULL   /* "pixel" */
+
+/* The estimates' CSV columns shared by the per-patch and per-point files: each layer's R, G, B and
+ * their standard errors, the header's (ending the line) and item i's (ending its row). */
+void bn__trace_csv_layer_head(FILE *fp, const bn_trace_patches *r);
+void bn__trace_csv_layer_row(FILE *fp, const bn_trace_patches *r, size_t i);
 
 #endif
