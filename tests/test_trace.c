@@ -432,7 +432,7 @@ BN_TEST(light_tree_nee_matches_power_nee)
 /* Points (bounce trace --points): in the furnace every point's layers are rho^k Le whatever its place
  * (centres, near edges and corners, every wall); each estimate within 5 standard errors of it; a file
  * line that is not six numbers, a zero normal and a point with no face whose front agrees are refused
- * naming the line. */
+ * naming the line, and so is a line longer than the reader takes. */
 BN_TEST(points_in_the_furnace_are_exact)
 {
     bn_scene *s = furnace(0.6, 1.5, 300);
@@ -481,6 +481,14 @@ BN_TEST(points_in_the_furnace_are_exact)
         if (!strstr(err.msg, bad[k].says) || !strstr(err.msg, "points.txt"))
             BN_FAIL("'%s' does not say '%s'", err.msg, bad[k].says);
     }
+    f = fopen(path, "w");   /* a line past the reader's buffer: refused, not read as two */
+    BN_ASSERT(f);
+    for (int k = 0; k < 700; k++)
+        fputs("1 ", f);
+    BN_ASSERT(fclose(f) == 0);
+    BN_ASSERT_STATUS(bn_trace_points_read(path, rt, &pts, &n, &err), BN_EINPUT);
+    if (!strstr(err.msg, ":1: a line longer than"))
+        BN_FAIL("'%s' does not refuse the long line", err.msg);
     bn_rt_destroy(rt);
     bn_scene_destroy(s);
 }

@@ -20,16 +20,12 @@ typedef struct bn__trace_what {
     const bn_trace_point *pts;
 } bn__trace_what;
 
-/* Sample s's start for item i: the patch, the point on it, and the reflectance there (NULL: the patch's). */
-static size_t bn__trace_start(const bn__tracer *t, const bn__trace_what *w, size_t i, bn__rng *rng, double x[3],
-                              double rho[3], const double **rho0)
+/* Sample s's start for item i: the patch and the point on it (a point item: its own, every sample). */
+static size_t bn__trace_start(const bn__tracer *t, const bn__trace_what *w, size_t i, bn__rng *rng, double x[3])
 {
     size_t p = i;
-    *rho0 = NULL;
     if (w->pts) {
         memcpy(x, w->pts[i].x, 3 * sizeof *x);
-        bn_scene_reflectance_at(t->scene, t->patches[w->pts[i].patch].face, x, rho);
-        *rho0 = rho;
         return w->pts[i].patch;
     }
     if (w->part) {   /* the region's patch by area (independent draws: se from the samples) */
@@ -55,6 +51,12 @@ static void bn__trace_item(const bn__tracer *t, const bn__trace_what *w, const b
                            unsigned long long *rays)
 {
     const uint64_t tag = w->pts ? BN__TRACE_TAG_POINT : w->part ? BN__TRACE_TAG_REGION : BN__TRACE_TAG_PATCH;
+    double rho[3];   /* a point's reflectance (its texture there), once for its samples; NULL: the patch's */
+    const double *rho0 = NULL;
+    if (w->pts) {
+        bn_scene_reflectance_at(t->scene, t->patches[w->pts[i].patch].face, w->pts[i].x, rho);
+        rho0 = rho;
+    }
     size_t m = nl * 3;
     double *m3 = m2 + m;
     memset(mean, 0, m * sizeof(double));
@@ -63,9 +65,8 @@ static void bn__trace_item(const bn__tracer *t, const bn__trace_what *w, const b
         if ((s & 4095) == 4095 && bn_interrupted() != BN_OK)
             break;   /* an item of 1e6 samples takes seconds: stop within one batch (discarded) */
         bn__rng rng = bn__rng_make(o->seed ^ tag, i, s);
-        double x[3], rho[3], *L = sample + 3 * (nl - 1);
-        const double *rho0;
-        size_t p = bn__trace_start(t, w, i, &rng, x, rho, &rho0);
+        double x[3], *L = sample + 3 * (nl - 1);
+        size_t p = bn__trace_start(t, w, i, &rng, x);
         memset(sample, 0, m * sizeof(double));
         /* Bin 0: the patch's own emission, seen directly. */
         for (int c = 0; c < 3; c++)

@@ -100,7 +100,11 @@ bn_status bn_trace_points_read(const char *path, const bn_rt *rt, bn_trace_point
     double tol = fmax(1e-6 * bn_v3_len(d), 4 * bn_rt_epsilon(rt));
     while (st == BN_OK && fgets(buf, sizeof buf, f)) {
         bn_trace_point pt;
-        int r = bn__point_line(path, ++line, buf, rt, tol, &pt, err);
+        size_t len = strlen(buf);
+        int r = len + 1 == sizeof buf && buf[len - 1] != '\n' && !feof(f)
+                    ? (bn_error_set(err, BN_EINPUT, "%s:%u: a line longer than %zu characters", path, line + 1,
+                                    sizeof buf - 2), -1)
+                    : bn__point_line(path, ++line, buf, rt, tol, &pt, err);
         if (r < 0)
             st = BN_EINPUT;
         else if (r > 0 && *n == cap && !bn__points_grow(pts, &cap))
