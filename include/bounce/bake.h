@@ -30,8 +30,12 @@ void bn_bake_destroy(bn_bake *b);   /* NULL is a no-op */
 const bn_scene *bn_bake_scene(const bn_bake *b);   /* the scene it was built from (borrowed) */
 size_t bn_bake_vertex_count(const bn_bake *b);
 const double *bn_bake_vertex_positions(const bn_bake *b);   /* xyz per output vertex (borrowed) */
-/* The output vertex of corner c of patch p (faces of the baked mesh are the patches). */
+/* The output vertex of corner c of patch p. */
 size_t bn_bake_corner_vertex(const bn_bake *b, size_t patch, unsigned corner);
+/* The faces written on the element mesh: the patches, or after bn_bake_refine its triangles (each
+ * inside one patch). Face f's corners (3 or 4, returned) as output vertices in v, its patch in *patch. */
+size_t bn_bake_face_count(const bn_bake *b);
+unsigned bn_bake_face(const bn_bake *b, size_t f, size_t v[4], size_t *patch);
 
 /* Vertex value = area-weighted mean of the per-patch values (N*3) of its group's patches:
  * sum_p A_p x_p / sum_p A_p; except at a T-junction (a vertex inside an edge of a patch of its own
@@ -59,6 +63,32 @@ void bn_bake_interpolate(const bn_bake *b, const double *vertex_values, size_t p
 /* The same interpolation as corner vertices and weights (for reading several value sets at one
  * point): returns the corner count n (3 or 4); value = sum_k w[k] vertex_values[vert[k]]. */
 unsigned bn_bake_weights(const bn_bake *b, size_t patch, const double p[3], size_t vert[4], double w[4]);
+
+/* A bake mesh refined where light changes (bounce bake --bake-vertices): the patches become triangles,
+ * every T-junction splits its edge (no vertex inside another face's edge: crack-free), then round by
+ * round the edges whose ends' luminance (of layer `key`) differ by more than tol x (the larger + a
+ * floor of 2% of the display white) are bisected, longest edge first (Rivara: conforming, angles
+ * bounded), and `eval` gives the new vertices' values, until no edge differs, no edge is longer than
+ * min_edge, or the vertices would pass max_vertices. */
+typedef bn_status (*bn_bake_eval_fn)(void *user, const double *x, const size_t *patch, size_t n, size_t first,
+                                     double *out, bn_error *err);
+/* eval: the values of n points x (3 each) on patches patch[], the bake's vertices first .. first+n-1
+ * (keys for random streams), into out: nlayers x n x 3, layer-major. */
+#define BN_BAKE_DEFAULT_VERTICES 100000   /* bounce bake's budget: the bunny box bakes in 2 minutes */
+#define BN_BAKE_REFINE_TOL 0.05
+typedef struct bn_bake_refine_opts {
+    size_t max_vertices;   /* the budget; 0: no refinement (the patches as faces, each vertex evaluated once) */
+    double tol;            /* relative difference that splits an edge (BN_BAKE_REFINE_TOL) */
+    double min_edge;       /* edges no longer than this stay whole (scene units; 0: 1/1000 of the diameter) */
+    size_t nlayers, key;   /* the layers eval returns, and the one compared (L) */
+    bn_bake_eval_fn eval;
+    void *user;
+    const bn_log *log;     /* a note per round */
+} bn_bake_refine_opts;
+void bn_bake_refine_opts_default(bn_bake_refine_opts *o);
+/* Refines b (built by bn_bake_create; it must not be refined yet) and evaluates every vertex: *values
+ * (malloc'd, the caller frees) holds nlayers x bn_bake_vertex_count(b) x 3, layer-major. */
+bn_status bn_bake_refine(bn_bake *b, const bn_bake_refine_opts *o, double **values, bn_error *err);
 
 /* A named per-patch value set to write (name used for extra PLY properties: <name>_red...). */
 typedef struct bn_bake_layer {

@@ -2,39 +2,13 @@
  * into smooth surfaces (same material, normals within the crease angle), and average the
  * patches of each surface by area:  x_v = sum_{p in g(v)} A_p x_p / sum_{p in g(v)} A_p. */
 #include "bounce/bake.h"
+#include "bake/bake_internal.h"
 #include "base/internal.h"
 #include "base/vec.h"
 #include "bounce/rt.h"
 
 #include <math.h>
 #include <string.h>
-
-typedef struct bn__xkey {
-    double x;
-    size_t i;
-} bn__xkey;
-static int bn__cmp_x(const void *a, const void *b)
-{
-    const bn__xkey *p = a, *q = b;
-    if (p->x != q->x)
-        return p->x < q->x ? -1 : 1;
-    return p->i < q->i ? -1 : (p->i > q->i);
-}
-
-struct bn_bake {
-    const bn_scene *scene;
-    size_t  nverts;
-    double *pos;        /* nverts*3 */
-    size_t *corner_v;   /* npatches*4: output vertex of each corner (unused corners = SIZE_MAX) */
-    size_t *vstart;     /* nverts+1: CSR of the patches of each vertex's group */
-    size_t *vpatch;
-    unsigned char *enclosed;   /* per patch: inside a closed object (NULL: none known) */
-    size_t ntj;         /* T-junctions: vertex v lies inside the edge (a, b) of a patch on its smooth */
-    struct bn__tj {     /* surface, at a + t (b - a); in decreasing order of the edge's length */
-        size_t v, a, b;
-        double t, len;
-    } *tj;
-};
 
 static int bn__cmp_tj(const void *x, const void *y)
 {
@@ -46,80 +20,113 @@ static int bn__cmp_tj(const void *x, const void *y)
     return (p->a > q->a) - (p->a < q->a);
 }
 
+static int bn__cmp_x(const void *a, const void *b)
+{
+    const bn__xkey *p = a, *q = b;
+    if (p->x != q->x)
+        return p->x < q->x ? -1 : 1;
+    return p->i < q->i ? -1 : (p->i > q->i);
+}
+
+bn__xkey *bn__xsort(const double *pos, size_t n)
+{
+    bn__xkey *ox = bn__malloc_array(n ? n : 1, sizeof *ox);
+    if (!ox)
+        return NULL;
+    for (size_t v = 0; v < n; v++) {
+        ox[v].x = pos[3 * v];
+        ox[v].i = v;
+    }
+    qsort(ox, n, sizeof *ox, bn__cmp_x);
+    return ox;
+}
+
+size_t bn__xfirst(const bn__xkey *ox, size_t n, double xlo)
+{
+    size_t lo = 0, hi = n;
+    while (lo < hi) {
+        size_t mid = lo + (hi - lo) / 2;
+        if (ox[mid].x < xlo)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+
+int bn__inside_segment(const double A[3], const double B[3], const double P[3], double eps, double dist, double *t)
+{
+    double ab[3], ap[3], d[3], len2, len;
+    bn_v3_sub(B, A, ab);
+    bn_v3_sub(P, A, ap);
+    len2 = bn_v3_dot(ab, ab);
+    if (!(len2 > 4 * eps * eps))
+        return 0;
+    len = sqrt(len2);
+    *t = bn_v3_dot(ap, ab) / len2;
+    if (!(*t > 0 && *t < 1) || *t * len <= eps || (1 - *t) * len <= eps)
+        return 0;
+    bn_v3_madd(ap, -*t, ab, d);
+    return bn_v3_len(d) <= dist;
+}
+
 /* T-junctions: an output vertex strictly inside an edge of a patch of its own smooth surface (same
  * material, normals within the crease) that does not have it as a corner, where faces meshed at
  * different sizes meet side by side. Its value is then taken from that edge (linear along it, as
  * both interpolations are), so the surface has no crack there. Candidates by x-range in `order`
  * (positions sorted by x). */
-static bn_status bn__find_tjunctions(bn_bake *b, const bn_patch *patches, size_t np, double eps, double cos_crease)
+/* Appends T-junction (v on the edge va-vb at t) to b->tj. */
+static bn_status bn__tj_push(bn_bake *b, size_t *cap, struct bn__tj j)
+{
+    if (b->ntj == *cap) {
+        size_t nc = *cap ? 2 * *cap : 64;
+        struct bn__tj *nt = bn__realloc_array(b->tj, nc, sizeof *nt);
+        if (!nt)
+            return BN_ENOMEM;
+        b->tj = nt;
+        *cap = nc;
+    }
+    b->tj[b->ntj++] = j;
+    return BN_OK;
+}
+
+int bn__same_surface(const bn_bake *b, const bn_patch *patches, size_t v, const bn_patch *pq)
+{
+    for (size_t i = b->vstart[v]; i < b->vstart[v + 1]; i++) {
+        const bn_patch *pp = &patches[b->vpatch[i]];
+        if (pp->material == pq->material && bn_v3_dot(pp->normal, pq->normal) >= b->cos_crease - 1e-12)
+            return 1;
+    }
+    return 0;
+}
+
+static bn_status bn__find_tjunctions(bn_bake *b, const bn_patch *patches, size_t np)
 {
     size_t n = b->nverts, cap = 0;
-    bn__xkey *ox = bn__malloc_array(n ? n : 1, sizeof *ox);
-    if (!ox)
-        return BN_ENOMEM;
-    for (size_t v = 0; v < n; v++) {
-        ox[v].x = b->pos[3 * v];
-        ox[v].i = v;
-    }
-    qsort(ox, n, sizeof *ox, bn__cmp_x);
-    for (size_t q = 0; q < np; q++) {
+    double eps = b->eps;
+    bn__xkey *ox = bn__xsort(b->pos, n);
+    bn_status st = ox ? BN_OK : BN_ENOMEM;
+    for (size_t q = 0; q < np && st == BN_OK; q++) {
         const bn_patch *pq = &patches[q];
-        for (unsigned c = 0; c < pq->ncorners; c++) {
+        for (unsigned c = 0; c < pq->ncorners && st == BN_OK; c++) {
             size_t va = b->corner_v[4 * q + c], vb = b->corner_v[4 * q + (c + 1) % pq->ncorners];
             const double *A = b->pos + 3 * va, *B = b->pos + 3 * vb;
-            double ab[3], len2, xlo = fmin(A[0], B[0]) - eps, xhi = fmax(A[0], B[0]) + eps;
-            size_t lo = 0, hi = n;
-            bn_v3_sub(B, A, ab);
-            len2 = bn_v3_dot(ab, ab);
-            if (!(len2 > 4 * eps * eps))
-                continue;
-            while (lo < hi) {   /* the first vertex with x >= xlo */
-                size_t mid = lo + (hi - lo) / 2;
-                if (ox[mid].x < xlo)
-                    lo = mid + 1;
-                else
-                    hi = mid;
-            }
-            for (size_t k = lo; k < n && ox[k].x <= xhi; k++) {
-                size_t v = ox[k].i, ok = 0;
-                const double *P = b->pos + 3 * v;
-                double ap[3], t, d[3];
+            double xhi = fmax(A[0], B[0]) + eps, t;
+            for (size_t k = bn__xfirst(ox, n, fmin(A[0], B[0]) - eps); k < n && ox[k].x <= xhi && st == BN_OK; k++) {
+                size_t v = ox[k].i;
                 int corner = 0;
                 for (unsigned cc = 0; cc < pq->ncorners; cc++)
                     corner |= b->corner_v[4 * q + cc] == v;
-                if (corner)
-                    continue;
-                bn_v3_sub(P, A, ap);
-                t = bn_v3_dot(ap, ab) / len2;
-                if (!(t > 0 && t < 1))
-                    continue;
-                bn_v3_madd(ap, -t, ab, d);
-                if (bn_v3_len(d) > eps || t * sqrt(len2) <= eps || (1 - t) * sqrt(len2) <= eps)
-                    continue;
-                for (size_t i = b->vstart[v]; i < b->vstart[v + 1] && !ok; i++) {
-                    const bn_patch *pp = &patches[b->vpatch[i]];
-                    ok = pp->material == pq->material && bn_v3_dot(pp->normal, pq->normal) >= cos_crease - 1e-12;
-                }
-                if (!ok)
-                    continue;
-                if (b->ntj == cap) {
-                    size_t nc = cap ? 2 * cap : 64;
-                    struct bn__tj *nt = bn__realloc_array(b->tj, nc, sizeof *nt);
-                    if (!nt) {
-                        free(ox);
-                        return BN_ENOMEM;
-                    }
-                    b->tj = nt;
-                    cap = nc;
-                }
-                b->tj[b->ntj++] = (struct bn__tj){v, va, vb, t, sqrt(len2)};
+                if (!corner && bn__inside_segment(A, B, b->pos + 3 * v, eps, eps, &t) &&
+                    bn__same_surface(b, patches, v, pq))
+                    st = bn__tj_push(b, &cap, (struct bn__tj){v, va, vb, t, bn_v3_dist(A, B)});
             }
         }
     }
     free(ox);
-    if (b->ntj)
+    if (st == BN_OK && b->ntj)
         qsort(b->tj, b->ntj, sizeof *b->tj, bn__cmp_tj);
-    return BN_OK;
+    return st;
 }
 
 /* The create's working tables: each patch vertex's welded root, and the (patch, corner)
@@ -131,14 +138,11 @@ typedef struct bn__bake_tmp {
 /* 1. Weld: sort by x, sweep a window of width eps, union points within eps; weld[i] = i's root. */
 static bn_status bn__weld(const double *pv, size_t npv, double eps, size_t *weld)
 {
-    bn__xkey *order = bn__malloc_array(npv, sizeof *order);
+    bn__xkey *order = bn__xsort(pv, npv);
     if (!order)
         return BN_ENOMEM;
-    for (size_t i = 0; i < npv; i++) {
-        order[i].x = pv[3 * i];
-        order[i].i = weld[i] = i;
-    }
-    qsort(order, npv, sizeof *order, bn__cmp_x);
+    for (size_t i = 0; i < npv; i++)
+        weld[i] = i;
     for (size_t a = 0; a < npv; a++)
         for (size_t c = a + 1; c < npv && order[c].x - order[a].x <= eps; c++)
             if (bn_v3_dist(pv + 3 * order[a].i, pv + 3 * order[c].i) <= eps)
@@ -211,8 +215,9 @@ static bn_status bn__vertex_lists(bn_bake *b, const double *pv, size_t np, size_
     b->pos = bn__malloc_array(nout, 3 * sizeof(double));
     b->vstart = bn__calloc(nout + 1, sizeof(size_t));
     b->vpatch = bn__malloc_array(t->ninc, sizeof(size_t));
+    b->vpoint = bn__malloc_array(nout, sizeof(size_t));
     fill = bn__malloc_array(nout, sizeof *fill);
-    if (!b->corner_v || !b->pos || !b->vstart || !b->vpatch || !fill) {
+    if (!b->corner_v || !b->pos || !b->vstart || !b->vpatch || !b->vpoint || !fill) {
         free(fill);
         return BN_ENOMEM;
     }
@@ -221,6 +226,7 @@ static bn_status bn__vertex_lists(bn_bake *b, const double *pv, size_t np, size_
     for (size_t w = 0; w < npv; w++)
         for (size_t i = t->inc_start[w]; i < t->inc_start[w + 1]; i++) {
             memcpy(b->pos + 3 * t->gid[i], pv + 3 * w, 3 * sizeof(double));
+            b->vpoint[t->gid[i]] = w;
             b->corner_v[t->inc[i]] = t->gid[i];
             b->vstart[t->gid[i] + 1]++;
         }
@@ -261,9 +267,12 @@ bn_status bn_bake_create(const bn_scene *scene, double crease_deg, bn_bake **out
     if (b && t.weld && t.inc_start && bn__weld(pv, npv, eps, t.weld) == BN_OK &&
         bn__incidences(patches, np, npv, &t) == BN_OK && (local = bn__malloc_array(t.ninc, sizeof *local))) {
         b->scene = scene;
+        b->eps = eps;
+        b->cos_crease = cos_crease;
+        b->npoints = npv;
         b->nverts = bn__group_points(patches, npv, flat, cos_crease, &t, local);
         if (bn__vertex_lists(b, pv, np, npv, &t) == BN_OK &&
-            (flat || bn__find_tjunctions(b, patches, np, eps, cos_crease) == BN_OK))
+            (flat || bn__find_tjunctions(b, patches, np) == BN_OK))
             st = BN_OK;
     }
     if (st == BN_OK) {
@@ -291,6 +300,9 @@ void bn_bake_destroy(bn_bake *b)
     free(b->vpatch);
     free(b->tj);
     free(b->enclosed);
+    free(b->vpoint);
+    free(b->tri);
+    free(b->tri_patch);
     free(b);
 }
 
@@ -298,6 +310,30 @@ const bn_scene *bn_bake_scene(const bn_bake *b) { return b->scene; }
 size_t bn_bake_vertex_count(const bn_bake *b) { return b->nverts; }
 const double *bn_bake_vertex_positions(const bn_bake *b) { return b->pos; }
 size_t bn_bake_corner_vertex(const bn_bake *b, size_t patch, unsigned corner) { return b->corner_v[4 * patch + corner]; }
+
+size_t bn_bake_face_count(const bn_bake *b)
+{
+    size_t np;
+    if (b->tri)
+        return b->ntri;
+    bn_scene_patches(b->scene, &np);
+    return np;
+}
+
+unsigned bn_bake_face(const bn_bake *b, size_t f, size_t v[4], size_t *patch)
+{
+    if (b->tri) {
+        memcpy(v, b->tri + 3 * f, 3 * sizeof *v);
+        v[3] = 0;
+        *patch = b->tri_patch[f];
+        return 3;
+    }
+    const bn_patch *pa = &bn_scene_patches(b->scene, NULL)[f];
+    for (unsigned c = 0; c < 4; c++)
+        v[c] = c < pa->ncorners ? b->corner_v[4 * f + c] : 0;
+    *patch = f;
+    return pa->ncorners;
+}
 
 size_t bn_bake_exclude_enclosed(bn_bake *b, const bn_rt *rt)
 {

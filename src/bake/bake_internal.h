@@ -4,6 +4,44 @@
 
 #include "bounce/bake.h"
 
+/* The bake (bake.c builds it, refine.c refines it): the output vertices, the patches' corners on them,
+ * each vertex's patches, and after bn_bake_refine the triangles written instead of the patches. */
+struct bn_bake {
+    const bn_scene *scene;
+    double  eps;        /* points closer than this are one (1e-9 of the scene's diameter) */
+    double  cos_crease; /* patches of one material whose normals are closer share vertices */
+    size_t  nverts;
+    double *pos;        /* nverts*3 */
+    size_t *vpoint;     /* nverts: the position's number (vertices split at a crease share it) */
+    size_t  npoints;    /* positions numbered so far */
+    size_t *corner_v;   /* npatches*4: output vertex of each corner (unused corners = SIZE_MAX) */
+    size_t *vstart;     /* nverts+1: CSR of the patches of each vertex's group */
+    size_t *vpatch;
+    unsigned char *enclosed;   /* per patch: inside a closed object (NULL: none known) */
+    size_t ntj;         /* T-junctions: vertex v lies inside the edge (a, b) of a patch on its smooth */
+    struct bn__tj {     /* surface, at a + t (b - a); in decreasing order of the edge's length */
+        size_t v, a, b;
+        double t, len;
+    } *tj;
+    size_t  ntri;       /* refined (bn_bake_refine): the faces are these triangles, 3 vertices each, */
+    size_t *tri;        /* tri_patch[t] the patch each lies in; 0 and NULL: the faces are the patches */
+    size_t *tri_patch;
+};
+
+/* Vertex v's group has a patch of pq's smooth surface (its material, normal within the crease). */
+int bn__same_surface(const bn_bake *b, const bn_patch *patches, size_t v, const bn_patch *pq);
+
+/* Positions sorted by x (i: the position's index) for range searches along x. */
+typedef struct bn__xkey {
+    double x;
+    size_t i;
+} bn__xkey;
+bn__xkey *bn__xsort(const double *pos, size_t n);   /* malloc'd; NULL without memory */
+size_t bn__xfirst(const bn__xkey *ox, size_t n, double xlo);   /* the first with x >= xlo */
+/* P strictly inside the segment A-B: more than eps from both ends, at most dist from the line;
+ * *t = where along it (0 at A, 1 at B). */
+int bn__inside_segment(const double A[3], const double B[3], const double P[3], double eps, double dist, double *t);
+
 /* The mesh to write: nv vertices (positions in scene units), nf convex faces of 3 or 4 corners
  * (face_idx: 4 per face), each face's material, and nlayers float colour sets (3 per vertex;
  * vals[0] is L), named; c8: an optional 8-bit sRGB display set (3 per vertex) at exposure_ev. */

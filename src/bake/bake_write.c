@@ -173,6 +173,7 @@ typedef struct bn__bake_job {
     size_t nv, nf, nlayers;
     float **vals;          /* nlayers arrays of nv x 3 */
     unsigned *face_n;
+    size_t *face_patch;    /* the element mesh: each face's patch */
     size_t *face_idx;      /* 4 per face, numbering the kept vertices */
     const double *pos;     /* cpos, or the bake's own positions */
     double *cpos;          /* --mesh input: the kept vertices' positions */
@@ -185,6 +186,7 @@ static void bn__job_free(bn__bake_job *j)
         free(j->vals[l]);
     free(j->vals);
     free(j->face_n);
+    free(j->face_patch);
     free(j->face_idx);
     free(j->cpos);
     free(j->c8);
@@ -271,28 +273,24 @@ static bn_status bn__job_renumber(const bn_bake *b, bn__bake_job *j, bn_error *e
     return BN_OK;
 }
 
-/* The faces written: every patch (the element mesh), or the input polygons. */
+/* The faces written: every patch or the refined triangles (the element mesh), or the input polygons. */
 static bn_status bn__job_faces(const bn_bake *b, int input_mesh, bn__bake_job *j, bn_error *err)
 {
-    size_t np;
-    const bn_patch *patches = bn_scene_patches(bn_bake_scene(b), &np);
     bn_scene_faces(bn_bake_scene(b), &j->nf);
     if (!input_mesh)
-        j->nf = np;
+        j->nf = bn_bake_face_count(b);
     j->pos = bn_bake_vertex_positions(b);
     j->face_n = bn__malloc_array(j->nf + 1, sizeof *j->face_n);
     j->face_idx = bn__malloc_array(j->nf + 1, 4 * sizeof *j->face_idx);
-    if (!j->face_n || !j->face_idx)
+    j->face_patch = input_mesh ? NULL : bn__malloc_array(j->nf + 1, sizeof *j->face_patch);
+    if (!j->face_n || !j->face_idx || (!input_mesh && !j->face_patch))
         return bn__bake_oom(j->nv, err);
     if (input_mesh) {
         bn_status st = bn__input_faces(b, j->face_n, j->face_idx, err);
         return st == BN_OK ? bn__job_renumber(b, j, err) : st;
     }
-    for (size_t p = 0; p < np; p++) {
-        j->face_n[p] = patches[p].ncorners;
-        for (unsigned c = 0; c < 4; c++)
-            j->face_idx[4 * p + c] = c < patches[p].ncorners ? bn_bake_corner_vertex(b, p, c) : 0;
-    }
+    for (size_t f = 0; f < j->nf; f++)
+        j->face_n[f] = bn_bake_face(b, f, j->face_idx + 4 * f, j->face_patch + f);
     return BN_OK;
 }
 
@@ -313,14 +311,15 @@ static bn_status bn__bake_gltf(const bn_bake *b, const char *path, int is_glb, c
     size_t np, nl = j->nlayers;
     const bn_patch *patches = bn_scene_patches(s, &np);
     const bn_face *faces = bn_scene_faces(s, &(size_t){0});
+    const size_t *fp = j->face_patch;
     size_t nobj = bn_scene_object_count(s);
     unsigned *fm = bn__malloc_array(j->nf + 1, sizeof *fm), *fo = bn__malloc_array(j->nf + 1, sizeof *fo);
     const char **lnames = bn__malloc_array(nl, sizeof *lnames), **onames = bn__malloc_array(nobj + 1, sizeof *onames);
     double *power = bn__calloc(3 * nl, sizeof(double));
     bn_status st = fm && fo && lnames && onames && power ? BN_OK : bn__bake_oom(j->nv, err);
     for (size_t k = 0; st == BN_OK && k < j->nf; k++) {
-        fm[k] = o->input_mesh ? faces[k].material : patches[k].material;
-        fo[k] = faces[o->input_mesh ? k : patches[k].face].object;
+        fm[k] = o->input_mesh ? faces[k].material : patches[fp[k]].material;
+        fo[k] = faces[o->input_mesh ? k : patches[fp[k]].face].object;
     }
     for (size_t k = 0; st == BN_OK && k < nobj; k++)
         onames[k] = bn_scene_object_name(s, k);

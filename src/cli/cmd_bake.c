@@ -15,8 +15,26 @@ typedef struct bn__bake_cli {
     bn_cli_solution sol;
     const char *out, *for_tool;
     int n, ldr, flat, per_bounce, mesh, is_gltf, no_colour_sets, gather, gather_rays;
-    double ev, crease;
+    double ev, crease, bake_tol;
+    size_t bake_vertices;
 } bn__bake_cli;
+
+/* How the vertices get their values, and where the mesh is refined. */
+static void bn__bake_vertex_options(bn_optset *set, bn__bake_cli *a)
+{
+    bn_optset_add(set, (bn_opt){"gather", 0, BN_OPT_CHOICE, &a->gather, bn_gather_mode_names(), 0, 0,
+                                 bn_gather_mode_names(),
+                                 "each vertex's values: the final gather at the vertex, as the images' pixels get "
+                                 "them (default final), or the mean of the patches around it (none; --flat: none)"});
+    bn_optset_add(set, (bn_opt){"gather-rays", 0, BN_OPT_INT, &a->gather_rays, NULL, 1, 1 << 20, "N",
+                                 "--gather final: hemisphere rays per vertex for K2E and beyond (default 2048)"});
+    bn_optset_add(set, (bn_opt){"bake-vertices", 0, BN_OPT_SIZE, &a->bake_vertices, NULL, 0, 1e9, "N",
+                                 "--gather final: the element mesh refined where L changes, up to N vertices (200k, "
+                                 "1M; default " BN__STR(BN_BAKE_DEFAULT_VERTICES) "; 0: the patches as they are)"});
+    bn_optset_add(set, (bn_opt){"bake-tol", 0, BN_OPT_DOUBLE, &a->bake_tol, NULL, 1e-4, 10, "T",
+                                 "an edge splits where its ends' L differ by more than T relative (default "
+                                 BN__STR(BN_BAKE_REFINE_TOL) ")"});
+}
 
 static void bn__bake_options(bn_optset *set, bn__bake_cli *a, bn_cli_common *c)
 {
@@ -26,13 +44,16 @@ static void bn__bake_options(bn_optset *set, bn__bake_cli *a, bn_cli_common *c)
     a->n = 3;
     a->crease = BN_BAKE_DEFAULT_CREASE;
     a->gather_rays = BN_BAKE_GATHER_RAYS;
+    a->bake_vertices = BN_BAKE_DEFAULT_VERTICES;
+    a->bake_tol = BN_BAKE_REFINE_TOL;
     set->usage = "bounce bake SCENE [-o baked.ply|.om|.obj|.glb|.gltf] [--ldr] [--per-bounce -n K] [options]";
     set->summary =
         "Solves L = E + K L and bakes L to vertex colours on the patches (--mesh input: on the input\n"
         "polygons alone): each vertex's values come from the final gather at the vertex, as the images'\n"
         "pixels get theirs (--gather none: the area-weighted mean of the patches around it within one\n"
         "smooth surface, adjacent faces of one material whose normals differ by less than --crease);\n"
-        "vertices are split at creases and material seams. Colours are float radiance (W m^-2 sr^-1) by\n"
+        "with the gather the element mesh is refined where L changes (shadow edges, contacts: triangles\n"
+        "bisected, no T-junctions, up to --bake-vertices); vertices are split at creases and material seams. Colours are float radiance (W m^-2 sr^-1) by\n"
         "default, 8-bit sRGB with --ldr. .ply (binary) and .om are written through OpenMesh,\n"
         ".obj directly as `v x y z r g b`. --per-bounce adds float vertex properties E_red, E_green, E_blue,\n"
         "KE_red, ..., K{K}E_*, rest_* (PLY, OM) so engines can blend bounces; their sum is L.\n"
@@ -50,12 +71,7 @@ static void bn__bake_options(bn_optset *set, bn__bake_cli *a, bn_cli_common *c)
                                  "as the solve sees them)"});
     bn_optset_add(set, (bn_opt){"ldr", 0, BN_OPT_FLAG, &a->ldr, NULL, 0, 0, NULL,
                                  "8-bit sRGB colours at --exposure instead of float radiance"});
-    bn_optset_add(set, (bn_opt){"gather", 0, BN_OPT_CHOICE, &a->gather, bn_gather_mode_names(), 0, 0,
-                                 bn_gather_mode_names(),
-                                 "each vertex's values: the final gather at the vertex, as the images' pixels get "
-                                 "them (default final), or the mean of the patches around it (none; --flat: none)"});
-    bn_optset_add(set, (bn_opt){"gather-rays", 0, BN_OPT_INT, &a->gather_rays, NULL, 1, 1 << 20, "N",
-                                 "--gather final: hemisphere rays per vertex for K2E and beyond (default 2048)"});
+    bn__bake_vertex_options(set, a);
     bn_optset_add(set, (bn_opt){"no-colour-sets", 0, BN_OPT_FLAG, &a->no_colour_sets, NULL, 0, 0, NULL,
                                  "glTF with --per-bounce: the terms as float attributes only, no COLOR_1 .. "
                                  "(smaller; engines and the viewer read the float ones)"});
@@ -94,6 +110,12 @@ static bn_status bn__bake_check(const bn_optset *set, bn__bake_cli *a, bn_error 
     if (a->gather == BN_GATHER_FINAL && !a->flat && a->per_bounce && a->n < 1)
         return bn_error_set(err, BN_EUSAGE, "--per-bounce -n 0 with --gather final: the gather at the vertices needs "
                             "KE kept (-n 1 or more), or --gather none");
+    if ((bn_cli_given(set, "bake-vertices") || bn_cli_given(set, "bake-tol")) &&
+        (a->flat || a->gather != BN_GATHER_FINAL || a->mesh != BN_BAKE_ELEMENTS))
+        return bn_error_set(err, BN_EUSAGE, "--bake-vertices, --bake-tol: the refined mesh is the element mesh's with "
+                            "the gather at its vertices (not with --flat, --gather none or --mesh input)");
+    if (a->flat || a->gather != BN_GATHER_FINAL || a->mesh != BN_BAKE_ELEMENTS)
+        a->bake_vertices = 0;
     if (a->for_tool && a->no_colour_sets)
         return bn_error_set(err, BN_EUSAGE, "--for blender and --no-colour-sets: Blender imports colour sets only");
     if (a->for_tool && !a->is_gltf)
@@ -138,7 +160,7 @@ static bn_status bn__bake_write(const bn__bake_cli *a, const bn_cli_common *c, c
                                 const bn_bake *bake, const bn_bake_layer *layers, size_t nl, const char *solver,
                                 bn_error *err)
 {
-    char ffdesc[256], patches[32], evbuf[160], creasebuf[32], verts[32], tolbuf[64], gatherbuf[256];
+    char ffdesc[256], patches[32], evbuf[160], creasebuf[32], verts[32], tolbuf[64], gatherbuf[256], refbuf[200];
     int elements = a->mesh == BN_BAKE_ELEMENTS;
     bn_formfactor_opts fo;
     bn_bake_write_opts wo;
@@ -155,6 +177,12 @@ static bn_status bn__bake_write(const bn__bake_cli *a, const bn_cli_common *c, c
         snprintf(creasebuf, sizeof creasebuf, "%g degrees", a->crease);
     bn__bake_colours(a, evbuf, sizeof evbuf);
     snprintf(tolbuf, sizeof tolbuf, "%g", a->sol.tol > 0 ? a->sol.tol : 1e-6);
+    if (a->bake_vertices)
+        snprintf(refbuf, sizeof refbuf, "the element mesh's triangles bisected (longest edge first, no T-junction) where "
+                 "L differs by more than %g relative between an edge's ends, up to %zu vertices: %zu triangles",
+                 a->bake_tol, a->bake_vertices, bn_bake_face_count(bake));
+    else
+        snprintf(refbuf, sizeof refbuf, "none (the patches as faces)");
     snprintf(gatherbuf, sizeof gatherbuf, "each layer by the final gather at the vertex, 1%% into one of its patches: KE in "
              "closed form (%d shadow rays a face), K2E and beyond from %d hemisphere rays, seed %llu", BN_BAKE_GATHER_LIGHT,
              a->gather_rays, (unsigned long long)c->seed);
@@ -162,6 +190,7 @@ static bn_status bn__bake_write(const bn__bake_cli *a, const bn_cli_common *c, c
         {"command line", c->cmdline}, {"scene", bn_scene_path(p->scene)}, {"solver", solver}, {"tolerance", tolbuf},
         {"form factors", ffdesc},      {"patches", patches},          {"vertices", verts}, {"crease", creasebuf},
         {"colours", evbuf},           {"faces", elements ? "the patches (element mesh)" : "the input polygons"},
+        {"refinement", refbuf},
         {"vertex colour", a->flat ? "L of the vertex's own patch (flat: no vertex shared between patches)"
                           : a->gather == BN_GATHER_FINAL ? gatherbuf
                                                          : "L, area-weighted mean of the patches around the vertex within "
@@ -184,52 +213,60 @@ static void bn__bake_summary(const bn__bake_cli *a, const bn_pipeline *p, const 
     bn_scene_faces(p->scene, &nf);
     bn__bake_colours(a, evbuf, sizeof evbuf);
     if (a->mesh == BN_BAKE_ELEMENTS)
-        printf("wrote %s (the element mesh: %zu vertices, %zu patches; %s%s)\n", a->out, bn_bake_vertex_count(bake),
+        printf("wrote %s (the element mesh%s: %zu vertices, %zu faces in %zu patches; %s%s)\n", a->out,
+               a->bake_vertices ? " refined where L changes" : "", bn_bake_vertex_count(bake), bn_bake_face_count(bake),
                p->n, evbuf, a->per_bounce ? "; per-bounce properties E .. rest" : "");
     else
         printf("wrote %s (the input mesh: %zu polygons; %s%s)\n", a->out, nf, evbuf,
                a->per_bounce ? "; per-bounce properties E .. rest" : "");
 }
 
-/* Each bake vertex's values by the final gather at the vertex (bn_gather_points: E, KE, ..., rest, L), as
- * the layers' vertex values; *vbuf holds them (the caller frees it). Each vertex is gathered at its own
- * value, T-junctions too: forcing one onto its edge's line (as the patch means are) moved the values
- * along the Cornell box's ceiling strips by up to 40% from the tracer's at the same points; the colour may
- * then step there by the larger patch's interpolation error (a bake mesh without T-junctions is the cure). */
-static bn_status bn__bake_gather(const bn__bake_cli *a, const bn_cli_common *c, const bn_pipeline *p,
-                                 const bn_bake *bake, bn_bake_layer *layers, size_t nl, double **vbuf, bn_error *err)
+/* The final gather at a batch of the bake's vertices (bn_bake_eval_fn): E, KE, ..., rest, L. Each batch
+ * after the first draws streams of its own (the seed mixed with its first vertex's number). */
+typedef struct bn__bake_eval_ctx {
+    const bn__bake_cli *a;
+    const bn_cli_common *c;
+    const bn_pipeline *p;
+} bn__bake_eval_ctx;
+
+static bn_status bn__bake_eval(void *user, const double *x, const size_t *patch, size_t n, size_t first, double *out,
+                               bn_error *err)
 {
-    size_t nv = bn_bake_vertex_count(bake), *patch = bn__malloc_array(nv + 1, sizeof *patch);
-    int n = p->res.nterms - 1;
-    double *out = bn__malloc_array((size_t)(n + 3) * (nv + 1), 3 * sizeof(double));
-    double *x = bn__malloc_array(nv + 1, 3 * sizeof(double));
-    const double *pos = bn_bake_vertex_positions(bake);
-    const bn_patch *pa = bn_scene_patches(p->scene, NULL);
+    const bn__bake_eval_ctx *e = user;
     bn_gather_opts go;
-    bn_status st;
-    *vbuf = out;
-    if (!patch || !out || !x) {
-        free(patch);
-        free(x);
-        return bn_error_set(err, BN_ENOMEM, "bake: out of memory for the gather at %zu vertices", nv);
-    }
-    for (size_t v = 0; v < nv; v++) {   /* 1% of the way into its patch: off an edge, a contact's foot, a hole's rim */
-        patch[v] = bn_bake_vertex_patch(bake, v);
-        for (int k = 0; k < 3; k++)
-            x[3 * v + k] = pos[3 * v + k] + BN_TRACE_POINT_INSET * (pa[patch[v]].centroid[k] - pos[3 * v + k]);
-    }
     bn_gather_opts_default(&go);
-    go.hemi_samples = a->gather_rays;
+    go.hemi_samples = e->a->gather_rays;
     go.light_samples = BN_BAKE_GATHER_LIGHT;
-    go.seed = c->seed;
-    go.threads = c->threads;
-    go.quiet = c->quiet;
-    st = bn_gather_points(p->rt, (const double *const *)p->res.terms, n, p->rest, x, patch, nv, &go, out, err);
-    free(patch);
-    free(x);
+    go.seed = first ? e->c->seed ^ bn__hash64((uint64_t)first) : e->c->seed;
+    go.threads = e->c->threads;
+    go.quiet = e->c->quiet || first > 0;   /* a bar for the first batch; the rounds say their own line */
+    return bn_gather_points(e->p->rt, (const double *const *)e->p->res.terms, e->p->res.nterms - 1, e->p->rest, x,
+                            patch, n, &go, out, err);
+}
+
+/* Each bake vertex's values by the final gather at the vertex (bn_gather_points: E, KE, ..., rest, L), the
+ * element mesh refined where L changes first (bn_bake_refine: crack-free, up to --bake-vertices), as the
+ * layers' vertex values; *vbuf holds them (the caller frees it). */
+static bn_status bn__bake_gather(const bn__bake_cli *a, const bn_cli_common *c, const bn_pipeline *p, bn_bake *bake,
+                                 bn_bake_layer *layers, size_t nl, double **vbuf, bn_error *err)
+{
+    int n = p->res.nterms - 1;
+    bn__bake_eval_ctx ctx = {a, c, p};
+    bn_log lg = {bn_cli_log, (void *)c, c->quiet};
+    bn_bake_refine_opts ro;
+    bn_bake_refine_opts_default(&ro);
+    ro.max_vertices = a->bake_vertices;
+    ro.tol = a->bake_tol;
+    ro.nlayers = (size_t)n + 3;
+    ro.key = (size_t)n + 2;
+    ro.eval = bn__bake_eval;
+    ro.user = &ctx;
+    ro.log = &lg;
+    bn_status st = bn_bake_refine(bake, &ro, vbuf, err);
+    size_t nv = bn_bake_vertex_count(bake);
     for (size_t l = 0; st == BN_OK && l < nl; l++) {   /* L, then E .. K^n E, rest */
         size_t k = l == 0 ? (size_t)n + 2 : l - 1 <= (size_t)n ? l - 1 : (size_t)n + 1;
-        layers[l].vertex_values = out + k * nv * 3;
+        layers[l].vertex_values = *vbuf + k * nv * 3;
     }
     return st;
 }

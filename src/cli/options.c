@@ -100,9 +100,18 @@ static bn_status bn__set_wxh(const bn_opt *o, const char *v, bn_error *err)
 /* An int, size or double within [min, max] (whole for the first two). */
 static bn_status bn__set_number(const bn_opt *o, const char *v, bn_error *err)
 {
-    double x;
+    double x, scale = 1;
+    char num[64];
+    size_t len = strlen(v);
+    if (o->type == BN_OPT_SIZE && len > 1 && len < sizeof num && (v[len - 1] == 'k' || v[len - 1] == 'M')) {
+        scale = v[len - 1] == 'k' ? 1e3 : 1e6;   /* 200k, 1M */
+        memcpy(num, v, len - 1);
+        num[len - 1] = '\0';
+        v = num;
+    }
     if (!bn__parse_num(v, &x))
         return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not a finite number", o->name, v);
+    x *= scale;
     if (x < o->min || x > o->max)
         return bn_error_set(err, BN_EUSAGE, "--%s: %s is outside [%g, %g]", o->name, v, o->min, o->max);
     if (o->type != BN_OPT_DOUBLE && x != floor(x))
