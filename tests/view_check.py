@@ -14,6 +14,7 @@ KE alone and K2E alone, checked against what the physics says, not against earli
 usage: view_check.py BOUNCE SOURCE_DIR OUT_DIR
 Exit 77 (skipped) when no browser is installed.
 """
+import math
 import os
 import re
 import shutil
@@ -192,8 +193,55 @@ def main():
     check(mean_diff(shots["L"], shots["E"]) > 0.02, "L and E alone differ (%.3f)" % mean_diff(shots["L"], shots["E"]))
     check(mean_diff(shots["KE"], shots["K2E"]) > 0.01,
           "KE and K2E alone differ (%.3f)" % mean_diff(shots["KE"], shots["K2E"]))
+    url_round_trip(bounce, base, url, fixed, out, page, mean_diff)
     print("%d failures" % len(failures))
     sys.exit(1 if failures else 0)
+
+
+def k2e_auto_ev(glb):
+    """The exposure bounce's rule gives K2E alone: its 99th percentile vertex luminance at 0.9 (here, from the
+    bake's own _K2E attribute, read by the test's glTF reader)."""
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from gltf_check import accessor, read_glb
+    gl, b = read_glb(glb)
+    at = gl["meshes"][0]["primitives"][0]["attributes"]
+    v, _ = accessor(gl, b, at["_K2E"])
+    lum = sorted(y for y in (0.2126 * v[i] + 0.7152 * v[i + 1] + 0.0722 * v[i + 2] for i in range(0, len(v), 3)) if y > 0)
+    return math.log2(0.9 / lum[int(0.99 * (len(lum) - 1))])
+
+
+def url_round_trip(bounce, base, url, fixed, out, page, mean_diff):
+    """The address follows the view: a page opened at a view (terms, automatic exposure, camera, folded panel)
+    links to that view, and the link opens the same picture; the bake kept beside the page is shown again
+    without solving."""
+    state = "terms=K2E&ev=auto&cam=0.52,0.41,-0.62,0.27,0.2,0.3"
+    dom = subprocess.run(base + ["--dump-dom", url + fixed + state], capture_output=True, text=True).stdout
+    m = re.search(r'<a id="link" href="#([^"]*)"', dom)
+    link = m.group(1).replace("&amp;", "&") if m else ""
+    want = dict(kv.split("=", 1) for kv in (fixed[1:] + state).split("&") if kv)
+    got = dict(kv.split("=", 1) for kv in link.split("&") if kv)
+    check(all(got.get(k) == v for k, v in want.items()), "the page's link holds its view: %s" % link)
+    ev = re.search(r'id="evtext">([-0-9.]+)<', dom)
+    kept = page[:-5] + ".bake.glb"
+    check(os.path.exists(kept), "bounce view kept the bake beside the page (%s)" % os.path.basename(kept))
+    if ev and os.path.exists(kept):
+        want_ev = k2e_auto_ev(kept)
+        check(abs(float(ev.group(1)) - want_ev) < 0.06,
+              "ev=auto on K2E alone: %s EV, its 99th percentile luminance at 0.9 says %.2f" % (ev.group(1), want_ev))
+    shots = []
+    for i, frag in enumerate((fixed + state, "#" + link)):
+        png = os.path.join(out, "view-link-%d.png" % i)
+        subprocess.run(base + ["--screenshot=" + png, url + frag], capture_output=True)
+        shots.append(read_png(png) if os.path.exists(png) else None)
+    check(all(shots) and mean_diff(shots[0], shots[1]) < 1e-3, "the link opens the same picture (mean difference %s)"
+          % ("%.2g" % mean_diff(shots[0], shots[1]) if all(shots) else "no screenshot"))
+    dom = subprocess.run(base + ["--dump-dom", url + "#panel=folded"], capture_output=True, text=True).stdout
+    check('id="body" style="display: none;"' in dom and "panel=folded" in dom,
+          "#panel=folded folds the panel, and its link says so")
+    again = os.path.join(out, "again.html")
+    r = subprocess.run([bounce, "view", kept, "-o", again], capture_output=True, text=True)
+    check(r.returncode == 0 and "transport" not in r.stderr and os.path.exists(again),
+          "bounce view of the kept bake builds the page without solving (exit %d)" % r.returncode)
 
 
 if __name__ == "__main__":

@@ -17,8 +17,11 @@ static const char *bn__view_help =
     "E, KE, K2E, ..., rest alone ('alone') or summed (check boxes; 'L' shows them all), set the\n"
     "exposure, switch to false colour (log10 radiance, with its scale), and read the power of each\n"
     "term. A .glb from `bounce bake --per-bounce` is embedded as it is; a scene (.obj, .ply, .off, a glTF) is\n"
-    "baked first with `bounce bake --per-bounce` and the options given (see bounce bake --help).\n"
-    "The page's URL may carry #terms=E,KE&ev=1.5&fc=1 (terms shown, exposure, false colour).\n\n"
+    "baked first with `bounce bake --per-bounce` and the options given (see bounce bake --help; --cache FILE\n"
+    "keeps the form factors of dense and sparse transports for the next run), and the bake is kept beside\n"
+    "the page (view.html: view.bake.glb): `bounce view view.bake.glb` shows it again without solving.\n"
+    "The page's URL follows what it shows: #terms=E,KE&ev=1.5 (or ev=auto: each view exposed by\n"
+    "itself)&fc=1&cam=x,y,z,tx,ty,tz (metres)&panel=folded; copy it to share the view.\n\n"
     "options:\n"
     "  -o, --output FILE.html   the page (default view.html)\n"
     "  -q, --quiet              no progress or summary\n"
@@ -75,32 +78,48 @@ static int bn__view_args(int argc, char **argv, bn__view_cli *v, int *done)
     return 0;
 }
 
-/* A scene baked (bounce bake --per-bounce, its progress and notes shown unless -q) into a temporary
- * .glb beside the page, then embedded; the .glb removed. */
-static int bn__view_bake(bn__view_cli *v, const char *title, bn_cli_common *c, bn_error *err, bn_status *st)
+/* Where a scene's bake is kept: the page's stem + ".bake.glb" (view.html: view.bake.glb), so the next
+ * `bounce view view.bake.glb` builds the page again without solving; malloc'd. */
+static char *bn__view_bake_path(const bn__view_cli *v)
 {
-    size_t len = strlen(v->out) + 32;
-    char *tmp = malloc(len);
-    int rc;
-    if (!tmp)
+    size_t n = strlen(v->out), len = n + 16;
+    char *path = malloc(len);
+    if (path)
+        snprintf(path, len, "%.*s.bake.glb", (int)(n - 5), v->out);
+    return path;
+}
+
+/* A scene baked (bounce bake --per-bounce, its progress and notes shown unless -q) into the .glb beside the
+ * page (bn__view_bake_path; a temporary when that would be the input itself), then embedded. */
+static int bn__view_bake(bn__view_cli *v, const char *title, bn_cli_common *c, bn_error *err, bn_status *st,
+                         char **kept)
+{
+    char *glb = bn__view_bake_path(v);
+    int rc, temporary = glb && strcmp(glb, v->in) == 0;
+    if (!glb)
         return bn_status_exit_code(BN_ENOMEM);
-    snprintf(tmp, len, "%s.%ld.bake.glb", v->out, (long)getpid());
+    if (temporary)
+        snprintf(glb + strlen(v->out) - 5, 16 + 5, ".%ld.glb", (long)getpid());
     v->bargv[v->bargc++] = "--per-bounce";
     v->bargv[v->bargc++] = "--no-colour-sets";   /* the page reads the float terms: half the bytes */
     v->bargv[v->bargc++] = "-o";
-    v->bargv[v->bargc++] = tmp;
+    v->bargv[v->bargc++] = glb;
     if (v->quiet)
         v->bargv[v->bargc++] = "-q";
     else
-        fprintf(stderr, "bounce: view: baking %s first (bounce bake --per-bounce; a .glb from it is embedded as it "
-                        "is)\n", v->in);
-    c->no_summary = 1;   /* its progress and notes, not its "wrote" line of the temporary .glb */
+        fprintf(stderr, "bounce: view: baking %s first (bounce bake --per-bounce, kept as %s; a .glb bake is "
+                        "embedded as it is, without solving)\n", v->in, glb);
+    c->no_summary = 1;   /* its progress and notes, not its "wrote" line */
     rc = bn_cmd_bake(v->bargc, v->bargv, c);
     c->no_summary = 0;
     if (rc == 0)
-        *st = bn_view_write(tmp, title, v->out, err);
-    unlink(tmp);
-    free(tmp);
+        *st = bn_view_write(glb, title, v->out, err);
+    if (temporary || rc != 0 || *st != BN_OK) {
+        unlink(glb);
+        free(glb);
+        glb = NULL;
+    }
+    *kept = glb;
     return rc;
 }
 
@@ -108,6 +127,7 @@ int bn_cmd_view(int argc, char **argv, bn_cli_common *c)
 {
     bn__view_cli v = {0};
     const char *title;
+    char *kept = NULL;
     int rc, done;
     bn_error err;
     bn_status st = BN_OK;
@@ -126,14 +146,18 @@ int bn_cmd_view(int argc, char **argv, bn_cli_common *c)
             return 2;
         }
         st = bn_view_write(v.in, title, v.out, &err);
-    } else if ((rc = bn__view_bake(&v, title, c, &err, &st)) != 0) {
+    } else if ((rc = bn__view_bake(&v, title, c, &err, &st, &kept)) != 0) {
         free(v.bargv);
         return rc;
     }
     if (st != BN_OK)
         rc = bn_cli_fail(&err);
+    else if (!v.quiet && !c->quiet && kept)
+        printf("wrote %s (open it in a browser; %s) and its bake %s: `bounce view %s -o %s` builds the page again "
+               "without solving\n", v.out, title, kept, kept, v.out);
     else if (!v.quiet && !c->quiet)
         printf("wrote %s (open it in a browser; %s)\n", v.out, title);
+    free(kept);
     free(v.bargv);
     return rc;
 }
