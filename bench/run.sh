@@ -360,9 +360,9 @@ note "hierarchy: eps study, links against patches, equal error"
     echo
 } >>"$report"
 if timeout "$timeout_s" "$bounce" study "$scene" --unit mm --patches 1200 --vary eps="$epsl" -o "$work/eps.csv" \
-    --plot "$root/bench/hierarchy-eps" -q >/dev/null 2>"$work/eps.err"; then
+    --plot "$(dirname "$out")/hierarchy-eps" -q >/dev/null 2>"$work/eps.err"; then   # beside the report
     {
-        echo "\`bounce study --patches 1200 --vary eps=$epsl\` (plot: bench/hierarchy-eps.svg). Reference: $(metaget "$work/eps.csv" reference);"
+        echo "\`bounce study --patches 1200 --vary eps=$epsl\` (plot: hierarchy-eps.svg beside this report). Reference: $(metaget "$work/eps.csv" reference);"
         echo "its error: $(metaget "$work/eps.csv" reference_error_how). err = per patch and channel |L - L_ref| / max(|L_ref|, mean)."
         echo
         echo "| eps | links | K MiB | err RMS | err max | max per surface | t_K s | t_total s |"
@@ -602,6 +602,22 @@ if [ "$big" = 1 ]; then
                 echo
             } >>"$big_report"
         fi
+        # bakes (issue 36): the gathered, refined bake with the defaults against the patch means, time and
+        # per-vertex error against the tracer at a sample of the vertices (bench/bake_bench.sh)
+        note "large scenes: bakes of the bunny box and the living room (bench/bake_bench.sh)"
+        {
+            echo "## Bakes: gathered and refined, against the patch means"
+            echo
+            echo "\`bounce bake SCENE --per-bounce -o X.glb\` with the defaults (the gather at each vertex, the mesh refined where L"
+            echo "changes up to 100,000 vertices) and with \`--gather none\`; errors per vertex against \`bounce trace --points\` at"
+            echo "every 40th vertex, 4,096 paths each, the tracer's variance subtracted (targets, issue 36: L 1% median and 3% at"
+            echo "the 95th, K2E 2% and 6%; time solve included: the bunny box 2 minutes, the living room 4)."
+            echo
+            bash "$root/bench/bake_bench.sh" "$bounce" "$work/bunny-box.obj" mm "$work/bake" 40 2>/dev/null
+            [ -f "$work/living-room.obj" ] &&
+                bash "$root/bench/bake_bench.sh" "$bounce" "$work/living-room.obj" m "$work/bake" 40 2>/dev/null | tail -n +3
+            echo
+        } >>"$big_report"
         # the MPI identity checks on the bunny box (tests/mpi_check.sh with BN_TEST_BIG=1: out of the
         # suite's budget, a big scene)
         if command -v mpirun >/dev/null 2>&1 && grep -q "BOUNCE_MPI:BOOL=ON" "$build/CMakeCache.txt" 2>/dev/null; then

@@ -25,3 +25,4 @@ echo "  cornell-box.exr         layers E, KE, K2E, K3E, K4E, rest, L (radiance, 
 echo "  cornell-box.<layer>.png sRGB previews; cornell-box.sheet.png: all layers side by side"
 echo "  cornell-box.ply         baked per-vertex radiance (float colours)"
 echo "  cornell-box.html        the viewer: open it in a browser, show each bounce alone or summed"
+echo "  cornell-box.bake.glb    the viewer's bake (glTF, every term): bounce view it again without solving"

@@ -47,8 +47,9 @@ size_t bn_bake_tjunction_count(const bn_bake *b);   /* T-junctions found (0 for 
 /* Vertex values from elsewhere (a gather at each vertex) made crack-free: each T-junction takes its
  * edge's value, as bn_bake_vertex_values does. */
 void bn_bake_vertex_tjunctions(const bn_bake *b, double *vertex_values);
-/* A patch of vertex v's group whose front the vertex lies on (one outside every closed object when it
- * has one): where a gather at the vertex takes its normal, face and reflectance. */
+/* The largest patch of vertex v's group (outside every closed object when it has one): where a gather at
+ * the vertex takes its normal, face and reflectance (on a curved mesh, the facet that covers most of
+ * the vertex's neighbourhood). */
 size_t bn_bake_vertex_patch(const bn_bake *b, size_t v);
 /* Patches inside a closed object (the floor under a block standing on it: no light reaches them and no
  * eye sees them) are left out of the vertex averages wherever a vertex also has patches outside, so

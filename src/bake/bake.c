@@ -370,10 +370,18 @@ void bn_bake_vertex_values(const bn_bake *b, const double *x, double *out)
 
 size_t bn_bake_vertex_patch(const bn_bake *b, size_t v)
 {
-    for (size_t i = b->vstart[v]; b->enclosed && i < b->vstart[v + 1]; i++)
-        if (!b->enclosed[b->vpatch[i]])
-            return b->vpatch[i];
-    return b->vpatch[b->vstart[v]];
+    const bn_patch *pa = bn_scene_patches(b->scene, NULL);
+    size_t best = b->vpatch[b->vstart[v]];
+    int open = 0;   /* the best so far is outside every closed object */
+    for (size_t i = b->vstart[v]; i < b->vstart[v + 1]; i++) {
+        size_t p = b->vpatch[i];
+        int o = !b->enclosed || !b->enclosed[p];
+        if ((o && !open) || (o == open && pa[p].area > pa[best].area)) {
+            best = p;
+            open = o;
+        }
+    }
+    return best;
 }
 
 void bn_bake_vertex_tjunctions(const bn_bake *b, double *out)

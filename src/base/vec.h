@@ -58,4 +58,32 @@ static inline double bn_v3_dist(const double a[3], const double b[3])
 }
 static inline double bn_clamp(double x, double lo, double hi) { return x < lo ? lo : (x > hi ? hi : x); }
 
+/* The midpoint rule on a triangle's k x k regular subdivision: each of its k^2 equal sub-triangles'
+ * centroid as (s1, s2), the point a + s1 (b - a) + s2 (c - a). Start from {k} (the rest zero):
+ *   bn_subtri it = {k}; while (bn_subtri_next(&it, &s1, &s2)) ...                                  */
+typedef struct bn_subtri {
+    int k, i, j, up;
+} bn_subtri;
+static inline int bn_subtri_next(bn_subtri *t, double *s1, double *s2)
+{
+    while (t->i < t->k) {
+        if (t->j + t->i >= t->k || t->up > 1 || (t->up == 1 && t->i + t->j + 1 >= t->k)) {
+            if (t->j + t->i >= t->k) {   /* row i done */
+                t->i++;
+                t->j = 0;
+            } else {
+                t->j++;
+            }
+            t->up = 0;
+            continue;
+        }
+        double third = t->up ? 2.0 / 3 : 1.0 / 3;   /* the cell's lower or upper (turned) sub-triangle */
+        *s1 = (t->i + third) / t->k;
+        *s2 = (t->j + third) / t->k;
+        t->up++;
+        return 1;
+    }
+    return 0;
+}
+
 #endif

@@ -44,30 +44,28 @@ static double bn__solid_angle(const double o[3], const double *a, const double *
 static void bn__tri_points(const bn_rt *rt, const bn_light *l, double m, const double *a, const double *b,
                            const double *c, const double n[3], double eps, double area, int k, double sum[8])
 {
-    for (int i = 0; i < k; i++)
-        for (int j = 0; j + i < k; j++)
-            for (int up = 0; up < 2 && (up == 0 || i + j + 1 < k); up++) {
-                double s1 = (i + (up ? 2.0 : 1.0) / 3) / k, s2 = (j + (up ? 2.0 : 1.0) / 3) / k, x[3], E[3], wi[3],
-                       d, o[3];
-                for (int q = 0; q < 3; q++)
-                    x[q] = a[q] + s1 * (b[q] - a[q]) + s2 * (c[q] - a[q]);
-                int lit = bn_light_irradiance(l, m, x, n, E, wi, &d);
-                double cosr = bn_v3_dot(wi, n);
-                sum[4] += area;
-                if (!(cosr > 0))
-                    continue;
-                sum[3] += isinf(d) ? area * cosr : area * cosr / (d * d * m * m);
-                bn_v3_madd(x, eps, n, o);
-                sum[6] += lit;
-                if (l->type == BN_LIGHT_SPOT && -bn_v3_dot(wi, l->dir) > l->cos_outer &&
-                    -bn_v3_dot(wi, l->dir) < l->cos_inner)
-                    sum[7] += 1;   /* in the spot's falloff */
-                if (!lit || bn_rt_occluded(rt, o, wi, 0, isinf(d) ? INFINITY : d * (1 - 1e-9) - eps))
-                    continue;
-                sum[5] += 1;
-                for (int q = 0; q < 3; q++)
-                    sum[q] += area * E[q];
-            }
+    bn_subtri it = {k, 0, 0, 0};
+    double s1, s2;
+    while (bn_subtri_next(&it, &s1, &s2)) {
+        double x[3], E[3], wi[3], d, o[3];
+        for (int q = 0; q < 3; q++)
+            x[q] = a[q] + s1 * (b[q] - a[q]) + s2 * (c[q] - a[q]);
+        int lit = bn_light_irradiance(l, m, x, n, E, wi, &d);
+        double cosr = bn_v3_dot(wi, n);
+        sum[4] += area;
+        if (!(cosr > 0))
+            continue;
+        sum[3] += isinf(d) ? area * cosr : area * cosr / (d * d * m * m);
+        bn_v3_madd(x, eps, n, o);
+        sum[6] += lit;
+        if (l->type == BN_LIGHT_SPOT && -bn_v3_dot(wi, l->dir) > l->cos_outer && -bn_v3_dot(wi, l->dir) < l->cos_inner)
+            sum[7] += 1;   /* in the spot's falloff */
+        if (!lit || bn_rt_occluded(rt, o, wi, 0, isinf(d) ? INFINITY : d * (1 - 1e-9) - eps))
+            continue;
+        sum[5] += 1;
+        for (int q = 0; q < 3; q++)
+            sum[q] += area * E[q];
+    }
 }
 
 /* Whether the light reaches the points just inside the patch's corners (1% of the way to its centre):

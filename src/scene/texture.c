@@ -190,15 +190,14 @@ static double bn__tri_texture(const bn_scene *sc, size_t f, const bn__texture *t
     uva = 0.5 * fabs((uv[1][0] - uv[0][0]) * (uv[2][1] - uv[0][1]) - (uv[2][0] - uv[0][0]) * (uv[1][1] - uv[0][1]));
     double kk = ceil(sqrt(2.0 * uva * t->w * t->h));
     int k = !(kk >= 1) ? 1 : kk > 64 ? 64 : (int)kk;
-    for (int i = 0; i < k; i++)
-        for (int j = 0; j + i < k; j++)
-            for (int up = 0; up < 2 && (up == 0 || i + j + 1 < k); up++) {   /* k^2 sub-triangles */
-                double s1 = (i + (up ? 2.0 : 1.0) / 3) / k, s2 = (j + (up ? 2.0 : 1.0) / 3) / k, rgb[3];
-                bn__texture_sample(t, uv[0][0] + s1 * (uv[1][0] - uv[0][0]) + s2 * (uv[2][0] - uv[0][0]),
-                                   uv[0][1] + s1 * (uv[1][1] - uv[0][1]) + s2 * (uv[2][1] - uv[0][1]), rgb);
-                for (int ch = 0; ch < 3; ch++)
-                    sum[ch] += rgb[ch];
-            }
+    bn_subtri it = {k, 0, 0, 0};
+    double s1, s2, rgb[3];
+    while (bn_subtri_next(&it, &s1, &s2)) {   /* k^2 sub-triangles */
+        bn__texture_sample(t, uv[0][0] + s1 * (uv[1][0] - uv[0][0]) + s2 * (uv[2][0] - uv[0][0]),
+                           uv[0][1] + s1 * (uv[1][1] - uv[0][1]) + s2 * (uv[2][1] - uv[0][1]), rgb);
+        for (int ch = 0; ch < 3; ch++)
+            sum[ch] += rgb[ch];
+    }
     for (int ch = 0; ch < 3; ch++)
         mean[ch] = sum[ch] / ((double)k * k);
     return 0.5 * bn_v3_len(n);

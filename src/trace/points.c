@@ -13,15 +13,16 @@
 
 /* The front of the face within tol of x along n: a ray from x + tol n towards -n, 2 tol long, that
  * arrives on a patch's front side; a point on a face's edge or corner (a bake's vertex) may slip past
- * it, so eight more rays around it, tol / 2 aside, look for the face it bounds; at a convex corner a ray may
- * graze the other face there, so the face's normal must agree with n (BN__POINT_AGREE). 1 and the patch,
- * or 0. */
+ * it, so more rays around it, on rings tol / 4, tol / 2 and 9 tol / 10 aside, 32 a ring (a sliver's
+ * corner a few degrees wide is met), look for the face it bounds; at a convex corner a ray may graze
+ * the other face there, so the face's normal must agree with n (BN__POINT_AGREE). 1 and the patch, or 0. */
 static int bn__point_patch(const bn_rt *rt, const double x[3], const double n[3], double tol, size_t *patch)
 {
+    static const double ring[3] = {0.25, 0.5, 0.9};
     double d[3] = {-n[0], -n[1], -n[2]}, s[3], t[3];
     bn_v3_basis(n, s, t);
-    for (int k = 0; k < 9; k++) {
-        double o[3], a = 2 * 3.14159265358979323846 * (k - 1) / 8, r = k ? 0.5 * tol : 0;
+    for (int k = 0; k < 1 + 3 * 32; k++) {
+        double o[3], a = 2 * 3.14159265358979323846 * ((k - 1) % 32) / 32, r = k ? ring[(k - 1) / 32] * tol : 0;
         bn_hit h;
         for (int c = 0; c < 3; c++)
             o[c] = x[c] + tol * n[c] + r * (cos(a) * s[c] + sin(a) * t[c]);
