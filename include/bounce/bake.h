@@ -68,9 +68,11 @@ unsigned bn_bake_weights(const bn_bake *b, size_t patch, const double p[3], size
 /* A bake mesh refined where light changes (bounce bake --bake-vertices): the patches become triangles,
  * every T-junction splits its edge (no vertex inside another face's edge: crack-free), then round by
  * round the edges whose ends' luminance (of layer `key`) differ by more than tol x (the larger + a
- * floor of 2% of the display white) are bisected, longest edge first (Rivara: conforming, angles
- * bounded), and `eval` gives the new vertices' values, until no edge differs, no edge is longer than
- * min_edge, or the vertices would pass max_vertices. */
+ * floor of 2% of the display white) have their midpoints probed by `eval`; those whose midpoint is off
+ * the ends' mean by as much are bisected, longest edge first (Rivara: conforming, angles bounded), the
+ * others left whole for good (linear light needs no vertex), and `eval` gives the new vertices'
+ * values, until no edge is left to probe, no edge is longer than min_edge, or the vertices could pass
+ * max_vertices. */
 typedef bn_status (*bn_bake_eval_fn)(void *user, const double *x, const size_t *patch, size_t n, size_t first,
                                      double *out, bn_error *err);
 /* eval: the values of n points x (3 each) on patches patch[], the bake's vertices first .. first+n-1

@@ -107,6 +107,8 @@ typedef struct bn__refine {
     double *xev;        /* each vertex's evaluation point (1% into its face) and patch */
     size_t *vpat;
     bn__emap split;     /* position edge -> the point it splits at */
+    bn__emap linear;    /* position edges whose midpoint, probed, lay on the line between their ends */
+    size_t probes;      /* midpoints probed so far (their random streams' keys) */
     bn__emap vsplit;    /* vertex edge -> the vertex there on that edge's side */
 } bn__refine;
 
@@ -415,7 +417,8 @@ static double bn__lum(const double *rgb) { return 0.2126 * rgb[0] + 0.7152 * rgb
 
 typedef struct bn__cand {
     double pri;
-    size_t a, b;
+    size_t a, b;   /* the edge's points, a < b */
+    size_t va, vb, patch;   /* its ends' vertices on one side, and that side's patch */
 } bn__cand;
 static int bn__cmp_cand(const void *x, const void *y)
 {
@@ -442,11 +445,11 @@ static size_t bn__candidates(const bn__refine *R, const double *Y, double tol, d
             if (bn_v3_dot(R->pa[R->vpat[A]].normal, R->pa[R->vpat[B]].normal) < BN__REFINE_FLAT)
                 continue;   /* a curved surface's facets: its vertices carry the turn; a split adds nothing */
             double d = fabs(Y[A] - Y[B]) / (fmax(Y[A], Y[B]) + floor);
-            if (!(len > min_edge && d > tol))
-                continue;
+            if (!(len > min_edge && d > tol) || bn__emap_get(&R->linear, pa, pb) != SIZE_MAX)
+                continue;   /* ends alike, too short, or found linear by a probe of its midpoint */
             if (bn__grow(c, cap, n + 1, sizeof **c) != BN_OK)
                 return SIZE_MAX;
-            (*c)[n++] = (bn__cand){d * len, pa < pb ? pa : pb, pa < pb ? pb : pa};
+            (*c)[n++] = (bn__cand){d * len, pa < pb ? pa : pb, pa < pb ? pb : pa, A, B, b->tri_patch[t]};
         }
     }
     if (n > 1)
@@ -454,32 +457,76 @@ static size_t bn__candidates(const bn__refine *R, const double *Y, double tol, d
     return n;
 }
 
-/* Up to `room` edges that differ get a midpoint (a split): *marked of them. */
+/* The midpoints of edges c[0..n) evaluated (1% into each one's patch), the key layer's luminance into ym.
+ * Keys for their random streams far above any vertex's. */
+static bn_status bn__probe(bn__refine *R, const bn_bake_refine_opts *o, const bn__cand *c, size_t n, double *ym,
+                           bn_error *err)
+{
+    double *x = bn__malloc_array(n + 1, 3 * sizeof(double)), *out = bn__malloc_array(n * o->nlayers + 1, 3 * sizeof(double));
+    size_t *patch = bn__malloc_array(n + 1, sizeof(size_t));
+    bn_status st = x && out && patch ? BN_OK : bn_error_set(err, BN_ENOMEM, "bake: out of memory probing %zu edges", n);
+    for (size_t i = 0; st == BN_OK && i < n; i++) {
+        const double *A = R->ppos + 3 * c[i].a, *B = R->ppos + 3 * c[i].b, *g = R->pa[c[i].patch].centroid;
+        for (int k = 0; k < 3; k++) {
+            double m = 0.5 * (A[k] + B[k]);
+            x[3 * i + k] = m + BN_TRACE_POINT_INSET * (g[k] - m);
+        }
+        patch[i] = c[i].patch;
+    }
+    if (st == BN_OK && n)
+        st = o->eval(o->user, x, patch, n, ((size_t)1 << 40) + R->probes, out, err);
+    R->probes += n;
+    for (size_t i = 0; st == BN_OK && i < n; i++)
+        ym[i] = bn__lum(out + (o->key * n + i) * 3);
+    free(x);
+    free(out);
+    free(patch);
+    return st;
+}
+
+/* Up to `room` edges whose ends differ have their midpoints probed: where the light between the ends is
+ * not linear (a shadow's edge, a contact: the midpoint off the ends' mean by more than the tolerance) the
+ * edge gets a split (*marked of them); where it is (a smooth gradient, which interpolation already
+ * draws), the edge is left whole for good. *probed: the edges probed. */
 static bn_status bn__mark(bn__refine *R, const bn_bake_refine_opts *o, const double *val, double floor,
-                          double min_edge, size_t room, size_t *marked)
+                          double min_edge, size_t room, size_t *marked, size_t *probed, bn_error *err)
 {
     bn_bake *b = R->b;
-    size_t nl = o->nlayers, cap = 0, n;
-    double *Y = bn__malloc_array(b->nverts + 1, sizeof *Y);
+    size_t nl = o->nlayers, cap = 0, n = 0, ns = 0;
+    double *Y = bn__malloc_array(b->nverts + 1, sizeof *Y), *ym = NULL;
     bn__cand *c = NULL;
     bn_status st = Y ? BN_OK : BN_ENOMEM;
-    *marked = 0;
+    *marked = *probed = 0;
     for (size_t v = 0; Y && v < b->nverts; v++)
         Y[v] = bn__lum(val + (v * nl + o->key) * 3);
     if (st == BN_OK && (n = bn__candidates(R, Y, o->tol, floor, min_edge, &c, &cap)) == SIZE_MAX)
         st = BN_ENOMEM;
-    for (size_t i = 0; st == BN_OK && i < n && *marked < room; i++) {
+    for (size_t i = 0; st == BN_OK && i < n && ns < room; i++)   /* the first of each edge, in priority order */
+        if (bn__emap_get(&R->linear, c[i].a, c[i].b) == SIZE_MAX && (st = bn__emap_put(&R->linear, c[i].a, c[i].b, 0)) == BN_OK)
+            c[ns++] = c[i];
+    if (st == BN_OK && !(ym = bn__malloc_array(ns + 1, sizeof *ym)))
+        st = BN_ENOMEM;
+    if (st != BN_OK) {
+        free(Y);
+        free(c);
+        return bn_error_set(err, st, "bake: out of memory refining %zu vertices", b->nverts);
+    }
+    st = bn__probe(R, o, c, ns, ym, err);
+    for (size_t i = 0; st == BN_OK && i < ns; i++) {
+        double ya = Y[c[i].va], yb = Y[c[i].vb], dev = fabs(ym[i] - 0.5 * (ya + yb)) / (fmax(ya, yb) + floor);
         const double *A = R->ppos + 3 * c[i].a, *B = R->ppos + 3 * c[i].b;
         double m[3] = {0.5 * (A[0] + B[0]), 0.5 * (A[1] + B[1]), 0.5 * (A[2] + B[2])};
         size_t s;
-        if (bn__emap_get(&R->split, c[i].a, c[i].b) != SIZE_MAX)
-            continue;
+        if (!(dev > o->tol))
+            continue;   /* linear: stays in `linear`, never probed again */
         if ((s = bn__add_point(R, m)) == SIZE_MAX || bn__emap_put(&R->split, c[i].a, c[i].b, s) != BN_OK)
-            st = BN_ENOMEM;
+            st = bn_error_set(err, BN_ENOMEM, "bake: out of memory refining %zu vertices", b->nverts);
         (*marked)++;
     }
+    *probed = ns;
     free(Y);
     free(c);
+    free(ym);
     return st;
 }
 
@@ -512,6 +559,7 @@ static void bn__refine_free(bn__refine *R)
     free(R->xev);
     free(R->vpat);
     bn__emap_free(&R->split);
+    bn__emap_free(&R->linear);
     bn__emap_free(&R->vsplit);
 }
 
@@ -532,7 +580,7 @@ static bn_status bn__refine_init(bn__refine *R, bn_bake *b, bn_error *err)
     R->pv = bn__malloc_array(nv + 1, sizeof(size_t));
     R->xev = bn__malloc_array(nv + 1, 3 * sizeof(double));
     R->vpat = bn__malloc_array(nv + 1, sizeof(size_t));
-    if (!R->ppos || !R->pv_start || !R->pv || !R->xev || !R->vpat || bn__emap_init(&R->split, 1024) != BN_OK ||
+    if (!R->ppos || !R->pv_start || !R->pv || !R->xev || !R->vpat || bn__emap_init(&R->split, 1024) != BN_OK || bn__emap_init(&R->linear, 1024) != BN_OK ||
         bn__emap_init(&R->vsplit, 1024) != BN_OK)
         return bn_error_set(err, BN_ENOMEM, "bake: out of memory refining %zu vertices", nv);
     memcpy(R->ppos, pv, npv * 3 * sizeof(double));
@@ -573,11 +621,11 @@ static bn_status bn__refine_rounds(bn__refine *R, const bn_bake_refine_opts *o, 
     size_t nv0 = b->nverts;
     int round = 0;
     while (b->nverts < o->max_vertices) {
-        size_t room = (o->max_vertices - b->nverts) / 4, marked, first = b->nverts;
-        bn_status st = room ? bn__mark(R, o, *val, floor, min_edge, room, &marked) : BN_OK;
+        size_t room = (o->max_vertices - b->nverts) / 8, marked = 0, probed = 0, first = b->nverts;
+        bn_status st = room ? bn__mark(R, o, *val, floor, min_edge, room, &marked, &probed, err) : BN_OK;
         if (st != BN_OK)
-            return bn_error_set(err, st, "bake: out of memory refining %zu vertices", b->nverts);
-        if (!room || !marked)
+            return st;
+        if (!room || !probed)
             break;
         if ((st = bn__conform(R, err)) != BN_OK || (st = bn__evaluate(R, o, first, val, err)) != BN_OK)
             return st;
@@ -587,8 +635,9 @@ static bn_status bn__refine_rounds(bn__refine *R, const bn_bake_refine_opts *o, 
             return bn_error_set(err, st, "bake: interrupted while refining");
     }
     bn_logf(o->log, BN_LOG_INFO, "bake: refined where L changes by more than %g%% along a flat surface (edges down to "
-            "%.3g): %zu rounds, %zu vertices (+%zu, budget %zu%s), %zu triangles, %.1f s", 100 * o->tol, min_edge, (size_t)round,
-            b->nverts, b->nverts - nv0, o->max_vertices, b->nverts + 4 > o->max_vertices ? ": spent" : "", b->ntri,
+            "%.3g; %zu midpoints probed): %zu rounds, %zu vertices (+%zu, budget %zu%s), %zu triangles, %.1f s", 100 * o->tol,
+            min_edge, R->probes, (size_t)round,
+            b->nverts, b->nverts - nv0, o->max_vertices, b->nverts + 8 > o->max_vertices ? ": spent" : "", b->ntri,
             bn__now() - t0);
     return BN_OK;
 }

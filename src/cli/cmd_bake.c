@@ -32,7 +32,8 @@ static void bn__bake_vertex_options(bn_optset *set, bn__bake_cli *a)
                                  "--gather final: the element mesh refined where L changes, up to N vertices (200k, "
                                  "1M; default " BN__STR(BN_BAKE_DEFAULT_VERTICES) "; 0: the patches as they are)"});
     bn_optset_add(set, (bn_opt){"bake-tol", 0, BN_OPT_DOUBLE, &a->bake_tol, NULL, 1e-4, 10, "T",
-                                 "an edge splits where its ends' L differ by more than T relative (default "
+                                 "an edge whose ends' L differ by more than T relative is probed at its midpoint, and split where "
+                                 "the light between them is not linear by as much (default "
                                  BN__STR(BN_BAKE_REFINE_TOL) ")"});
 }
 
@@ -160,7 +161,7 @@ static bn_status bn__bake_write(const bn__bake_cli *a, const bn_cli_common *c, c
                                 const bn_bake *bake, const bn_bake_layer *layers, size_t nl, const char *solver,
                                 bn_error *err)
 {
-    char ffdesc[256], patches[32], evbuf[160], creasebuf[32], verts[32], tolbuf[64], gatherbuf[256], refbuf[200];
+    char ffdesc[256], patches[32], evbuf[160], creasebuf[32], verts[32], tolbuf[64], gatherbuf[256], refbuf[320];
     int elements = a->mesh == BN_BAKE_ELEMENTS;
     bn_formfactor_opts fo;
     bn_bake_write_opts wo;
@@ -179,7 +180,8 @@ static bn_status bn__bake_write(const bn__bake_cli *a, const bn_cli_common *c, c
     snprintf(tolbuf, sizeof tolbuf, "%g", a->sol.tol > 0 ? a->sol.tol : 1e-6);
     if (a->bake_vertices)
         snprintf(refbuf, sizeof refbuf, "the element mesh's triangles bisected (longest edge first, no T-junction) where "
-                 "L differs by more than %g relative between an edge's ends, up to %zu vertices: %zu triangles",
+                 "L differs by more than %g relative between an edge's ends and its probed midpoint is off their mean by as "
+                 "much, up to %zu vertices: %zu triangles",
                  a->bake_tol, a->bake_vertices, bn_bake_face_count(bake));
     else
         snprintf(refbuf, sizeof refbuf, "none (the patches as faces)");
