@@ -300,3 +300,34 @@ BN_TEST(shadow_edge_crossing_within_2mm) /* BN_SLOW */
     free(patch);
     bn_pipeline_free(&p);
 }
+
+/* The CLI: a budget as 1k is 1,000 and holds; values it cannot be refused by name; the refinement's
+ * options where there is no refinement refused. */
+BN_TEST(cli_budget_and_bad_values)
+{
+    char cmd[1024], *out = NULL;
+    const char *glb = bn_test_tmp("budget.glb");
+    unsigned long nv = 0;
+    snprintf(cmd, sizeof cmd, "bake %s --unit mm --patches 300 --ff-visibility rays --bake-vertices 1k -o %s",
+             bn_test_path("meshes/cornell-box.obj"), glb);
+    BN_ASSERT_EQ(bn_test_bounce(cmd, &out), 0);
+    const char *w = strstr(out, "refined where L changes: ");
+    BN_ASSERT(w && sscanf(w, "refined where L changes: %lu vertices", &nv) == 1);
+    fprintf(stderr, "--bake-vertices 1k: %lu vertices\n", nv);
+    BN_ASSERT_LE(nv, 1000);
+    BN_ASSERT_GT(nv, 300);
+    free(out);
+    static const char *bad[][2] = {{"--bake-vertices 0.0005k", "'0.0005k' is not a whole number"},
+                                   {"--bake-vertices 2G", "'2G' is not a finite number"},
+                                   {"--bake-vertices -1k", "-1k is outside"},
+                                   {"--bake-tol 0", "0 is outside"},
+                                   {"--gather none --bake-vertices 5k", "not with --flat, --gather none or --mesh input"}};
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        out = NULL;
+        snprintf(cmd, sizeof cmd, "bake %s --unit mm %s -o %s", bn_test_path("meshes/cornell-box.obj"), bad[i][0], glb);
+        BN_ASSERT_EQ(bn_test_bounce(cmd, &out), 2);
+        fprintf(stderr, "%s: %s", bad[i][0], out);
+        BN_ASSERT(strstr(out, bad[i][1]) != NULL);
+        free(out);
+    }
+}

@@ -368,19 +368,19 @@ void bn_bake_vertex_values(const bn_bake *b, const double *x, double *out)
     bn_bake_vertex_tjunctions(b, out);
 }
 
+int bn__patch_better(const bn_bake *b, size_t p, size_t q)
+{
+    int op = !b->enclosed || !b->enclosed[p], oq = !b->enclosed || !b->enclosed[q];
+    const bn_patch *pa = bn_scene_patches(b->scene, NULL);
+    return op != oq ? op : pa[p].area > pa[q].area;
+}
+
 size_t bn_bake_vertex_patch(const bn_bake *b, size_t v)
 {
-    const bn_patch *pa = bn_scene_patches(b->scene, NULL);
     size_t best = b->vpatch[b->vstart[v]];
-    int open = 0;   /* the best so far is outside every closed object */
-    for (size_t i = b->vstart[v]; i < b->vstart[v + 1]; i++) {
-        size_t p = b->vpatch[i];
-        int o = !b->enclosed || !b->enclosed[p];
-        if ((o && !open) || (o == open && pa[p].area > pa[best].area)) {
-            best = p;
-            open = o;
-        }
-    }
+    for (size_t i = b->vstart[v] + 1; i < b->vstart[v + 1]; i++)
+        if (bn__patch_better(b, b->vpatch[i], best))
+            best = b->vpatch[i];
     return best;
 }
 

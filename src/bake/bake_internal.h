@@ -31,6 +31,10 @@ struct bn_bake {
 /* Vertex v's group has a patch of pq's smooth surface (its material, normal within the crease). */
 int bn__same_surface(const bn_bake *b, const bn_patch *patches, size_t v, const bn_patch *pq);
 
+/* Where a vertex is gathered: patch p before q when p is outside every closed object and q is not, else
+ * when p is larger (bn_bake_vertex_patch's rule; the refinement's new vertices follow it too). */
+int bn__patch_better(const bn_bake *b, size_t p, size_t q);
+
 /* Positions sorted by x (i: the position's index) for range searches along x. */
 typedef struct bn__xkey {
     double x;

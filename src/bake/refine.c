@@ -166,10 +166,8 @@ static size_t bn__add_point(bn__refine *R, const double x[3])
  * the same point). */
 static void bn__vertex_on(bn__refine *R, size_t v, size_t patch)
 {
-    const double *c = R->pa[patch].centroid, *x = R->b->pos + 3 * v;
     R->vpat[v] = patch;
-    for (int k = 0; k < 3; k++)
-        R->xev[3 * v + k] = x[k] + BN_TRACE_POINT_INSET * (c[k] - x[k]);
+    bn_trace_point_inset(R->b->scene, patch, R->b->pos + 3 * v, R->xev + 3 * v);
 }
 
 /* A new output vertex at point pt on patch `patch`; SIZE_MAX without memory. */
@@ -195,9 +193,9 @@ static size_t bn__split_vertex(bn__refine *R, size_t A, size_t B, size_t s, size
 {
     bn_bake *b = R->b;
     size_t v = bn__emap_get(&R->vsplit, A, B);
-    if (v != SIZE_MAX && v >= R->nv0 && b->enclosed && b->enclosed[R->vpat[v]] && !b->enclosed[patch]) {
-        b->vpatch[b->vstart[v]] = patch;   /* on a contact line: evaluated on the side seen */
-        bn__vertex_on(R, v, patch);
+    if (v != SIZE_MAX && v >= R->nv0 && bn__patch_better(b, patch, R->vpat[v])) {
+        b->vpatch[b->vstart[v]] = patch;   /* gathered where bn_bake_vertex_patch would (on a contact line: */
+        bn__vertex_on(R, v, patch);        /* the side seen, not the one under the block) */
     }
     if (v != SIZE_MAX)
         return v;
@@ -407,12 +405,6 @@ void bn_bake_refine_opts_default(bn_bake_refine_opts *o)
     o->nlayers = 1;
 }
 
-static int bn__cmp_double(const void *x, const void *y)
-{
-    double a = *(const double *)x, b = *(const double *)y;
-    return (a > b) - (a < b);
-}
-
 static double bn__lum(const double *rgb) { return 0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2]; }
 
 typedef struct bn__cand {
@@ -466,11 +458,9 @@ static bn_status bn__probe(bn__refine *R, const bn_bake_refine_opts *o, const bn
     size_t *patch = bn__malloc_array(n + 1, sizeof(size_t));
     bn_status st = x && out && patch ? BN_OK : bn_error_set(err, BN_ENOMEM, "bake: out of memory probing %zu edges", n);
     for (size_t i = 0; st == BN_OK && i < n; i++) {
-        const double *A = R->ppos + 3 * c[i].a, *B = R->ppos + 3 * c[i].b, *g = R->pa[c[i].patch].centroid;
-        for (int k = 0; k < 3; k++) {
-            double m = 0.5 * (A[k] + B[k]);
-            x[3 * i + k] = m + BN_TRACE_POINT_INSET * (g[k] - m);
-        }
+        const double *A = R->ppos + 3 * c[i].a, *B = R->ppos + 3 * c[i].b;
+        double m[3] = {0.5 * (A[0] + B[0]), 0.5 * (A[1] + B[1]), 0.5 * (A[2] + B[2])};
+        bn_trace_point_inset(R->b->scene, c[i].patch, m, x + 3 * i);
         patch[i] = c[i].patch;
     }
     if (st == BN_OK && n)
@@ -595,21 +585,18 @@ static bn_status bn__refine_init(bn__refine *R, bn_bake *b, bn_error *err)
     return BN_OK;
 }
 
-/* 2% of the display white (the 99th percentile luminance at 0.9, as the exposure takes it): differences
- * in the dark below it weigh less. */
+/* 2% of the display white (2^-EV at the bake's automatic exposure of the key layer): differences in
+ * the dark below it weigh less. */
 static double bn__refine_floor(const double *val, size_t nv, size_t nl, size_t key)
 {
-    double *Y = bn__malloc_array(nv + 1, sizeof *Y), y99;
-    if (!Y || nv == 0) {
-        free(Y);
+    double *rgb = bn__malloc_array(nv + 1, 3 * sizeof *rgb), floor;
+    if (!rgb)
         return 0;
-    }
     for (size_t v = 0; v < nv; v++)
-        Y[v] = bn__lum(val + (v * nl + key) * 3);
-    qsort(Y, nv, sizeof *Y, bn__cmp_double);
-    y99 = Y[(size_t)(0.99 * (double)(nv - 1))];
-    free(Y);
-    return 0.02 * y99 / 0.9;
+        memcpy(rgb + 3 * v, val + (v * nl + key) * 3, 3 * sizeof *rgb);
+    floor = 0.02 * pow(2.0, -bn_bake_auto_exposure(rgb, nv));
+    free(rgb);
+    return floor;
 }
 
 /* Rounds of marking the edges that differ, closing the mesh and evaluating the new vertices. */

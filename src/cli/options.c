@@ -102,6 +102,7 @@ static bn_status bn__set_number(const bn_opt *o, const char *v, bn_error *err)
 {
     double x, scale = 1;
     char num[64];
+    const char *given = v;   /* messages name the value as given, suffix included */
     size_t len = strlen(v);
     if (o->type == BN_OPT_SIZE && len > 1 && len < sizeof num && (v[len - 1] == 'k' || v[len - 1] == 'M')) {
         scale = v[len - 1] == 'k' ? 1e3 : 1e6;   /* 200k, 1M */
@@ -110,12 +111,12 @@ static bn_status bn__set_number(const bn_opt *o, const char *v, bn_error *err)
         v = num;
     }
     if (!bn__parse_num(v, &x))
-        return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not a finite number", o->name, v);
+        return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not a finite number", o->name, given);
     x *= scale;
     if (x < o->min || x > o->max)
-        return bn_error_set(err, BN_EUSAGE, "--%s: %s is outside [%g, %g]", o->name, v, o->min, o->max);
+        return bn_error_set(err, BN_EUSAGE, "--%s: %s is outside [%g, %g]", o->name, given, o->min, o->max);
     if (o->type != BN_OPT_DOUBLE && x != floor(x))
-        return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not a whole number", o->name, v);
+        return bn_error_set(err, BN_EUSAGE, "--%s: '%s' is not a whole number", o->name, given);
     if (o->type == BN_OPT_INT)
         *(int *)o->dest = (int)x;
     else if (o->type == BN_OPT_SIZE)
