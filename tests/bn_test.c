@@ -220,3 +220,21 @@ const char *bn_test_write_gltf(const char *name, const char *json, const void *b
     free(b64);
     return path;
 }
+
+bn_scene *bn_test_load_meshed(const char *rel, bn_unit unit, size_t patches)
+{
+    bn_load_opts lo;
+    bn_mesh_opts mo;
+    bn_error err;
+    bn_scene *s = NULL;
+    bn_load_opts_default(&lo);
+    lo.unit = unit;
+    lo.log.quiet = 1;
+    if (bn_scene_load(bn_test_path(rel), &lo, &s, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    bn_mesh_opts_default(&mo);
+    mo.target_patches = patches;
+    if (bn_scene_mesh(s, &mo, &err) != BN_OK)
+        BN_FAIL("%s", err.msg);
+    return s;
+}

@@ -7,6 +7,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include "bounce/scene.h"
 #include "bounce/transport.h"
 
 typedef void (*bn_test_fn)(void);
@@ -98,6 +99,9 @@ const char *bn_test_tmp(const char *name);
 int bn_test_run(const char *cmdline, char **output);
 /* Runs `bounce ARGS` (args appended after the executable). */
 int bn_test_bounce(const char *args, char **output);
+/* A scene of the repository (rel, e.g. "meshes/cornell-box.obj") loaded quietly in `unit` and meshed
+ * to about `patches` patches; fails the test on any error. */
+bn_scene *bn_test_load_meshed(const char *rel, bn_unit unit, size_t patches);
 /* Reads a whole file (malloc'd, NUL-terminated) or NULL. */
 char *bn_test_read_file(const char *path, size_t *size);
 int bn_test_file_exists(const char *path);

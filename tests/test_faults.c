@@ -58,21 +58,7 @@ static void restore_limit(const struct rlimit *old)
     BN_ASSERT(setrlimit(RLIMIT_AS, old) == 0);
 }
 
-static bn_scene *cornell(size_t patches)
-{
-    bn_load_opts lo;
-    bn_mesh_opts mo;
-    bn_scene *s;
-    bn_error err;
-    bn_load_opts_default(&lo);
-    lo.unit = BN_UNIT_MM;
-    lo.log.quiet = 1;
-    BN_ASSERT_STATUS(bn_scene_load(bn_test_path("meshes/cornell-box.obj"), &lo, &s, &err), BN_OK);
-    bn_mesh_opts_default(&mo);
-    mo.target_patches = patches;
-    BN_ASSERT_STATUS(bn_scene_mesh(s, &mo, &err), BN_OK);
-    return s;
-}
+static bn_scene *cornell(size_t patches) { return bn_test_load_meshed("meshes/cornell-box.obj", BN_UNIT_MM, patches); }
 
 /* eps 1e-12 links every pair of the 2,000 patches that see each other: about 3e6 links, 30 MB and
  * more; the margin, 16 MB, runs out part way. */

@@ -25,23 +25,6 @@ static bn_status eval_field(void *user, const double *x, const size_t *patch, si
     return BN_OK;
 }
 
-static bn_scene *cornell(size_t patches)
-{
-    bn_load_opts lo;
-    bn_mesh_opts mo;
-    bn_error err;
-    bn_scene *s;
-    bn_load_opts_default(&lo);
-    lo.log.quiet = 1;
-    if (bn_scene_load(bn_test_path("meshes/cornell-box.obj"), &lo, &s, &err) != BN_OK)
-        BN_FAIL("%s", err.msg);
-    bn_mesh_opts_default(&mo);
-    mo.target_patches = patches;
-    if (bn_scene_mesh(s, &mo, &err) != BN_OK)
-        BN_FAIL("%s", err.msg);
-    return s;
-}
-
 static double tri_area(const double *A, const double *B, const double *C, double n[3])
 {
     double e1[3], e2[3];
@@ -83,7 +66,7 @@ static size_t hanging_vertices(const bn_bake *b, double tol)
 
 BN_TEST(refined_mesh_is_conforming_and_follows_a_step)
 {
-    bn_scene *s = cornell(400);
+    bn_scene *s = bn_test_load_meshed("meshes/cornell-box.obj", BN_UNIT_M, 400);   /* the file's numbers (mm) */
     bn_bake *b;
     bn_error err;
     bn_bake_refine_opts ro;
