@@ -130,6 +130,12 @@ const double      *bn_scene_vertices(const bn_scene *s, size_t *count);      /* 
 const size_t      *bn_scene_face_indices(const bn_scene *s, size_t *count);
 const bn_face     *bn_scene_faces(const bn_scene *s, size_t *count);
 const bn_patch    *bn_scene_patches(const bn_scene *s, size_t *count);
+/* x on patch `patch` moved BN_SCENE_POINT_INSET of the way to the patch's centroid, into out (out may be
+ * x): a point off the patch's edges, where `bounce trace --points` estimates and a bake gathers its
+ * vertices (so the two are asked the same point; rays from a point exactly on an edge would leave along
+ * the neighbouring surface's plane). */
+#define BN_SCENE_POINT_INSET 0.01
+void bn_scene_point_inset(const bn_scene *s, size_t patch, const double x[3], double out[3]);
 const double      *bn_scene_patch_vertices(const bn_scene *s, size_t *count); /* xyz */
 /* The size the mesher was given or chose (0 with no_subdivide): an upper bound of the patch edges
  * along each face's grid, not the patches' actual size, which is: */

@@ -127,10 +127,7 @@ bn_status bn_trace_regions_run(const bn_rt *rt, const bn_partition *part, const 
 
 /* Points the tracer estimates at (an independent reference for per-vertex values, bounce bake's): a
  * place on a patch, on the side its normal faces. */
-#define BN_TRACE_POINT_INSET 0.01
-/* x on patch `patch` moved BN_TRACE_POINT_INSET of the way to the patch's centroid, into out: where the
- * tracer takes a point, and a bake gathers its vertices (so the two can be asked the same point). */
-void bn_trace_point_inset(const bn_scene *s, size_t patch, const double x[3], double out[3]);
+#define BN_TRACE_POINT_INSET BN_SCENE_POINT_INSET   /* bn_scene_point_inset: the bake's rule too */
 typedef struct bn_trace_point {
     double x[3];
     size_t patch;

@@ -10,7 +10,6 @@
 #include "bake/bake_internal.h"
 #include "base/internal.h"
 #include "base/vec.h"
-#include "bounce/trace.h"
 
 #include <math.h>
 #include <string.h>
@@ -167,7 +166,7 @@ static size_t bn__add_point(bn__refine *R, const double x[3])
 static void bn__vertex_on(bn__refine *R, size_t v, size_t patch)
 {
     R->vpat[v] = patch;
-    bn_trace_point_inset(R->b->scene, patch, R->b->pos + 3 * v, R->xev + 3 * v);
+    bn_scene_point_inset(R->b->scene, patch, R->b->pos + 3 * v, R->xev + 3 * v);
 }
 
 /* A new output vertex at point pt on patch `patch`; SIZE_MAX without memory. */
@@ -460,7 +459,7 @@ static bn_status bn__probe(bn__refine *R, const bn_bake_refine_opts *o, const bn
     for (size_t i = 0; st == BN_OK && i < n; i++) {
         const double *A = R->ppos + 3 * c[i].a, *B = R->ppos + 3 * c[i].b;
         double m[3] = {0.5 * (A[0] + B[0]), 0.5 * (A[1] + B[1]), 0.5 * (A[2] + B[2])};
-        bn_trace_point_inset(R->b->scene, c[i].patch, m, x + 3 * i);
+        bn_scene_point_inset(R->b->scene, c[i].patch, m, x + 3 * i);
         patch[i] = c[i].patch;
     }
     if (st == BN_OK && n)

@@ -31,3 +31,10 @@ void bn__scene_patch_finish(bn_patch *p, const double *pv, const double normal[3
                                          : 0.25 * (a[k] + b[k] + c[k] + d[k]);
     }
 }
+
+void bn_scene_point_inset(const bn_scene *s, size_t patch, const double x[3], double out[3])
+{
+    const double *c = bn_scene_patches(s, NULL)[patch].centroid;
+    for (int k = 0; k < 3; k++)
+        out[k] = x[k] + BN_SCENE_POINT_INSET * (c[k] - x[k]);
+}

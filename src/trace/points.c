@@ -35,13 +35,6 @@ static int bn__point_patch(const bn_rt *rt, const double x[3], const double n[3]
     return 0;
 }
 
-void bn_trace_point_inset(const bn_scene *s, size_t patch, const double x[3], double out[3])
-{
-    const double *c = bn_scene_patches(s, NULL)[patch].centroid;
-    for (int k = 0; k < 3; k++)
-        out[k] = x[k] + BN_TRACE_POINT_INSET * (c[k] - x[k]);
-}
-
 /* One line's point: 1 placed, 0 blank or a comment, -1 bad (err set). */
 static int bn__point_line(const char *path, unsigned line, char *buf, const bn_rt *rt, double tol, bn_trace_point *pt,
                           bn_error *err)
@@ -73,8 +66,7 @@ static int bn__point_line(const char *path, unsigned line, char *buf, const bn_r
                      tol, v[0], v[1], v[2], n[0], n[1], n[2]);
         return -1;
     }
-    bn_trace_point_inset(bn_rt_scene(rt), pt->patch, pt->x, pt->x);   /* off an edge: rays from a point exactly
-                                                                          on one leave along the neighbour's plane */
+    bn_scene_point_inset(bn_rt_scene(rt), pt->patch, pt->x, pt->x);   /* off an edge */
     return 1;
 }
 
