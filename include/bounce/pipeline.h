@@ -93,13 +93,16 @@ typedef struct bn_pipeline {
      * the checked ones); an exact F's balance is within a few of it. */
     double power_arriving[3], power_towards[3], power_emitted[3], balance[3], balance_se[3];
     double *E;                 /* N*3 emitted radiance */
-    double *D;                 /* N*3 radiance the punctual lights give directly (bounce 1); NULL: no lights */
+    double *D;                 /* N*3 radiance the punctual lights give directly (bounce 1): rho x D_white */
+    double *D_white;           /* N*3 the same for white patches (E / pi); both NULL: no punctual lights */
     bn_solve_result res;       /* L and the terms K^0 E .. K^b E (b = solve.bounces) */
     bn_solve_method method_used;  /* the solver that ran (method_auto may have chosen it) */
     double *rest;              /* N*3: L - sum of the kept terms (NULL when none are kept) */
     size_t n;                  /* patches */
     double singular_threshold; /* the threshold the solve used */
     double seconds_load, seconds_mesh, seconds_operator, seconds_solve;
+    double seconds_relight;    /* the last bn_pipeline_relight's (0: none) */
+    double relight_gain;       /* after a relight: the largest ratio of the new L to the old (patches, channels) */
 } bn_pipeline;
 
 /* Each stage reads what the earlier ones left in *p. A caller with a meshed scene of its own may
@@ -108,9 +111,9 @@ typedef struct bn_pipeline {
 
 /* Loads and meshes `path`. */
 bn_status bn_pipeline_scene(const char *path, const bn_pipeline_opts *o, bn_pipeline *p, bn_error *err);
-/* The punctual lights' direct light on every patch of s, as the radiance it reflects (rho E / pi, N x 3,
- * owned by the caller): each patch's mean irradiance with visibility (src/pipeline/punctual.c). *out is
- * NULL when the scene has no punctual light. */
+/* The punctual lights' direct light on every patch of s, as the radiance a white patch reflects (E / pi,
+ * N x 3, owned by the caller; times the patch's rho it is bounce 1's share): each patch's mean irradiance
+ * with visibility (src/pipeline/punctual.c). *out is NULL when the scene has no punctual light. */
 bn_status bn_punctual_direct(const bn_scene *s, const bn_rt *rt, int threads, double **out, bn_error *err);
 /* Builds the ray scene, the punctual lights' direct light (p->D) and K for p->scene; fills p->ff. */
 bn_status bn_pipeline_operator(const bn_pipeline_opts *o, bn_pipeline *p, bn_error *err);
@@ -120,6 +123,16 @@ bn_solve_method bn_pipeline_method(const bn_pipeline_opts *o, const bn_pipeline 
 /* Solves (I - K) L = E keeping the terms, and rest. On BN_ENOTCONV the answer is kept (the caller
  * decides whether an unconverged answer is a result). */
 bn_status bn_pipeline_solve(const bn_pipeline_opts *o, bn_pipeline *p, bn_error *err);
+/* Relights a solved p: applies the material edits (bn_scene_edit_materials: new rho, new Le) and solves
+ * again on the same F, K = diag(rho') F, for E' (and the punctual lights' bounce 1 times rho'), every kept
+ * term and rest anew; no form factor is computed. Dense and sparse F give exactly the answer of a fresh
+ * solve of the edited scene. The hierarchy's links were refined for the old light: relit on them, the
+ * answer is exactly a fresh solve on those links, and their error bound was held for the old
+ * brightness (a note says by how much the new L exceeds the old: the bound scales with it there);
+ * refine 1 builds new links for the new light instead (the ray scene is made again; dense and sparse
+ * ignore it). On failure the scene may hold the edits and p no answer. */
+bn_status bn_pipeline_relight(const bn_pipeline_opts *o, bn_pipeline *p, const bn_material_edit *e, size_t n,
+                              int refine, bn_error *err);
 /* The three stages. */
 bn_status bn_pipeline_run(const char *path, const bn_pipeline_opts *o, bn_pipeline *p, bn_error *err);
 void bn_pipeline_free(bn_pipeline *p);

@@ -71,6 +71,8 @@ typedef struct bn_load_opts {
     const char *two_sided;
     double  planar_tol;      /* non-planarity allowed, relative to the face's diameter (default 1e-6) */
     bn_log  log;             /* warnings: dropped faces, triangulated faces, no emitter */
+    const struct bn_material_edit *edits;   /* applied after reading, in order (bn_scene_edit_materials; */
+    size_t  nedits;                         /* borrowed: --set-rho, --set-Le) */
 } bn_load_opts;
 void bn_load_opts_default(bn_load_opts *o);
 
@@ -121,6 +123,24 @@ bn_status bn_scene_mesh(bn_scene *s, const bn_mesh_opts *o, bn_error *err);
 /* The patch count bn_scene_mesh would make before contact cuts (which only add), from the faces'
  * sizes alone, without meshing: for refusing a too-large mesh before any work. */
 bn_status bn_scene_mesh_estimate(const bn_scene *s, const bn_mesh_opts *o, double *patches, bn_error *err);
+
+/* ---- material edits: a named material's reflectance or emitted radiance replaced (`--set-rho`,
+ * `--set-Le`, relighting). The geometry and the patches stay: F does not change, only K = diag(rho) F
+ * and E (bn_pipeline_relight). For a textured material rho is the factor its texture multiplies (glTF
+ * baseColorFactor, MTL Kd under map_Kd) and Le the factor of its emission texture. */
+typedef struct bn_material_edit {
+    char   material[BN_NAME_MAX];   /* the material's name, as the file gives it */
+    int    has_rho, has_Le;         /* which of the two this edit sets */
+    double rho[3];                  /* in [0, 1] */
+    double Le[3];                   /* finite, >= 0, W m^-2 sr^-1 */
+} bn_material_edit;
+/* Parses "NAME=R,G,B" or "NAME=V" (grey) into a zeroed e, setting rho (what "rho") or Le (what
+ * "Le"); BN_EUSAGE naming the text and the value out of range. */
+bn_status bn_material_edit_parse(const char *what, const char *text, bn_material_edit *e, bn_error *err);
+/* Applies n edits in order: all or none (checked first: a name that is not a material of s is
+ * BN_EUSAGE naming it and the scene's materials; values out of range too). A meshed scene's
+ * textured reflectance per patch follows. */
+bn_status bn_scene_edit_materials(bn_scene *s, const bn_material_edit *e, size_t n, bn_error *err);
 
 /* Accessors. Returned arrays are borrowed: valid while the scene lives and is not re-meshed. */
 const char        *bn_scene_path(const bn_scene *s);

@@ -70,6 +70,9 @@ void bn_transport_destroy(bn_transport *k);   /* NULL is a no-op */
 
 size_t        bn_transport_size(const bn_transport *k);   /* N patches */
 const double *bn_transport_rho(const bn_transport *k);    /* borrowed, N*3 */
+/* New reflectances (N*3, copied; each in [0, 1], else BN_EINPUT naming the patch and nothing
+ * changes): K = diag(rho) F for the same F, whatever keeps it (relighting needs no new F). */
+bn_status     bn_transport_set_rho(bn_transport *k, const double *rho, bn_error *err);
 const char   *bn_transport_name(const bn_transport *k);
 unsigned      bn_transport_caps(const bn_transport *k);   /* BN_OP_* bits */
 size_t        bn_transport_bytes(const bn_transport *k);  /* operator + rho */

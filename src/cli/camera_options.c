@@ -88,6 +88,8 @@ void bn_cli_pipeline_opts(const bn_cli_scene *so, const bn_cli_ff *ff, const bn_
         out->load.planar_tol = so->planar_tol;
     out->load.orient = (bn_orient)so->orient;
     out->load.two_sided = so->two_sided;
+    out->load.edits = so->edits.e;
+    out->load.nedits = so->edits.n;
     out->load.log = (bn_log){bn_cli_log, (void *)c, c->quiet};
     out->mesh.patch_size = so->patch_size;
     if (so->patches)

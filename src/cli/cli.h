@@ -18,7 +18,9 @@ typedef enum bn_opt_type {
     BN_OPT_CHOICE,   /* int: index of the value in `choices` ("a|b|c") */
     BN_OPT_NAME,     /* const char *: one of `choices` ("a|b|c", a library's vocabulary), kept as given */
     BN_OPT_VEC3,     /* double[3] from "x,y,z" */
-    BN_OPT_WXH       /* int[2] from "WxH" */
+    BN_OPT_WXH,      /* int[2] from "WxH" */
+    BN_OPT_EDIT      /* bn_cli_edits: one more material edit, "NAME=R,G,B"; choices: "rho" or "Le";
+                        may be given again (each appends) */
 } bn_opt_type;
 
 typedef struct bn_opt {
@@ -66,6 +68,13 @@ typedef struct bn_cli_common {
 } bn_cli_common;
 void bn_cli_add_common(bn_optset *s, bn_cli_common *c);
 
+/* Material edits given on the command line (--set-rho, --set-Le), in order. */
+#define BN_CLI_MAX_EDITS 64
+typedef struct bn_cli_edits {
+    bn_material_edit e[BN_CLI_MAX_EDITS];
+    size_t n;
+} bn_cli_edits;
+
 /* Scene loading and meshing options. */
 typedef struct bn_cli_scene {
     int    unit;          /* index into "m|cm|mm" */
@@ -79,6 +88,7 @@ typedef struct bn_cli_scene {
     double planar_tol;
     int    orient;         /* bn_orient */
     const char *two_sided; /* bn_load_opts.two_sided */
+    bn_cli_edits edits;    /* bn_load_opts.edits */
 } bn_cli_scene;
 void bn_cli_add_scene(bn_optset *s, bn_cli_scene *o);
 /* Loads and meshes (the pipeline's first stage; transport "auto": the mesh a default solve makes,

@@ -191,6 +191,8 @@ static void bn__study_fixed(const bn__study_cli *a, bn_cli_common *c, bn_study_o
         o->load.planar_tol = a->so.planar_tol;
     o->load.orient = (bn_orient)a->so.orient;
     o->load.two_sided = a->so.two_sided;
+    o->load.edits = a->so.edits.e;
+    o->load.nedits = a->so.edits.n;
     o->load.log = (bn_log){bn_cli_log, c, 1};   /* the scene is loaded once per setting: its notes once would do */
     o->mesh.patch_size = a->so.patch_size;
     if (a->so.patches)

@@ -167,6 +167,14 @@ static bn_status bn__set(const bn_opt *o, const char *v, bn_error *err)
     case BN_OPT_SIZE:
     case BN_OPT_DOUBLE:
         return bn__set_number(o, v, err);
+    case BN_OPT_EDIT: {
+        bn_cli_edits *l = o->dest;
+        if (l->n == BN_CLI_MAX_EDITS)
+            return bn_error_set(err, BN_EUSAGE, "--%s: more than %d material edits", o->name, BN_CLI_MAX_EDITS);
+        bn_status st = bn_material_edit_parse(o->choices, v, &l->e[l->n], err);
+        l->n += st == BN_OK;
+        return st;
+    }
     }
     return bn_error_set(err, BN_EINTERNAL, "option type");
 }
@@ -315,6 +323,13 @@ void bn_cli_add_scene(bn_optset *s, bn_cli_scene *o)
                               "distance from a face's plane that still counts as touching it, scene units (default 1e-6 of the scene's diameter)"});
     bn_optset_add(s, (bn_opt){"two-sided", 0, BN_OPT_STRING, &o->two_sided, NULL, 0, 0, "MATERIALS|all|none",
                               "materials (names separated by commas, or all) whose faces reflect and emit on both sides, each side with its own radiance, besides those the file marks (glTF doubleSided); none: every surface one-sided, the file's marks too; none,NAMES: only these (default: only the file's; OBJ, PLY and OFF have none)"});
+    bn_optset_add(s, (bn_opt){"set-rho", 0, BN_OPT_EDIT, &o->edits, "rho", 0, 0, "MATERIAL=R,G,B",
+                              "the material's reflectance replaced (each channel in [0, 1]; one value: grey; given "
+                              "again for more materials); F does not change, so a form-factor --cache made before "
+                              "still serves"});
+    bn_optset_add(s, (bn_opt){"set-Le", 0, BN_OPT_EDIT, &o->edits, "Le", 0, 0, "MATERIAL=R,G,B",
+                              "the material's emitted radiance replaced, W m^-2 sr^-1 (>= 0; 0 turns a light off; "
+                              "given again for more)"});
     bn_optset_add(s, (bn_opt){"orient", 0, BN_OPT_CHOICE, &o->orient, "normals|winding", 0, 0, "normals|winding",
                               "which side of a face is its front where the file gives vertex normals (OBJ vn): the side they point to, faces wound against them turned (default), or the winding's (right-hand rule)"});
     bn_optset_add(s, (bn_opt){"planar-tol", 0, BN_OPT_DOUBLE, &o->planar_tol, NULL, 0, 1, "T",

@@ -257,6 +257,20 @@ static double bn__escape_var(double w, double e, int rays)
     return rays > 0 ? w * w * q * (1 - q) / rays : 0;
 }
 
+/* Is patch j in p->emit_patch (ascending)? */
+static int bn__is_emitter(const bn_pipeline *p, size_t j)
+{
+    size_t lo = 0, hi = p->nemit;
+    while (lo < hi) {
+        size_t mid = lo + (hi - lo) / 2;
+        if (p->emit_patch[mid] < j)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo < p->nemit && p->emit_patch[lo] == j;
+}
+
 /* sum_j A_j (1 - e_j) L_j, the light leaving the patches that does not reach a surface (escaping, or
  * meeting a back): the emitters' own (they dominate it) from their exact sums by many rays, and the
  * rest from the checked rows (every stride-th patch), scaled by the stride. Per channel, scene units;
@@ -277,7 +291,7 @@ static void bn__escaping(const bn_pipeline *p, double esc[3], double var[3])
     }
     for (size_t k = 0; k < p->rows.rows; k++) {
         size_t j = k * p->rows.stride;
-        if (p->E[3 * j] + p->E[3 * j + 1] + p->E[3 * j + 2] > 0 && p->emit_exact)
+        if (bn__is_emitter(p, j))   /* counted above */
             continue;
         m++;
         for (int c = 0; c < 3; c++) {
@@ -374,6 +388,19 @@ static bn_status bn__operator_checks(const bn_pipeline_opts *o, bn_pipeline *p, 
     return st;
 }
 
+/* The punctual lights' share of bounce 1 for the scene's reflectances: D = rho x D_white. */
+static bn_status bn__direct(bn_pipeline *p, bn_error *err)
+{
+    if (!p->D_white)
+        return BN_OK;
+    if (!p->D && !(p->D = bn__malloc_array(3 * p->n + 1, sizeof(double))))
+        return bn_error_set(err, BN_ENOMEM, "out of memory for the punctual lights' light on %zu patches", p->n);
+    bn_scene_patch_reflectance(p->scene, p->D);
+    for (size_t k = 0; k < 3 * p->n; k++)
+        p->D[k] *= p->D_white[k];
+    return BN_OK;
+}
+
 bn_status bn_pipeline_operator(const bn_pipeline_opts *o, bn_pipeline *p, bn_error *err)
 {
     bn_formfactor_opts fo = o->ff;
@@ -400,8 +427,10 @@ bn_status bn_pipeline_operator(const bn_pipeline_opts *o, bn_pipeline *p, bn_err
                 "tolerance %g (`precision` float keeps float)", amp, o->solve.tol);
     }
     bn_status st = bn_rt_create(p->scene, o->threads, &p->rt, err);
-    if (st == BN_OK && !p->D)
-        st = bn_punctual_direct(p->scene, p->rt, o->threads, &p->D, err);
+    if (st == BN_OK && !p->D_white)
+        st = bn_punctual_direct(p->scene, p->rt, o->threads, &p->D_white, err);
+    if (st == BN_OK)
+        st = bn__direct(p, err);
     if (!fo.threads)
         fo.threads = o->threads;
     if (st == BN_OK && p->hierarchical) {
@@ -549,6 +578,78 @@ bn_status bn_pipeline_run(const char *path, const bn_pipeline_opts *o, bn_pipeli
     return st;
 }
 
+/* ---- relighting: new materials on the same F ---- */
+
+/* The largest ratio of new to old radiance over patches and channels (the old L's values below a
+ * millionth of its largest read as that floor), and where. */
+static double bn__gain(const double *L0, const double *L1, size_t n, size_t *at)
+{
+    double top = 0, gain = 0;
+    for (size_t k = 0; k < 3 * n; k++)
+        top = fmax(top, L0[k]);
+    *at = 0;
+    for (size_t k = 0; k < 3 * n && top > 0; k++) {
+        double g = L1[k] / fmax(L0[k], 1e-6 * top);
+        if (g > gain) {
+            gain = g;
+            *at = k / 3;
+        }
+    }
+    return gain;
+}
+
+/* Under frozen links: what the old refinement means for the new answer, said in a note. */
+static void bn__relight_note(const bn_pipeline_opts *o, bn_pipeline *p, const double *L0)
+{
+    size_t at = 0;
+    p->relight_gain = L0 && p->res.L ? bn__gain(L0, p->res.L, p->n, &at) : 0;
+    if (!p->hierarchical || !L0)
+        return;
+    bn_logf(&o->solve.log_sink, BN_LOG_INFO,
+            "relit on the hierarchy's links as refined for the old light: each link's error was held to eps (%.3g "
+            "absolute) for the old brightness; the new L is up to %.3g times the old (patch %zu), and where it is "
+            "brighter the links' error may be as much larger (relight with refine, Python's relight(refine=True), "
+            "builds links for the new light)", p->hier.eps_abs, p->relight_gain, at);
+}
+
+bn_status bn_pipeline_relight(const bn_pipeline_opts *o, bn_pipeline *p, const bn_material_edit *e, size_t n,
+                              int refine, bn_error *err)
+{
+    double t0 = bn__now(), *rho = NULL, *L0 = NULL;
+    bn_status st;
+    if (!p->scene || !p->k)
+        return bn_error_set(err, BN_EUSAGE, "relight: no solved scene (its operator K is not built)");
+    if ((st = bn_scene_edit_materials(p->scene, e, n, err)) != BN_OK)
+        return st;
+    rho = bn__malloc_array(3 * p->n + 1, sizeof *rho);
+    if (p->res.L && (L0 = bn__malloc_array(3 * p->n + 1, sizeof *L0)))
+        memcpy(L0, p->res.L, 3 * p->n * sizeof *L0);
+    if (!rho || (p->res.L && !L0))
+        st = bn_error_set(err, BN_ENOMEM, "out of memory for the reflectances of %zu patches", p->n);
+    if (st == BN_OK && refine && p->hierarchical) {   /* new links for the new light */
+        bn_transport_destroy(p->k);
+        p->k = NULL;
+        st = bn_pipeline_operator(o, p, err);
+    } else if (st == BN_OK) {
+        bn_scene_patch_reflectance(p->scene, rho);
+        st = bn_transport_set_rho(p->k, rho, err);
+        if (st == BN_OK)
+            st = bn__direct(p, err);
+    }
+    bn_solve_result_free(&p->res);
+    free(p->rest);
+    free(p->E);
+    p->rest = p->E = NULL;
+    if (st == BN_OK)
+        st = bn_pipeline_solve(o, p, err);
+    if (st == BN_OK || st == BN_ENOTCONV)
+        bn__relight_note(o, p, refine ? NULL : L0);
+    p->seconds_relight = bn__now() - t0;
+    free(rho);
+    free(L0);
+    return st;
+}
+
 void bn_pipeline_free(bn_pipeline *p)
 {
     if (!p)
@@ -557,6 +658,7 @@ void bn_pipeline_free(bn_pipeline *p)
     free(p->rest);
     free(p->E);
     free(p->D);
+    free(p->D_white);
     free(p->row_exact);
     free(p->emit_patch);
     free(p->emit_exact);

@@ -1,6 +1,6 @@
 /* The radiosity side's share of punctual lights: each patch's mean direct irradiance from every
- * light, with visibility, as the radiance it reflects (rho E / pi): the part of the source that
- * belongs to bounce 1 (bn_solve_opts.direct).
+ * light, with visibility, as the radiance a white patch reflects (E / pi; times rho, the part of the
+ * source that belongs to bounce 1: bn_solve_opts.direct).
  *
  * A patch's mean irradiance from a point or spot light is (1/A) x the integral over the solid angle the
  * patch subtends at the light of I(w) V(w): I x Omega / A when the light is isotropic and the patch in
@@ -136,21 +136,17 @@ bn_status bn_punctual_direct(const bn_scene *s, const bn_rt *rt, int threads, do
     *out = NULL;
     if (nl == 0)
         return BN_OK;
-    double *D = bn__calloc(3 * np + 1, sizeof *D), *rho = bn__malloc_array(3 * np + 1, sizeof *rho);
-    if (!D || !rho) {
-        free(D), free(rho);
+    double *D = bn__calloc(3 * np + 1, sizeof *D);
+    if (!D)
         return bn_error_set(err, BN_ENOMEM, "out of memory for the punctual lights' direct light on %zu patches", np);
-    }
-    bn_scene_patch_reflectance(s, rho);
 #pragma omp parallel for schedule(dynamic, 64) num_threads(bn_threads_resolve(threads))
     for (size_t p = 0; p < np; p++)
         for (size_t k = 0; k < nl; k++) {
             double E[3];
             bn__patch_light(s, rt, p, &lights[k], E);
             for (int c = 0; c < 3; c++)
-                D[3 * p + c] += rho[3 * p + c] * E[c] / BN_PI;
+                D[3 * p + c] += E[c] / BN_PI;
         }
-    free(rho);
     *out = D;
     return BN_OK;
 }

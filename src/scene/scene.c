@@ -651,6 +651,10 @@ bn_status bn_scene_load(const char *path, const bn_load_opts *o, bn_scene **out,
     if (st == BN_OK)
         st = bn__scene_build(path, &s, o, out, err);
     bn__soup_free(&s);
+    if (st == BN_OK && o->nedits > 0 && (st = bn_scene_edit_materials(*out, o->edits, o->nedits, err)) != BN_OK) {
+        bn_scene_destroy(*out);
+        *out = NULL;
+    }
     return st;
 }
 

@@ -36,22 +36,31 @@ static const char *bn__ops_missing(const bn_transport_ops *ops)
     return NULL;
 }
 
+/* Every reflectance in [0, 1]: BN_EINPUT naming the first that is not. */
+static bn_status bn__rho_check(size_t n, const double *rho, bn_error *err)
+{
+    for (size_t i = 0; i < 3 * n; i++)
+        if (!(rho[i] >= 0 && rho[i] <= 1))
+            return bn_error_set(err, BN_EINPUT, "patch %zu: reflectance %g is outside [0, 1]", i / 3, rho[i]);
+    return BN_OK;
+}
+
 bn_status bn_transport_create(size_t n, const double *rho, const bn_transport_ops *ops, void *ctx,
                               bn_transport **out, bn_error *err)
 {
     bn_transport *k;
     const char *missing;
+    bn_status st;
     *out = NULL;
     if (!ops || (missing = bn__ops_missing(ops)) != NULL) {
         bn__ctx_destroy(ops, ctx);
         return bn_error_set(err, BN_EUSAGE, "transport operator %s: no %s function", ops && ops->name ? ops->name : "?",
                             ops ? missing : "ops table");
     }
-    for (size_t i = 0; i < 3 * n; i++)
-        if (!(rho[i] >= 0 && rho[i] <= 1)) {
-            bn__ctx_destroy(ops, ctx);
-            return bn_error_set(err, BN_EINPUT, "patch %zu: reflectance %g is outside [0, 1]", i / 3, rho[i]);
-        }
+    if ((st = bn__rho_check(n, rho, err)) != BN_OK) {
+        bn__ctx_destroy(ops, ctx);
+        return st;
+    }
     k = calloc(1, sizeof *k);
     if (k) {
         k->rho = bn__malloc_array(n ? 3 * n : 1, sizeof(double));
@@ -89,6 +98,14 @@ void bn_transport_destroy(bn_transport *k)
 size_t bn_transport_size(const bn_transport *k) { return k->n; }
 size_t bn_transport_nonfinite_patch(const bn_transport *k) { return atomic_load(&k->calls[2]); }
 const double *bn_transport_rho(const bn_transport *k) { return k->rho; }
+
+bn_status bn_transport_set_rho(bn_transport *k, const double *rho, bn_error *err)
+{
+    bn_status st = bn__rho_check(k->n, rho, err);
+    if (st == BN_OK)
+        memcpy(k->rho, rho, 3 * k->n * sizeof(double));
+    return st;
+}
 const char *bn_transport_name(const bn_transport *k) { return k->ops->name ? k->ops->name : "user"; }
 unsigned bn_transport_caps(const bn_transport *k) { return k->ops->caps; }
 
