@@ -84,6 +84,18 @@ void bn_flat_ff_diagnostics(const bn_flat *f, double out[12]);
  * values (float storage gives float values). BN_ENOTSUP under the hierarchy, which keeps no pairs. */
 bn_status bn_flat_form_factors(const bn_flat *f, double *F, char *msg, size_t msglen);
 
+/* Relights a solved scene in place on its own F (bn_pipeline_relight): n materials by name, each with
+ * a new reflectance (rho, n x 3) and/or emitted radiance (Le, n x 3; W m^-2 sr^-1); either array may be
+ * NULL, and a row of three NaN leaves that material's value as it is. Every term, rest and L are solved
+ * again (the arrays handed out before are freed: take them again). refine: under the hierarchy, new
+ * links for the new light (else the old ones, frozen). Unknown names, rho outside [0, 1], Le negative
+ * or not finite: BN_EUSAGE naming them, nothing changed. On a solve's failure f keeps the edits and
+ * no answer (BN_ENOTCONV: the unconverged one). */
+bn_status bn_flat_relight(bn_flat *f, size_t n, const char *const *materials, const double *rho, const double *Le,
+                          int refine, char *msg, size_t msglen);
+/* The largest ratio of the relit L to the one before (patches and channels); 0 before any relight. */
+double bn_flat_relight_gain(const bn_flat *f);
+
 /* Bakes the solution to vertex colours as `bounce bake` does: out by extension (.ply, .om, .obj,
  * .glb, .gltf); per_bounce adds every term; mesh: a bn_flat_names("mesh") name, "elements" (NULL,
  * the default: the patches) or "input" (the scene's polygons);

@@ -2,10 +2,11 @@
 
     import bounce
     r = bounce.solve("meshes/cornell-box.obj", unit="mm", bounces=3)
-    r.L          # patches x 3 radiance, W m^-2 sr^-1 (numpy, sharing the library's memory)
+    r.L          # patches x 3 radiance, W m^-2 sr^-1 (numpy, read-only)
     r.terms[k]   # K^k E, patches x 3: r.terms[0] = E, r.terms[1] = KE (direct light), ...
     r.rest       # L minus the kept terms (the longer paths)
-    r.area, r.normal, r.centroid, r.reflectance, r.face   # per patch (numpy copies, small)
+    r.area, r.normal, r.centroid, r.reflectance, r.face   # per patch (numpy, read-only)
+    r.relight(Le={"light": (34, 24, 8)}, rho={"red": (0.1, 0.6, 0.1)})   # new materials, the same F
 
 The library is found as the environment variable BOUNCE_LIBRARY names it, else in the build tree
 beside this package (build/libbounce.so). Errors raise bounce.BounceError with bounce's message
@@ -131,6 +132,10 @@ def _load():
     lib.bn_flat_solve_operator.argtypes = [S, D, _APPLY, _ROW, P, ctypes.POINTER(_Opts), ctypes.POINTER(P),
                                            ctypes.c_char_p, S]
     lib.bn_flat_solve_operator.restype = I
+    lib.bn_flat_relight.argtypes = [P, S, ctypes.POINTER(ctypes.c_char_p), D, D, I, ctypes.c_char_p, S]
+    lib.bn_flat_relight.restype = I
+    lib.bn_flat_relight_gain.argtypes = [P]
+    lib.bn_flat_relight_gain.restype = ctypes.c_double
     _lib = lib
     return lib
 
@@ -153,35 +158,60 @@ def _main_thread():
     return threading.current_thread() is threading.main_thread()
 
 
+def _frozen(a):
+    """a made read-only: an edit raises (ValueError) instead of being silently ignored by bounce."""
+    if a is not None:
+        a.flags.writeable = False
+    return a
+
+
+def _patch_data(lib, h, n):
+    """area, normal, centroid, reflectance, face of every patch (read-only copies)."""
+    Dp = ctypes.POINTER(ctypes.c_double)
+    area, normal, centroid, rho = np.full(n, np.nan), np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.full((n, 3), np.nan)
+    face = np.zeros(n, dtype=np.uintp)   # an operator's result has no scene: NaN and 0 stay
+    lib.bn_flat_patch_data(h, area.ctypes.data_as(Dp), normal.ctypes.data_as(Dp), centroid.ctypes.data_as(Dp),
+                           rho.ctypes.data_as(Dp), face.ctypes.data_as(ctypes.POINTER(ctypes.c_size_t)))
+    return [_frozen(a) for a in (area, normal, centroid, rho, face)]
+
+
+def _rgb(option, name, v):
+    """A material's new value: one number (grey) or three."""
+    try:
+        a = np.asarray(v, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise BounceError("EUSAGE", "%s[%r] must be a number or three, not %r" % (option, name, v))
+    if a.shape not in ((1,), (3,)):
+        raise BounceError("EUSAGE", "%s[%r] must be a number or three, not %d values" % (option, name, a.size))
+    if np.isnan(a).any():
+        raise BounceError("EUSAGE", "%s[%r] = %r: nan is not a value" % (option, name, v))
+    return np.repeat(a, 3) if a.size == 1 else a
+
+
 class Result:
-    """A solved scene. L, terms and rest are numpy views of the library's arrays (no copies): they
-    stay valid while this object lives (each view keeps it alive)."""
+    """A solved scene. L, terms, rest and the per-patch arrays are read-only numpy arrays (an edit
+    raises: bounce never ignores one); relight() solves again for new materials on the same F and
+    replaces them (arrays taken before keep the old answer)."""
 
     def __init__(self, handle, lib):
         self._h, self._lib = handle, lib
         n = lib.bn_flat_patches(handle)
         self.patches = n
+        self.area, self.normal, self.centroid, self.reflectance, self.face = _patch_data(lib, handle, n)
+        self.relight_gain = 0.0
+        self._answer()
 
-        def view(ptr):
-            if not ptr:
-                return None
-            a = np.ctypeslib.as_array(ptr, shape=(n, 3))
-            a.flags.writeable = False
-            return _Owned(a, self)
+    def _answer(self):
+        """The solve's arrays and report, copied from the library (read-only)."""
+        lib, handle, n = self._lib, self._h, self.patches
 
-        self.L = view(lib.bn_flat_L(handle))
-        self.terms = [view(lib.bn_flat_term(handle, k)) for k in range(lib.bn_flat_terms(handle))]
-        self.rest = view(lib.bn_flat_rest(handle))
-        self.emission = view(lib.bn_flat_emission(handle))
-        self.area = np.empty(n)
-        self.normal = np.empty((n, 3))
-        self.centroid = np.empty((n, 3))
-        self.reflectance = np.empty((n, 3))
-        self.face = np.empty(n, dtype=np.uintp)
-        Dp = ctypes.POINTER(ctypes.c_double)
-        lib.bn_flat_patch_data(handle, self.area.ctypes.data_as(Dp), self.normal.ctypes.data_as(Dp),
-                               self.centroid.ctypes.data_as(Dp), self.reflectance.ctypes.data_as(Dp),
-                               self.face.ctypes.data_as(ctypes.POINTER(ctypes.c_size_t)))
+        def copy(ptr):
+            return _frozen(np.ctypeslib.as_array(ptr, shape=(n, 3)).copy()) if ptr else None
+
+        self.L = copy(lib.bn_flat_L(handle))
+        self.terms = [copy(lib.bn_flat_term(handle, k)) for k in range(lib.bn_flat_terms(handle))]
+        self.rest = copy(lib.bn_flat_rest(handle))
+        self.emission = copy(lib.bn_flat_emission(handle))
         self.stop_reason = lib.bn_flat_stop_reason(handle).decode()
         self.method = lib.bn_flat_method(handle).decode()
         self.transport = lib.bn_flat_transport(handle).decode()
@@ -193,6 +223,38 @@ class Result:
         table = np.ctypeslib.as_array(rows, shape=(m, 7)).copy() if m else np.zeros((0, 7))
         self.history = {k: table[:, j] for j, k in enumerate(
             ("iteration", "residual_max", "residual_rms", "change", "bound", "error_bound", "seconds"))}
+
+    def relight(self, Le=None, rho=None, refine=False):
+        """Solves again for new materials on this result's own F (no form factor is computed): Le and
+        rho map material names to a new emitted radiance (W m^-2 sr^-1, >= 0) or reflectance (in
+        [0, 1]), each one number (grey) or three. L, terms, rest, emission and reflectance are
+        replaced; the result is returned. Dense and sparse K give exactly a fresh solve of the edited
+        scene. Under the hierarchy the links refined for the old light are kept (self.relight_gain:
+        how much brighter the new L gets than the old, by which their error bound grows there);
+        refine=True builds links for the new light."""
+        Le, rho = dict(Le or {}), dict(rho or {})
+        for option, d in (("Le", Le), ("rho", rho)):
+            for name in d:
+                if not isinstance(name, str):
+                    raise BounceError("EUSAGE", "%s: material names are strings, not %r" % (option, name))
+        mats = sorted(set(Le) | set(rho))
+        n = len(mats)
+        nan = np.full(3, np.nan)
+        R = np.array([_rgb("rho", m, rho[m]) if m in rho else nan for m in mats]).reshape(n, 3)
+        L = np.array([_rgb("Le", m, Le[m]) if m in Le else nan for m in mats]).reshape(n, 3)
+        names_c = (ctypes.c_char_p * max(n, 1))(*[m.encode() for m in mats])
+        Dp = ctypes.POINTER(ctypes.c_double)
+        msg = ctypes.create_string_buffer(2048)
+        st = self._lib.bn_flat_relight(self._h, n, names_c, np.ascontiguousarray(R).ctypes.data_as(Dp),
+                                       np.ascontiguousarray(L).ctypes.data_as(Dp), int(bool(refine)), msg, len(msg))
+        if st != 0 and self._lib.bn_flat_L(self._h):
+            self._answer()
+        if st != 0:
+            _raise(self._lib, st, msg)
+        self.reflectance = _patch_data(self._lib, self._h, self.patches)[3]
+        self._answer()
+        self.relight_gain = self._lib.bn_flat_relight_gain(self._h)
+        return self
 
     def form_factors(self):
         """F as a dense patches x patches array (a copy: the library may store it in float, as here
@@ -247,18 +309,6 @@ class Result:
     def __repr__(self):
         return "<bounce.Result %d patches, %s on %s, %s after %d iterations, %d terms>" % (
             self.patches, self.method, self.transport, self.stop_reason, self.iterations, len(self.terms))
-
-
-class _Owned(np.ndarray):
-    """A numpy view that keeps its Result (the owner of the memory) alive."""
-
-    def __new__(cls, a, owner):
-        obj = a.view(cls)
-        obj._owner = owner
-        return obj
-
-    def __array_finalize__(self, obj):
-        self._owner = getattr(obj, "_owner", None)
 
 
 _DIAG = ("row_sum_min", "row_sum_max", "row_sum_rms_dev", "reciprocity_residual", "k_norm_inf",
@@ -337,13 +387,8 @@ class Scene:
             _raise(lib, st, msg)
         self._lib, self._h = lib, h
         n = self.patches = lib.bn_flat_patches(h)
-        Dp = ctypes.POINTER(ctypes.c_double)
-        self.area, self.normal, self.centroid = np.empty(n), np.empty((n, 3)), np.empty((n, 3))
-        self.reflectance, self.face = np.empty((n, 3)), np.empty(n, dtype=np.uintp)
-        lib.bn_flat_patch_data(h, self.area.ctypes.data_as(Dp), self.normal.ctypes.data_as(Dp),
-                               self.centroid.ctypes.data_as(Dp), self.reflectance.ctypes.data_as(Dp),
-                               self.face.ctypes.data_as(ctypes.POINTER(ctypes.c_size_t)))
-        self.emission = np.ctypeslib.as_array(lib.bn_flat_emission(h), shape=(n, 3)).copy()
+        self.area, self.normal, self.centroid, self.reflectance, self.face = _patch_data(lib, h, n)
+        self.emission = _frozen(np.ctypeslib.as_array(lib.bn_flat_emission(h), shape=(n, 3)).copy())
         self.diagnostics = None
         return self
 

@@ -331,6 +331,52 @@ bn_status bn_flat_solve(const char *path, const bn_flat_opts *o, bn_flat **out, 
     return st;
 }
 
+/* The edits of bn_flat_relight: material i's rho and Le rows (n x 3; NULL, or a row of NaN: not set). */
+static bn_status bn__flat_edits(size_t n, const char *const *materials, const double *rho, const double *Le,
+                                bn_material_edit *e, bn_error *err)
+{
+    for (size_t i = 0; i < n; i++) {
+        memset(&e[i], 0, sizeof e[i]);
+        if (!materials || !materials[i] || strlen(materials[i]) >= sizeof e[i].material)
+            return bn_error_set(err, BN_EUSAGE, "relight: material %zu has no name (or one above %d bytes)", i,
+                                BN_NAME_MAX - 1);
+        strcpy(e[i].material, materials[i]);
+        e[i].has_rho = rho && !(isnan(rho[3 * i]) && isnan(rho[3 * i + 1]) && isnan(rho[3 * i + 2]));
+        e[i].has_Le = Le && !(isnan(Le[3 * i]) && isnan(Le[3 * i + 1]) && isnan(Le[3 * i + 2]));
+        for (int c = 0; c < 3; c++) {
+            e[i].rho[c] = e[i].has_rho ? rho[3 * i + c] : 0;
+            e[i].Le[c] = e[i].has_Le ? Le[3 * i + c] : 0;
+        }
+    }
+    return BN_OK;
+}
+
+bn_status bn_flat_relight(bn_flat *f, size_t n, const char *const *materials, const double *rho, const double *Le,
+                          int refine, char *msg, size_t msglen)
+{
+    bn_material_edit *e = bn__malloc_array(n + 1, sizeof *e);
+    bn__flat_sig sg;
+    bn_error err;
+    bn_status st;
+    bn_error_clear(&err);
+    if (!f || !f->p.scene || !f->p.k || !f->p.res.L)
+        st = bn_error_set(&err, BN_EUSAGE, "relight: not a solved scene (a scene file's, with its K)");
+    else if (!e)
+        st = bn_error_set(&err, BN_ENOMEM, "out of memory");
+    else
+        st = bn__flat_edits(n, materials, rho, Le, e, &err);
+    if (st == BN_OK) {
+        f->nhist = 0;   /* the new solve's monitor */
+        bn__flat_sig_begin(&sg, f->sigint);
+        st = bn_pipeline_relight(&f->po, &f->p, e, n, refine, &err);
+        bn__flat_sig_end(&sg);
+    }
+    free(e);
+    if (st != BN_OK)
+        bn__flat_fail(st, err.msg, msg, msglen);
+    return st;
+}
+
 void bn_flat_ff_diagnostics(const bn_flat *f, double out[12])
 {
     const bn_ff_diagnostics *d = &f->p.ff;
@@ -365,6 +411,7 @@ const char *bn_flat_stop_reason(const bn_flat *f) { return bn_stop_reason_name(f
 const char *bn_flat_method(const bn_flat *f) { return bn_solve_method_name(f->p.method_used); }
 size_t bn_flat_iterations(const bn_flat *f) { return f->p.res.iterations; }
 double bn_flat_residual(const bn_flat *f) { return f->p.res.residual_max; }
+double bn_flat_relight_gain(const bn_flat *f) { return f->p.relight_gain; }
 const char *bn_flat_transport(const bn_flat *f) { return f->transport; }
 
 void bn_flat_patch_data(const bn_flat *f, double *area, double *normal, double *centroid, double *reflectance,

@@ -102,16 +102,63 @@ def test_messages_name_options_as_python_keywords():
     assert "`" not in text and "--" not in text, text
 
 
-def test_arrays_share_the_library_memory():
+def test_arrays_are_read_only_copies_of_the_librarys():
     r = bounce.solve(CORNELL, unit="mm", patches=300)
-    lib, h = r._lib, r._h
-    addr = lambda p: ctypes.cast(p, ctypes.c_void_p).value
-    assert r.L.__array_interface__["data"][0] == addr(lib.bn_flat_L(h))
-    assert r.terms[2].__array_interface__["data"][0] == addr(lib.bn_flat_term(h, 2))
-    assert not r.L.flags.owndata and not r.L.flags.writeable
+    lib, h, n = r._lib, r._h, r.patches
+    lib_L = np.ctypeslib.as_array(lib.bn_flat_L(h), shape=(n, 3))
+    assert np.array_equal(r.L, lib_L) and np.array_equal(r.terms[2], np.ctypeslib.as_array(lib.bn_flat_term(h, 2), shape=(n, 3)))
+    for a in (r.L, r.terms[1], r.rest, r.emission, r.reflectance, r.area):
+        assert not a.flags.writeable
+    with pytest.raises(ValueError):   # an edit is an error, never silently ignored
+        r.reflectance[:] = 0.1
+    s = bounce.Scene.load(CORNELL, unit="mm", patches=100)
+    with pytest.raises(ValueError):
+        s.reflectance[:] = 0.1
     L = r.L
-    del r   # the view keeps the result (and its memory) alive
+    del r
     assert np.isfinite(L).all() and L.max() > 1
+
+
+def _edited_cornell(tmp_path, light, red):
+    """The Cornell box with the light's Ke and the red wall's Kd replaced, as files of its own."""
+    src = open(os.path.join(SRC, "meshes", "cornell-box.mtl")).read()
+    src = src.replace("Ke 17 12 4", "Ke %g %g %g" % tuple(light)).replace("Kd 0.63 0.065 0.05", "Kd %g %g %g" % tuple(red))
+    (tmp_path / "cornell-box.mtl").write_text(src)
+    obj = open(CORNELL).read()
+    (tmp_path / "cornell-box.obj").write_text(obj)
+    return str(tmp_path / "cornell-box.obj")
+
+
+def test_relight_equals_a_fresh_solve_of_the_edited_file(tmp_path):
+    r = bounce.solve(CORNELL, unit="mm", patches=300, transport="dense", tol=1e-12, bounces=4)
+    L_before = r.L
+    assert r.relight(Le={"light": (34, 24, 8)}, rho={"red": (0.1, 0.6, 0.1)}) is r
+    fresh = bounce.solve(_edited_cornell(tmp_path, (34, 24, 8), (0.1, 0.6, 0.1)), unit="mm", patches=300,
+                         transport="dense", tol=1e-12, bounces=4)
+    assert np.abs(r.L - L_before).max() > 0.5 * np.abs(L_before).max()   # it changed ...
+    for a, b in zip(r.terms + [r.rest, r.L, r.emission, r.reflectance], fresh.terms + [fresh.rest, fresh.L, fresh.emission, fresh.reflectance]):
+        assert np.abs(a - b).max() <= 1e-6 * np.abs(b).max()          # ... to a fresh solve's answer
+    assert r.relight_gain > 2 * 0.6 / 0.065 * 0.9
+    again = r.relight(Le={"light": 0})   # the light off: no light at all
+    assert np.abs(again.L).max() == 0 and L_before.max() > 1   # arrays taken before keep their answer
+
+
+@pytest.mark.parametrize("kw, needle", [
+    (dict(Le={"blue": 1}), "'blue' is not a material"),
+    (dict(rho={"red": 1.5}), "1.5"),
+    (dict(Le={"light": -2}), "-2"),
+    (dict(Le={"light": (1, 2)}), "2 values"),
+    (dict(rho={"red": "dark"}), "dark"),
+    (dict(rho={3: 0.5}), "not 3"),
+    (dict(Le={"light": float("nan")}), "nan"),
+])
+def test_bad_relights_raise_naming_the_value(kw, needle):
+    r = bounce.solve(CORNELL, unit="mm", patches=100)
+    L = r.L.copy()
+    with pytest.raises(bounce.BounceError) as e:
+        r.relight(**kw)
+    assert needle in str(e.value), str(e.value)
+    assert np.array_equal(r.L, L)   # nothing changed
 
 
 def test_form_factors_rows_and_reciprocity(tmp_path):
