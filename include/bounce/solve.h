@@ -94,6 +94,9 @@ typedef struct bn_solve_opts {
      * rho E_direct / pi; NULL: none): part of the source (L = E + direct + K L) but of bounce 1, not 0
      * (a point light is not seen): the terms are E, K E + direct, K (K E + direct), ... */
     const double *direct;
+    /* N*3 or NULL: the power iteration's start and its last iterate (bn_solve_spectral_radius_from);
+     * bn_pipeline keeps one across relights, where K changes little. */
+    double *power_start;
 } bn_solve_opts;
 void bn_solve_opts_default(bn_solve_opts *o);
 /* Each term is a whole N x 3 vector (and an image layer, a bake attribute): past this many, the
@@ -149,6 +152,12 @@ size_t bn_solve_direct_bytes(size_t n);
  * *lower = the Collatz-Wielandt bound max_c min_i (K_c x)_i / x_i <= spectral radius (x >= 0). */
 bn_status bn_solve_spectral_radius(const bn_transport *k, size_t max_steps, double *estimate, double *lower,
                                    size_t *steps, bn_error *err);
+/* The same from a start of the caller's: x (N*3, in/out) when it holds a positive value in every channel,
+ * plus 1e-3 of its largest (every entry positive), else from 1; its last iterate is left in x. A solve
+ * after a small change of K (a relight) starts near the dominant eigenvector and settles in a few
+ * steps. */
+bn_status bn_solve_spectral_radius_from(const bn_transport *k, size_t max_steps, double *x, double *estimate,
+                                        double *lower, size_t *steps, bn_error *err);
 
 /* Fills terms[k] = K^k E for k = 0..nterms-1 (caller-allocated, N*3 each); stops with the
  * operator's status if an application of K fails. */

@@ -554,6 +554,9 @@ bn_status bn_pipeline_solve(const bn_pipeline_opts *o, bn_pipeline *p, bn_error 
     }
     p->method_used = so.method;
     so.direct = p->D;
+    if (!p->power && !(p->power = bn__calloc(3 * p->n + 1, sizeof(double))))
+        return bn_error_set(err, BN_ENOMEM, "out of memory for the power iteration of %zu patches", p->n);
+    so.power_start = p->power;   /* a relight's solve starts where the last one ended */
     st = bn_solve(p->k, p->E, &so, &p->res, err);
     if ((st == BN_OK || st == BN_ENOTCONV) && p->res.nterms > 0) {
         p->rest = bn__malloc_array(3 * p->n + 1, sizeof(double));
@@ -659,6 +662,7 @@ void bn_pipeline_free(bn_pipeline *p)
     free(p->E);
     free(p->D);
     free(p->D_white);
+    free(p->power);
     free(p->row_exact);
     free(p->emit_patch);
     free(p->emit_exact);

@@ -120,22 +120,42 @@ static bn_status bn__power_step(const bn_transport *k, double *x, double *y, dou
     return BN_OK;
 }
 
+/* The power iteration's start in x: x + 1e-3 of its largest per channel when every channel has a
+ * positive value (a previous iterate), else 1. */
+static void bn__power_start(double *x, size_t n)
+{
+    double top[3] = {0, 0, 0};
+    for (size_t i = 0; i < 3 * n; i++)
+        top[i % 3] = fmax(top[i % 3], x[i]);
+    int warm = top[0] > 0 && top[1] > 0 && top[2] > 0 && isfinite(top[0] + top[1] + top[2]);
+    for (size_t i = 0; i < 3 * n; i++)
+        x[i] = warm && x[i] >= 0 ? x[i] + 1e-3 * top[i % 3] : 1.0;
+}
+
 bn_status bn_solve_spectral_radius(const bn_transport *k, size_t max_steps, double *estimate, double *lower,
                                    size_t *steps, bn_error *err)
 {
+    size_t m = 3 * bn_transport_size(k);
+    double *x = bn__calloc(m ? m : 1, sizeof(double));
+    if (!x)
+        return bn_error_set(err, BN_ENOMEM, "power iteration: out of memory for %zu patches", m / 3);
+    bn_status st = bn_solve_spectral_radius_from(k, max_steps, x, estimate, lower, steps, err);
+    free(x);
+    return st;
+}
+
+bn_status bn_solve_spectral_radius_from(const bn_transport *k, size_t max_steps, double *x, double *estimate,
+                                        double *lower, size_t *steps, bn_error *err)
+{
     size_t n = bn_transport_size(k), m = 3 * n, s;
-    double *x = bn__malloc_array(m ? m : 1, sizeof(double)), *y = bn__malloc_array(m ? m : 1, sizeof(double));
+    double *y = bn__malloc_array(m ? m : 1, sizeof(double));
     double est = 0, low = 0, hist[3] = {-1, -1, -1}, prev_ratio[3] = {0, 0, 0};
     bn_status st = BN_OK;
     *estimate = *lower = 0;
     *steps = 0;
-    if (!x || !y) {
-        free(x);
-        free(y);
+    if (!y)
         return bn_error_set(err, BN_ENOMEM, "power iteration: out of memory for %zu patches", n);
-    }
-    for (size_t i = 0; i < m; i++)
-        x[i] = 1.0;
+    bn__power_start(x, n);
     if (max_steps == 0)
         max_steps = 1;
     for (s = 1; s <= max_steps; s++) {
@@ -159,7 +179,6 @@ bn_status bn_solve_spectral_radius(const bn_transport *k, size_t max_steps, doub
         *lower = low;
         *steps = s > max_steps ? max_steps : s;
     }
-    free(x);
     free(y);
     return st;
 }
@@ -496,8 +515,11 @@ static bn_status bn__solve_analyse(bn__solve *S)
     if (st == BN_OK)
         st = bn__solve_diag(S);
     if (st == BN_OK)
-        st = bn_solve_spectral_radius(S->k, S->o->power_iter, &S->res->spectral_radius,
-                                      &S->res->spectral_radius_lower, &S->res->power_iterations, S->err);
+        st = S->o->power_start
+                 ? bn_solve_spectral_radius_from(S->k, S->o->power_iter, S->o->power_start, &S->res->spectral_radius,
+                                                 &S->res->spectral_radius_lower, &S->res->power_iterations, S->err)
+                 : bn_solve_spectral_radius(S->k, S->o->power_iter, &S->res->spectral_radius,
+                                            &S->res->spectral_radius_lower, &S->res->power_iterations, S->err);
     if (st == BN_OK)
         st = bn__solve_singular(S);
     if (st == BN_OK)
