@@ -188,11 +188,17 @@ if [ -f "$raceref" ]; then
     run_prog emitter_bench "Many emitters: the gather with the Cornell light cut into 1, 100 and 10,000 faces" \
         "$raceref" $([ "$quick" = 1 ] && echo --quick)
 fi
+# ---- relighting (issue 37): new materials solved again on the same F, against the whole run ----
+# (targets: the Cornell box, dense, 10 bounces, at most 10 ms; the bunny box, hierarchical, at most 1 s: --big)
+for m in neumann jacobi gauss-seidel; do
+    run_prog relight_bench "Relighting: the Cornell box relit on its dense F ($m; target 10 ms for 10 bounces)" \
+        --method "$m" --reps 20 "$root/meshes/cornell-box.obj" mm dense light red
+done
 # any other bench program someone adds later
 for src in "$root"/bench/*.c; do
     [ -e "$src" ] || continue
     name=$(basename "$src" .c)
-    case "$name" in ff_bench|solve_bench|trace_bench|gather_bench|race_bench|emitter_bench|ref_exr) continue ;; esac
+    case "$name" in ff_bench|solve_bench|trace_bench|gather_bench|race_bench|emitter_bench|relight_bench|ref_exr) continue ;; esac
     run_prog "$name" "$name"
 done
 
@@ -616,6 +622,15 @@ if [ "$big" = 1 ]; then
             bash "$root/bench/bake_bench.sh" "$bounce" "$work/bunny-box.obj" mm "$work/bake" 40 2>/dev/null
             [ -f "$work/living-room.obj" ] &&
                 bash "$root/bench/bake_bench.sh" "$bounce" "$work/living-room.obj" m "$work/bake" 40 2>/dev/null | tail -n +3
+            echo
+        } >>"$big_report"
+        # relighting the bunny box on its frozen links (issue 37: at most 1 s)
+        note "large scenes: relighting the bunny box"
+        {
+            echo "## Relighting the bunny box on its hierarchy's links (\`relight_bench\`; target 1 s)"
+            echo
+            "$build/bench/relight_bench" --reps 5 "$work/bunny-box.obj" mm auto light red 2>/dev/null ||
+                echo "_relight_bench failed_"
             echo
         } >>"$big_report"
         # the MPI identity checks on the bunny box (tests/mpi_check.sh with BN_TEST_BIG=1: out of the

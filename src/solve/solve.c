@@ -338,6 +338,7 @@ typedef struct bn__solve {
     double t0, knorm, target, r0max;
     double kpow;                    /* ||K||^(s k + 1) at iteration k (s sweeps per iteration) */
     double *diag, *r, *Lprev, *y;   /* diag NULL when K_ii = 0 for every i (or unknown) */
+    int filled;                     /* terms K^0 E .. K^(filled-1) E made so far */
     bn_solve_row row;
 } bn__solve;
 
@@ -624,6 +625,39 @@ static bn_status bn__solve_stop_test(bn__solve *S, int *done)
 }
 
 /* sweep -> residual -> bounds -> NaN check -> monitor row -> stop test, from row 0 (L0 = E). */
+/* The terms' arrays, before the iteration (which may fill some: bn__solve_capture), terms[0] = E. */
+static bn_status bn__solve_alloc_terms(bn__solve *S)
+{
+    bn_solve_result *res = S->res;
+    if (S->o->bounces < 0)
+        return BN_OK;
+    res->nterms = S->o->bounces + 1;
+    res->terms = bn__calloc((size_t)res->nterms, sizeof(double *));
+    if (!res->terms) {
+        res->nterms = 0;
+        return bn_error_set(S->err, BN_ENOMEM, "solve: out of memory for %d bounce terms", S->o->bounces + 1);
+    }
+    for (int q = 0; q < res->nterms; q++)
+        if (!(res->terms[q] = bn__malloc_array(S->m ? S->m : 1, sizeof(double))))
+            return bn_error_set(S->err, BN_ENOMEM, "solve: out of memory for %d bounce terms of %zu patches",
+                                S->o->bounces + 1, S->n);
+    memcpy(res->terms[0], S->Esurf, S->m * sizeof(double));
+    S->filled = 1;
+    return BN_OK;
+}
+
+/* The Neumann series' residual after `it` terms is the next term, K^(it+1) E, computed as the terms
+ * are (one application of K to the one before): kept, it is not computed again after the iteration.
+ * Not with punctual lights (the series then runs on E + direct, the terms on E). */
+static void bn__solve_capture(bn__solve *S, size_t it)
+{
+    bn_solve_result *res = S->res;
+    if (S->o->method != BN_SOLVE_NEUMANN || S->o->direct || !res->terms || (size_t)S->filled != it + 1 ||
+        S->filled >= res->nterms)
+        return;
+    memcpy(res->terms[S->filled++], S->r, S->m * sizeof(double));
+}
+
 static bn_status bn__solve_iterate(bn__solve *S)
 {
     bn__solve_ctx ctx = {S->k, S->E, S->diag, S->o, S->n};
@@ -638,6 +672,7 @@ static bn_status bn__solve_iterate(bn__solve *S)
         if (it > 0 && (st = bn__solve_step(S, state)) != BN_OK)
             break;
         bn__solve_bounds(S, it);
+        bn__solve_capture(S, it);
         S->res->iterations = it;
         bad = bn__first_nonfinite(S->res->L, S->m);
         if (bad != SIZE_MAX || !isfinite(S->row.residual_max)) {
@@ -693,22 +728,18 @@ static bn_status bn__solve_direct(bn__solve *S)
 }
 
 /* The per-bounce terms K^0 E .. K^bounces E. */
+/* The per-bounce terms the iteration did not leave: K^q E = K (K^(q-1) E) from the last one kept. */
 static bn_status bn__solve_keep_terms(bn__solve *S)
 {
     bn_solve_result *res = S->res;
-    if (S->o->bounces < 0)
-        return BN_OK;
-    res->nterms = S->o->bounces + 1;
-    res->terms = bn__calloc((size_t)res->nterms, sizeof(double *));
-    if (!res->terms) {
-        res->nterms = 0;
-        return bn_error_set(S->err, BN_ENOMEM, "solve: out of memory for %d bounce terms", S->o->bounces + 1);
+    for (int q = S->filled; q < res->nterms; q++) {
+        bn_status st = bn_transport_apply(S->k, res->terms[q - 1], res->terms[q], S->err);
+        if (st != BN_OK)
+            return st;
+        for (size_t i = 0; q == 1 && S->o->direct && i < S->m; i++)
+            res->terms[1][i] += S->o->direct[i];   /* the punctual lights' direct light: bounce 1 */
     }
-    for (int q = 0; q < res->nterms; q++)
-        if (!(res->terms[q] = bn__malloc_array(S->m ? S->m : 1, sizeof(double))))
-            return bn_error_set(S->err, BN_ENOMEM, "solve: out of memory for %d bounce terms of %zu patches",
-                                S->o->bounces + 1, S->n);
-    return bn_solve_terms_direct(S->k, S->Esurf, S->o->direct, res->nterms, res->terms, S->err);
+    return BN_OK;
 }
 
 /* The source E + direct when punctual lights give some (the emission alone otherwise). */
@@ -759,6 +790,8 @@ static bn_status bn__solve_body(const bn_transport *k, const double *E, const bn
     st = bn__solve_source(&S);
     if (st == BN_OK)
         st = bn__solve_check(&S);
+    if (st == BN_OK)
+        st = bn__solve_alloc_terms(&S);
     if (st == BN_OK)
         st = bn__solve_analyse(&S);
     if (st == BN_OK) {
