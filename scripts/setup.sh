@@ -20,6 +20,8 @@ PACKAGES=(
   chromium                   # headless browser: tests open the study report page
   python3                    # tests: the glTF bake read back by a reader of its own
   python3-numpy python3-pytest   # the Python package (python/bounce) and its tests
+  python3-venv python3-setuptools python3-wheel   # pip install of the package into a venv (pyproject.toml)
+  mypy                       # the package's type hints checked (python.mypy)
 )
 
 missing=()

@@ -8,38 +8,80 @@
     r.area, r.normal, r.centroid, r.reflectance, r.face   # per patch (numpy, read-only)
     r.relight(Le={"light": (34, 24, 8)}, rho={"red": (0.1, 0.6, 0.1)})   # new materials, the same F
 
-The library is found as the environment variable BOUNCE_LIBRARY names it, else in the build tree
-beside this package (build/libbounce.so). Errors raise bounce.BounceError with bounce's message
-and status name. Nothing here computes: every number comes from the C library.
+The library (libbounce.so) is found, in this order, where the environment variable BOUNCE_LIBRARY
+names it; in the build tree beside this package's sources (build/libbounce.so: running from a
+checkout); in the Python prefix (`cmake --install build --prefix "$VIRTUAL_ENV"` puts it in the venv's
+lib/); in cmake --install's default prefix, /usr/local/lib, or wherever the system's loader finds it.
+bounce.library_source() says which. Errors raise bounce.BounceError with bounce's message and status
+name. Nothing here computes: every number comes from the C library.
 """
+from __future__ import annotations
+
 import ctypes
+import ctypes.util
 import os
 import re
+import sys
+from typing import Any, Callable, Dict, Iterator, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
+import numpy.typing as npt
 
-__all__ = ["Scene", "solve", "Result", "Operator", "BounceError", "library_path", "library_version", "names"]
+# A material's new value: one number (grey) or three (R, G, B).
+RGB = Union[float, Sequence[float]]
+# Names a parameter takes (method, transport, unit, ...) are the library's: names("method") lists them.
+Name = str
+PathLike = Union[str, "os.PathLike[str]"]
+
+__version__ = "0.1.0"   # the library's version (CMakeLists.txt's project VERSION; a test keeps them equal)
+
+__all__ = ["Scene", "solve", "Result", "Operator", "BounceError", "library_path", "library_source",
+           "library_version", "names", "__version__"]
 
 
 class BounceError(RuntimeError):
     """A bounce call failed: .status is bounce's status name ("EINPUT", ...), str() its message."""
 
-    def __init__(self, status, message):
+    def __init__(self, status: str, message: str) -> None:
         super().__init__(message)
         self.status = status
 
 
-def library_path():
+def _library_candidates() -> Iterator[Tuple[str, str]]:
+    """(path, how it was found) in the order library_path() tries them."""
     env = os.environ.get("BOUNCE_LIBRARY")
     if env:
-        return env
-    here = os.path.dirname(os.path.abspath(__file__))
-    root = os.path.dirname(os.path.dirname(here))
+        yield env, "BOUNCE_LIBRARY"
+        return
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     for build in ("build", "build-asan", "build-bench"):
-        p = os.path.join(root, build, "libbounce.so")
-        if os.path.exists(p):
-            return p
-    raise BounceError("EUSAGE", "libbounce.so not found: build bounce (scripts/test.sh or cmake) or set BOUNCE_LIBRARY")
+        yield os.path.join(root, build, "libbounce.so"), "the build tree of the checkout at %s" % root
+    for prefix in dict.fromkeys((sys.prefix, "/usr/local")):
+        for lib in ("lib", "lib64", "lib/x86_64-linux-gnu"):
+            yield os.path.join(prefix, lib, "libbounce.so"), "the prefix %s (cmake --install)" % prefix
+    found = ctypes.util.find_library("bounce")
+    if found:
+        yield found, "the system's library path (ldconfig)"
+
+
+def _find_library() -> Tuple[str, str]:
+    for path, how in _library_candidates():
+        if how == "BOUNCE_LIBRARY" or os.path.exists(path) or not os.path.isabs(path):
+            return path, how
+    raise BounceError("EUSAGE", "libbounce.so not found: set BOUNCE_LIBRARY, build bounce in this checkout "
+                      "(cmake --preset default && cmake --build --preset default), or install it into this "
+                      "Python's prefix (cmake --install build --prefix %s)" % sys.prefix)
+
+
+def library_path() -> str:
+    """The libbounce.so this package uses (see library_source())."""
+    return _find_library()[0]
+
+
+def library_source() -> str:
+    """How library_path() was found: "BOUNCE_LIBRARY", "the build tree of the checkout at ...",
+    "the prefix ... (cmake --install)" or "the system's library path (ldconfig)"."""
+    return _find_library()[1]
 
 
 class _Opts(ctypes.Structure):
@@ -69,7 +111,7 @@ def _check_layout(lib, path):
                           "package and the library are from different versions" % (path, version, theirs, ours))
 
 
-def names(vocabulary):
+def names(vocabulary: str) -> List[str]:
     """The names a parameter takes, as the library has them (its one table per vocabulary):
     names("method") == ["jacobi", "gauss-seidel", "neumann", "direct"]; "transport", "storage",
     "precision", "ff", "visibility", "unit", "stop", "mesh", "gather", "strategy", "model"."""
@@ -79,12 +121,12 @@ def names(vocabulary):
     return text.decode().split("|")
 
 
-def library_version():
+def library_version() -> str:
     """The version of the libbounce.so in use."""
     return _load().bn_version().decode()
 
 
-def _load():
+def _load() -> Any:
     global _lib
     if _lib is not None:
         return _lib
@@ -193,7 +235,12 @@ class Result:
     raises: bounce never ignores one); relight() solves again for new materials on the same F and
     replaces them (arrays taken before keep the old answer)."""
 
-    def __init__(self, handle, lib):
+    L: np.ndarray
+    terms: List[np.ndarray]
+    rest: Optional[np.ndarray]
+    emission: np.ndarray
+
+    def __init__(self, handle: Any, lib: Any) -> None:
         self._h, self._lib = handle, lib
         n = lib.bn_flat_patches(handle)
         self.patches = n
@@ -201,7 +248,7 @@ class Result:
         self.relight_gain = 0.0
         self._answer()
 
-    def _answer(self):
+    def _answer(self) -> None:
         """The solve's arrays and report, copied from the library (read-only)."""
         lib, handle, n = self._lib, self._h, self.patches
 
@@ -224,7 +271,8 @@ class Result:
         self.history = {k: table[:, j] for j, k in enumerate(
             ("iteration", "residual_max", "residual_rms", "change", "bound", "error_bound", "seconds"))}
 
-    def relight(self, Le=None, rho=None, refine=False):
+    def relight(self, Le: Optional[Mapping[str, RGB]] = None, rho: Optional[Mapping[str, RGB]] = None,
+                refine: bool = False) -> "Result":
         """Solves again for new materials on this result's own F (no form factor is computed): Le and
         rho map material names to a new emitted radiance (W m^-2 sr^-1, >= 0) or reflectance (in
         [0, 1]), each one number (grey) or three. L, terms, rest, emission and reflectance are
@@ -256,7 +304,7 @@ class Result:
         self.relight_gain = self._lib.bn_flat_relight_gain(self._h)
         return self
 
-    def form_factors(self):
+    def form_factors(self) -> np.ndarray:
         """F as a dense patches x patches array (a copy: the library may store it in float, as here
         its values are). Raises BounceError under the hierarchy, which keeps no pairs."""
         n = self.patches
@@ -267,7 +315,8 @@ class Result:
             _raise(self._lib, st, msg)
         return F
 
-    def bake(self, path, per_bounce=True, mesh="elements", ldr=False, exposure=None, crease=30.0):
+    def bake(self, path: PathLike, per_bounce: bool = True, mesh: Name = "elements", ldr: bool = False,
+             exposure: Optional[float] = None, crease: float = 30.0) -> None:
         """Bakes this solution to vertex colours as `bounce bake` does, by the extension of `path`
         (.ply, .om, .obj, .glb, .gltf): per_bounce adds every term; mesh="input" bakes the scene's
         own polygons; ldr writes 8-bit sRGB (glTF: a COLOR_1 set beside the float ones) at
@@ -279,8 +328,10 @@ class Result:
         if st != 0:
             _raise(self._lib, st, msg)
 
-    def images(self, path, size=None, spp=None, eye=None, look=None, fov=None, previews=True, smooth=False,
-               half=False, gather=True):
+    def images(self, path: PathLike, size: Optional[Tuple[int, int]] = None, spp: Optional[int] = None,
+               eye: Optional[Sequence[float]] = None, look: Optional[Sequence[float]] = None,
+               fov: Optional[float] = None, previews: bool = True, smooth: bool = False, half: bool = False,
+               gather: Union[bool, Name] = True) -> None:
         """Camera images of every layer as `bounce bounces` writes them: path (FILE.exr, a layer per
         term, rest and L) and with previews FILE.<layer>.png and the contact sheet. The camera is the
         scene's NAME.camera sidecar, else in front of the box; size=(w, h), spp, eye, look (scene
@@ -306,7 +357,7 @@ class Result:
             self._lib.bn_flat_free(self._h)
             self._h = None
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return "<bounce.Result %d patches, %s on %s, %s after %d iterations, %d terms>" % (
             self.patches, self.method, self.transport, self.stop_reason, self.iterations, len(self.terms))
 
@@ -371,9 +422,23 @@ class Scene:
     form_factors() builds F (with the meshing options given here) and returns it;
     bounce.solve(scene, ...) solves it."""
 
+    path: str
+    options: Dict[str, Any]
+    patches: int
+    area: np.ndarray
+    normal: np.ndarray
+    centroid: np.ndarray
+    reflectance: np.ndarray
+    face: np.ndarray
+    emission: np.ndarray
+    diagnostics: Optional[Dict[str, float]]
+    _lib: Any
+    _h: Any
+
     @classmethod
-    def load(cls, path, unit="m", patches=None, patch_size=None, transport="auto", eps=None, threads=0,
-             progress=False, visibility="exact"):
+    def load(cls, path: PathLike, unit: Name = "m", patches: Optional[int] = None,
+             patch_size: Optional[float] = None, transport: Name = "auto", eps: Optional[float] = None,
+             threads: int = 0, progress: bool = False, visibility: Name = "exact") -> "Scene":
         lib = _load()
         self = cls()
         self.path = os.fspath(path)
@@ -392,7 +457,7 @@ class Scene:
         self.diagnostics = None
         return self
 
-    def form_factors(self, sparse=False):
+    def form_factors(self, sparse: bool = False) -> Any:
         """F (patches x patches, row i: the share of patch i's view that each patch fills, with
         visibility), as bounce assembles it for the solve. A dense numpy array, or with sparse=True
         a scipy.sparse CSR matrix when scipy is installed. self.diagnostics then holds the
@@ -411,7 +476,7 @@ class Scene:
             _raise(self._lib, st, msg)
         if sparse:
             try:
-                import scipy.sparse
+                import scipy.sparse   # type: ignore[import]
             except ImportError:
                 raise BounceError("EUSAGE", "sparse=True needs scipy (python3-scipy)")
             return scipy.sparse.csr_matrix(F)
@@ -430,7 +495,8 @@ class Operator:
     on it as well (one call per patch per sweep). The direct solve needs entries and is refused. Pass
     it to bounce.solve with the emission E (patches x 3)."""
 
-    def __init__(self, patches, apply, row=None):
+    def __init__(self, patches: int, apply: Callable[[np.ndarray], npt.ArrayLike],
+                 row: Optional[Callable[[int, np.ndarray], npt.ArrayLike]] = None) -> None:
         self.patches = _int("patches", patches, unsigned=True)
         if not callable(apply) or (row is not None and not callable(row)):
             raise BounceError("EUSAGE", "apply (and row, if given) must be callable")
@@ -494,8 +560,10 @@ def _solve_operator(op, emission, method, bounces, tol, threads, progress):
     return Result(h, lib)
 
 
-def solve(path, unit="m", method="auto", transport="auto", bounces=3, tol=None, patches=None, patch_size=None,
-          eps=None, threads=0, progress=False, emission=None, visibility="exact"):
+def solve(path: Union[PathLike, "Scene", Operator], unit: Name = "m", method: Name = "auto",
+          transport: Name = "auto", bounces: int = 3, tol: Optional[float] = None, patches: Optional[int] = None,
+          patch_size: Optional[float] = None, eps: Optional[float] = None, threads: int = 0,
+          progress: bool = False, emission: Optional[npt.ArrayLike] = None, visibility: Name = "exact") -> Result:
     """Loads, meshes, builds K and solves L = E + K L for the scene file at `path`, keeping the
     terms K^0 E .. K^bounces E. Options are those of `bounce solve` (defaults alike; visibility is
     --ff-visibility: "exact" or "rays"). Raises
@@ -510,12 +578,13 @@ def solve(path, unit="m", method="auto", transport="auto", bounces=3, tol=None, 
         so = path.options
         o = _opts(lib, so["unit"], method, so["transport"], bounces, tol, so["patches"], so["patch_size"],
                   so["eps"], threads or so["threads"], progress or so["progress"], so["visibility"])
-        path = path.path
+        file = path.path
     else:
         o = _opts(lib, unit, method, transport, bounces, tol, patches, patch_size, eps, threads, progress, visibility)
+        file = os.fspath(path)
     h = ctypes.c_void_p()
     msg = ctypes.create_string_buffer(2048)
-    st = lib.bn_flat_solve(os.fsencode(path), ctypes.byref(o), ctypes.byref(h), msg, len(msg))
+    st = lib.bn_flat_solve(os.fsencode(file), ctypes.byref(o), ctypes.byref(h), msg, len(msg))
     if st != 0:
         if h:
             lib.bn_flat_free(h)

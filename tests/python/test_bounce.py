@@ -3,6 +3,7 @@ through every method, the CLI's own CSV for the Cornell box, bounce's errors as 
 arrays that are the library's memory, not copies. Run by ctest (tests/python/run.sh)."""
 import ctypes
 import os
+import re
 import subprocess
 import sys
 
@@ -100,6 +101,33 @@ def test_messages_name_options_as_python_keywords():
     text = str(e.value)
     assert e.value.status == "ENOMEM" and "patch_size=" in text and "patches=" in text, text
     assert "`" not in text and "--" not in text, text
+
+
+def test_the_package_as_installed_and_its_version():
+    """Under tests/python/run.sh the package and the library are the ones pip and cmake --install put in
+    the venv, found without PYTHONPATH or BOUNCE_LIBRARY; one version everywhere."""
+    venv = os.environ.get("BOUNCE_INSTALLED_IN")
+    if venv:
+        assert os.path.realpath(bounce.__file__).startswith(os.path.realpath(venv)), bounce.__file__
+        assert os.path.realpath(bounce.library_path()).startswith(os.path.realpath(venv))
+        assert bounce.library_source() == "the prefix %s (cmake --install)" % sys.prefix
+    cmake = open(os.path.join(SRC, "CMakeLists.txt")).read()
+    assert bounce.__version__ == re.search(r"project\(bounce VERSION ([0-9.]+)", cmake).group(1)
+    assert bounce.library_version() == bounce.__version__
+    assert os.path.exists(os.path.join(os.path.dirname(bounce.__file__), "py.typed"))
+
+
+def test_the_readme_python_lines_run(tmp_path):
+    """README.md's Python lines, as a user pastes them (in a folder of their own with the meshes)."""
+    readme = open(os.path.join(SRC, "README.md")).read()
+    code = re.search(r"## From Python.*?```python\n(.*?)```", readme, re.S).group(1)
+    os.symlink(os.path.join(SRC, "meshes"), tmp_path / "meshes")
+    code = code.replace('bounces=10)', 'bounces=10, patches=300)').replace('(256, 256)', '(64, 64)')   # smaller
+    out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    before, after = [np.array(ln.split("[")[1].split("]")[0].split(), float) for ln in out.stdout.splitlines()[:2]]
+    assert after[0] > 1.5 * before[0]          # the light doubled
+    assert (tmp_path / "relit.exr").exists() and (tmp_path / "relit.sheet.png").exists()
 
 
 def test_arrays_are_read_only_copies_of_the_librarys():
