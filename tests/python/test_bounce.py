@@ -42,12 +42,12 @@ def test_furnace_every_method(tmp_path, method, rho):
 
 def test_cornell_equals_the_cli_csv(tmp_path):
     csv = tmp_path / "cb.csv"
-    subprocess.run([EXE, "solve", CORNELL, "--unit", "mm", "-q", "-o", str(csv)], check=True,
+    subprocess.run([EXE, "solve", CORNELL, "--unit", "mm", "--patches", "400", "-q", "-o", str(csv)], check=True,
                    stderr=subprocess.DEVNULL)
     rows = [ln.split(",") for ln in csv.read_text().splitlines() if ln and not ln.startswith("#")]
     head, rows = rows[0], rows[1:]
     cols = [head.index(c) for c in ("L_R", "L_G", "L_B")]
-    r = bounce.solve(CORNELL, unit="mm")
+    r = bounce.solve(CORNELL, unit="mm", patches=400)
     assert r.patches == len(rows)
     area = head.index("area")
     mismatch = 0
