@@ -22,6 +22,7 @@ PACKAGES=(
   python3-numpy python3-pytest   # the Python package (python/bounce) and its tests
   python3-venv python3-setuptools python3-wheel   # pip install of the package into a venv (pyproject.toml)
   mypy                       # the package's type hints checked (python.mypy)
+  python3-scipy              # the package's sparse F and K as a scipy LinearOperator (and their tests)
 )
 
 missing=()

@@ -84,6 +84,15 @@ void bn_flat_ff_diagnostics(const bn_flat *f, double out[12]);
  * values (float storage gives float values). BN_ENOTSUP under the hierarchy, which keeps no pairs. */
 bn_status bn_flat_form_factors(const bn_flat *f, double *F, char *msg, size_t msglen);
 
+/* F's nonzero stored entries as compressed sparse rows, without a dense copy (the hierarchy keeps no
+ * pairs: BN_ENOTSUP): indptr (N + 1) is filled, *nnz set to the entries' count; with indices and data
+ * (room for *nnz on entry) they are filled too. Call once without them to learn the size. */
+bn_status bn_flat_form_factors_csr(const bn_flat *f, size_t *indptr, size_t *indices, double *data, size_t *nnz,
+                                   char *msg, size_t msglen);
+/* y = K x (with_rho 1) or y = F x (0), N x 3 interleaved; x and y distinct. Any operator, the hierarchy's
+ * too (a scipy LinearOperator, a solver of the caller's). */
+bn_status bn_flat_apply(const bn_flat *f, int with_rho, const double *x, double *y, char *msg, size_t msglen);
+
 /* Relights a solved scene in place on its own F (bn_pipeline_relight): n materials by name, each with
  * a new reflectance (rho, n x 3) and/or emitted radiance (Le, n x 3; W m^-2 sr^-1); either array may be
  * NULL, and a row of three NaN leaves that material's value as it is. Every term, rest and L are solved

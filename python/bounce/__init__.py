@@ -35,7 +35,7 @@ PathLike = Union[str, "os.PathLike[str]"]
 
 __version__ = "0.1.0"   # the library's version (CMakeLists.txt's project VERSION; a test keeps them equal)
 
-__all__ = ["Scene", "solve", "Result", "Operator", "BounceError", "library_path", "library_source",
+__all__ = ["Scene", "solve", "Result", "Operator", "BounceError", "as_linear_operator", "library_path", "library_source",
            "library_version", "names", "__version__"]
 
 
@@ -176,6 +176,11 @@ def _load() -> Any:
     lib.bn_flat_solve_operator.restype = I
     lib.bn_flat_relight.argtypes = [P, S, ctypes.POINTER(ctypes.c_char_p), D, D, I, ctypes.c_char_p, S]
     lib.bn_flat_relight.restype = I
+    Sp = ctypes.POINTER(ctypes.c_size_t)
+    lib.bn_flat_form_factors_csr.argtypes = [P, Sp, Sp, D, Sp, ctypes.c_char_p, S]
+    lib.bn_flat_form_factors_csr.restype = I
+    lib.bn_flat_apply.argtypes = [P, I, D, D, ctypes.c_char_p, S]
+    lib.bn_flat_apply.restype = I
     lib.bn_flat_relight_gain.argtypes = [P]
     lib.bn_flat_relight_gain.restype = ctypes.c_double
     _lib = lib
@@ -228,6 +233,37 @@ def _rgb(option, name, v):
     if np.isnan(a).any():
         raise BounceError("EUSAGE", "%s[%r] = %r: nan is not a value" % (option, name, v))
     return np.repeat(a, 3) if a.size == 1 else a
+
+
+def _scipy_sparse() -> Any:
+    try:
+        import scipy.sparse   # type: ignore[import]
+        import scipy.sparse.linalg   # type: ignore[import]
+    except ImportError:
+        raise BounceError("EUSAGE", "this needs scipy (Debian: python3-scipy)")
+    return scipy.sparse
+
+
+def _form_factors(lib: Any, h: Any, n: int, sparse: bool) -> Any:
+    """F of handle h: dense (n x n), or CSR from the stored entries (two passes: count, then fill)."""
+    msg = ctypes.create_string_buffer(2048)
+    if not sparse:
+        F = np.empty((n, n))
+        st = lib.bn_flat_form_factors(h, F.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), msg, len(msg))
+        if st != 0:
+            _raise(lib, st, msg)
+        return F
+    sp = _scipy_sparse()
+    S, Dp = ctypes.POINTER(ctypes.c_size_t), ctypes.POINTER(ctypes.c_double)
+    indptr, nnz = np.zeros(n + 1, dtype=np.uintp), ctypes.c_size_t(0)
+    st = lib.bn_flat_form_factors_csr(h, indptr.ctypes.data_as(S), None, None, ctypes.byref(nnz), msg, len(msg))
+    indices, data = np.zeros(nnz.value, dtype=np.uintp), np.zeros(nnz.value)
+    if st == 0:
+        st = lib.bn_flat_form_factors_csr(h, indptr.ctypes.data_as(S), indices.ctypes.data_as(S),
+                                          data.ctypes.data_as(Dp), ctypes.byref(nnz), msg, len(msg))
+    if st != 0:
+        _raise(lib, st, msg)
+    return sp.csr_matrix((data, indices.astype(np.int64), indptr.astype(np.int64)), shape=(n, n))
 
 
 class Result:
@@ -304,16 +340,11 @@ class Result:
         self.relight_gain = self._lib.bn_flat_relight_gain(self._h)
         return self
 
-    def form_factors(self) -> np.ndarray:
+    def form_factors(self, sparse: bool = False) -> Any:
         """F as a dense patches x patches array (a copy: the library may store it in float, as here
-        its values are). Raises BounceError under the hierarchy, which keeps no pairs."""
-        n = self.patches
-        F = np.empty((n, n))
-        msg = ctypes.create_string_buffer(1024)
-        st = self._lib.bn_flat_form_factors(self._h, F.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), msg, len(msg))
-        if st != 0:
-            _raise(self._lib, st, msg)
-        return F
+        its values are), or with sparse=True a scipy.sparse CSR matrix made from the stored entries
+        (no dense copy). Raises BounceError under the hierarchy, which keeps no pairs."""
+        return _form_factors(self._lib, self._h, self.patches, sparse)
 
     def bake(self, path: PathLike, per_bounce: bool = True, mesh: Name = "elements", ldr: bool = False,
              exposure: Optional[float] = None, crease: float = 30.0) -> None:
@@ -469,18 +500,7 @@ class Scene:
         d = (ctypes.c_double * 12)()
         self._lib.bn_flat_ff_diagnostics(self._h, d)
         self.diagnostics = dict(zip(_DIAG, list(d)))
-        n = self.patches
-        F = np.empty((n, n))
-        st = self._lib.bn_flat_form_factors(self._h, F.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), msg, len(msg))
-        if st != 0:
-            _raise(self._lib, st, msg)
-        if sparse:
-            try:
-                import scipy.sparse   # type: ignore[import]
-            except ImportError:
-                raise BounceError("EUSAGE", "sparse=True needs scipy (python3-scipy)")
-            return scipy.sparse.csr_matrix(F)
-        return F
+        return _form_factors(self._lib, self._h, self.patches, sparse)
 
     def __del__(self):
         if getattr(self, "_h", None):
@@ -558,6 +578,27 @@ def _solve_operator(op, emission, method, bounces, tol, threads, progress):
             lib.bn_flat_free(h)
         _raise(lib, st, msg)
     return Result(h, lib)
+
+
+def as_linear_operator(result: Result, reflectance: bool = True) -> Any:
+    """K of a solved result (F with reflectance=False) as a scipy.sparse.linalg.LinearOperator on
+    vectors of 3 x patches values in bounce's order (patch-major: x.reshape(patches, 3)), whatever
+    stores it (dense, sparse, the hierarchy's links): for scipy's solvers and eigensolvers, e.g.
+    gmres(I - K, E.ravel()). Each product is one application of the library's operator."""
+    sp = _scipy_sparse()
+    n, lib, h = result.patches, result._lib, result._h
+    Dp = ctypes.POINTER(ctypes.c_double)
+
+    def matvec(x: np.ndarray) -> np.ndarray:
+        xa = np.ascontiguousarray(np.asarray(x, dtype=np.float64).reshape(3 * n))
+        y = np.empty(3 * n)
+        msg = ctypes.create_string_buffer(1024)
+        st = lib.bn_flat_apply(h, int(reflectance), xa.ctypes.data_as(Dp), y.ctypes.data_as(Dp), msg, len(msg))
+        if st != 0:
+            _raise(lib, st, msg)
+        return y
+
+    return sp.linalg.LinearOperator((3 * n, 3 * n), matvec=matvec, dtype=np.float64)
 
 
 def solve(path: Union[PathLike, "Scene", Operator], unit: Name = "m", method: Name = "auto",

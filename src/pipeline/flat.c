@@ -450,6 +450,69 @@ bn_status bn_flat_form_factors(const bn_flat *f, double *F, char *msg, size_t ms
     return st;
 }
 
+/* Row i's nonzero stored entries into cols/vals (room for N); *count set. */
+static bn_status bn__flat_row_nonzeros(const bn_flat *f, size_t i, size_t *cols, double *vals, size_t *count,
+                                       bn_error *err)
+{
+    size_t m = 0, k;
+    bn_status st = bn_transport_row_entries(f->p.k, i, cols, vals, count, err);
+    for (k = 0; st == BN_OK && k < *count; k++)
+        if (vals[k] != 0) {
+            cols[m] = cols[k];
+            vals[m++] = vals[k];
+        }
+    *count = m;
+    return st;
+}
+
+bn_status bn_flat_form_factors_csr(const bn_flat *f, size_t *indptr, size_t *indices, double *data, size_t *nnz,
+                                   char *msg, size_t msglen)
+{
+    bn_error err;
+    bn_status st = BN_OK;
+    size_t n = f ? f->p.n : 0, *cols = NULL, have = nnz ? *nnz : 0, total = 0;
+    double *vals = NULL;
+    bn_error_clear(&err);
+    if (!f || !f->p.k || !indptr || !nnz)
+        return bn__flat_fail(BN_EUSAGE, "no operator (or no indptr, nnz)", msg, msglen);
+    cols = bn__malloc_array(n + 1, sizeof *cols);
+    vals = bn__malloc_array(n + 1, sizeof *vals);
+    if (!cols || !vals)
+        st = bn_error_set(&err, BN_ENOMEM, "out of memory for a row of %zu patches", n);
+    indptr[0] = 0;
+    for (size_t i = 0; st == BN_OK && i < n; i++) {
+        size_t c;
+        st = bn__flat_row_nonzeros(f, i, cols, vals, &c, &err);
+        for (size_t k = 0; st == BN_OK && indices && data && k < c && total + k < have; k++) {
+            indices[total + k] = cols[k];
+            data[total + k] = vals[k];
+        }
+        total += c;
+        indptr[i + 1] = total;
+    }
+    free(cols);
+    free(vals);
+    if (st == BN_OK && indices && data && total > have)
+        st = bn_error_set(&err, BN_EUSAGE, "F has %zu nonzero entries, the arrays room for %zu", total, have);
+    *nnz = total;
+    if (st != BN_OK)
+        bn__flat_fail(st, err.msg, msg, msglen);
+    return st;
+}
+
+bn_status bn_flat_apply(const bn_flat *f, int with_rho, const double *x, double *y, char *msg, size_t msglen)
+{
+    bn_error err;
+    bn_status st;
+    bn_error_clear(&err);
+    if (!f || !f->p.k || !x || !y || x == y)
+        return bn__flat_fail(BN_EUSAGE, "apply: no operator, or x and y missing or the same array", msg, msglen);
+    st = with_rho ? bn_transport_apply(f->p.k, x, y, &err) : bn_transport_apply_F(f->p.k, x, y, &err);
+    if (st != BN_OK)
+        bn__flat_fail(st, err.msg, msg, msglen);
+    return st;
+}
+
 /* ---- a caller's operator ---- */
 
 typedef struct bn__flat_op {

@@ -130,6 +130,35 @@ def test_the_readme_python_lines_run(tmp_path):
     assert (tmp_path / "relit.exr").exists() and (tmp_path / "relit.sheet.png").exists()
 
 
+def test_sparse_form_factors_are_the_dense_ones_without_a_dense_copy():
+    pytest.importorskip("scipy")
+    s = bounce.Scene.load(CORNELL, unit="mm", patches=300)
+    S = s.form_factors(sparse=True)
+    F = s.form_factors()
+    assert S.shape == F.shape and S.nnz == np.count_nonzero(F)
+    assert np.array_equal(S.toarray(), F)
+    r = bounce.solve(CORNELL, unit="mm", patches=300, transport="sparse")
+    assert np.array_equal(r.form_factors(sparse=True).toarray(), r.form_factors())
+
+
+def test_k_as_a_scipy_linear_operator():
+    """scipy's GMRES on bounce's K reaches bounce's own L; K E is the KE term exactly; under the hierarchy too."""
+    spla = pytest.importorskip("scipy.sparse.linalg")
+    for transport in ("dense", "hierarchical"):
+        r = bounce.solve(CORNELL, unit="mm", patches=300, transport=transport, tol=1e-12, method="jacobi")
+        K = bounce.as_linear_operator(r)
+        n3 = 3 * r.patches
+        assert K.shape == (n3, n3)
+        assert np.array_equal(K.matvec(r.emission.ravel()), r.terms[1].ravel())
+        A = spla.LinearOperator((n3, n3), matvec=lambda x: x - K.matvec(x), dtype=np.float64)
+        L, info = spla.gmres(A, r.emission.ravel(), tol=1e-12, atol=0, restart=60, maxiter=100)
+        assert info == 0
+        assert np.abs(L - r.L.ravel()).max() <= 1e-8 * np.abs(r.L).max(), transport
+        F = bounce.as_linear_operator(r, reflectance=False)
+        ones = np.ones(n3)
+        assert np.allclose(r.reflectance.ravel() * F.matvec(ones), K.matvec(ones), rtol=1e-15, atol=0)
+
+
 def test_arrays_are_read_only_copies_of_the_librarys():
     r = bounce.solve(CORNELL, unit="mm", patches=300)
     lib, h, n = r._lib, r._h, r.patches
