@@ -181,6 +181,8 @@ def _load() -> Any:
     lib.bn_flat_form_factors_csr.restype = I
     lib.bn_flat_apply.argtypes = [P, I, D, D, ctypes.c_char_p, S]
     lib.bn_flat_apply.restype = I
+    lib.bn_flat_solve_loaded.argtypes = [P, ctypes.POINTER(_Opts), ctypes.c_char_p, S]
+    lib.bn_flat_solve_loaded.restype = I
     lib.bn_flat_relight_gain.argtypes = [P]
     lib.bn_flat_relight_gain.restype = ctypes.c_double
     _lib = lib
@@ -276,8 +278,9 @@ class Result:
     rest: Optional[np.ndarray]
     emission: np.ndarray
 
-    def __init__(self, handle: Any, lib: Any) -> None:
+    def __init__(self, handle: Any, lib: Any, scene: Optional["Scene"] = None) -> None:
         self._h, self._lib = handle, lib
+        self._scene = scene   # solved on a Scene's own K: the scene owns the handle (and its F)
         n = lib.bn_flat_patches(handle)
         self.patches = n
         self.area, self.normal, self.centroid, self.reflectance, self.face = _patch_data(lib, handle, n)
@@ -336,6 +339,8 @@ class Result:
         if st != 0:
             _raise(self._lib, st, msg)
         self.reflectance = _patch_data(self._lib, self._h, self.patches)[3]
+        if self._scene is not None:   # the scene's materials are the ones just edited
+            self._scene._refresh()
         self._answer()
         self.relight_gain = self._lib.bn_flat_relight_gain(self._h)
         return self
@@ -384,9 +389,9 @@ class Result:
             _raise(self._lib, st, msg)
 
     def __del__(self):
-        if getattr(self, "_h", None):
+        if getattr(self, "_h", None) and getattr(self, "_scene", None) is None:
             self._lib.bn_flat_free(self._h)
-            self._h = None
+        self._h = None
 
     def __repr__(self) -> str:
         return "<bounce.Result %d patches, %s on %s, %s after %d iterations, %d terms>" % (
@@ -482,11 +487,16 @@ class Scene:
         if st != 0:
             _raise(lib, st, msg)
         self._lib, self._h = lib, h
-        n = self.patches = lib.bn_flat_patches(h)
-        self.area, self.normal, self.centroid, self.reflectance, self.face = _patch_data(lib, h, n)
-        self.emission = _frozen(np.ctypeslib.as_array(lib.bn_flat_emission(h), shape=(n, 3)).copy())
+        self.patches = lib.bn_flat_patches(h)
+        self._refresh()
         self.diagnostics = None
         return self
+
+    def _refresh(self) -> None:
+        """The per-patch arrays from the library (again after a relight of a result solved on this scene)."""
+        n, lib, h = self.patches, self._lib, self._h
+        self.area, self.normal, self.centroid, self.reflectance, self.face = _patch_data(lib, h, n)
+        self.emission = _frozen(np.ctypeslib.as_array(lib.bn_flat_emission(h), shape=(n, 3)).copy())
 
     def form_factors(self, sparse: bool = False) -> Any:
         """F (patches x patches, row i: the share of patch i's view that each patch fills, with
@@ -615,11 +625,15 @@ def solve(path: Union[PathLike, "Scene", Operator], unit: Name = "m", method: Na
             raise BounceError("EUSAGE", "an Operator needs emission= (patches x 3)")
         return _solve_operator(path, emission, method, bounces, tol, threads, progress)
     lib = _load()
-    if isinstance(path, Scene):   # its file and meshing options (K is built again for the solve)
+    if isinstance(path, Scene):   # its own K (built once, kept with the scene): only the solver's options
         so = path.options
         o = _opts(lib, so["unit"], method, so["transport"], bounces, tol, so["patches"], so["patch_size"],
                   so["eps"], threads or so["threads"], progress or so["progress"], so["visibility"])
-        file = path.path
+        msg = ctypes.create_string_buffer(2048)
+        st = lib.bn_flat_solve_loaded(path._h, ctypes.byref(o), msg, len(msg))
+        if st != 0:
+            _raise(lib, st, msg)
+        return Result(path._h, lib, scene=path)
     else:
         o = _opts(lib, unit, method, transport, bounces, tol, patches, patch_size, eps, threads, progress, visibility)
         file = os.fspath(path)

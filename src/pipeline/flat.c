@@ -377,6 +377,37 @@ bn_status bn_flat_relight(bn_flat *f, size_t n, const char *const *materials, co
     return st;
 }
 
+bn_status bn_flat_solve_loaded(bn_flat *f, const bn_flat_opts *o, char *msg, size_t msglen)
+{
+    bn_flat tmp;
+    bn_error err;
+    bn_status st;
+    memset(&tmp, 0, sizeof tmp);
+    if (!f || !f->p.scene || !o)
+        return bn__flat_fail(BN_EUSAGE, "solve: no loaded scene (or no options)", msg, msglen);
+    if ((st = bn__flat_popts(o, &tmp, msg, msglen)) != BN_OK)   /* checked as at load; the solver's taken */
+        return st;
+    f->po.solve.method = tmp.po.solve.method;
+    f->po.method_auto = tmp.po.method_auto;
+    f->po.solve.bounces = tmp.po.solve.bounces;
+    f->po.solve.tol = tmp.po.solve.tol;
+    f->po.threads = tmp.po.threads;
+    f->po.solve.quiet = tmp.po.solve.quiet;
+    if ((st = bn_flat_operator(f, msg, msglen)) != BN_OK)
+        return st;
+    bn_solve_result_free(&f->p.res);
+    free(f->p.rest);
+    f->p.rest = NULL;
+    f->nhist = 0;
+    f->po.solve.monitor = bn__flat_monitor;
+    f->po.solve.monitor_user = f;
+    bn_error_clear(&err);
+    st = bn__flat_stage(f, f->sigint, 2, NULL, &err);
+    if (st != BN_OK)
+        bn__flat_fail(st, err.msg, msg, msglen);
+    return st;
+}
+
 void bn_flat_ff_diagnostics(const bn_flat *f, double out[12])
 {
     const bn_ff_diagnostics *d = &f->p.ff;

@@ -390,6 +390,28 @@ def test_scene_arrays_form_factors_and_solve(tmp_path):
     assert r.patches == s.patches and np.abs(r.L - 10).max() <= 1e-5
 
 
+def test_a_scene_keeps_its_F_across_solves_and_relights():
+    """bounce.solve(scene) solves on the scene's own K: built once (its report's seconds, to the bit,
+    unchanged by later solves), answers equal to a solve of the file; a relight shows in the scene."""
+    s = bounce.Scene.load(CORNELL, unit="mm", patches=300, transport="dense")
+    F = s.form_factors()
+    d0 = (ctypes.c_double * 12)()
+    s._lib.bn_flat_ff_diagnostics(s._h, d0)
+    a = bounce.solve(s, bounces=3, tol=1e-10)
+    b = bounce.solve(s, method="jacobi", bounces=5, tol=1e-10)
+    d1 = (ctypes.c_double * 12)()
+    s._lib.bn_flat_ff_diagnostics(s._h, d1)
+    assert list(d0) == list(d1) and d0[9] > 0                      # the same assembly: F not built again
+    fresh = bounce.solve(CORNELL, unit="mm", patches=300, transport="dense", bounces=3, tol=1e-10)
+    assert np.abs(a.L - fresh.L).max() <= 1e-8 * fresh.L.max() and len(b.terms) == 6
+    assert np.abs(b.L - a.L).max() <= 1e-8 * a.L.max()             # a's arrays survive b's solve
+    b.relight(rho={"red": 0.5})
+    assert (s.reflectance[s.reflectance[:, 1] == 0.5].shape[0] > 0)   # the scene follows the relight
+    assert np.array_equal(s.form_factors(), F)
+    del a, b
+    assert s.patches > 0 and np.isfinite(s.area).all()           # the results did not free the scene's handle
+
+
 def test_monitor_history(tmp_path):
     """The solver's monitor as arrays: in the furnace Jacobi's residual falls by exactly rho each
     iteration (K = rho F with rows of F summing to 1, so the error is rho^k times the first), and
