@@ -127,6 +127,15 @@ bn_status bn_flat_images(const bn_flat *f, const char *out, int width, int heigh
                          const double *look, double fov_deg, int previews, int smooth, int half, const char *gather,
                          const char *caller, char *msg, size_t msglen);
 
+/* The same images in memory, no file: out has room for bn_flat_layers(f) x height x width x 3 floats
+ * (layer-major, rows from the top, RGB; radiance, W m^-2 sr^-1); width and height must be given. */
+bn_status bn_flat_render(const bn_flat *f, int width, int height, int spp, const double *eye, const double *look,
+                         double fov_deg, int smooth, const char *gather, float *out, char *msg, size_t msglen);
+/* The layers of a solution (terms, rest, L: bounces + 3; 0 without terms) and layer l's name ("E", "KE",
+ * "K2E", ..., "rest", "L") into buf (NULL past the last). */
+int bn_flat_layers(const bn_flat *f);
+const char *bn_flat_layer_name(const bn_flat *f, int layer, char *buf, size_t size);
+
 /* A caller's own operator: apply(user, x, y) sets y = K x for N x 3 interleaved x (no aliasing)
  * and returns 0, or nonzero to stop the solve (BN_EINPUT, "the operator failed"). */
 typedef int (*bn_flat_apply_fn)(void *user, const double *x, double *y);

@@ -177,6 +177,11 @@ void bn_bounces_opts_default(bn_bounces_opts *o);
  * layer in float RGB), checked before any work: BN_ENOMEM naming the size, the layers and the limit
  * (max_memory; 0: 80% of physical memory) when above it, or when the product overflows. */
 bn_status bn_bounces_check_memory(int width, int height, int bounces, size_t max_memory, bn_error *err);
+/* The images of bn_bounces_write without the files: imgs (bn_layer_count(bounces) of them, zeroed by the
+ * caller; allocated here, freed with bn_image_free) receive each layer as o says (gather, smooth, seed,
+ * threads); o->output, previews and exposure are not used. */
+bn_status bn_bounces_render(const bn_scene *scene, const bn_rt *rt, const bn_camera *cam, const double *const *layers,
+                            int bounces, const bn_bounces_opts *o, bn_image *imgs, bn_error *err);
 bn_status bn_bounces_write(const bn_scene *scene, const bn_rt *rt, const bn_camera *cam, const double *const *layers,
                            int bounces, const bn_bounces_opts *o, double *ev_used, bn_error *err);
 

@@ -181,6 +181,13 @@ def _load() -> Any:
     lib.bn_flat_form_factors_csr.restype = I
     lib.bn_flat_apply.argtypes = [P, I, D, D, ctypes.c_char_p, S]
     lib.bn_flat_apply.restype = I
+    lib.bn_flat_render.argtypes = [P, I, I, I, D, D, ctypes.c_double, I, ctypes.c_char_p,
+                                   ctypes.POINTER(ctypes.c_float), ctypes.c_char_p, S]
+    lib.bn_flat_render.restype = I
+    lib.bn_flat_layers.argtypes = [P]
+    lib.bn_flat_layers.restype = I
+    lib.bn_flat_layer_name.argtypes = [P, I, ctypes.c_char_p, S]
+    lib.bn_flat_layer_name.restype = ctypes.c_char_p
     lib.bn_flat_solve_loaded.argtypes = [P, ctypes.POINTER(_Opts), ctypes.c_char_p, S]
     lib.bn_flat_solve_loaded.restype = I
     lib.bn_flat_relight_gain.argtypes = [P]
@@ -387,6 +394,31 @@ class Result:
                                       b"python bounce package", msg, len(msg))
         if st != 0:
             _raise(self._lib, st, msg)
+
+    def render(self, size: Tuple[int, int] = (256, 256), spp: Optional[int] = None,
+               eye: Optional[Sequence[float]] = None, look: Optional[Sequence[float]] = None,
+               fov: Optional[float] = None, smooth: bool = False,
+               gather: Union[bool, Name] = True) -> Dict[str, np.ndarray]:
+        """The images of images() in memory, no file: {"E": ..., "KE": ..., "K2E": ..., "rest": ...,
+        "L": ...}, each a float32 array of shape (height, width, 3), rows from the top, radiance in
+        W m^-2 sr^-1 (camera and gather as images() takes them)."""
+        if isinstance(gather, bool):
+            gather = names("gather")[0 if gather else 1]
+        w, h = (_int("size", v, bits=32) for v in size)
+        lib, nl = self._lib, self._lib.bn_flat_layers(self._h)
+        out = np.zeros((max(nl, 1), h, w, 3), dtype=np.float32) if w > 0 and h > 0 else np.zeros(0, np.float32)
+        Dp = ctypes.POINTER(ctypes.c_double)
+        vec = lambda v: None if v is None else (ctypes.c_double * 3)(*[float(x) for x in v])
+        e, lk = vec(eye), vec(look)
+        msg = ctypes.create_string_buffer(2048)
+        st = lib.bn_flat_render(self._h, w, h, int(spp or 0), ctypes.cast(e, Dp) if e else None,
+                                ctypes.cast(lk, Dp) if lk else None, float(fov or 0), int(smooth),
+                                _name("gather", gather), out.ctypes.data_as(ctypes.POINTER(ctypes.c_float)),
+                                msg, len(msg))
+        if st != 0:
+            _raise(lib, st, msg)
+        buf = ctypes.create_string_buffer(32)
+        return {lib.bn_flat_layer_name(self._h, k, buf, len(buf)).decode(): _frozen(out[k]) for k in range(nl)}
 
     def __del__(self):
         if getattr(self, "_h", None) and getattr(self, "_scene", None) is None:

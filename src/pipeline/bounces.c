@@ -38,10 +38,10 @@ static char *bn__sibling(const char *path, const char *suffix)
 }
 
 /* The layers' images at the camera's size, rendered (flat, or smooth through a bake). */
-static bn_status bn__bounces_render(const bn_scene *scene, const bn_rt *rt, const bn_camera *cam,
-                                    const double *const *layers, size_t nl, const bn_bounces_opts *o, bn_image *imgs,
-                                    bn_error *err)
+bn_status bn_bounces_render(const bn_scene *scene, const bn_rt *rt, const bn_camera *cam, const double *const *layers,
+                            int bounces, const bn_bounces_opts *o, bn_image *imgs, bn_error *err)
 {
+    size_t nl = (size_t)bn_layer_count(bounces);
     bn_bake *bake = NULL;
     bn_status st = BN_OK;
     for (size_t l = 0; l < nl && st == BN_OK; l++)
@@ -143,7 +143,7 @@ bn_status bn_bounces_write(const bn_scene *scene, const bn_rt *rt, const bn_came
     double ev = o->ev;
     bn_status st = imgs && named && names && attrs ? BN_OK : bn_error_set(err, BN_ENOMEM, "out of memory");
     if (st == BN_OK)
-        st = bn__bounces_render(scene, rt, cam, layers, nl, o, imgs, err);
+        st = bn_bounces_render(scene, rt, cam, layers, bounces, o, imgs, err);
     if (st == BN_OK) {
         for (size_t l = 0; l < nl; l++) {
             named[l].name = bn_layer_name((int)l, bounces, names[l], sizeof names[l]);

@@ -728,23 +728,22 @@ bn_status bn_flat_bake(const bn_flat *f, const char *out, int per_bounce, const 
     return st;
 }
 
-bn_status bn_flat_images(const bn_flat *f, const char *out, int width, int height, int spp, const double *eye,
-                         const double *look, double fov_deg, int previews, int smooth, int half, const char *gather,
-                         const char *caller, char *msg, size_t msglen)
+/* The camera of bn_flat_images and bn_flat_render (the scene's sidecar or default, then what is given),
+ * validated with the images' memory, and the layers (at most 72); *gather_mode from `gather`. */
+static bn_status bn__flat_view(const bn_flat *f, int width, int height, int spp, const double *eye,
+                               const double *look, double fov_deg, const char *gather, bn_camera *cam_out,
+                               const double **layers, int *gather_mode, char *msg, size_t msglen)
 {
     int nb = f->p.res.nterms - 1;
-    const double *layers[72];
     bn_camera cam;
-    bn_bounces_opts bo;
     bn_error err;
     bn_status st;
-    char solver[160], patches[32];
     if (!f->p.scene || !f->p.rt)
         return bn__flat_fail(BN_EUSAGE, "images: this result has no scene (a caller's operator)", msg, msglen);
     if (nb < 0 || bn_layer_count(nb) > 72)
         return bn__flat_fail(BN_EUSAGE, "images: the solve kept no terms (bounces >= 0 needed)", msg, msglen);
-    int mode;
-    if ((st = bn__flat_name("images: gather", gather, bn_gather_mode_names(), bn__gather_index, &mode, msg, msglen)))
+    if ((st = bn__flat_name("images: gather", gather, bn_gather_mode_names(), bn__gather_index, gather_mode, msg,
+                            msglen)))
         return st;
     bn_error_clear(&err);
     bn_camera_default(f->p.scene, &cam);
@@ -767,6 +766,64 @@ bn_status bn_flat_images(const bn_flat *f, const char *out, int width, int heigh
         return bn__flat_fail(st, err.msg, msg, msglen);
     for (int l = 0; l < bn_layer_count(nb); l++)
         layers[l] = l <= nb ? f->p.res.terms[l] : l == nb + 1 ? f->p.rest : f->p.res.L;
+    *cam_out = cam;
+    return BN_OK;
+}
+
+int bn_flat_layers(const bn_flat *f) { return f->p.res.nterms > 0 ? bn_layer_count(f->p.res.nterms - 1) : 0; }
+
+const char *bn_flat_layer_name(const bn_flat *f, int layer, char *buf, size_t size)
+{
+    return layer >= 0 && layer < bn_flat_layers(f) ? bn_layer_name(layer, f->p.res.nterms - 1, buf, size) : NULL;
+}
+
+bn_status bn_flat_render(const bn_flat *f, int width, int height, int spp, const double *eye, const double *look,
+                         double fov_deg, int smooth, const char *gather, float *out, char *msg, size_t msglen)
+{
+    const double *layers[72];
+    bn_image imgs[72];
+    bn_camera cam;
+    bn_bounces_opts bo;
+    bn_error err;
+    int mode, nb = f->p.res.nterms - 1;
+    bn_status st = bn__flat_view(f, width, height, spp, eye, look, fov_deg, gather, &cam, layers, &mode, msg, msglen);
+    if (st != BN_OK)
+        return st;
+    if (!out || cam.width != width || cam.height != height)
+        return bn__flat_fail(BN_EUSAGE, "render: width and height must be given (> 0) with room for them in out",
+                             msg, msglen);
+    memset(imgs, 0, sizeof imgs);
+    bn_bounces_opts_default(&bo);
+    bo.smooth = smooth;
+    bo.gather = mode == BN_GATHER_FINAL;
+    bo.log.quiet = 1;
+    bn_error_clear(&err);
+    st = bn_bounces_render(f->p.scene, f->p.rt, &cam, layers, nb, &bo, imgs, &err);
+    size_t px = (size_t)width * (size_t)height * 3;
+    for (int l = 0; l < bn_layer_count(nb); l++) {
+        if (st == BN_OK)
+            memcpy(out + (size_t)l * px, imgs[l].rgb, px * sizeof *out);
+        bn_image_free(&imgs[l]);
+    }
+    if (st != BN_OK)
+        bn__flat_fail(st, err.msg, msg, msglen);
+    return st;
+}
+
+bn_status bn_flat_images(const bn_flat *f, const char *out, int width, int height, int spp, const double *eye,
+                         const double *look, double fov_deg, int previews, int smooth, int half, const char *gather,
+                         const char *caller, char *msg, size_t msglen)
+{
+    int nb = f->p.res.nterms - 1, mode;
+    const double *layers[72];
+    bn_camera cam;
+    bn_bounces_opts bo;
+    bn_error err;
+    char solver[160], patches[32];
+    bn_status st = bn__flat_view(f, width, height, spp, eye, look, fov_deg, gather, &cam, layers, &mode, msg, msglen);
+    if (st != BN_OK)
+        return st;
+    bn_error_clear(&err);
     snprintf(solver, sizeof solver, "%s: %s after %zu iterations, residual %.3g", bn_solve_method_name(f->p.method_used),
              bn_stop_reason_name(f->p.res.reason), f->p.res.iterations, f->p.res.residual_max);
     snprintf(patches, sizeof patches, "%zu", f->p.n);

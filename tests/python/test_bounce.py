@@ -159,6 +159,23 @@ def test_k_as_a_scipy_linear_operator():
         assert np.allclose(r.reflectance.ravel() * F.matvec(ones), K.matvec(ones), rtol=1e-15, atol=0)
 
 
+def test_images_in_memory():
+    """render(): without the gather each pixel (1 sample) is the radiance of the patch it sees, L is the
+    sum of the other layers, and the final gather's L is near the flat one's on average."""
+    r = bounce.solve(CORNELL, unit="mm", patches=300, bounces=2)
+    flat = r.render(size=(48, 40), spp=1, gather=False)
+    assert list(flat) == ["E", "KE", "K2E", "rest", "L"]
+    assert all(a.shape == (40, 48, 3) and a.dtype == np.float32 and not a.flags.writeable for a in flat.values())
+    values = set(np.float32(r.L).ravel().tolist()) | {0.0}
+    assert set(flat["L"].ravel().tolist()) <= values              # every pixel a patch's L (or a miss)
+    total = flat["E"] + flat["KE"] + flat["K2E"] + flat["rest"]
+    assert np.abs(total - flat["L"]).max() <= 1e-5 * flat["L"].max()
+    gathered = r.render(size=(48, 40))
+    assert abs(gathered["L"].mean() / flat["L"].mean() - 1) < 0.1
+    with pytest.raises(bounce.BounceError):
+        r.render(size=(0, 10))
+
+
 def test_arrays_are_read_only_copies_of_the_librarys():
     r = bounce.solve(CORNELL, unit="mm", patches=300)
     lib, h, n = r._lib, r._h, r.patches
