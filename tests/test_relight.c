@@ -83,7 +83,7 @@ BN_TEST(dense_relight_equals_a_fresh_solve_of_the_edited_scene)
     bn_pipeline p, q;
     bn_material_edit e[2];
     bn_error err;
-    quiet_opts(&o, "dense", 300);
+    quiet_opts(&o, "dense", 200);
     run(&o, &p);
     double *L0 = malloc(3 * p.n * sizeof *L0);
     memcpy(L0, p.res.L, 3 * p.n * sizeof *L0);
