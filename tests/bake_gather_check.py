@@ -107,8 +107,8 @@ def main():
     res = {}
     for mode in ("final", "none"):
         glb = os.path.join(outdir, "cornell-%s.glb" % mode)
-        run([bounce, "bake", scene, "--unit", "mm", "-q", "--per-bounce", "--gather", mode,
-             "-o", glb] + RAYS)
+        run([bounce, "bake", scene, "--unit", "mm", "-q", "--per-bounce", "--gather", mode,   # one F for both
+             "--cache", os.path.join(outdir, "cornell.bnff"), "-o", glb] + RAYS)
         res[mode] = errors(bounce, scene, glb, outdir, 4096)
         print("--gather %s: L median %.2f%% 95th %.2f%%; K2E median %.2f%% 95th %.2f%%" % (
             mode, 100 * res[mode]["L"][0], 100 * res[mode]["L"][1], 100 * res[mode]["K2E"][0], 100 * res[mode]["K2E"][1]))
