@@ -5,6 +5,7 @@
 #define BOUNCE_FLAT_H
 
 #include <stddef.h>
+#include <stdint.h>
 #include "bounce/status.h"
 
 #ifdef __cplusplus
@@ -34,6 +35,16 @@ typedef struct bn_flat_opts {
     const char *visibility;   /* partly occluded pairs' form factors: "exact" (default) or "rays" (as
                                  `--ff-visibility`; the hierarchy's links above the patches always
                                  take rays) */
+    /* The command line's other solve options, by the same names (0 / NULL: their defaults). */
+    size_t max_iter;          /* --max-iter (default 100000) */
+    double atol;              /* --atol, absolute tolerance (default 0) */
+    const char *stop;         /* --stop: one of bn_flat_names("stop") */
+    uint64_t seed;            /* --seed: every sampled quantity (0: the default, 1) */
+    const char *precision;    /* --precision: "auto" (default) or one of bn_flat_names("precision") */
+    const char *storage;      /* --storage: one of bn_flat_names("storage") (the transport's when given) */
+    const char *cache;        /* --cache FILE: dense and sparse F read from it when its key matches, else
+                                 written to it (NULL: none) */
+    const char *ff;           /* --ff: one of bn_flat_names("ff") (default analytic) */
 } bn_flat_opts;
 void bn_flat_opts_default(bn_flat_opts *o);
 /* sizeof(bn_flat_opts) in this library: a binding that lays the struct out itself (Python's ctypes)

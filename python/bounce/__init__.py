@@ -88,7 +88,10 @@ class _Opts(ctypes.Structure):
     _fields_ = [("unit", ctypes.c_char_p), ("method", ctypes.c_char_p), ("transport", ctypes.c_char_p),
                 ("bounces", ctypes.c_int), ("tol", ctypes.c_double), ("patches", ctypes.c_size_t),
                 ("patch_size", ctypes.c_double), ("eps", ctypes.c_double), ("threads", ctypes.c_int),
-                ("quiet", ctypes.c_int), ("sigint", ctypes.c_int), ("visibility", ctypes.c_char_p)]
+                ("quiet", ctypes.c_int), ("sigint", ctypes.c_int), ("visibility", ctypes.c_char_p),
+                ("max_iter", ctypes.c_size_t), ("atol", ctypes.c_double), ("stop", ctypes.c_char_p),
+                ("seed", ctypes.c_uint64), ("precision", ctypes.c_char_p), ("storage", ctypes.c_char_p),
+                ("cache", ctypes.c_char_p), ("ff", ctypes.c_char_p)]
 
 
 _lib = None
@@ -461,8 +464,31 @@ def _float(option, v):
     return float(v)
 
 
+# The command line's further solve options, by the same names (None: the library's default).
+_MORE = ("max_iter", "atol", "stop", "seed", "precision", "storage", "cache", "ff")
+
+
+def _more(o: Any, more: Mapping[str, Any]) -> None:
+    """max_iter, atol, stop, seed, precision, storage, cache, ff into the flat options (types checked
+    here, values and names by the library)."""
+    unknown = set(more) - set(_MORE)
+    if unknown:
+        raise BounceError("EUSAGE", "unknown option %s (the solve options are %s)" % (sorted(unknown)[0], ", ".join(_MORE)))
+    if more.get("max_iter") is not None:
+        o.max_iter = _int("max_iter", more["max_iter"], unsigned=True)
+    if more.get("atol") is not None:
+        o.atol = _float("atol", more["atol"])
+    if more.get("seed") is not None:
+        o.seed = _int("seed", more["seed"], unsigned=True)
+    for name in ("stop", "precision", "storage", "ff"):
+        if more.get(name) is not None:
+            setattr(o, name, _name(name, more[name]))
+    if more.get("cache") is not None:
+        o.cache = os.fsencode(os.fspath(more["cache"]))
+
+
 def _opts(lib, unit="m", method="auto", transport="auto", bounces=3, tol=None, patches=None, patch_size=None,
-          eps=None, threads=0, progress=False, visibility="exact"):
+          eps=None, threads=0, progress=False, visibility="exact", **more):
     """The flat options: the library's defaults, then what was given (None: the default). Values are
     checked by the library, once for every front end; here only their Python types."""
     o = _Opts()
@@ -481,6 +507,7 @@ def _opts(lib, unit="m", method="auto", transport="auto", bounces=3, tol=None, p
     o.threads = _int("threads", threads, bits=32)
     o.quiet = 0 if progress else 1
     o.sigint = 1 if _main_thread() else 0   # Ctrl-C stops the C loops, then raises KeyboardInterrupt
+    _more(o, more)
     return o
 
 
@@ -506,12 +533,12 @@ class Scene:
     @classmethod
     def load(cls, path: PathLike, unit: Name = "m", patches: Optional[int] = None,
              patch_size: Optional[float] = None, transport: Name = "auto", eps: Optional[float] = None,
-             threads: int = 0, progress: bool = False, visibility: Name = "exact") -> "Scene":
+             threads: int = 0, progress: bool = False, visibility: Name = "exact", **more: Any) -> "Scene":
         lib = _load()
         self = cls()
         self.path = os.fspath(path)
         self.options = dict(unit=unit, patches=patches, patch_size=patch_size, transport=transport, eps=eps,
-                            threads=threads, progress=progress, visibility=visibility)
+                            threads=threads, progress=progress, visibility=visibility, **more)
         o = _opts(lib, **self.options)
         h = ctypes.c_void_p()
         msg = ctypes.create_string_buffer(2048)
@@ -576,7 +603,7 @@ def _operator_output(what, v, shape):
     return a
 
 
-def _solve_operator(op, emission, method, bounces, tol, threads, progress):
+def _solve_operator(op, emission, method, bounces, tol, threads, progress, **more):
     lib = _load()
     n = op.patches
     E = np.ascontiguousarray(emission, dtype=np.float64)
@@ -606,7 +633,7 @@ def _solve_operator(op, emission, method, bounces, tol, threads, progress):
 
     cb = _APPLY(tramp)
     rb = _ROW(rtramp) if op.row is not None else _ROW()
-    o = _opts(lib, method=method, bounces=bounces, tol=tol, threads=threads, progress=progress)
+    o = _opts(lib, method=method, bounces=bounces, tol=tol, threads=threads, progress=progress, **more)
     h = ctypes.c_void_p()
     msg = ctypes.create_string_buffer(2048)
     st = lib.bn_flat_solve_operator(n, E.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), cb, rb, None, ctypes.byref(o),
@@ -646,7 +673,8 @@ def as_linear_operator(result: Result, reflectance: bool = True) -> Any:
 def solve(path: Union[PathLike, "Scene", Operator], unit: Name = "m", method: Name = "auto",
           transport: Name = "auto", bounces: int = 3, tol: Optional[float] = None, patches: Optional[int] = None,
           patch_size: Optional[float] = None, eps: Optional[float] = None, threads: int = 0,
-          progress: bool = False, emission: Optional[npt.ArrayLike] = None, visibility: Name = "exact") -> Result:
+          progress: bool = False, emission: Optional[npt.ArrayLike] = None, visibility: Name = "exact",
+          **more: Any) -> Result:
     """Loads, meshes, builds K and solves L = E + K L for the scene file at `path`, keeping the
     terms K^0 E .. K^bounces E. Options are those of `bounce solve` (defaults alike; visibility is
     --ff-visibility: "exact" or "rays"). Raises
@@ -655,19 +683,21 @@ def solve(path: Union[PathLike, "Scene", Operator], unit: Name = "m", method: Na
     if isinstance(path, Operator):
         if emission is None:
             raise BounceError("EUSAGE", "an Operator needs emission= (patches x 3)")
-        return _solve_operator(path, emission, method, bounces, tol, threads, progress)
+        return _solve_operator(path, emission, method, bounces, tol, threads, progress, **more)
     lib = _load()
     if isinstance(path, Scene):   # its own K (built once, kept with the scene): only the solver's options
         so = path.options
         o = _opts(lib, so["unit"], method, so["transport"], bounces, tol, so["patches"], so["patch_size"],
-                  so["eps"], threads or so["threads"], progress or so["progress"], so["visibility"])
+                  so["eps"], threads or so["threads"], progress or so["progress"], so["visibility"],
+                  **{**{k: so[k] for k in _MORE if k in so}, **more})
         msg = ctypes.create_string_buffer(2048)
         st = lib.bn_flat_solve_loaded(path._h, ctypes.byref(o), msg, len(msg))
         if st != 0:
             _raise(lib, st, msg)
         return Result(path._h, lib, scene=path)
     else:
-        o = _opts(lib, unit, method, transport, bounces, tol, patches, patch_size, eps, threads, progress, visibility)
+        o = _opts(lib, unit, method, transport, bounces, tol, patches, patch_size, eps, threads, progress, visibility,
+                  **more)
         file = os.fspath(path)
     h = ctypes.c_void_p()
     msg = ctypes.create_string_buffer(2048)

@@ -139,6 +139,58 @@ static bn_status bn__flat_ranges(const bn_flat_opts *o, char *msg, size_t msglen
     return bn__flat_fail(BN_EUSAGE, t, msg, msglen);
 }
 
+static int bn__stop_index(const char *s)
+{
+    bn_solve_stop v;
+    return bn_solve_stop_parse(s, &v) == 0 ? (int)v : -1;
+}
+
+static int bn__precision_index(const char *s)
+{
+    bn_precision v;
+    return !strcmp(s, "auto") ? 0 : bn_precision_parse(s, &v) == 0 ? (int)v + 1 : -1;
+}
+
+static int bn__ff_index(const char *s)
+{
+    bn_ff_method v;
+    return bn_ff_method_parse(s, &v) == 0 ? (int)v : -1;
+}
+
+static int bn__storage_index(const char *s) { return bn_storage_exists(s) ? 0 : -1; }
+
+/* The command line's other solve options (max_iter, atol, stop, seed, precision, storage, cache, ff):
+ * names checked here, values by bn_pipeline_opts_check. */
+static bn_status bn__flat_more(const bn_flat_opts *o, bn_pipeline_opts *po, char *msg, size_t msglen)
+{
+    int v;
+    if (o->max_iter)
+        po->solve.max_iter = o->max_iter;
+    po->solve.atol = o->atol;
+    if (o->seed)
+        po->ff.seed = o->seed;
+    po->ff.cache_path = o->cache;
+    if (o->stop && bn__flat_name("stop", o->stop, bn_solve_stop_names(), bn__stop_index, &v, msg, msglen) != BN_OK)
+        return BN_EUSAGE;
+    if (o->stop)
+        po->solve.stop = (bn_solve_stop)v;
+    if (o->precision && bn__flat_name("precision", o->precision, "auto|float|double", bn__precision_index, &v, msg,
+                                      msglen) != BN_OK)
+        return BN_EUSAGE;
+    if (o->precision && v > 0) {
+        po->ff.precision = (bn_precision)(v - 1);
+        po->auto_precision = 0;
+    }
+    if (o->storage && bn__flat_name("storage", o->storage, bn_storage_names(), bn__storage_index, &v, msg, msglen))
+        return BN_EUSAGE;
+    po->ff.storage = o->storage;
+    if (o->ff && bn__flat_name("ff", o->ff, bn_ff_method_names(), bn__ff_index, &v, msg, msglen) != BN_OK)
+        return BN_EUSAGE;
+    if (o->ff)
+        po->ff.method = (bn_ff_method)v;
+    return BN_OK;
+}
+
 /* A solver by its name (bn_solve_method_names). */
 static bn_status bn__flat_method(const char *name, bn_solve_method *out, char *msg, size_t msglen)
 {
@@ -181,7 +233,7 @@ static bn_status bn__flat_popts(const bn_flat_opts *o, bn_flat *f, char *msg, si
         snprintf(t, sizeof t, "visibility '%.64s' is not one of %s", o->visibility, bn_ff_visibility_names());
         return bn__flat_fail(BN_EUSAGE, t, msg, msglen);
     }
-    if (bn__flat_ranges(o, msg, msglen) != BN_OK)
+    if (bn__flat_ranges(o, msg, msglen) != BN_OK || bn__flat_more(o, po, msg, msglen) != BN_OK)
         return BN_EUSAGE;
     po->solve.bounces = o->bounces < 0 ? -1 : o->bounces;
     po->solve.tol = o->tol;
@@ -579,10 +631,15 @@ static bn_status bn__flat_op_opts(size_t n, int rows, const bn_flat_opts *o, bn_
 {
     bn_error err;
     bn_status st;
+    bn_pipeline_opts more;   /* max_iter, atol, stop as for a scene's solve */
     bn_error_clear(&err);
-    if (bn__flat_ranges(o, msg, msglen) != BN_OK)
+    bn_pipeline_opts_default(&more);
+    if (bn__flat_ranges(o, msg, msglen) != BN_OK || bn__flat_more(o, &more, msg, msglen) != BN_OK)
         return BN_EUSAGE;
     bn_solve_opts_default(so);
+    so->max_iter = more.solve.max_iter;
+    so->atol = more.solve.atol;
+    so->stop = more.solve.stop;
     so->method = rows ? BN_SOLVE_GAUSS_SEIDEL : BN_SOLVE_JACOBI;
     if (o->method && strcmp(o->method, "auto") != 0 && (st = bn__flat_method(o->method, &so->method, msg, msglen)) != BN_OK)
         return st;

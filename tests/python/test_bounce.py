@@ -176,6 +176,32 @@ def test_images_in_memory():
         r.render(size=(0, 10))
 
 
+def test_the_cli_solve_options_by_their_names(tmp_path):
+    """max_iter, atol, stop, seed, precision, storage, cache, ff as `bounce solve` takes them."""
+    kw = dict(unit="mm", patches=100)
+    assert bounce.solve(CORNELL, precision="double", **kw).transport == "dense-double"
+    assert bounce.solve(CORNELL, storage="sparse", **kw).transport == "csr-float"
+    with pytest.raises(bounce.BounceError) as e:
+        bounce.solve(CORNELL, max_iter=2, **kw)
+    assert e.value.status == "ENOTCONV" and "within 2 iterations" in str(e.value)
+    a = bounce.solve(CORNELL, stop="bound", atol=1e-9, **kw)
+    assert a.iterations > bounce.solve(CORNELL, **kw).iterations   # the bound stops later than the residual
+    cache = tmp_path / "ff.bnff"
+    first = bounce.solve(CORNELL, cache=cache, **kw)
+    stamp = os.stat(cache).st_mtime_ns
+    again = bounce.solve(CORNELL, cache=str(cache), **kw)          # read, not written again
+    assert os.stat(cache).st_mtime_ns == stamp and np.array_equal(first.L, again.L)
+    h5, h6 = (bounce.solve(CORNELL, ff="hemisphere", seed=s, **kw).L for s in (5, 6))
+    assert not np.array_equal(h5, h6) and np.abs(h5 - h6).max() < 0.2 * h5.max()   # the seed is used
+    for bad, needle in ((dict(stop="never"), "stop 'never'"), (dict(precision="half"), "precision 'half'"),
+                        (dict(storage="tree"), "storage 'tree'"), (dict(ff="magic"), "ff 'magic'"),
+                        (dict(colour=1), "unknown option colour"), (dict(atol=-1), "atol -1"),
+                        (dict(max_iter=-3), "max_iter -3")):
+        with pytest.raises(bounce.BounceError) as e:
+            bounce.solve(CORNELL, **kw, **bad)
+        assert needle in str(e.value), str(e.value)
+
+
 def test_arrays_are_read_only_copies_of_the_librarys():
     r = bounce.solve(CORNELL, unit="mm", patches=300)
     lib, h, n = r._lib, r._h, r.patches
