@@ -148,6 +148,7 @@ BN_TEST(hierarchy_relight_is_a_solve_on_the_same_links)
     BN_ASSERT_LE(frozen, level);
     o.hier.eps /= 4;   /* refine 1: links made for the new light, the fresh refinement's answer */
     o.load.nedits = 0;
+    o.keep_rt = 1;     /* its ray scene made again, the old one released (the sanitized run's leak check) */
     run(&o, &r);
     if (bn_pipeline_relight(&o, &r, e, 2, 1, &err) != BN_OK)
         BN_FAIL("relight with refine: %s", err.msg);

@@ -629,9 +629,11 @@ bn_status bn_pipeline_relight(const bn_pipeline_opts *o, bn_pipeline *p, const b
         memcpy(L0, p->res.L, 3 * p->n * sizeof *L0);
     if (!rho || (p->res.L && !L0))
         st = bn_error_set(err, BN_ENOMEM, "out of memory for the reflectances of %zu patches", p->n);
-    if (st == BN_OK && refine && p->hierarchical) {   /* new links for the new light */
+    if (st == BN_OK && refine && p->hierarchical) {   /* new links for the new light (and a new ray scene) */
         bn_transport_destroy(p->k);
+        bn_rt_destroy(p->rt);
         p->k = NULL;
+        p->rt = NULL;
         st = bn_pipeline_operator(o, p, err);
     } else if (st == BN_OK) {
         bn_scene_patch_reflectance(p->scene, rho);
