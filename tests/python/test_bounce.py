@@ -132,12 +132,12 @@ def test_the_readme_python_lines_run(tmp_path):
 
 def test_sparse_form_factors_are_the_dense_ones_without_a_dense_copy():
     pytest.importorskip("scipy")
-    s = bounce.Scene.load(CORNELL, unit="mm", patches=300)
+    s = bounce.Scene.load(CORNELL, unit="mm", patches=150)
     S = s.form_factors(sparse=True)
     F = s.form_factors()
     assert S.shape == F.shape and S.nnz == np.count_nonzero(F)
     assert np.array_equal(S.toarray(), F)
-    r = bounce.solve(CORNELL, unit="mm", patches=300, transport="sparse")
+    r = bounce.solve(CORNELL, unit="mm", patches=150, transport="sparse")
     assert np.array_equal(r.form_factors(sparse=True).toarray(), r.form_factors())
 
 
@@ -145,7 +145,7 @@ def test_k_as_a_scipy_linear_operator():
     """scipy's GMRES on bounce's K reaches bounce's own L; K E is the KE term exactly; under the hierarchy too."""
     spla = pytest.importorskip("scipy.sparse.linalg")
     for transport in ("dense", "hierarchical"):
-        r = bounce.solve(CORNELL, unit="mm", patches=300, transport=transport, tol=1e-12, method="jacobi")
+        r = bounce.solve(CORNELL, unit="mm", patches=150, transport=transport, tol=1e-12, method="jacobi")
         K = bounce.as_linear_operator(r)
         n3 = 3 * r.patches
         assert K.shape == (n3, n3)
@@ -230,10 +230,10 @@ def _edited_cornell(tmp_path, light, red):
 
 
 def test_relight_equals_a_fresh_solve_of_the_edited_file(tmp_path):
-    r = bounce.solve(CORNELL, unit="mm", patches=300, transport="dense", tol=1e-12, bounces=4)
+    r = bounce.solve(CORNELL, unit="mm", patches=200, transport="dense", tol=1e-12, bounces=4)
     L_before = r.L
     assert r.relight(Le={"light": (34, 24, 8)}, rho={"red": (0.1, 0.6, 0.1)}) is r
-    fresh = bounce.solve(_edited_cornell(tmp_path, (34, 24, 8), (0.1, 0.6, 0.1)), unit="mm", patches=300,
+    fresh = bounce.solve(_edited_cornell(tmp_path, (34, 24, 8), (0.1, 0.6, 0.1)), unit="mm", patches=200,
                          transport="dense", tol=1e-12, bounces=4)
     assert np.abs(r.L - L_before).max() > 0.5 * np.abs(L_before).max()   # it changed ...
     for a, b in zip(r.terms + [r.rest, r.L, r.emission, r.reflectance], fresh.terms + [fresh.rest, fresh.L, fresh.emission, fresh.reflectance]):
@@ -436,7 +436,7 @@ def test_scene_arrays_form_factors_and_solve(tmp_path):
 def test_a_scene_keeps_its_F_across_solves_and_relights():
     """bounce.solve(scene) solves on the scene's own K: built once (its report's seconds, to the bit,
     unchanged by later solves), answers equal to a solve of the file; a relight shows in the scene."""
-    s = bounce.Scene.load(CORNELL, unit="mm", patches=300, transport="dense")
+    s = bounce.Scene.load(CORNELL, unit="mm", patches=150, transport="dense")
     F = s.form_factors()
     d0 = (ctypes.c_double * 12)()
     s._lib.bn_flat_ff_diagnostics(s._h, d0)
@@ -445,7 +445,7 @@ def test_a_scene_keeps_its_F_across_solves_and_relights():
     d1 = (ctypes.c_double * 12)()
     s._lib.bn_flat_ff_diagnostics(s._h, d1)
     assert list(d0) == list(d1) and d0[9] > 0                      # the same assembly: F not built again
-    fresh = bounce.solve(CORNELL, unit="mm", patches=300, transport="dense", bounces=3, tol=1e-10)
+    fresh = bounce.solve(CORNELL, unit="mm", patches=150, transport="dense", bounces=3, tol=1e-10)
     assert np.abs(a.L - fresh.L).max() <= 1e-8 * fresh.L.max() and len(b.terms) == 6
     assert np.abs(b.L - a.L).max() <= 1e-8 * a.L.max()             # a's arrays survive b's solve
     b.relight(rho={"red": 0.5})
