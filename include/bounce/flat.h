@@ -124,9 +124,13 @@ double bn_flat_relight_gain(const bn_flat *f);
  * .glb, .gltf); per_bounce adds every term; mesh: a bn_flat_names("mesh") name, "elements" (NULL,
  * the default: the patches) or "input" (the scene's polygons);
  * ldr: 8-bit sRGB colours (glTF: the COLOR_1 set beside); exposure_ev: NAN or inf for automatic;
- * crease_deg <= 0: the default 30. Provenance names the caller ("python" for the package). */
+ * crease_deg <= 0: the default 30; gather: a bn_flat_names("gather") name, "final" (NULL, the default:
+ * each vertex by the final gather, the element mesh refined where L changes up to `vertices` vertices,
+ * < 0: BN_BAKE_DEFAULT_VERTICES, 0: the patches' vertices; bn_pipeline_bake_gather; the input mesh
+ * gathered at its own vertices) or "none" (the patches' values). Provenance names the caller ("python" for the package). */
 bn_status bn_flat_bake(const bn_flat *f, const char *out, int per_bounce, const char *mesh, int ldr, double exposure_ev,
-                       double crease_deg, const char *caller, char *msg, size_t msglen);
+                       double crease_deg, const char *gather, long long vertices, const char *caller, char *msg,
+                       size_t msglen);
 
 /* Camera images of every layer as `bounce bounces` writes them: out (FILE.exr, one layer per term,
  * rest and L) and, with previews, FILE.<layer>.png and the contact sheet. The camera is the scene's

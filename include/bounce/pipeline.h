@@ -177,6 +177,24 @@ void bn_bounces_opts_default(bn_bounces_opts *o);
  * layer in float RGB), checked before any work: BN_ENOMEM naming the size, the layers and the limit
  * (max_memory; 0: 80% of physical memory) when above it, or when the product overflows. */
 bn_status bn_bounces_check_memory(int width, int height, int bounces, size_t max_memory, bn_error *err);
+/* ---- the gathered bake (src/pipeline/bake_gather.c): `bounce bake`'s and the flat API's ---- */
+#include "bounce/bake.h"
+typedef struct bn_bake_gather_opts {
+    int gather_rays;          /* hemisphere rays per vertex (default BN_BAKE_GATHER_RAYS) */
+    size_t max_vertices;      /* the refinement's vertex budget (default BN_BAKE_DEFAULT_VERTICES; 0: the
+                                 patches' vertices as they are) */
+    double tol;               /* the refinement's tolerance (default BN_BAKE_REFINE_TOL) */
+    uint64_t seed;            /* default 1 */
+    int threads, quiet;
+    const bn_log *log;        /* the refinement's note (may be NULL) */
+} bn_bake_gather_opts;
+void bn_bake_gather_opts_default(bn_bake_gather_opts *o);
+/* Each vertex of `bake` gathered (E, KE, ..., rest, L at the vertex by the final gather), the element mesh
+ * refined where L changes first (bn_bake_refine): layers[0] (L) and layers[1 .. nl-1] (E, KE, ..., rest)
+ * point into *vbuf (the caller frees it). Needs p->rt and a solve keeping KE. */
+bn_status bn_pipeline_bake_gather(const bn_pipeline *p, bn_bake *bake, const bn_bake_gather_opts *o,
+                                  bn_bake_layer *layers, size_t nl, double **vbuf, bn_error *err);
+
 /* The images of bn_bounces_write without the files: imgs (bn_layer_count(bounces) of them, zeroed by the
  * caller; allocated here, freed with bn_image_free) receive each layer as o says (gather, smooth, seed,
  * threads); o->output, previews and exposure are not used. */

@@ -158,7 +158,8 @@ def _load() -> Any:
     lib.bn_status_name.restype = ctypes.c_char_p
     lib.bn_flat_names.argtypes = [ctypes.c_char_p]
     lib.bn_flat_names.restype = ctypes.c_char_p
-    lib.bn_flat_bake.argtypes = [P, ctypes.c_char_p, I, ctypes.c_char_p, I, ctypes.c_double, ctypes.c_double, ctypes.c_char_p,
+    lib.bn_flat_bake.argtypes = [P, ctypes.c_char_p, I, ctypes.c_char_p, I, ctypes.c_double, ctypes.c_double,
+                                 ctypes.c_char_p, ctypes.c_longlong, ctypes.c_char_p,
                                  ctypes.c_char_p, S]
     lib.bn_flat_bake.restype = I
     lib.bn_flat_images.argtypes = [P, ctypes.c_char_p, I, I, I, D, D, ctypes.c_double, I, I, I, ctypes.c_char_p,
@@ -362,15 +363,23 @@ class Result:
         return _form_factors(self._lib, self._h, self.patches, sparse)
 
     def bake(self, path: PathLike, per_bounce: bool = True, mesh: Name = "elements", ldr: bool = False,
-             exposure: Optional[float] = None, crease: float = 30.0) -> None:
+             exposure: Optional[float] = None, crease: float = 30.0, gather: Union[bool, Name] = True,
+             vertices: Optional[int] = None) -> None:
         """Bakes this solution to vertex colours as `bounce bake` does, by the extension of `path`
         (.ply, .om, .obj, .glb, .gltf): per_bounce adds every term; mesh="input" bakes the scene's
         own polygons; ldr writes 8-bit sRGB (glTF: a COLOR_1 set beside the float ones) at
-        `exposure` EV (None: automatic). Atomic, as every bounce output."""
+        `exposure` EV (None: automatic). gather (as --gather; True: "final", the default) computes
+        each vertex by the final gather, the element mesh refined where L changes up to `vertices`
+        vertices (as --bake-vertices; None: 100,000; 0: the patches' own); False or "none" bakes the
+        patches' values. Atomic, as every bounce output."""
+        if isinstance(gather, bool):
+            gather = names("gather")[0 if gather else 1]
         msg = ctypes.create_string_buffer(2048)
         ev = float("nan") if exposure is None else float(exposure)
+        nv = -1 if vertices is None else _int("vertices", vertices, unsigned=True)
         st = self._lib.bn_flat_bake(self._h, os.fsencode(path), int(per_bounce), _name("mesh", mesh), int(ldr), ev,
-                                    float(crease), b"python bounce package", msg, len(msg))
+                                    float(crease), _name("gather", gather), nv, b"python bounce package", msg,
+                                    len(msg))
         if st != 0:
             _raise(self._lib, st, msg)
 

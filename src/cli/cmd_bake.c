@@ -225,52 +225,22 @@ static void bn__bake_summary(const bn__bake_cli *a, const bn_pipeline *p, const 
 
 /* The final gather at a batch of the bake's vertices (bn_bake_eval_fn): E, KE, ..., rest, L. Each batch
  * after the first draws streams of its own (the seed mixed with its first vertex's number). */
-typedef struct bn__bake_eval_ctx {
-    const bn__bake_cli *a;
-    const bn_cli_common *c;
-    const bn_pipeline *p;
-} bn__bake_eval_ctx;
-
-static bn_status bn__bake_eval(void *user, const double *x, const size_t *patch, size_t n, size_t first, double *out,
-                               bn_error *err)
-{
-    const bn__bake_eval_ctx *e = user;
-    bn_gather_opts go;
-    bn_gather_opts_default(&go);
-    go.hemi_samples = e->a->gather_rays;
-    go.light_samples = BN_BAKE_GATHER_LIGHT;
-    go.seed = first ? e->c->seed ^ bn__hash64((uint64_t)first) : e->c->seed;
-    go.threads = e->c->threads;
-    go.quiet = e->c->quiet || first > 0;   /* a bar for the first batch; the rounds say their own line */
-    return bn_gather_points(e->p->rt, (const double *const *)e->p->res.terms, e->p->res.nterms - 1, e->p->rest, x,
-                            patch, n, &go, out, err);
-}
-
-/* Each bake vertex's values by the final gather at the vertex (bn_gather_points: E, KE, ..., rest, L), the
- * element mesh refined where L changes first (bn_bake_refine: crack-free, up to --bake-vertices), as the
- * layers' vertex values; *vbuf holds them (the caller frees it). */
+/* Each bake vertex's values by the final gather, the mesh refined where L changes first
+ * (bn_pipeline_bake_gather, with the command line's rays, budget, tolerance and seed). */
 static bn_status bn__bake_gather(const bn__bake_cli *a, const bn_cli_common *c, const bn_pipeline *p, bn_bake *bake,
                                  bn_bake_layer *layers, size_t nl, double **vbuf, bn_error *err)
 {
-    int n = p->res.nterms - 1;
-    bn__bake_eval_ctx ctx = {a, c, p};
     bn_log lg = {bn_cli_log, (void *)c, c->quiet};
-    bn_bake_refine_opts ro;
-    bn_bake_refine_opts_default(&ro);
-    ro.max_vertices = a->bake_vertices;
-    ro.tol = a->bake_tol;
-    ro.nlayers = (size_t)n + 3;
-    ro.key = (size_t)n + 2;
-    ro.eval = bn__bake_eval;
-    ro.user = &ctx;
-    ro.log = &lg;
-    bn_status st = bn_bake_refine(bake, &ro, vbuf, err);
-    size_t nv = bn_bake_vertex_count(bake);
-    for (size_t l = 0; st == BN_OK && l < nl; l++) {   /* L, then E .. K^n E, rest */
-        size_t k = l == 0 ? (size_t)n + 2 : l - 1 <= (size_t)n ? l - 1 : (size_t)n + 1;
-        layers[l].vertex_values = *vbuf + k * nv * 3;
-    }
-    return st;
+    bn_bake_gather_opts go;
+    bn_bake_gather_opts_default(&go);
+    go.gather_rays = a->gather_rays;
+    go.max_vertices = a->bake_vertices;
+    go.tol = a->bake_tol;
+    go.seed = c->seed;
+    go.threads = c->threads;
+    go.quiet = c->quiet;
+    go.log = &lg;
+    return bn_pipeline_bake_gather(p, bake, &go, layers, nl, vbuf, err);
 }
 
 /* What the file needs to show as meant where it is opened (Blender 3.4 as Debian ships it). */

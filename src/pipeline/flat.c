@@ -732,17 +732,47 @@ bn_status bn_flat_solve_operator(size_t n, const double *E, bn_flat_apply_fn app
     return st;
 }
 
+/* The bake's vertex values by the final gather (gather "final"; the element mesh refined up to `vertices`
+ * (< 0: the default budget)), or the patches' values ("none", or the input mesh). */
+static bn_status bn__flat_bake_gather(const bn_flat *f, bn_bake *b, int input_mesh, const char *gather,
+                                      long long vertices, bn_bake_layer *layers, size_t nl, double **vbuf,
+                                      char *msg, size_t msglen)
+{
+    int mode;
+    bn_error err;
+    bn_bake_gather_opts go;
+    bn_status st = bn__flat_name("bake: gather", gather, bn_gather_mode_names(), bn__gather_index, &mode, msg, msglen);
+    if (st == BN_OK && vertices >= 0 && (mode != BN_GATHER_FINAL || input_mesh))
+        return bn__flat_fail(BN_EUSAGE, "bake: `vertices`: the refined mesh is the element mesh's with the gather at its "
+                             "vertices (not with gather none or the input mesh)", msg, msglen);
+    if (st != BN_OK || mode != BN_GATHER_FINAL)
+        return st;
+    bn_bake_gather_opts_default(&go);
+    if (vertices >= 0 || input_mesh)   /* the input mesh: gathered at its own vertices, as `bounce bake` does */
+        go.max_vertices = input_mesh ? 0 : (size_t)vertices;
+    go.seed = f->po.ff.seed;
+    go.threads = f->po.threads;
+    go.quiet = 1;
+    bn_error_clear(&err);
+    st = bn_pipeline_bake_gather(&f->p, b, &go, layers, nl, vbuf, &err);
+    if (st != BN_OK)
+        bn__flat_fail(st, err.msg, msg, msglen);
+    return st;
+}
+
 bn_status bn_flat_bake(const bn_flat *f, const char *out, int per_bounce, const char *mesh, int ldr, double exposure_ev,
-                       double crease_deg, const char *caller, char *msg, size_t msglen)
+                       double crease_deg, const char *gather, long long vertices, const char *caller, char *msg,
+                       size_t msglen)
 {
     int nb = f->p.res.nterms - 1;
-    size_t nl = per_bounce && nb >= 0 ? (size_t)bn_layer_count(nb) : 1;
+    size_t nl = nb >= 0 ? (size_t)bn_layer_count(nb) : 1;
     bn_bake_layer layers[72];
     char names[72][16], solver[160], patches[32], tol[48];
     bn_bake *b = NULL;
     bn_bake_write_opts wo;
     bn_error err;
     bn_status st;
+    double *vbuf = NULL;
     if (!f->p.scene)
         return bn__flat_fail(BN_EUSAGE, "bake: this result has no scene (a caller's operator)", msg, msglen);
     if (nl > 72)
@@ -763,6 +793,12 @@ bn_status bn_flat_bake(const bn_flat *f, const char *out, int per_bounce, const 
         return bn__flat_fail(st, err.msg, msg, msglen);
     if (f->p.rt)
         bn_bake_exclude_enclosed(b, f->p.rt);   /* as `bounce bake` */
+    if ((st = bn__flat_bake_gather(f, b, input_mesh, gather, vertices, layers, nl, &vbuf, msg, msglen)) != BN_OK) {
+        bn_bake_destroy(b);
+        free(vbuf);
+        return st;
+    }
+    nl = per_bounce ? nl : 1;
     snprintf(solver, sizeof solver, "%s: %s after %zu iterations, residual %.3g", bn_solve_method_name(f->p.method_used),
              bn_stop_reason_name(f->p.res.reason), f->p.res.iterations, f->p.res.residual_max);
     snprintf(patches, sizeof patches, "%zu", f->p.n);
@@ -780,6 +816,7 @@ bn_status bn_flat_bake(const bn_flat *f, const char *out, int per_bounce, const 
         st = bn_bake_write(b, out, layers, nl, &wo, &err);
     }
     bn_bake_destroy(b);
+    free(vbuf);
     if (st != BN_OK)
         bn__flat_fail(st, err.msg, msg, msglen);
     return st;

@@ -342,7 +342,8 @@ def test_ctrl_c_stops_the_c_loops():
 
 def test_bake_from_python_equals_the_cli(tmp_path):
     """A bake from Python and `bounce bake` of the same scene and options write the same vertices and
-    colours (the glTF's float attributes compared value by value; the header may differ in provenance)."""
+    colours (the glTF's float attributes compared value by value; the header may differ in provenance),
+    with the patches' values (--gather none) and gathered on the refined mesh (the defaults, a budget)."""
     import json
     import struct
 
@@ -355,16 +356,20 @@ def test_bake_from_python_equals_the_cli(tmp_path):
         v = g["bufferViews"][a["bufferView"]]
         return np.frombuffer(binary, dtype="<f4", count=3 * a["count"], offset=v["byteOffset"])
 
-    r = bounce.solve(CORNELL, unit="mm", patches=400)
-    mine = tmp_path / "py.glb"
-    r.bake(str(mine))
-    cli = tmp_path / "cli.glb"
-    # the Python bake is the patch averages: the CLI's --gather none
-    subprocess.run([EXE, "bake", CORNELL, "--unit", "mm", "--patches", "400", "--per-bounce", "--gather", "none", "-q", "-o", str(cli)],
-                   check=True, stderr=subprocess.DEVNULL)
-    for attr in ("POSITION", "COLOR_0", "_L", "_E", "_KE", "_K2E", "_K3E", "_REST"):
-        a, b = glb_floats(mine, attr), glb_floats(cli, attr)
-        assert a.shape == b.shape and np.array_equal(a, b), attr
+    r = bounce.solve(CORNELL, unit="mm", patches=200)
+    for gather, extra in ((False, ["--gather", "none"]), (True, ["--bake-vertices", "600"])):
+        mine = tmp_path / ("py-%s.glb" % gather)
+        r.bake(str(mine), gather=gather, vertices=600 if gather else None)
+        cli = tmp_path / ("cli-%s.glb" % gather)
+        subprocess.run([EXE, "bake", CORNELL, "--unit", "mm", "--patches", "200", "--per-bounce", "-q", "-o", str(cli)]
+                       + extra, check=True, stderr=subprocess.DEVNULL)
+        for attr in ("POSITION", "COLOR_0", "_L", "_E", "_KE", "_K2E", "_K3E", "_REST"):
+            a, b = glb_floats(mine, attr), glb_floats(cli, attr)
+            assert a.shape == b.shape and np.array_equal(a, b), (gather, attr)
+    assert glb_floats(tmp_path / "py-True.glb", "POSITION").size > glb_floats(tmp_path / "py-False.glb", "POSITION").size
+    with pytest.raises(bounce.BounceError) as e:   # the refinement is the gathered element mesh's
+        r.bake(str(tmp_path / "z.glb"), gather=False, vertices=10)
+    assert "vertices" in str(e.value)
     with pytest.raises(bounce.BounceError) as e:
         r.bake(str(tmp_path / "x.stl"))
     assert e.value.status == "EUSAGE" and ".stl" in str(e.value)
