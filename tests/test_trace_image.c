@@ -12,18 +12,7 @@
 
 static bn_scene *load_furnace(size_t patches)
 {
-    bn_scene *s = NULL;
-    bn_load_opts lo;
-    bn_mesh_opts mo;
-    bn_error err;
-    bn_load_opts_default(&lo);
-    if (bn_scene_load(bn_test_path("meshes/furnace-box.obj"), &lo, &s, &err) != BN_OK)
-        BN_FAIL("%s", err.msg);
-    bn_mesh_opts_default(&mo);
-    mo.target_patches = patches;
-    if (bn_scene_mesh(s, &mo, &err) != BN_OK)
-        BN_FAIL("%s", err.msg);
-    return s;
+    return bn_test_load_meshed("meshes/furnace-box.obj", BN_UNIT_M, patches);
 }
 
 static void inside_camera(bn_camera *cam, int w, int h)

@@ -257,20 +257,6 @@ static double bn__escape_var(double w, double e, int rays)
     return rays > 0 ? w * w * q * (1 - q) / rays : 0;
 }
 
-/* Is patch j in p->emit_patch (ascending)? */
-static int bn__is_emitter(const bn_pipeline *p, size_t j)
-{
-    size_t lo = 0, hi = p->nemit;
-    while (lo < hi) {
-        size_t mid = lo + (hi - lo) / 2;
-        if (p->emit_patch[mid] < j)
-            lo = mid + 1;
-        else
-            hi = mid;
-    }
-    return lo < p->nemit && p->emit_patch[lo] == j;
-}
-
 /* sum_j A_j (1 - e_j) L_j, the light leaving the patches that does not reach a surface (escaping, or
  * meeting a back): the emitters' own (they dominate it) from their exact sums by many rays, and the
  * rest from the checked rows (every stride-th patch), scaled by the stride. Per channel, scene units;
@@ -289,9 +275,11 @@ static void bn__escaping(const bn_pipeline *p, double esc[3], double var[3])
             var[c] += bn__escape_var(pa[j].area * p->res.L[3 * j + c], p->emit_exact[k], p->emit_rays);
         }
     }
-    for (size_t k = 0; k < p->rows.rows; k++) {
+    for (size_t k = 0, e = 0; k < p->rows.rows; k++) {
         size_t j = k * p->rows.stride;
-        if (bn__is_emitter(p, j))   /* counted above */
+        while (e < p->nemit && p->emit_patch[e] < j)   /* both ascending: walked together */
+            e++;
+        if (e < p->nemit && p->emit_patch[e] == j)   /* an emitter: counted above */
             continue;
         m++;
         for (int c = 0; c < 3; c++) {
@@ -620,16 +608,18 @@ bn_status bn_pipeline_relight(const bn_pipeline_opts *o, bn_pipeline *p, const b
 {
     double t0 = bn__now(), *rho = NULL, *L0 = NULL;
     bn_status st;
+    int relink = refine && p->hierarchical;
     if (!p->scene || !p->k)
         return bn_error_set(err, BN_EUSAGE, "relight: no solved scene (its operator K is not built)");
     if ((st = bn_scene_edit_materials(p->scene, e, n, err)) != BN_OK)
         return st;
-    rho = bn__malloc_array(3 * p->n + 1, sizeof *rho);
+    if (!relink)
+        rho = bn__malloc_array(3 * p->n + 1, sizeof *rho);
     if (p->res.L && (L0 = bn__malloc_array(3 * p->n + 1, sizeof *L0)))
         memcpy(L0, p->res.L, 3 * p->n * sizeof *L0);
-    if (!rho || (p->res.L && !L0))
+    if ((!relink && !rho) || (p->res.L && !L0))
         st = bn_error_set(err, BN_ENOMEM, "out of memory for the reflectances of %zu patches", p->n);
-    if (st == BN_OK && refine && p->hierarchical) {   /* new links for the new light (and a new ray scene) */
+    if (st == BN_OK && relink) {   /* new links for the new light (and a new ray scene) */
         bn_transport_destroy(p->k);
         bn_rt_destroy(p->rt);
         p->k = NULL;

@@ -122,4 +122,4 @@ done:
     return st;
 }
 
-const bn_solver_type bn__solver_direct = {"direct", BN_OP_ENTRIES, 0, 0, NULL, NULL, NULL, bn__direct_solve};
+const bn_solver_type bn__solver_direct = {"direct", BN_OP_ENTRIES, 0, 0, NULL, NULL, NULL, bn__direct_solve, 0};

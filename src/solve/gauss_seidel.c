@@ -63,6 +63,6 @@ static bn_status bn__gs_iterate_symmetric(void *st, double *L, double *r, int *h
 static void bn__gs_cleanup(void *st) { (void)st; }
 
 const bn_solver_type bn__solver_gauss_seidel = {"gauss-seidel", BN_OP_ROWS, sizeof(bn__gs), 1, bn__gs_setup, bn__gs_iterate,
-                                                bn__gs_cleanup, NULL};
+                                                bn__gs_cleanup, NULL, 0};
 const bn_solver_type bn__solver_gauss_seidel_symmetric = {
-    "gauss-seidel-symmetric", BN_OP_ROWS, sizeof(bn__gs), 2, bn__gs_setup, bn__gs_iterate_symmetric, bn__gs_cleanup, NULL};
+    "gauss-seidel-symmetric", BN_OP_ROWS, sizeof(bn__gs), 2, bn__gs_setup, bn__gs_iterate_symmetric, bn__gs_cleanup, NULL, 0};

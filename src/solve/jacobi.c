@@ -58,4 +58,4 @@ static void bn__jacobi_cleanup(void *st)
 }
 
 const bn_solver_type bn__solver_jacobi = {"jacobi", 0, sizeof(bn__jacobi), 1, bn__jacobi_setup, bn__jacobi_iterate,
-                                          bn__jacobi_cleanup, NULL};
+                                          bn__jacobi_cleanup, NULL, 0};

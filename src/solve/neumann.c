@@ -2,7 +2,7 @@
  * Its residual is the next term: E - (I - K) S_n = K^(n+1) E, so one application of K per
  * term gives both; the tail is bounded by ||L - S_n|| <= ||K^(n+1) E|| / (1 - ||K||) a posteriori
  * and ||K||^(n+1) / (1 - ||K||) ||E|| a priori (Kress, Linear Integral Equations, thm. 2.14).
- * The per-bounce terms K^0 E .. K^n E are kept by the driver (bn_solve_terms). */
+ * Its residuals are the per-bounce terms K^1 E, K^2 E, ...: the driver keeps them (residual_is_term). */
 #include "solve/solve_internal.h"
 #include "base/internal.h"
 
@@ -58,4 +58,4 @@ static void bn__neumann_cleanup(void *st)
 }
 
 const bn_solver_type bn__solver_neumann = {"neumann", 0, sizeof(bn__neumann), 1, bn__neumann_setup, bn__neumann_iterate,
-                                           bn__neumann_cleanup, NULL};
+                                           bn__neumann_cleanup, NULL, 1};

@@ -66,21 +66,28 @@ void bn_solve_result_free(bn_solve_result *res)
     res->nterms = 0;
 }
 
-bn_status bn_solve_terms_direct(const bn_transport *k, const double *E, const double *D, int nterms, double **terms,
-                                bn_error *err)
+/* terms[first .. nterms-1] from terms[first-1]: K^q E = K (K^(q-1) E), and D in bounce 1. */
+static bn_status bn__terms_extend(const bn_transport *k, const double *D, int first, int nterms, double **terms,
+                                  bn_error *err)
 {
     size_t m = 3 * bn_transport_size(k);
-    if (nterms <= 0)
-        return BN_OK;
-    memcpy(terms[0], E, m * sizeof(double));
-    for (int q = 1; q < nterms; q++) {
-        bn_status st = bn_transport_apply(k, terms[q - 1], terms[q], err);   /* K^q E <- K (K^(q-1) E) */
+    for (int q = first; q < nterms; q++) {
+        bn_status st = bn_transport_apply(k, terms[q - 1], terms[q], err);
         if (st != BN_OK)
             return st;
         for (size_t i = 0; q == 1 && D && i < m; i++)
             terms[1][i] += D[i];   /* the punctual lights' direct light: bounce 1 */
     }
     return BN_OK;
+}
+
+bn_status bn_solve_terms_direct(const bn_transport *k, const double *E, const double *D, int nterms, double **terms,
+                                bn_error *err)
+{
+    if (nterms <= 0)
+        return BN_OK;
+    memcpy(terms[0], E, 3 * bn_transport_size(k) * sizeof(double));
+    return bn__terms_extend(k, D, 1, nterms, terms, err);
 }
 
 bn_status bn_solve_terms(const bn_transport *k, const double *E, int nterms, double **terms, bn_error *err)
@@ -624,7 +631,6 @@ static bn_status bn__solve_stop_test(bn__solve *S, int *done)
     return BN_OK;
 }
 
-/* sweep -> residual -> bounds -> NaN check -> monitor row -> stop test, from row 0 (L0 = E). */
 /* The terms' arrays, before the iteration (which may fill some: bn__solve_capture), terms[0] = E. */
 static bn_status bn__solve_alloc_terms(bn__solve *S)
 {
@@ -646,18 +652,20 @@ static bn_status bn__solve_alloc_terms(bn__solve *S)
     return BN_OK;
 }
 
-/* The Neumann series' residual after `it` terms is the next term, K^(it+1) E, computed as the terms
- * are (one application of K to the one before): kept, it is not computed again after the iteration.
- * Not with punctual lights (the series then runs on E + direct, the terms on E). */
+/* A method whose residual after iteration `it` is the next term, K^(it+1) E, computed as the terms are
+ * (bn_solver_type.residual_is_term: the Neumann series) leaves the terms as it goes: they are not
+ * computed again after the iteration. Not with punctual lights (the iteration then runs on E + direct,
+ * the terms on E). */
 static void bn__solve_capture(bn__solve *S, size_t it)
 {
     bn_solve_result *res = S->res;
-    if (S->o->method != BN_SOLVE_NEUMANN || S->o->direct || !res->terms || (size_t)S->filled != it + 1 ||
+    if (!S->type->residual_is_term || S->o->direct || !res->terms || (size_t)S->filled != it + 1 ||
         S->filled >= res->nterms)
         return;
     memcpy(res->terms[S->filled++], S->r, S->m * sizeof(double));
 }
 
+/* sweep -> residual -> bounds -> NaN check -> monitor row -> stop test, from row 0 (L0 = E). */
 static bn_status bn__solve_iterate(bn__solve *S)
 {
     bn__solve_ctx ctx = {S->k, S->E, S->diag, S->o, S->n};
@@ -727,19 +735,10 @@ static bn_status bn__solve_direct(bn__solve *S)
     return BN_OK;
 }
 
-/* The per-bounce terms K^0 E .. K^bounces E. */
-/* The per-bounce terms the iteration did not leave: K^q E = K (K^(q-1) E) from the last one kept. */
+/* The per-bounce terms the iteration did not leave, from the last one it kept. */
 static bn_status bn__solve_keep_terms(bn__solve *S)
 {
-    bn_solve_result *res = S->res;
-    for (int q = S->filled; q < res->nterms; q++) {
-        bn_status st = bn_transport_apply(S->k, res->terms[q - 1], res->terms[q], S->err);
-        if (st != BN_OK)
-            return st;
-        for (size_t i = 0; q == 1 && S->o->direct && i < S->m; i++)
-            res->terms[1][i] += S->o->direct[i];   /* the punctual lights' direct light: bounce 1 */
-    }
-    return BN_OK;
+    return bn__terms_extend(S->k, S->o->direct, S->filled, S->res->nterms, S->res->terms, S->err);
 }
 
 /* The source E + direct when punctual lights give some (the emission alone otherwise). */

@@ -28,6 +28,9 @@ typedef struct bn_solver_type {
     void      (*cleanup)(void *st);
     /* Non-iterative methods (direct) fill L instead of setup/iterate/cleanup. */
     bn_status (*solve)(const bn__solve_ctx *ctx, double *L, int *singular, bn_error *err);
+    /* 1: the residual r after iteration k is exactly K^(k+1) E, made by applying K to K^k E as the
+     * per-bounce terms are (the Neumann series): the driver keeps it as that term. */
+    int residual_is_term;
 } bn_solver_type;
 
 extern const bn_solver_type bn__solver_jacobi;
