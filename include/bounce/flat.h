@@ -87,8 +87,8 @@ bn_status bn_flat_load(const char *path, const bn_flat_opts *o, bn_flat **out, c
 /* Builds K for a loaded scene (no-op when built): then bn_flat_form_factors and the diagnostics. */
 bn_status bn_flat_operator(bn_flat *f, char *msg, size_t msglen);
 /* Solves a loaded scene on its own K (built first when it is not): o's solver options are taken
- * (method, bounces, tol, threads, quiet; checked as bn_flat_solve checks them), the scene's loading,
- * meshing and form-factor options stay as loaded. Solving again replaces the answer and reuses K. */
+ * (method, bounces, tol, atol, max_iter, stop, threads, quiet; checked as bn_flat_solve checks them), the
+ * scene's loading, meshing and form-factor options (seed, precision, storage, cache, ff) stay as loaded. Solving again replaces the answer and reuses K. */
 bn_status bn_flat_solve_loaded(bn_flat *f, const bn_flat_opts *o, char *msg, size_t msglen);
 /* The form factors' diagnostics, in this order (NAN where K is not built): row_sum_min, row_sum_max,
  * row_sum_rms_dev, reciprocity_residual, k_norm_inf, occluded_fraction, rays, nonzeros, bytes,

@@ -695,6 +695,9 @@ def solve(path: Union[PathLike, "Scene", Operator], unit: Name = "m", method: Na
         return _solve_operator(path, emission, method, bounces, tol, threads, progress, **more)
     lib = _load()
     if isinstance(path, Scene):   # its own K (built once, kept with the scene): only the solver's options
+        late = [k for k in ("seed", "precision", "storage", "cache", "ff") if more.get(k) is not None]
+        if late:
+            raise BounceError("EUSAGE", "%s= shapes F, which the scene keeps: give it to Scene.load" % late[0])
         so = path.options
         o = _opts(lib, so["unit"], method, so["transport"], bounces, tol, so["patches"], so["patch_size"],
                   so["eps"], threads or so["threads"], progress or so["progress"], so["visibility"],

@@ -183,7 +183,8 @@ static bn_status bn__flat_more(const bn_flat_opts *o, bn_pipeline_opts *po, char
     }
     if (o->storage && bn__flat_name("storage", o->storage, bn_storage_names(), bn__storage_index, &v, msg, msglen))
         return BN_EUSAGE;
-    po->ff.storage = o->storage;
+    if (o->storage)
+        po->ff.storage = o->storage;
     if (o->ff && bn__flat_name("ff", o->ff, bn_ff_method_names(), bn__ff_index, &v, msg, msglen) != BN_OK)
         return BN_EUSAGE;
     if (o->ff)
@@ -443,6 +444,9 @@ bn_status bn_flat_solve_loaded(bn_flat *f, const bn_flat_opts *o, char *msg, siz
     f->po.method_auto = tmp.po.method_auto;
     f->po.solve.bounces = tmp.po.solve.bounces;
     f->po.solve.tol = tmp.po.solve.tol;
+    f->po.solve.atol = tmp.po.solve.atol;
+    f->po.solve.max_iter = tmp.po.solve.max_iter;
+    f->po.solve.stop = tmp.po.solve.stop;
     f->po.threads = tmp.po.threads;
     f->po.solve.quiet = tmp.po.solve.quiet;
     if ((st = bn_flat_operator(f, msg, msglen)) != BN_OK)

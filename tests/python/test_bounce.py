@@ -456,6 +456,12 @@ def test_a_scene_keeps_its_F_across_solves_and_relights():
     b.relight(rho={"red": 0.5})
     assert (s.reflectance[s.reflectance[:, 1] == 0.5].shape[0] > 0)   # the scene follows the relight
     assert np.array_equal(s.form_factors(), F)
+    with pytest.raises(bounce.BounceError) as e:   # the solver's options reach a scene's solve ...
+        bounce.solve(s, max_iter=2)
+    assert e.value.status == "ENOTCONV" and "within 2 iterations" in str(e.value)
+    with pytest.raises(bounce.BounceError) as e:   # ... F's are the scene's, never silently dropped
+        bounce.solve(s, cache="elsewhere.bnff")
+    assert "Scene.load" in str(e.value) and not os.path.exists("elsewhere.bnff")
     del a, b
     assert s.patches > 0 and np.isfinite(s.area).all()           # the results did not free the scene's handle
 
