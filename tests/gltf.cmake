@@ -32,4 +32,9 @@ if(BN_PYTHON3)
   add_test(NAME view.cornell_in_chromium COMMAND ${BN_PYTHON3} ${CMAKE_CURRENT_LIST_DIR}/view_check.py
     $<TARGET_FILE:bounce_cli> ${PROJECT_SOURCE_DIR} ${CMAKE_CURRENT_BINARY_DIR}/tmp/view_check)
   set_tests_properties(view.cornell_in_chromium PROPERTIES LABELS gltf TIMEOUT 600 SKIP_RETURN_CODE 77)
+  # The live page (bounce view --live): its worker under node against bounce solve's relit terms (dense F
+  # and the hierarchy's links), --budget, bad options, and the page in headless Chromium (tests/live_check.py)
+  add_test(NAME view.live COMMAND ${BN_PYTHON3} ${CMAKE_CURRENT_LIST_DIR}/live_check.py
+    $<TARGET_FILE:bounce_cli> ${PROJECT_SOURCE_DIR} ${CMAKE_CURRENT_BINARY_DIR}/tmp/live_check)
+  set_tests_properties(view.live PROPERTIES LABELS gltf TIMEOUT 600 SKIP_RETURN_CODE 77)
 endif()

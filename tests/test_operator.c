@@ -99,9 +99,9 @@ static void sphere_destroy(void *ctx)
 
 static const bn_transport_ops sphere_full = {
     "sphere-test", BN_OP_ROWS | BN_OP_ENTRIES | BN_OP_DIAG, sphere_apply, sphere_row, sphere_entry, NULL,
-    sphere_diag, sphere_bytes, sphere_destroy};
+    sphere_diag, sphere_bytes, sphere_destroy, NULL};
 static const bn_transport_ops sphere_apply_only = {"sphere-apply-only", 0, sphere_apply, NULL, NULL, NULL, NULL,
-                                                   NULL, sphere_destroy};
+                                                   NULL, sphere_destroy, NULL};
 
 /* n patches with areas from 0.1 to 10 (a deterministic spread), rho per channel. */
 static void sphere_init(sphere *s, size_t n)
@@ -372,9 +372,10 @@ BN_TEST(interrupted_operator_stops_every_solver) { failing_case(BN_EINTR); }
 /* The table is checked when the operator is made; ctx is released even then. */
 BN_TEST(create_checks_the_ops_table)
 {
-    static const bn_transport_ops no_apply = {"no-apply", 0, NULL, NULL, NULL, NULL, NULL, NULL, sphere_destroy};
+    static const bn_transport_ops no_apply = {"no-apply", 0, NULL, NULL, NULL, NULL, NULL, NULL, sphere_destroy,
+                                              NULL};
     static const bn_transport_ops rows_missing = {"rows-missing", BN_OP_ROWS, sphere_apply, NULL, NULL, NULL, NULL,
-                                                  NULL, sphere_destroy};
+                                                  NULL, sphere_destroy, NULL};
     sphere s;
     bn_transport *k = NULL;
     bn_error err;
@@ -490,4 +491,60 @@ BN_TEST(builder_pattern_and_names)
     BN_ASSERT_STATUS(bn_transport_builder_create(5, &o, &need, &b, &err), BN_EUSAGE);
     BN_ASSERT(strstr(err.msg, "dense|sparse") != NULL);
     BN_ASSERT(bn_storage_exists("dense") && bn_storage_exists("sparse") && !bn_storage_exists("csr"));
+}
+
+/* F exported as links (the live page's data): dense and sparse give one leaf per patch and a link per
+ * nonzero of the array, in row order, values to the precision; the byte count needs no export; an
+ * operator with neither links nor entries is a usage error naming it. */
+BN_TEST(links_export_is_the_array)
+{
+    const size_t n = 23;
+    double F[23 * 23], rho[3 * 23];
+    const char *storages[] = {"dense", "sparse"};
+    size_t nz = 0;
+    for (size_t i = 0; i < n * n; i++) {
+        F[i] = (i * 7 % 5 == 0 || i % (n + 1) == 0) ? 0 : (double)(i % 13 + 1) / (13.0 * (double)n);
+        nz += F[i] != 0;
+    }
+    for (size_t i = 0; i < 3 * n; i++)
+        rho[i] = 0.5;
+    for (int st = 0; st < 2; st++) {
+        bn_transport *k;
+        bn_transport_links l;
+        bn_error err;
+        size_t bytes, at = 0;
+        BN_ASSERT_STATUS(bn_transport_from_array(n, F, rho, storages[st], BN_PRECISION_DOUBLE, 0, &k, &err), BN_OK);
+        BN_ASSERT_STATUS(bn_transport_links_get(k, &l, &err), BN_OK);
+        BN_ASSERT_EQ(l.npatch, n);
+        BN_ASSERT_EQ(l.nnodes, n);
+        BN_ASSERT_EQ(l.nlinks, nz);
+        BN_ASSERT(l.dir == NULL && l.rowscale == NULL);
+        for (size_t i = 0; i < n; i++) {
+            BN_ASSERT_EQ(l.child[i], BN_LINK_NONE);
+            BN_ASSERT_EQ(l.leaf_patch[i], (uint32_t)i);
+            BN_ASSERT_EQ(l.start[i], (uint32_t)at);
+            for (size_t j = 0; j < n; j++)
+                if (F[i * n + j] != 0) {
+                    BN_ASSERT_EQ(l.src[at], (uint32_t)j);
+                    BN_ASSERT_NEAR(l.F[at], F[i * n + j], 1e-7 * F[i * n + j]);
+                    at++;
+                }
+        }
+        BN_ASSERT_EQ(l.start[n], (uint32_t)nz);
+        BN_ASSERT_STATUS(bn_transport_links_bytes(k, &bytes, &err), BN_OK);
+        BN_ASSERT_EQ(bytes, n * 29 + 4 + nz * 8 + n * 4);
+        bn_transport_links_free(&l);
+        bn_transport_destroy(k);
+    }
+    {
+        sphere s;
+        bn_transport *k;
+        bn_transport_links l;
+        bn_error err;
+        sphere_init(&s, 8);
+        k = sphere_k(&s, &sphere_apply_only);
+        BN_ASSERT_STATUS(bn_transport_links_get(k, &l, &err), BN_EUSAGE);
+        BN_ASSERT(strstr(err.msg, "sphere-apply-only") != NULL);
+        bn_transport_destroy(k);
+    }
 }

@@ -285,7 +285,7 @@ static bn_status fwd_entry(void *ctx, size_t i, size_t j, double *v, bn_error *e
 BN_TEST(nan_from_file_scene_operator_stops_every_method)
 {
     static const bn_transport_ops ops = {"nan-forward", BN_OP_ROWS | BN_OP_ENTRIES, fwd_apply, fwd_row, fwd_entry,
-                                         NULL, NULL, NULL, NULL};
+                                         NULL, NULL, NULL, NULL, NULL};
     static const bn_solve_method methods[] = {BN_SOLVE_JACOBI, BN_SOLVE_GAUSS_SEIDEL, BN_SOLVE_NEUMANN,
                                               BN_SOLVE_DIRECT};
     bn_pipeline_opts o;

@@ -137,6 +137,8 @@ double bn_bake_auto_exposure(const double *L, size_t n);
  * alone), exposure, a false-colour mode with its scale and the per-bounce power table. Atomic.
  * BN_EUSAGE when this build has no three.js (scripts/setup.sh installs it). */
 bn_status bn_view_write(const char *glb_path, const char *title, const char *out, bn_error *err);
+/* The live page: the same viewer around a live payload (bn_pipeline_live_write) instead of a bake. */
+bn_status bn_view_write_live(const unsigned char *live, size_t n, const char *title, const char *out, bn_error *err);
 /* 1 if the .glb at glb_path is a bake bounce wrote (its asset's generator is bounce), 0 if it is some
  * other glTF (a scene: `bounce view` bakes it first), -1 if it cannot be read as a .glb. */
 int bn_view_is_bake(const char *glb_path);

@@ -177,6 +177,26 @@ void bn_bounces_opts_default(bn_bounces_opts *o);
  * layer in float RGB), checked before any work: BN_ENOMEM naming the size, the layers and the limit
  * (max_memory; 0: 80% of physical memory) when above it, or when the product overflows. */
 bn_status bn_bounces_check_memory(int width, int height, int bounces, size_t max_memory, bn_error *err);
+/* ---- the live page (src/pipeline/live.c, `bounce view --live`): the viewer page with what a browser needs
+ * to relight the solved scene itself: the patches, their materials and texture factors, the punctual
+ * lights' direct light and F as links (bn_transport_links); its worker sums the series for the
+ * materials' rho and Le the page's sliders set. ---- */
+#define BN_LIVE_DEFAULT_BUDGET_MB 64
+typedef struct bn_live_opts {
+    int bounces;              /* terms E .. K^bounces E shown, then rest (default 5; 0 to 64) */
+    size_t budget;            /* the payload's bytes the caller aims at (bn_pipeline_live_bytes; default
+                                 BN_LIVE_DEFAULT_BUDGET_MB MiB); not enforced here */
+    const char *note;         /* what the page says about how it was built (may be NULL) */
+    const bn_attr *attrs;     /* provenance (borrowed) */
+    size_t nattrs;
+} bn_live_opts;
+void bn_live_opts_default(bn_live_opts *o);
+/* The payload's bytes for p (F's links counted, not exported; the page embeds them base64, 4/3 as many). */
+bn_status bn_pipeline_live_bytes(const bn_pipeline *p, size_t *bytes, bn_error *err);
+/* Writes the live page for a solved (or only operated) p to `out` (atomic). */
+bn_status bn_pipeline_live_write(const bn_pipeline *p, const bn_live_opts *o, const char *title, const char *out,
+                                 bn_error *err);
+
 /* ---- the gathered bake (src/pipeline/bake_gather.c): `bounce bake`'s and the flat API's ---- */
 #include "bounce/bake.h"
 typedef struct bn_bake_gather_opts {

@@ -264,6 +264,10 @@ void bn_scene_patch_emission(const bn_scene *s, double *E);
  * emissiveTexture) over the face when it has one. Uniform over each face. */
 void bn_scene_face_emission(const bn_scene *s, size_t f, double Le[3]);
 void bn_scene_patch_reflectance(const bn_scene *s, double *rho);
+/* Per patch, what its material's rho and Le are multiplied by: the mean of the material's reflectance
+ * and emission textures over the patch (over its face for emission), 1 where untextured; N*3 each, either
+ * may be NULL. rho_i = rho_material x rho_f[i] and E_i = Le_material x Le_f[i] (a relit page's sliders). */
+void bn_scene_patch_texture_factors(const bn_scene *s, double *rho_f, double *Le_f);
 /* The reflectance at point x of face `face` (on its plane): the material's, times its texture there
  * (glTF baseColorTexture, MTL map_Kd) when it has one; what the final gather's pixels use. */
 void bn_scene_reflectance_at(const bn_scene *s, size_t face, const double x[3], double rho[3]);

@@ -33,6 +33,7 @@ enum {
 /* The functions an operator provides. ctx is the operator's own state; err (may be NULL) takes
  * the message of a failure. An operator may return BN_EINTR/BN_ETERM (bn_interrupted()) from a
  * long apply; callers stop with that status and write nothing. */
+struct bn_transport_links;
 typedef struct bn_transport_ops {
     const char *name;   /* "dense-float", "csr-double", "sphere-test", ... (for logs and headers) */
     unsigned caps;      /* BN_OP_* bits of the optional functions below that are set */
@@ -55,6 +56,9 @@ typedef struct bn_transport_ops {
     size_t (*bytes)(const void *ctx);
     /* Optional: releases ctx (NULL: nothing to release; the caller owns ctx). */
     void (*destroy)(void *ctx);
+    /* Optional: F as links between the nodes of a tree (bn_transport_links; NULL: its entries, with
+     * BN_OP_ENTRIES, one node per patch); count_only: only npatch, nnodes and nlinks set. */
+    bn_status (*links)(const void *ctx, struct bn_transport_links *out, int count_only, bn_error *err);
 } bn_transport_ops;
 
 typedef struct bn_transport bn_transport;   /* opaque: ops + ctx + rho */
@@ -102,6 +106,40 @@ bn_status bn_transport_diag(const bn_transport *k, double *d, bn_error *err);
  * BN_ENUMERIC naming it (its patch in *bad_patch). per_channel and bad_patch may be NULL. */
 bn_status bn_transport_norm_inf(const bn_transport *k, double *norm, double per_channel[3], size_t *bad_patch,
                                 bn_error *err);
+/* ---- F exported, for a program of its own that applies it (the live viewer page's worker) ----
+ * Nodes of a binary tree above the patches: node v's children are child[v] and child[v] + 1 (BN_LINK_NONE:
+ * a leaf, whose patch is leaf_patch[v]); children come after their parents. F x is
+ *   pull: B_v = x[leaf_patch[v]] at a leaf, else the area-weighted mean of its two children's B;
+ *   gather: G_r = sum of F[l] B_src[l] over r's links l in [start[r], start[r + 1]); a cluster receiver
+ *     (cluster[r] 1) gathers per channel the vector sum F[l] B_src[l] u_l instead, u_l the unit direction
+ *     dir[l] (octahedral: bn_transport_links_dir);
+ *   push: top down, a planar node adds its parent's G; a cluster adds its parent cluster's vectors; a
+ *     planar node under a cluster adds the dot product of its normal with its parent's vectors;
+ *   (F x)_i = rowscale[i] (1 when NULL) times G at patch i's leaf.
+ * Dense and sparse F: one leaf per patch (node i is patch i), a link per stored entry, no cluster. */
+#define BN_LINK_NONE UINT32_MAX
+typedef struct bn_transport_links {
+    size_t npatch, nnodes, nlinks;
+    uint32_t *child, *leaf_patch;   /* per node */
+    uint8_t *cluster;               /* per node: 1 a volume cluster receiver */
+    float *area;                    /* per node (scene units squared; only ratios matter) */
+    float *normal;                  /* 3 per node (planar nodes under a cluster) */
+    uint32_t *start;                /* nnodes + 1 */
+    uint32_t *src;                  /* per link: the source node */
+    float *F;                       /* per link */
+    uint16_t *dir;                  /* per link: cluster receivers' direction to the source; NULL: none */
+    float *rowscale;                /* npatch; NULL: none */
+} bn_transport_links;
+/* K's F as links (the operator's own, or its entries); BN_EUSAGE for an operator with neither, BN_ENOMEM
+ * above 2^32 links. Free with bn_transport_links_free. */
+bn_status bn_transport_links_get(const bn_transport *k, bn_transport_links *out, bn_error *err);
+void bn_transport_links_free(bn_transport_links *l);
+/* The links' bytes as bn_transport_links holds them (the page embeds the same), from their count alone
+ * (no export): the operator's own count, or its stored entries counted row by row. */
+bn_status bn_transport_links_bytes(const bn_transport *k, size_t *bytes, bn_error *err);
+/* Link l's unit direction (cluster receivers): the octahedral decoding of dir[l], 8 bits per axis. */
+void bn_transport_links_dir(uint16_t e, double u[3]);
+
 /* F as a row-major N*N double array (needs BN_OP_ENTRIES; caller allocates N*N). */
 bn_status bn_transport_to_dense(const bn_transport *k, double *F, bn_error *err);
 

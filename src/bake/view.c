@@ -9,8 +9,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-extern const unsigned char bn__web_viewer[], bn__web_three[], bn__web_orbit[], bn__web_meshopt[];
-extern const size_t bn__web_viewer_size, bn__web_three_size, bn__web_orbit_size, bn__web_meshopt_size;
+extern const unsigned char bn__web_viewer[], bn__web_three[], bn__web_orbit[], bn__web_meshopt[], bn__web_worker[];
+extern const size_t bn__web_viewer_size, bn__web_three_size, bn__web_orbit_size, bn__web_meshopt_size,
+    bn__web_worker_size;
 extern const int bn__web_have_assets;
 
 static void bn__base64(FILE *fp, const unsigned char *p, size_t n)
@@ -90,17 +91,71 @@ int bn_view_is_bake(const char *glb_path)
     return strstr(json, "\"generator\":\"bounce") != NULL;
 }
 
+/* The template with its __BN_*__ placeholders filled: the bake (glb) or the live payload, the other empty. */
+static bn_status bn__view_page(const unsigned char *glb, size_t glen, const unsigned char *live, size_t llen,
+                               const char *title, const char *out, bn_error *err)
+{
+    static const struct {
+        const char *key;
+        int what;   /* 0 title, 1 three, 2 orbit, 3 meshopt, 4 glb, 5 live, 6 the live page's worker */
+    } keys[] = {{"__BN_TITLE__", 0}, {"__BN_THREE__", 1}, {"__BN_ORBIT__", 2}, {"__BN_MESHOPT__", 3},
+                {"__BN_GLB__", 4},   {"__BN_LIVE__", 5},  {"__BN_WORKER__", 6}};
+    const char *t = (const char *)bn__web_viewer, *end = t + bn__web_viewer_size;
+    bn__outfile f;
+    bn_status st = bn__outfile_open(&f, out, "wb", err);
+    if (st != BN_OK)
+        return st;
+    while (t < end) {
+        const char *m = strstr(t, "__BN_");
+        size_t k = 0;
+        if (!m || m >= end) {
+            fwrite(t, 1, (size_t)(end - t), f.fp);
+            break;
+        }
+        fwrite(t, 1, (size_t)(m - t), f.fp);
+        while (k < sizeof keys / sizeof *keys && strncmp(m, keys[k].key, strlen(keys[k].key)) != 0)
+            k++;
+        if (k == sizeof keys / sizeof *keys) {
+            fwrite(m, 1, 5, f.fp);
+            t = m + 5;
+            continue;
+        }
+        switch (keys[k].what) {
+        case 0: bn__html_text(f.fp, title); break;
+        case 1: bn__base64(f.fp, bn__web_three, bn__web_three_size); break;
+        case 2: bn__base64(f.fp, bn__web_orbit, bn__web_orbit_size); break;
+        case 3: bn__base64(f.fp, bn__web_meshopt, bn__web_meshopt_size); break;
+        case 4: bn__base64(f.fp, glb, glen); break;
+        case 5: bn__base64(f.fp, live, llen); break;
+        default: bn__base64(f.fp, live ? bn__web_worker : NULL, live ? bn__web_worker_size : 0); break;
+        }
+        t = m + strlen(keys[k].key);
+    }
+    return bn__outfile_commit(&f, err);
+}
+
+static bn_status bn__view_assets(bn_error *err)
+{
+    if (!bn__web_have_assets)
+        return bn_error_set(err, BN_EUSAGE, "this bounce was built without three.js or meshoptimizer "
+                                            "(web/node_modules was incomplete): run scripts/setup.sh, which installs it, and rebuild");
+    return BN_OK;
+}
+
+bn_status bn_view_write_live(const unsigned char *live, size_t n, const char *title, const char *out, bn_error *err)
+{
+    bn_status st = bn__view_assets(err);
+    return st != BN_OK ? st : bn__view_page(NULL, 0, live, n, title, out, err);
+}
+
 bn_status bn_view_write(const char *glb_path, const char *title, const char *out, bn_error *err)
 {
     FILE *in;
     unsigned char *glb = NULL;
     long len;
-    bn__outfile f;
     bn_status st;
-    const char *t = (const char *)bn__web_viewer, *end = t + bn__web_viewer_size;
-    if (!bn__web_have_assets)
-        return bn_error_set(err, BN_EUSAGE, "this bounce was built without three.js or meshoptimizer "
-                                            "(web/node_modules was incomplete): run scripts/setup.sh, which installs it, and rebuild");
+    if ((st = bn__view_assets(err)) != BN_OK)
+        return st;
     if (!(in = fopen(glb_path, "rb")))
         return bn_error_set(err, BN_EIO, "%s: cannot open the bake", glb_path);
     if (fseek(in, 0, SEEK_END) != 0 || (len = ftell(in)) < 0 || fseek(in, 0, SEEK_SET) != 0) {
@@ -122,38 +177,7 @@ bn_status bn_view_write(const char *glb_path, const char *title, const char *out
         free(glb);
         return st;
     }
-    st = bn__outfile_open(&f, out, "wb", err);
-    if (st != BN_OK) {
-        free(glb);
-        return st;
-    }
-    while (t < end) {   /* the template, its __BN_*__ placeholders filled */
-        const char *m = strstr(t, "__BN_");
-        if (!m || m >= end) {
-            fwrite(t, 1, (size_t)(end - t), f.fp);
-            break;
-        }
-        fwrite(t, 1, (size_t)(m - t), f.fp);
-        if (strncmp(m, "__BN_TITLE__", 12) == 0) {
-            bn__html_text(f.fp, title);
-            t = m + 12;
-        } else if (strncmp(m, "__BN_THREE__", 12) == 0) {
-            bn__base64(f.fp, bn__web_three, bn__web_three_size);
-            t = m + 12;
-        } else if (strncmp(m, "__BN_ORBIT__", 12) == 0) {
-            bn__base64(f.fp, bn__web_orbit, bn__web_orbit_size);
-            t = m + 12;
-        } else if (strncmp(m, "__BN_MESHOPT__", 14) == 0) {
-            bn__base64(f.fp, bn__web_meshopt, bn__web_meshopt_size);
-            t = m + 14;
-        } else if (strncmp(m, "__BN_GLB__", 10) == 0) {
-            bn__base64(f.fp, glb, (size_t)len);
-            t = m + 10;
-        } else {
-            fwrite(m, 1, 5, f.fp);
-            t = m + 5;
-        }
-    }
+    st = bn__view_page(glb, (size_t)len, NULL, 0, title, out, err);
     free(glb);
-    return bn__outfile_commit(&f, err);
+    return st;
 }

@@ -152,4 +152,25 @@ int bn__name_find(const char *const *names, size_t n, const char *s);
         return i >= 0 ? 0 : -1;                                                                     \
     }
 
+/* Growing buffers (src/base/buffers.c): text (JSON headers of glTF bakes and live pages) and 4-byte
+ * aligned binary. A failed allocation sets oom and later appends do nothing; the caller checks oom once
+ * and frees s / p. */
+typedef struct bn__str {
+    char *s;
+    size_t n, cap;
+    int oom;
+} bn__str;
+void bn__str_add(bn__str *b, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+/* A JSON string literal: quotes, backslashes and control characters escaped; bytes >= 0x80 pass. */
+void bn__str_json(bn__str *b, const char *v);
+/* A finite double as JSON (%.9g keeps a float's value; not finite: 0). */
+void bn__str_num(bn__str *b, double v);
+typedef struct bn__blob {
+    unsigned char *p;
+    size_t n, cap;
+    int oom;
+} bn__blob;
+/* Appends n bytes at a 4-byte boundary; returns their offset. */
+size_t bn__blob_add(bn__blob *b, const void *src, size_t n);
+
 #endif

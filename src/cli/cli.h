@@ -190,6 +190,7 @@ bn_status bn_cli_run_solution(const char *path, const bn_cli_scene *so, const bn
 /* Subcommands: each takes argv from the subcommand's name on. */
 int bn_cmd_info(int argc, char **argv, bn_cli_common *c);
 int bn_cmd_view(int argc, char **argv, bn_cli_common *c);
+int bn_cmd_view_live(int argc, char **argv, bn_cli_common *c);   /* view --live */
 int bn_cmd_formfactors(int argc, char **argv, bn_cli_common *c);
 int bn_cmd_solve(int argc, char **argv, bn_cli_common *c);
 int bn_cmd_bounces(int argc, char **argv, bn_cli_common *c);

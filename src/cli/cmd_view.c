@@ -21,7 +21,8 @@ static const char *bn__view_help =
     "keeps the form factors of dense and sparse transports for the next run), and the bake is kept beside\n"
     "the page (view.html: view.bake.glb): `bounce view view.bake.glb` shows it again without solving.\n"
     "The page's URL follows what it shows: #terms=E,KE&ev=1.5 (or ev=auto: each view exposed by\n"
-    "itself)&fc=1&cam=x,y,z,tx,ty,tz (metres)&panel=folded; copy it to share the view.\n\n"
+    "itself)&fc=1&cam=x,y,z,tx,ty,tz (metres)&panel=folded; copy it to share the view.\n"
+    "bounce view --live SCENE: a page that relights the scene in the browser (see bounce view --live --help).\n\n"
     "options:\n"
     "  -o, --output FILE.html   the page (default view.html)\n"
     "  -q, --quiet              no progress or summary\n"
@@ -132,6 +133,9 @@ int bn_cmd_view(int argc, char **argv, bn_cli_common *c)
     bn_error err;
     bn_status st = BN_OK;
     bn_error_clear(&err);
+    for (int i = 1; i < argc; i++)
+        if (strcmp(argv[i], "--live") == 0)
+            return bn_cmd_view_live(argc, argv, c);
     rc = bn__view_args(argc, argv, &v, &done);
     if (rc != 0 || done) {
         free(v.bargv);

@@ -93,5 +93,5 @@ bn_status bn_scene_edit_materials(bn_scene *s, const bn_material_edit *e, size_t
         if (e[k].has_Le)
             memcpy(m->Le, e[k].Le, sizeof m->Le);
     }
-    return s->npatches > 0 ? bn__scene_patch_textures(s, err) : BN_OK;
+    return BN_OK;   /* a textured patch's reflectance is its material's times its texture's mean */
 }

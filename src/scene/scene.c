@@ -677,7 +677,7 @@ void bn_scene_destroy(bn_scene *s)
     free(s->mat_etex);
     free(s->femit);
     free(s->fuv);
-    free(s->prho);
+    free(s->ptex);
     bn__file_tree_free(s->tree);
     free(s->lights);
     free(s);
@@ -786,8 +786,8 @@ unsigned long long bn_scene_digest(const bn_scene *s)
     h = bn__fnv1a(h, s->pverts, s->npverts * 3 * sizeof(double));
     for (size_t p = 0; p < s->npatches; p++)
         h = bn__fnv1a(h, s->patches[p].corner, sizeof s->patches[p].corner);
-    if (s->prho)   /* textured reflectance per patch */
-        h = bn__fnv1a(h, s->prho, 3 * s->npatches * sizeof *s->prho);
+    if (s->ptex)   /* textured reflectance per patch */
+        h = bn__fnv1a(h, s->ptex, 3 * s->npatches * sizeof *s->ptex);
     if (s->femit)   /* textured emission per face */
         h = bn__fnv1a(h, s->femit, 3 * s->nfaces * sizeof *s->femit);
     for (size_t k = 0; k < s->nlights; k++) {   /* punctual lights: what they are, not their names */
@@ -812,7 +812,7 @@ void bn_scene_patch_reflectance(const bn_scene *s, double *rho)
 {
     for (size_t i = 0; i < s->npatches; i++)
         for (int c = 0; c < 3; c++)
-            rho[3 * i + c] = s->prho ? s->prho[3 * i + c] : s->mats[s->patches[i].material].rho[c];
+            rho[3 * i + c] = s->mats[s->patches[i].material].rho[c] * (s->ptex ? s->ptex[3 * i + c] : 1);
 }
 
 int bn_scene_textured(const bn_scene *s) { return s->mat_tex != NULL; }

@@ -145,8 +145,8 @@ bn_status bn__scene_two_sided(bn_scene *sc, const char *path, const unsigned cha
 /* Textures (src/scene/texture.c): the soup's textures moved into the scene with each face corner's
  * texture coordinates (looked up by vertex in the polygon it came from), after its faces are built. */
 bn_status bn__scene_textures(bn_scene *sc, bn__soup *s);
-/* Each textured patch's mean reflectance (the material's factor x the texture's mean over the patch),
- * after meshing; NULL prho when no material has a texture. */
+/* Each textured patch's texture mean (its reflectance is the material's factor times it), after
+ * meshing; NULL ptex when no material has a texture. */
 bn_status bn__scene_patch_textures(bn_scene *sc, bn_error *err);
 /* The scene's objects and each face's (src/scene/objects.c), after its faces are built. */
 bn_status bn__scene_objects(bn_scene *sc, const bn__soup *s);
@@ -190,7 +190,7 @@ struct bn_scene {
     int         *mat_etex;                /* per material: its emission texture, -1 none; NULL: none */
     double      *femit;                   /* 3 per face: its emission texture's mean over it; NULL: none */
     double      *fuv;                     /* 2 per face index entry (NaN: none); NULL: no textures */
-    double      *prho;                    /* 3 per patch: the patch's mean reflectance; NULL: none */
+    double      *ptex;                    /* 3 per patch: its texture's mean over it (1 untextured); NULL: none */
     bn__file_camera cam;                  /* the file's camera, if any (bn_scene_camera) */
     bn__file_tree *tree;                  /* the file's node tree, if any (bn_scene_nodes) */
     bn_light    *lights;                  /* punctual lights (bn_scene_lights) */

@@ -205,15 +205,14 @@ static double bn__tri_texture(const bn_scene *sc, size_t f, const bn__texture *t
 
 bn_status bn__scene_patch_textures(bn_scene *sc, bn_error *err)
 {
-    free(sc->prho);
-    sc->prho = NULL;
+    free(sc->ptex);
+    sc->ptex = NULL;
     if (!sc->mat_tex)
         return BN_OK;
-    if (!(sc->prho = bn__malloc_array(3 * sc->npatches + 1, sizeof *sc->prho)))
+    if (!(sc->ptex = bn__malloc_array(3 * sc->npatches + 1, sizeof *sc->ptex)))
         return bn_error_set(err, BN_ENOMEM, "out of memory for the patches' textured reflectance");
     for (size_t p = 0; p < sc->npatches; p++) {
         const bn_patch *q = &sc->patches[p];
-        const double *rho = sc->mats[q->material].rho;
         int t = sc->mat_tex[q->material];
         double acc[3] = {0, 0, 0}, wsum = 0, mean[3];
         for (unsigned k = 1; t >= 0 && k + 1 < q->ncorners; k++) {   /* the patch as a fan of triangles */
@@ -224,7 +223,7 @@ bn_status bn__scene_patch_textures(bn_scene *sc, bn_error *err)
                 acc[c] += w * mean[c];
         }
         for (int c = 0; c < 3; c++)
-            sc->prho[3 * p + c] = rho[c] * (wsum > 0 ? acc[c] / wsum : 1);
+            sc->ptex[3 * p + c] = wsum > 0 ? acc[c] / wsum : 1;
     }
     return BN_OK;
 }
@@ -280,6 +279,17 @@ static bn_status bn__scene_face_emission(bn_scene *sc, const bn__soup *s)
             sc->femit[3 * f + c] = wsum > 0 ? acc[c] / wsum : 1;
     }
     return BN_OK;
+}
+
+void bn_scene_patch_texture_factors(const bn_scene *s, double *rho_f, double *Le_f)
+{
+    for (size_t p = 0; p < s->npatches; p++)
+        for (int c = 0; c < 3; c++) {
+            if (rho_f)
+                rho_f[3 * p + c] = s->ptex ? s->ptex[3 * p + c] : 1;
+            if (Le_f)
+                Le_f[3 * p + c] = s->femit ? s->femit[3 * s->patches[p].face + c] : 1;
+        }
 }
 
 void bn_scene_face_emission(const bn_scene *s, size_t f, double Le[3])

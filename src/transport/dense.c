@@ -258,10 +258,10 @@ static void bn__dense_destroy(void *ctx)
 #define BN__DENSE_CAPS (BN_OP_ROWS | BN_OP_ENTRIES | BN_OP_DIAG)
 static const bn_transport_ops bn__dense_float_ops = {
     "dense-float", BN__DENSE_CAPS, bn__dense_apply, bn__dense_row, bn__dense_entry, bn__dense_row_entries,
-    bn__dense_diag, bn__dense_bytes, bn__dense_destroy};
+    bn__dense_diag, bn__dense_bytes, bn__dense_destroy, NULL};
 static const bn_transport_ops bn__dense_double_ops = {
     "dense-double", BN__DENSE_CAPS, bn__dense_apply, bn__dense_row, bn__dense_entry, bn__dense_row_entries,
-    bn__dense_diag, bn__dense_bytes, bn__dense_destroy};
+    bn__dense_diag, bn__dense_bytes, bn__dense_destroy, NULL};
 
 /* ---- the storage: zeroed N^2, filled in place ---- */
 

@@ -275,6 +275,64 @@ static bn_status bn__hop_diag(void *ctx, double *d, bn_error *err)
     return BN_OK;
 }
 
+void bn_transport_links_dir(uint16_t e, double u[3]) { bn__oct_decode(e, u); }
+
+/* The nodes' arrays of the export. */
+static bn_status bn__hop_links_nodes(const bn__hop *h, bn_transport_links *o, bn_error *err)
+{
+    size_t n = h->n;
+    o->child = bn__malloc_array(n, sizeof *o->child);
+    o->leaf_patch = bn__malloc_array(n, sizeof *o->leaf_patch);
+    o->cluster = bn__malloc_array(n, 1);
+    o->area = bn__malloc_array(n, sizeof *o->area);
+    o->normal = bn__malloc_array(3 * n, sizeof *o->normal);
+    o->start = bn__malloc_array(n + 1, sizeof *o->start);
+    if (h->rowscale)
+        o->rowscale = bn__malloc_array(h->npatch, sizeof *o->rowscale);
+    if (!o->child || !o->leaf_patch || !o->cluster || !o->area || !o->normal || !o->start ||
+        (h->rowscale && !o->rowscale))
+        return bn_error_set(err, BN_ENOMEM, "out of memory for the export of %zu nodes", n);
+    memcpy(o->child, h->child, n * sizeof *o->child);
+    memcpy(o->leaf_patch, h->leaf_patch, n * sizeof *o->leaf_patch);
+    memcpy(o->normal, h->normal, 3 * n * sizeof *o->normal);
+    for (size_t v = 0; v < n; v++) {
+        o->cluster[v] = h->cl[v] != BN__NONE;
+        o->area[v] = (float)h->area[v];
+    }
+    for (size_t v = 0; v <= n; v++)
+        o->start[v] = (uint32_t)h->start[v];
+    for (size_t i = 0; h->rowscale && i < h->npatch; i++)
+        o->rowscale[i] = (float)h->rowscale[i];
+    return BN_OK;
+}
+
+static bn_status bn__hop_links(const void *ctx, bn_transport_links *o, int count_only, bn_error *err)
+{
+    const bn__hop *h = ctx;
+    bn_status st;
+    o->npatch = h->npatch;
+    o->nnodes = h->n;
+    o->nlinks = h->nlinks;
+    if (h->distributed)
+        return bn_error_set(err, BN_EUSAGE, "the hierarchy's links are spread over MPI ranks: export them from "
+                                            "one process");
+    if (h->nlinks >= BN__NONE)
+        return bn_error_set(err, BN_ENOMEM, "%zu links: too many to export (2^32)", h->nlinks);
+    if (count_only)
+        return BN_OK;
+    if ((st = bn__hop_links_nodes(h, o, err)) != BN_OK)
+        return st;
+    o->src = bn__malloc_array(h->nlinks + 1, sizeof *o->src);
+    o->F = bn__malloc_array(h->nlinks + 1, sizeof *o->F);
+    o->dir = bn__malloc_array(h->nlinks + 1, sizeof *o->dir);
+    if (!o->src || !o->F || !o->dir)
+        return bn_error_set(err, BN_ENOMEM, "out of memory for the export of %zu links", h->nlinks);
+    memcpy(o->src, h->src, h->nlinks * sizeof *o->src);
+    memcpy(o->F, h->F, h->nlinks * sizeof *o->F);
+    memcpy(o->dir, h->dir, h->nlinks * sizeof *o->dir);
+    return BN_OK;
+}
+
 const bn_transport_ops bn__hop_ops = {
     .name = "hierarchical",   /* as the transport option names it */
     .caps = BN_OP_DIAG,
@@ -282,4 +340,5 @@ const bn_transport_ops bn__hop_ops = {
     .diag = bn__hop_diag,
     .bytes = bn__hop_bytes,
     .destroy = bn__hop_destroy,
+    .links = bn__hop_links,
 };

@@ -143,10 +143,10 @@ static size_t bn__csr_bytes(const void *ctx)
 #define BN__CSR_CAPS (BN_OP_ROWS | BN_OP_ENTRIES | BN_OP_DIAG)
 static const bn_transport_ops bn__csr_float_ops = {"csr-float", BN__CSR_CAPS, bn__csr_apply, bn__csr_row,
                                                    bn__csr_entry, bn__csr_row_entries, bn__csr_diag,
-                                                   bn__csr_bytes, bn__csr_free};
+                                                   bn__csr_bytes, bn__csr_free, NULL};
 static const bn_transport_ops bn__csr_double_ops = {"csr-double", BN__CSR_CAPS, bn__csr_apply, bn__csr_row,
                                                     bn__csr_entry, bn__csr_row_entries, bn__csr_diag,
-                                                    bn__csr_bytes, bn__csr_free};
+                                                    bn__csr_bytes, bn__csr_free, NULL};
 
 /* ---- the storage: a pattern first, values into its slots, zeros dropped at the end ---- */
 

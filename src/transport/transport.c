@@ -337,3 +337,124 @@ BN__VOCABULARY(bn_precision, bn_precision, BN__PRECISIONS)
 double bn_precision_epsilon(bn_precision p) { return p == BN_PRECISION_DOUBLE ? 0x1p-53 : 0x1p-24; }
 unsigned bn_precision_bytes(bn_precision p) { return p == BN_PRECISION_DOUBLE ? 8 : 4; }
 int bn_precision_digits(bn_precision p) { return p == BN_PRECISION_DOUBLE ? 17 : 9; }
+
+/* ---- F exported as links (bn_transport_links) ---- */
+
+void bn_transport_links_free(bn_transport_links *l)
+{
+    if (!l)
+        return;
+    free(l->child);
+    free(l->leaf_patch);
+    free(l->cluster);
+    free(l->area);
+    free(l->normal);
+    free(l->start);
+    free(l->src);
+    free(l->F);
+    free(l->dir);
+    free(l->rowscale);
+    memset(l, 0, sizeof *l);
+}
+
+/* Dense and sparse F's nonzero entries counted (count_only) or exported: a leaf per patch. */
+static bn_status bn__links_from_entries(const bn_transport *k, bn_transport_links *out, int count_only, bn_error *err)
+{
+    size_t n = k->n, *cols = bn__malloc_array(n ? n : 1, sizeof *cols), total = 0, cap = 0, cnt;
+    double *vals = bn__malloc_array(n ? n : 1, sizeof *vals);
+    bn_status st = BN_OK;
+    out->npatch = out->nnodes = n;
+    if (!cols || !vals)
+        st = bn_error_set(err, BN_ENOMEM, "out of memory for a row of %zu entries", n);
+    for (size_t i = 0; st == BN_OK && i < n; i++) {
+        if ((st = bn_transport_row_entries(k, i, cols, vals, &cnt, err)) != BN_OK)
+            break;
+        size_t kept = 0;
+        for (size_t q = 0; q < cnt; q++)   /* a dense row's exact zeros (no sight, one plane) are not links */
+            if (vals[q] != 0) {
+                cols[kept] = cols[q];
+                vals[kept++] = vals[q];
+            }
+        cnt = kept;
+        if (!count_only && total + cnt > cap) {   /* the link arrays grow by half */
+            size_t want = (total + cnt) + (total + cnt) / 2 + 1024;
+            uint32_t *s2 = realloc(out->src, want * sizeof *s2);
+            float *f2 = s2 ? realloc(out->F, want * sizeof *f2) : NULL;
+            out->src = s2 ? s2 : out->src;
+            out->F = f2 ? f2 : out->F;
+            if (!s2 || !f2) {
+                st = bn_error_set(err, BN_ENOMEM, "out of memory for %zu links", want);
+                break;
+            }
+            cap = want;
+        }
+        for (size_t q = 0; !count_only && q < cnt; q++) {
+            out->src[total + q] = (uint32_t)cols[q];
+            out->F[total + q] = (float)vals[q];
+        }
+        if (!count_only)
+            out->start[i + 1] = (uint32_t)(total + cnt);
+        total += cnt;
+        if (total >= BN_LINK_NONE)
+            st = bn_error_set(err, BN_ENOMEM, "F has more than 2^32 entries: too many to export as links");
+    }
+    free(cols);
+    free(vals);
+    out->nlinks = total;
+    return st;
+}
+
+/* The tree of one leaf per patch, flat. */
+static bn_status bn__links_leaves(size_t n, bn_transport_links *out, bn_error *err)
+{
+    out->child = bn__malloc_array(n + 1, sizeof *out->child);
+    out->leaf_patch = bn__malloc_array(n + 1, sizeof *out->leaf_patch);
+    out->cluster = bn__calloc(n + 1, 1);
+    out->area = bn__malloc_array(n + 1, sizeof *out->area);
+    out->normal = bn__calloc(3 * n + 1, sizeof *out->normal);
+    out->start = bn__calloc(n + 1, sizeof *out->start);
+    if (!out->child || !out->leaf_patch || !out->cluster || !out->area || !out->normal || !out->start)
+        return bn_error_set(err, BN_ENOMEM, "out of memory for the links of %zu patches", n);
+    for (size_t i = 0; i < n; i++) {
+        out->child[i] = BN_LINK_NONE;
+        out->leaf_patch[i] = (uint32_t)i;
+        out->area[i] = 1;
+    }
+    return BN_OK;
+}
+
+static bn_status bn__links(const bn_transport *k, bn_transport_links *out, int count_only, bn_error *err)
+{
+    bn_status st;
+    memset(out, 0, sizeof *out);
+    if (k->ops->links)
+        st = k->ops->links(k->ctx, out, count_only, err);
+    else if (!(k->ops->caps & BN_OP_ENTRIES))
+        return bn_error_set(err, BN_EUSAGE, "%s operator: neither links nor entries to export",
+                            bn_transport_name(k));
+    else if (!count_only && (st = bn__links_leaves(k->n, out, err)) != BN_OK)
+        ;
+    else
+        st = bn__links_from_entries(k, out, count_only, err);
+    if (st != BN_OK)
+        bn_transport_links_free(out);
+    return st;
+}
+
+bn_status bn_transport_links_get(const bn_transport *k, bn_transport_links *out, bn_error *err)
+{
+    return bn__links(k, out, 0, err);
+}
+
+bn_status bn_transport_links_bytes(const bn_transport *k, size_t *bytes, bn_error *err)
+{
+    bn_transport_links l;
+    bn_status st = bn__links(k, &l, 1, err);
+    *bytes = 0;
+    if (st != BN_OK)
+        return st;
+    /* per node child, leaf_patch, cluster, area, normal, start; per link src, F, dir; per patch rowscale */
+    *bytes = l.nnodes * (4 + 4 + 1 + 4 + 12 + 4) + 4 + l.nlinks * (4 + 4 + (l.nnodes > l.npatch ? 2 : 0)) +
+             l.npatch * 4;
+    return BN_OK;
+}
