@@ -737,6 +737,27 @@ $work/view-bunny.html#lod=0:69469:off:all (#lod=0)"
     done <<<"$pages"
     echo >>"$report"
     if [ -f "$report.val" ]; then cat "$report.val" >>"$report"; echo >>"$report"; rm -f "$report.val"; fi
+    # the live page (issue 37: at most 30 ms per change for the Cornell box, 1 s for the bunny box)
+    note "viewer page: the live page's update time per change"
+    {
+        echo "## The live page (\`bounce view --live\`): update time per change"
+        echo
+        echo "The page's own #livebench=20: 20 changes alternating a reflectance (x0.9 and back; the series summed"
+        echo "again in the Web Worker) and an emitter's Le (x1.5 and back; a weighted sum of the emitters' own terms),"
+        echo "each timed from the slider to the recoloured page (SwiftShader draws each frame on these cores), in ms,"
+        echo "median (max). First view: the terms E .. K^5E exact, rest estimated from the last term's ratio; exact:"
+        echo "rest summed until a term is below 1e-5 of the reflected light. Targets: Cornell box 30 ms, bunny box 1 s."
+        echo
+        echo "| page | triangles | rho: first view | rho: exact | Le | the last change, as the page says |"
+        echo "|---|---|---|---|---|---|"
+        "$bounce" view --live "$root/meshes/cornell-box.obj" --unit mm -q -o "$work/live-cornell.html" 2>/dev/null &&
+            python3 "$root/bench/live_bench.py" "$work/live-cornell.html" 20 </dev/null
+        if [ "$big" = 1 ] && [ -f "$bb" ]; then
+            "$bounce" view --live "$bb" --unit mm -q -o "$work/live-bunny.html" 2>/dev/null &&
+                python3 "$root/bench/live_bench.py" "$work/live-bunny.html" 6 </dev/null
+        fi
+        echo
+    } >>"$report"
 fi
 
 # ---- the crosscheck's false-alarm rate (--rates N): written to bench/rates.md, kept between runs ----

@@ -58,15 +58,16 @@ static int bn__live_parse(int argc, char **argv, bn_cli_common *c, bn__live_cli 
     return 1;
 }
 
-/* Coarser options after a page of `bytes` over `budget`: the hierarchy's eps doubled (links fall
- * roughly as eps^-1), else the patches cut by the square root of the excess (F's entries go as N^2).
- * Returns the line the page and the summary say. */
+/* Coarser options after a page of `bytes` over `budget`: the hierarchy's eps times the excess^2.5, at
+ * least 2 (the bunny box's links fell as eps^-0.4: the patches' own links to their neighbours stay),
+ * else the patches cut by the square root of the excess (F's entries go as N^2). Returns the line the
+ * page and the summary say. */
 static void bn__live_coarser(bn_pipeline_opts *po, const bn_pipeline *p, size_t bytes, size_t budget, char *why,
                              size_t n)
 {
     if (p->hierarchical) {
         double eps = po->hier.eps;
-        po->hier.eps = eps * 2;
+        po->hier.eps = eps * fmin(16, fmax(2, pow((double)bytes / (double)budget, 2.5)));
         snprintf(why, n, "F at eps %g needs %.1f MiB, over the budget %.3g MiB: built at eps %g", eps,
                  (double)bytes / 1048576, (double)budget / 1048576, po->hier.eps);
     } else {
@@ -91,12 +92,19 @@ static bn_status bn__live_solve(const char *scene, bn_pipeline_opts *po, size_t 
         memset(p, 0, sizeof *p);
         if ((st = bn_pipeline_run(scene, po, p, err)) != BN_OK || (st = bn_pipeline_live_bytes(p, bytes, err)) != BN_OK)
             return st;
-        if (*bytes <= budget)
+        if (*bytes <= budget) {
+            if (note[0] && p->hierarchical)   /* the first excess, then what was built */
+                snprintf(note + strlen(note), nnote - strlen(note), "; built at eps %g: %.1f MiB (bounce view --budget)",
+                         po->hier.eps, (double)*bytes / 1048576);
+            else if (note[0])
+                snprintf(note + strlen(note), nnote - strlen(note), "; built on %zu patches: %.1f MiB (bounce view "
+                         "--budget)", p->n, (double)*bytes / 1048576);
             return BN_OK;
+        }
         bn__live_coarser(po, p, *bytes, budget, why, sizeof why);
         fprintf(stderr, "bounce: view: %s\n", why);
         if (!note[0])
-            snprintf(note, nnote, "%s (bounce view --budget)", why);
+            snprintf(note, nnote, "%.*s", (int)(strchr(why, ':') - why), why);
         bn_pipeline_free(p);
         memset(p, 0, sizeof *p);
     }
