@@ -546,5 +546,6 @@ BN_TEST(links_export_is_the_array)
         BN_ASSERT_STATUS(bn_transport_links_get(k, &l, &err), BN_EUSAGE);
         BN_ASSERT(strstr(err.msg, "sphere-apply-only") != NULL);
         bn_transport_destroy(k);
+        free(s.A);
     }
 }
