@@ -7,6 +7,9 @@
   changed the red wall's light;
 - the hierarchy's links (tree, clusters, row scaling) at the file's materials: the worker's terms equal
   `bounce solve --transport hierarchical`'s (the same links: refinement is deterministic);
+- punctual lights (glTF KHR_lights_punctual, the Cornell box's light turned into a bulb and a spot):
+  the worker's L at the file's lights equals the solve's L the page carries, and scaling them by 2
+  doubles every term (they are bounce 1's source);
 - --budget below the data: the page is built on fewer patches, says so, and fits;
 - bad options: a clear error, exit 2, no page;
 - in headless Chromium: the page set through its address (the same edits) shows the C solve's KE on a
@@ -105,6 +108,24 @@ def hierarchy_checks(bounce, src, out, base):
     compare(rows, w, [(len(w["terms"]) - 1, "L")], 1e-4, "hierarchy")
 
 
+def punctual_checks(bounce, src, out):
+    import punctual_check
+    scene, page = os.path.join(out, "lamp.gltf"), os.path.join(out, "lamp.html")
+    punctual_check.write(os.path.join(src, "meshes/cornell-box.obj"), scene)
+    r = run([bounce, "view", "--live", scene, "--patches", "300", "--ff-visibility", "rays", "-q", "-o", page])
+    w1 = worker(src, page, {}) if r.returncode == 0 else None
+    w2 = worker(src, page, {"punctual": 2}) if w1 else None
+    if not w2:
+        check(False, "the punctual page and its worker ran")
+        return
+    L, ref = w1["terms"][-1], w1["L_solved"]
+    top = max(ref)
+    worst = max(abs(a - b) / (abs(b) + 1e-3 * top) for a, b in zip(L, ref))
+    check(sum(w1["terms"][1]) > 0 and worst < 1e-4, "punctual lights: the page's L is the solve's (worst %.2g)" % worst)
+    worst2 = max(abs(a - 2 * b) / (abs(2 * b) + 1e-9) for t1, t2 in zip(w1["terms"], w2["terms"]) for a, b in zip(t2, t1))
+    check(worst2 < 1e-9, "punctual lights x2 double every term (worst %.2g)" % worst2)
+
+
 def budget_and_bad_input(bounce, out, base):
     page = os.path.join(out, "small.html")
     r = run([bounce, "view", "--live"] + base + ["--budget", "0.25", "-o", page])
@@ -176,6 +197,7 @@ def main():
     base = [os.path.join(src, "meshes/cornell-box.obj"), "--unit", "mm", "--patches", "300", "--ff-visibility", "rays"]
     d = dense_checks(bounce, src, out, base)
     hierarchy_checks(bounce, src, out, base)
+    punctual_checks(bounce, src, out)
     budget_and_bad_input(bounce, out, base)
     if d:
         chromium_checks(*d)
