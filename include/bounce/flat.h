@@ -151,6 +151,19 @@ bn_status bn_flat_render(const bn_flat *f, int width, int height, int spp, const
 int bn_flat_layers(const bn_flat *f);
 const char *bn_flat_layer_name(const bn_flat *f, int layer, char *buf, size_t size);
 
+/* The path tracer on f's scene (loaded or solved; it shares the scene and the ray scene only, never F,
+ * K or the solve: bounce's independent cross-check). Layers E .. K^bounces E, rest, L (bounces + 3), spp
+ * samples each, seed keys the streams; results are the same for any thread count.
+ * bn_flat_trace_patches: each patch's mean outgoing radiance and its standard error, mean and se with room
+ * for (bounces + 3) x patches x 3 doubles (layer-major). bn_flat_trace_image: the camera (the scene's
+ * sidecar or default; eye, look may be NULL, fov_deg <= 0 keeps it) per pixel, mean and the variance of
+ * the mean, (bounces + 3) x height x width x 3 floats each, rows from the top. */
+bn_status bn_flat_trace_patches(bn_flat *f, size_t spp, int bounces, uint64_t seed, int threads, double *mean,
+                                double *se, char *msg, size_t msglen);
+bn_status bn_flat_trace_image(bn_flat *f, int width, int height, size_t spp, int bounces, uint64_t seed,
+                              const double *eye, const double *look, double fov_deg, int threads, float *mean,
+                              float *var, char *msg, size_t msglen);
+
 /* A caller's own operator: apply(user, x, y) sets y = K x for N x 3 interleaved x (no aliasing)
  * and returns 0, or nonzero to stop the solve (BN_EINPUT, "the operator failed"). */
 typedef int (*bn_flat_apply_fn)(void *user, const double *x, double *y);

@@ -196,6 +196,14 @@ def _load() -> Any:
     lib.bn_flat_solve_loaded.restype = I
     lib.bn_flat_relight_gain.argtypes = [P]
     lib.bn_flat_relight_gain.restype = ctypes.c_double
+    U64 = ctypes.c_uint64
+    lib.bn_flat_trace_patches.argtypes = [P, S, I, U64, I, D, D, ctypes.c_char_p, S]
+    lib.bn_flat_trace_patches.restype = I
+    Fp = ctypes.POINTER(ctypes.c_float)
+    lib.bn_flat_trace_image.argtypes = [P, I, I, S, I, U64, D, D, ctypes.c_double, I, Fp, Fp, ctypes.c_char_p, S]
+    lib.bn_flat_trace_image.restype = I
+    lib.bn_layer_name.argtypes = [I, I, ctypes.c_char_p, S]
+    lib.bn_layer_name.restype = ctypes.c_char_p
     _lib = lib
     return lib
 
@@ -279,7 +287,85 @@ def _form_factors(lib: Any, h: Any, n: int, sparse: bool) -> Any:
     return sp.csr_matrix((data, indices.astype(np.int64), indptr.astype(np.int64)), shape=(n, n))
 
 
-class Result:
+class Traced:
+    """The path tracer's answer (Result.trace, Scene.trace, and their trace_image): layers (E, KE, ...,
+    rest, L), mean[name] and its statistical error[name] (per patch: the standard error of the mean,
+    shape (patches, 3); per pixel: the variance of the mean, shape (height, width, 3)); read-only arrays.
+    The tracer shares only the scene with the radiosity side (no F, K or solve): an independent check."""
+
+    def __init__(self, layers: List[str], mean: Dict[str, np.ndarray], error: Dict[str, np.ndarray],
+                 spp: int, seed: int) -> None:
+        self.layers, self.mean, self.error, self.spp, self.seed = layers, mean, error, spp, seed
+
+    def __repr__(self) -> str:
+        return "<bounce.Traced %s, %d samples, seed %d>" % (",".join(self.layers), self.spp, self.seed)
+
+
+def _trace_args(spp, bounces, seed, threads):
+    return (_int("spp", spp, unsigned=True), _int("bounces", bounces, bits=32), _int("seed", seed, unsigned=True),
+            _int("threads", threads, bits=32))
+
+
+def _layer_names(lib, bounces):
+    buf = ctypes.create_string_buffer(32)
+    return [lib.bn_layer_name(k, bounces, buf, len(buf)).decode() for k in range(bounces + 3)]
+
+
+def _trace_patches(lib: Any, h: Any, n: int, spp: int, bounces: int, seed: int, threads: int) -> Traced:
+    spp, bounces, seed, threads = _trace_args(spp, bounces, seed, threads)
+    nl = max(bounces, 0) + 3
+    mean, se = np.zeros((nl, n, 3)), np.zeros((nl, n, 3))
+    Dp = ctypes.POINTER(ctypes.c_double)
+    msg = ctypes.create_string_buffer(2048)
+    st = lib.bn_flat_trace_patches(h, spp, bounces, seed, threads, mean.ctypes.data_as(Dp), se.ctypes.data_as(Dp),
+                                   msg, len(msg))
+    if st != 0:
+        _raise(lib, st, msg)
+    names_ = _layer_names(lib, bounces)
+    return Traced(names_, {k: _frozen(mean[i]) for i, k in enumerate(names_)},
+                  {k: _frozen(se[i]) for i, k in enumerate(names_)}, spp, seed)
+
+
+def _trace_image(lib: Any, h: Any, size: Tuple[int, int], spp: int, bounces: int, seed: int, threads: int,
+                 eye: Optional[Sequence[float]], look: Optional[Sequence[float]], fov: Optional[float]) -> Traced:
+    spp, bounces, seed, threads = _trace_args(spp, bounces, seed, threads)
+    w, hh = (_int("size", v, unsigned=True, bits=32) for v in size)
+    nl = max(bounces, 0) + 3
+    mean, var = (np.zeros((nl, hh, w, 3), dtype=np.float32) for _ in range(2))
+    Dp, Fp = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_float)
+    vec = lambda v: None if v is None else ctypes.cast((ctypes.c_double * 3)(*[_float("eye/look", x) for x in v]), Dp)  # noqa: E731
+    msg = ctypes.create_string_buffer(2048)
+    st = lib.bn_flat_trace_image(h, w, hh, spp, bounces, seed, vec(eye), vec(look), float(fov or 0), threads,
+                                 mean.ctypes.data_as(Fp), var.ctypes.data_as(Fp), msg, len(msg))
+    if st != 0:
+        _raise(lib, st, msg)
+    names_ = _layer_names(lib, bounces)
+    return Traced(names_, {k: _frozen(mean[i]) for i, k in enumerate(names_)},
+                  {k: _frozen(var[i]) for i, k in enumerate(names_)}, spp, seed)
+
+
+class _Traceable:
+    """trace() and trace_image() for a Result and a Scene (the same scene, the tracer's own rays)."""
+    _lib: Any
+    _h: Any
+    patches: int
+
+    def trace(self, spp: int = 64, bounces: int = 3, seed: int = 1, threads: int = 0) -> Traced:
+        """The path tracer's estimate of every patch's mean outgoing radiance, bounce by bounce (E ..
+        K^bounces E, rest, L), spp independent samples per patch, with each mean's standard error:
+        what `bounce trace --patches-out` writes, and what `bounce crosscheck` compares with. Compare
+        with the radiosity answer: z = (result.terms[1] - t.mean["KE"]) / t.error["KE"]."""
+        return _trace_patches(self._lib, self._h, self.patches, spp, bounces, seed, threads)
+
+    def trace_image(self, size: Tuple[int, int] = (256, 256), spp: int = 16, bounces: int = 3, seed: int = 1,
+                    eye: Optional[Sequence[float]] = None, look: Optional[Sequence[float]] = None,
+                    fov: Optional[float] = None, threads: int = 0) -> Traced:
+        """The path tracer's camera image (bounce trace's EXR, in memory): per layer a float32 array
+        (height, width, 3), mean over spp samples per pixel, and the variance of that mean."""
+        return _trace_image(self._lib, self._h, size, spp, bounces, seed, threads, eye, look, fov)
+
+
+class Result(_Traceable):
     """A solved scene. L, terms, rest and the per-patch arrays are read-only numpy arrays (an edit
     raises: bounce never ignores one); relight() solves again for new materials on the same F and
     replaces them (arrays taken before keep the old answer)."""
@@ -520,7 +606,7 @@ def _opts(lib, unit="m", method="auto", transport="auto", bounces=3, tol=None, p
     return o
 
 
-class Scene:
+class Scene(_Traceable):
     """A scene file loaded and cut into patches, with its per-patch arrays (numpy): area (scene
     units^2), normal, centroid, reflectance, emission (W m^-2 sr^-1), face (the input polygon).
     form_factors() builds F (with the meshing options given here) and returns it;

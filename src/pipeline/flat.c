@@ -5,6 +5,7 @@
 #include "bounce/image.h"
 #include "bounce/gather.h"
 #include "base/internal.h"
+#include "pipeline/flat_internal.h"
 
 #include <math.h>
 
@@ -13,16 +14,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-struct bn_flat {
-    bn_pipeline p;
-    bn_pipeline_opts po;   /* as loaded (bn_flat_load): the operator and solve stages use them */
-    char transport[32];    /* the operator's name, once built */
-    char transport_opt[16];   /* po.transport points here */
-    int sigint;            /* catch SIGINT in later stages too (opts.sigint at load) */
-    double *hist;          /* the monitor's rows, BN_FLAT_HISTORY values each */
-    size_t nhist, caphist;
-    void *op;   /* a caller's operator's context (bn_flat_solve_operator), freed after K */
-};
 
 /* SIGINT during a call (opts.sigint): the library's interrupt flag, which every long loop polls. */
 static void bn__flat_on_sigint(int sig)
@@ -31,12 +22,8 @@ static void bn__flat_on_sigint(int sig)
     bn_interrupt_raise(BN_EINTR);
 }
 
-typedef struct bn__flat_sig {
-    struct sigaction old;
-    int on;
-} bn__flat_sig;
 
-static void bn__flat_sig_begin(bn__flat_sig *s, int want)
+void bn__flat_sig_begin(bn__flat_sig *s, int want)
 {
     struct sigaction sa;
     s->on = 0;
@@ -49,7 +36,7 @@ static void bn__flat_sig_begin(bn__flat_sig *s, int want)
     s->on = sigaction(SIGINT, &sa, &s->old) == 0;
 }
 
-static void bn__flat_sig_end(bn__flat_sig *s)
+void bn__flat_sig_end(bn__flat_sig *s)
 {
     if (s->on)
         sigaction(SIGINT, &s->old, NULL);
@@ -71,7 +58,7 @@ void bn_flat_opts_default(bn_flat_opts *o)
     o->quiet = 1;
 }
 
-static bn_status bn__flat_fail(bn_status st, const char *text, char *msg, size_t msglen)
+bn_status bn__flat_fail(bn_status st, const char *text, char *msg, size_t msglen)
 {
     if (msg && msglen)
         snprintf(msg, msglen, "%s", text);

@@ -176,6 +176,30 @@ def test_images_in_memory():
         r.render(size=(0, 10))
 
 
+def test_the_tracer_from_python_agrees_with_the_solve_by_its_own_errors():
+    """trace(): the path tracer, which shares only the scene with the solve, estimates KE and K2E of
+    every patch; the solve's values sit within its standard errors (z over ~860 values: rms near 1,
+    mean near 0); the same seed gives the same numbers; trace_image() gives every layer per pixel, L
+    the sum of the others; a Scene traces without solving; bad samples raise naming them."""
+    r = bounce.solve(CORNELL, unit="mm", patches=300, bounces=2, visibility="rays")
+    t = r.trace(spp=256, bounces=2)
+    assert t.layers == ["E", "KE", "K2E", "rest", "L"]
+    for k, name in ((1, "KE"), (2, "K2E")):
+        ok = t.error[name] > 0
+        z = (r.terms[k] - t.mean[name])[ok] / t.error[name][ok]
+        assert ok.sum() > 500 and 0.7 < np.sqrt((z ** 2).mean()) < 1.4 and abs(z.mean()) < 0.25, (name, z.mean())
+    assert np.array_equal(r.trace(spp=256, bounces=2, threads=1).mean["KE"], t.mean["KE"])
+    im = r.trace_image(size=(32, 24), spp=4, bounces=1)
+    assert list(im.mean) == ["E", "KE", "rest", "L"] and im.mean["L"].shape == (24, 32, 3)
+    total = im.mean["E"] + im.mean["KE"] + im.mean["rest"]
+    assert np.abs(total - im.mean["L"]).max() <= 1e-4 * im.mean["L"].max() and im.error["L"].min() >= 0
+    s = bounce.Scene.load(CORNELL, unit="mm", patches=100)
+    assert s.trace(spp=4, bounces=0).mean["E"].max() == pytest.approx(17.0, rel=1e-6)   # the light's Le
+    for kw, needle in ((dict(spp=0), "spp 0"), (dict(spp=-2), "spp -2"), (dict(bounces=99), "bounces 99")):
+        with pytest.raises(bounce.BounceError, match=needle):
+            r.trace(**kw)
+
+
 def test_the_cli_solve_options_by_their_names(tmp_path):
     """max_iter, atol, stop, seed, precision, storage, cache, ff as `bounce solve` takes them."""
     kw = dict(unit="mm", patches=100)
