@@ -42,12 +42,12 @@ def test_furnace_every_method(tmp_path, method, rho):
 
 def test_cornell_equals_the_cli_csv(tmp_path):
     csv = tmp_path / "cb.csv"
-    subprocess.run([EXE, "solve", CORNELL, "--unit", "mm", "--patches", "400", "-q", "-o", str(csv)], check=True,
-                   stderr=subprocess.DEVNULL)
+    subprocess.run([EXE, "solve", CORNELL, "--unit", "mm", "--patches", "400", "--ff-visibility", "rays", "-q", "-o",
+                    str(csv)], check=True, stderr=subprocess.DEVNULL)   # the subject is the binding, not visibility
     rows = [ln.split(",") for ln in csv.read_text().splitlines() if ln and not ln.startswith("#")]
     head, rows = rows[0], rows[1:]
     cols = [head.index(c) for c in ("L_R", "L_G", "L_B")]
-    r = bounce.solve(CORNELL, unit="mm", patches=400)
+    r = bounce.solve(CORNELL, unit="mm", patches=400, visibility="rays")
     assert r.patches == len(rows)
     area = head.index("area")
     mismatch = 0
@@ -202,7 +202,7 @@ def test_the_tracer_from_python_agrees_with_the_solve_by_its_own_errors():
 
 def test_the_cli_solve_options_by_their_names(tmp_path):
     """max_iter, atol, stop, seed, precision, storage, cache, ff as `bounce solve` takes them."""
-    kw = dict(unit="mm", patches=100)
+    kw = dict(unit="mm", patches=100, visibility="rays")
     assert bounce.solve(CORNELL, precision="double", **kw).transport == "dense-double"
     assert bounce.solve(CORNELL, storage="sparse", **kw).transport == "csr-float"
     with pytest.raises(bounce.BounceError) as e:
@@ -328,11 +328,12 @@ def test_an_operator_that_raises_stops_the_solve():
 
 
 def test_the_doc_example_runs(tmp_path):
-    """doc/python_example.py: its table says what the series must: the shares add up to L, and the
-    truncation error falls with every term kept."""
+    """doc/python_example.py (at 400 patches): its table says what the series must: the shares add up
+    to L, and the truncation error falls with every term kept; its contact sheet has every layer."""
     env = dict(os.environ)
-    out = subprocess.run([sys.executable, os.path.join(SRC, "doc", "python_example.py"), str(tmp_path / "ex")],
+    out = subprocess.run([sys.executable, os.path.join(SRC, "doc", "python_example.py"), str(tmp_path / "ex"), "400"],
                          capture_output=True, text=True, env=env, check=True).stdout
+    assert "contact sheet: E KE K2E K3E rest L, 960 x 320 pixels" in out
     rows = [ln.split() for ln in out.splitlines() if ln[:2].strip().isdigit()]
     assert len(rows) == 11
     errors = [float(r[3]) for r in rows]
@@ -380,13 +381,13 @@ def test_bake_from_python_equals_the_cli(tmp_path):
         v = g["bufferViews"][a["bufferView"]]
         return np.frombuffer(binary, dtype="<f4", count=3 * a["count"], offset=v["byteOffset"])
 
-    r = bounce.solve(CORNELL, unit="mm", patches=200)
+    r = bounce.solve(CORNELL, unit="mm", patches=200, visibility="rays")
     for gather, extra in ((False, ["--gather", "none"]), (True, ["--bake-vertices", "600"])):
         mine = tmp_path / ("py-%s.glb" % gather)
         r.bake(str(mine), gather=gather, vertices=600 if gather else None)
         cli = tmp_path / ("cli-%s.glb" % gather)
-        subprocess.run([EXE, "bake", CORNELL, "--unit", "mm", "--patches", "200", "--per-bounce", "-q", "-o", str(cli)]
-                       + extra, check=True, stderr=subprocess.DEVNULL)
+        subprocess.run([EXE, "bake", CORNELL, "--unit", "mm", "--patches", "200", "--ff-visibility", "rays",
+                        "--per-bounce", "-q", "-o", str(cli)] + extra, check=True, stderr=subprocess.DEVNULL)
         for attr in ("POSITION", "COLOR_0", "_L", "_E", "_KE", "_K2E", "_K3E", "_REST"):
             a, b = glb_floats(mine, attr), glb_floats(cli, attr)
             assert a.shape == b.shape and np.array_equal(a, b), (gather, attr)
@@ -426,12 +427,12 @@ def test_images_from_python_equal_the_cli(tmp_path):
     oiio = shutil.which("oiiotool")
     if not oiio:
         pytest.skip("no oiiotool (Debian's openimageio-tools, which scripts/setup.sh installs)")
-    r = bounce.solve(CORNELL, unit="mm", patches=400)
+    r = bounce.solve(CORNELL, unit="mm", patches=400, visibility="rays")
     mine = tmp_path / "py.exr"
     r.images(str(mine), size=(96, 96), previews=False)
     cli = tmp_path / "cli.exr"
-    subprocess.run([EXE, "bounces", CORNELL, "--unit", "mm", "--patches", "400", "--size", "96x96", "--no-previews",
-                    "-q", "-o", str(cli)], check=True, stderr=subprocess.DEVNULL)
+    subprocess.run([EXE, "bounces", CORNELL, "--unit", "mm", "--patches", "400", "--ff-visibility", "rays", "--size",
+                    "96x96", "--no-previews", "-q", "-o", str(cli)], check=True, stderr=subprocess.DEVNULL)
 
     def means(p):
         out = subprocess.run([oiio, "--stats", str(p)], capture_output=True, text=True, check=True).stdout
