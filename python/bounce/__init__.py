@@ -29,7 +29,10 @@ import numpy.typing as npt
 
 # A material's new value: one number (grey) or three (R, G, B).
 RGB = Union[float, Sequence[float]]
-# Names a parameter takes (method, transport, unit, ...) are the library's: names("method") lists them.
+# Names a parameter takes (method, transport, unit, ...) are the library's: names("method") lists them,
+# and _names.py holds them as Literal types, generated from the library's tables (scripts/python_names.py).
+from bounce._names import (GatherName, MeshName, MethodName, TransportName, UnitName,  # noqa: E402
+                           VisibilityName)
 Name = str
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -448,8 +451,8 @@ class Result(_Traceable):
         (no dense copy). Raises BounceError under the hierarchy, which keeps no pairs."""
         return _form_factors(self._lib, self._h, self.patches, sparse)
 
-    def bake(self, path: PathLike, per_bounce: bool = True, mesh: Name = "elements", ldr: bool = False,
-             exposure: Optional[float] = None, crease: float = 30.0, gather: Union[bool, Name] = True,
+    def bake(self, path: PathLike, per_bounce: bool = True, mesh: MeshName = "elements", ldr: bool = False,
+             exposure: Optional[float] = None, crease: float = 30.0, gather: Union[bool, GatherName] = True,
              vertices: Optional[int] = None) -> None:
         """Bakes this solution to vertex colours as `bounce bake` does, by the extension of `path`
         (.ply, .om, .obj, .glb, .gltf): per_bounce adds every term; mesh="input" bakes the scene's
@@ -458,13 +461,12 @@ class Result(_Traceable):
         each vertex by the final gather, the element mesh refined where L changes up to `vertices`
         vertices (as --bake-vertices; None: 100,000; 0: the patches' own); False or "none" bakes the
         patches' values. Atomic, as every bounce output."""
-        if isinstance(gather, bool):
-            gather = names("gather")[0 if gather else 1]
+        gname = _gather_name(gather)
         msg = ctypes.create_string_buffer(2048)
         ev = float("nan") if exposure is None else float(exposure)
         nv = -1 if vertices is None else _int("vertices", vertices, unsigned=True)
         st = self._lib.bn_flat_bake(self._h, os.fsencode(path), int(per_bounce), _name("mesh", mesh), int(ldr), ev,
-                                    float(crease), _name("gather", gather), nv, b"python bounce package", msg,
+                                    float(crease), _name("gather", gname), nv, b"python bounce package", msg,
                                     len(msg))
         if st != 0:
             _raise(self._lib, st, msg)
@@ -472,15 +474,14 @@ class Result(_Traceable):
     def images(self, path: PathLike, size: Optional[Tuple[int, int]] = None, spp: Optional[int] = None,
                eye: Optional[Sequence[float]] = None, look: Optional[Sequence[float]] = None,
                fov: Optional[float] = None, previews: bool = True, smooth: bool = False, half: bool = False,
-               gather: Union[bool, Name] = True) -> None:
+               gather: Union[bool, GatherName] = True) -> None:
         """Camera images of every layer as `bounce bounces` writes them: path (FILE.exr, a layer per
         term, rest and L) and with previews FILE.<layer>.png and the contact sheet. The camera is the
         scene's NAME.camera sidecar, else in front of the box; size=(w, h), spp, eye, look (scene
         units) and fov (degrees) override it. gather: a names("gather") name, "final" (or True) the
         final gather per pixel (as `bounce bounces` by default; the solve must keep KE, bounces >= 1),
         "none" (or False) each pixel the value of the patch it sees."""
-        if isinstance(gather, bool):
-            gather = names("gather")[0 if gather else 1]
+        gname = _gather_name(gather)
         Dp = ctypes.POINTER(ctypes.c_double)
         vec = lambda v: None if v is None else (ctypes.c_double * 3)(*[float(x) for x in v])
         e, lk = vec(eye), vec(look)
@@ -488,7 +489,7 @@ class Result(_Traceable):
         msg = ctypes.create_string_buffer(2048)
         st = self._lib.bn_flat_images(self._h, os.fsencode(path), int(w), int(h), int(spp or 0),
                                       ctypes.cast(e, Dp) if e else None, ctypes.cast(lk, Dp) if lk else None,
-                                      float(fov or 0), int(previews), int(smooth), int(half), _name("gather", gather),
+                                      float(fov or 0), int(previews), int(smooth), int(half), _name("gather", gname),
                                       b"python bounce package", msg, len(msg))
         if st != 0:
             _raise(self._lib, st, msg)
@@ -496,12 +497,11 @@ class Result(_Traceable):
     def render(self, size: Tuple[int, int] = (256, 256), spp: Optional[int] = None,
                eye: Optional[Sequence[float]] = None, look: Optional[Sequence[float]] = None,
                fov: Optional[float] = None, smooth: bool = False,
-               gather: Union[bool, Name] = True) -> Dict[str, np.ndarray]:
+               gather: Union[bool, GatherName] = True) -> Dict[str, np.ndarray]:
         """The images of images() in memory, no file: {"E": ..., "KE": ..., "K2E": ..., "rest": ...,
         "L": ...}, each a float32 array of shape (height, width, 3), rows from the top, radiance in
         W m^-2 sr^-1 (camera and gather as images() takes them)."""
-        if isinstance(gather, bool):
-            gather = names("gather")[0 if gather else 1]
+        gname = _gather_name(gather)
         w, h = (_int("size", v, bits=32) for v in size)
         lib, nl = self._lib, self._lib.bn_flat_layers(self._h)
         out = np.zeros((max(nl, 1), h, w, 3), dtype=np.float32) if w > 0 and h > 0 else np.zeros(0, np.float32)
@@ -511,7 +511,7 @@ class Result(_Traceable):
         msg = ctypes.create_string_buffer(2048)
         st = lib.bn_flat_render(self._h, w, h, int(spp or 0), ctypes.cast(e, Dp) if e else None,
                                 ctypes.cast(lk, Dp) if lk else None, float(fov or 0), int(smooth),
-                                _name("gather", gather), out.ctypes.data_as(ctypes.POINTER(ctypes.c_float)),
+                                _name("gather", gname), out.ctypes.data_as(ctypes.POINTER(ctypes.c_float)),
                                 msg, len(msg))
         if st != 0:
             _raise(lib, st, msg)
@@ -530,6 +530,11 @@ class Result(_Traceable):
 
 _DIAG = ("row_sum_min", "row_sum_max", "row_sum_rms_dev", "reciprocity_residual", "k_norm_inf",
          "occluded_fraction", "rays", "nonzeros", "bytes", "seconds", "rows_above_one", "row_sum_tol")
+
+
+def _gather_name(gather: Union[bool, str]) -> str:
+    """True: the final gather (the library's first gather name), False: none; a name as it is."""
+    return names("gather")[0 if gather else 1] if isinstance(gather, bool) else gather
 
 
 def _name(option, v):
@@ -626,9 +631,9 @@ class Scene(_Traceable):
     _h: Any
 
     @classmethod
-    def load(cls, path: PathLike, unit: Name = "m", patches: Optional[int] = None,
-             patch_size: Optional[float] = None, transport: Name = "auto", eps: Optional[float] = None,
-             threads: int = 0, progress: bool = False, visibility: Name = "exact", **more: Any) -> "Scene":
+    def load(cls, path: PathLike, unit: UnitName = "m", patches: Optional[int] = None,
+             patch_size: Optional[float] = None, transport: TransportName = "auto", eps: Optional[float] = None,
+             threads: int = 0, progress: bool = False, visibility: VisibilityName = "exact", **more: Any) -> "Scene":
         lib = _load()
         self = cls()
         self.path = os.fspath(path)
@@ -765,10 +770,10 @@ def as_linear_operator(result: Result, reflectance: bool = True) -> Any:
     return sp.linalg.LinearOperator((3 * n, 3 * n), matvec=matvec, dtype=np.float64)
 
 
-def solve(path: Union[PathLike, "Scene", Operator], unit: Name = "m", method: Name = "auto",
-          transport: Name = "auto", bounces: int = 3, tol: Optional[float] = None, patches: Optional[int] = None,
+def solve(path: Union[PathLike, "Scene", Operator], unit: UnitName = "m", method: MethodName = "auto",
+          transport: TransportName = "auto", bounces: int = 3, tol: Optional[float] = None, patches: Optional[int] = None,
           patch_size: Optional[float] = None, eps: Optional[float] = None, threads: int = 0,
-          progress: bool = False, emission: Optional[npt.ArrayLike] = None, visibility: Name = "exact",
+          progress: bool = False, emission: Optional[npt.ArrayLike] = None, visibility: VisibilityName = "exact",
           **more: Any) -> Result:
     """Loads, meshes, builds K and solves L = E + K L for the scene file at `path`, keeping the
     terms K^0 E .. K^bounces E. Options are those of `bounce solve` (defaults alike; visibility is

@@ -200,6 +200,21 @@ def test_the_tracer_from_python_agrees_with_the_solve_by_its_own_errors():
             r.trace(**kw)
 
 
+def test_the_type_hints_names_are_the_librarys():
+    """bounce._names (Literal types for method, transport, unit, ...) is what scripts/python_names.py
+    makes from the library's tables now: a vocabulary changed in C without regenerating it fails here."""
+    import importlib.util
+    import typing
+    import bounce._names as hints
+    spec = importlib.util.spec_from_file_location("python_names", os.path.join(SRC, "scripts", "python_names.py"))
+    gen = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(gen)
+    assert open(hints.__file__).read() == gen.text()
+    for v in gen.VOCABULARIES:
+        got = list(typing.get_args(getattr(hints, v.capitalize() + "Name")))
+        assert got == bounce.names(v) + (["auto"] if v == "method" else []), v
+
+
 def test_the_cli_solve_options_by_their_names(tmp_path):
     """max_iter, atol, stop, seed, precision, storage, cache, ff as `bounce solve` takes them."""
     kw = dict(unit="mm", patches=100, visibility="rays")
