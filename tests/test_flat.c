@@ -185,3 +185,49 @@ BN_TEST(errors_carry_the_message)
     BN_ASSERT(strstr(msg, "telepathy") != NULL);
     bn_flat_free(NULL);
 }
+
+/* The tracer and the cross-check through the flat API, in the furnace (rho 0.5, Le 1): bounce k is
+ * 0.5^k everywhere, so every patch's estimate is within 6 of its standard errors of it and the mean
+ * over pixels within 5%; radiosity agrees, so the cross-check passes; bad options are refused with a
+ * message. */
+BN_TEST(tracer_and_crosscheck_in_the_furnace)
+{
+    bn_flat_opts o;
+    bn_flat *f = NULL;
+    bn_flat_check *c = NULL;
+    char msg[512];
+    double fig[BN_FLAT_CHECK_FIGURES], *mean, *se;
+    float *im, *var;
+    size_t n;
+    bn_flat_opts_default(&o);
+    o.patches = 48;
+    o.bounces = 2;
+    BN_ASSERT_EQ(bn_flat_load(furnace(), &o, &f, msg, sizeof msg), BN_OK);   /* a scene, not solved */
+    n = bn_flat_patches(f);
+    mean = malloc(5 * n * 3 * sizeof *mean);
+    se = malloc(5 * n * 3 * sizeof *se);
+    BN_ASSERT_EQ(bn_flat_trace_patches(f, 64, 2, 1, 0, mean, se, msg, sizeof msg), BN_OK);
+    for (size_t i = 0; i < 3 * n; i++)
+        for (int k = 0; k < 3; k++)
+            BN_ASSERT_NEAR(mean[(size_t)k * 3 * n + i], ldexp(1.0, -k), 6 * se[(size_t)k * 3 * n + i] + 1e-12);
+    BN_ASSERT_EQ(bn_flat_trace_patches(f, 0, 2, 1, 0, mean, se, msg, sizeof msg), BN_EUSAGE);
+    BN_ASSERT(strstr(msg, "spp 0") != NULL);
+    im = malloc(5 * 8 * 6 * 3 * sizeof *im);
+    var = malloc(5 * 8 * 6 * 3 * sizeof *var);
+    const double eye[3] = {0.5, 0.5, 0.5}, look[3] = {0.5, 0.5, 1};   /* inside: the faces' fronts */
+    BN_ASSERT_EQ(bn_flat_trace_image(f, 8, 6, 4, 2, 1, eye, look, 0, 0, im, var, msg, sizeof msg), BN_OK);
+    double ke = 0;
+    for (size_t p = 0; p < 8 * 6 * 3; p++)
+        ke += im[8 * 6 * 3 + p] / (8 * 6 * 3);
+    BN_ASSERT_NEAR(ke, 0.5, 0.025);   /* KE over the pixels */
+    free(mean), free(se), free(im), free(var);
+    bn_flat_free(f);
+    BN_ASSERT_EQ(bn_flat_crosscheck(furnace(), &o, 64, 2, 0, "patch", &c, msg, sizeof msg), BN_OK);
+    BN_ASSERT(bn_flat_check_pass(c));
+    BN_ASSERT_EQ(bn_flat_check_layers(c), 5);
+    bn_flat_check_figures(c, fig);
+    BN_ASSERT_EQ(fig[0], (double)(5 * 3 * bn_flat_check_entries(c)));   /* the family: layers x entries x 3 */
+    bn_flat_check_free(c);
+    BN_ASSERT_EQ(bn_flat_crosscheck(furnace(), &o, 64, 2, 0, "mesh", &c, msg, sizeof msg), BN_EUSAGE);
+    BN_ASSERT(c == NULL && strstr(msg, "'mesh'") != NULL);
+}

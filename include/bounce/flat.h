@@ -164,6 +164,25 @@ bn_status bn_flat_trace_image(bn_flat *f, int width, int height, size_t spp, int
                               const double *eye, const double *look, double fov_deg, int threads, float *mean,
                               float *var, char *msg, size_t msglen);
 
+/* `bounce crosscheck` on the scene file at path (o: the load, mesh and form-factor options; o->seed
+ * also keys the tracer): radiosity solved to 1e-10 against the path tracer at spp samples per patch
+ * (0: 1024), terms E .. K^bounces E, rest and L compared per patch and channel at the family-wise
+ * false-failure rate alpha (0: 0.01); model "patch" (the default: the tracer estimates the
+ * patch-constant transport, no allowance) or "continuous" (with a second mesh level's allowance). */
+typedef struct bn_flat_check bn_flat_check;
+bn_status bn_flat_crosscheck(const char *path, const bn_flat_opts *o, size_t spp, int bounces, double alpha,
+                             const char *model, bn_flat_check **out, char *msg, size_t msglen);
+void bn_flat_check_free(bn_flat_check *c);   /* NULL is a no-op */
+int bn_flat_check_pass(const bn_flat_check *c);
+int bn_flat_check_layers(const bn_flat_check *c);        /* bounces + 3 */
+size_t bn_flat_check_entries(const bn_flat_check *c);    /* patches (or regions, for large scenes) */
+/* family, alpha, crit, within, worst_z, worst_z_raw, power_crit, power_worst_z, few_hits, spp, seconds */
+#define BN_FLAT_CHECK_FIGURES 11
+void bn_flat_check_figures(const bn_flat_check *c, double out[BN_FLAT_CHECK_FIGURES]);
+/* layers x entries x 3 each (any may be NULL): radiosity, the tracer's mean and standard error, and the
+ * allowance for what the two estimate differently (0 where none). */
+void bn_flat_check_arrays(const bn_flat_check *c, double *rad, double *trace, double *se, double *tol);
+
 /* A caller's own operator: apply(user, x, y) sets y = K x for N x 3 interleaved x (no aliasing)
  * and returns 0, or nonzero to stop the solve (BN_EINPUT, "the operator failed"). */
 typedef int (*bn_flat_apply_fn)(void *user, const double *x, double *y);

@@ -205,6 +205,20 @@ def _load() -> Any:
     Fp = ctypes.POINTER(ctypes.c_float)
     lib.bn_flat_trace_image.argtypes = [P, I, I, S, I, U64, D, D, ctypes.c_double, I, Fp, Fp, ctypes.c_char_p, S]
     lib.bn_flat_trace_image.restype = I
+    lib.bn_flat_crosscheck.argtypes = [ctypes.c_char_p, ctypes.POINTER(_Opts), S, I, ctypes.c_double, ctypes.c_char_p,
+                                       ctypes.POINTER(P), ctypes.c_char_p, S]
+    lib.bn_flat_crosscheck.restype = I
+    lib.bn_flat_check_free.argtypes = [P]
+    lib.bn_flat_check_free.restype = None
+    for fn in ("bn_flat_check_pass", "bn_flat_check_layers"):
+        getattr(lib, fn).argtypes = [P]
+        getattr(lib, fn).restype = I
+    lib.bn_flat_check_entries.argtypes = [P]
+    lib.bn_flat_check_entries.restype = S
+    lib.bn_flat_check_figures.argtypes = [P, D]
+    lib.bn_flat_check_figures.restype = None
+    lib.bn_flat_check_arrays.argtypes = [P, D, D, D, D]
+    lib.bn_flat_check_arrays.restype = None
     lib.bn_layer_name.argtypes = [I, I, ctypes.c_char_p, S]
     lib.bn_layer_name.restype = ctypes.c_char_p
     _lib = lib
@@ -609,6 +623,80 @@ def _opts(lib, unit="m", method="auto", transport="auto", bounces=3, tol=None, p
     o.sigint = 1 if _main_thread() else 0   # Ctrl-C stops the C loops, then raises KeyboardInterrupt
     _more(o, more)
     return o
+
+
+_CHECK = ("family", "alpha", "crit", "within", "worst_z", "worst_z_raw", "power_crit", "power_worst_z", "few_hits",
+          "spp", "seconds")
+
+
+class CrossCheck:
+    """bounce crosscheck's answer (bounce.crosscheck): passed (the verdict), the figures of its verdict
+    line (family, alpha, crit, within, worst_z, worst_z_raw, power_crit, power_worst_z, few_hits, spp,
+    seconds), and per layer (E .. K^b E, rest, L) what was compared, arrays (entries, 3): radiosity,
+    trace (the tracer's mean), error (its standard error) and allowance (what the two may differ by
+    without an error: 0 under the default patch model). z(name) is (radiosity - trace) / error."""
+
+    passed: bool
+    family: int
+    alpha: float
+    crit: float
+    within: int
+    worst_z: float
+    worst_z_raw: float
+    power_crit: float
+    power_worst_z: float
+    few_hits: int
+    spp: int
+    seconds: float
+
+    def __init__(self, lib: Any, h: Any, bounces: int) -> None:
+        f = (ctypes.c_double * len(_CHECK))()
+        lib.bn_flat_check_figures(h, f)
+        for k, v in zip(_CHECK, f):
+            setattr(self, k, int(v) if k in ("family", "within", "few_hits", "spp") else float(v))
+        self.passed = bool(lib.bn_flat_check_pass(h))
+        nl, n = lib.bn_flat_check_layers(h), lib.bn_flat_check_entries(h)
+        a = [np.zeros((nl, n, 3)) for _ in range(4)]
+        Dp = ctypes.POINTER(ctypes.c_double)
+        lib.bn_flat_check_arrays(h, *[x.ctypes.data_as(Dp) for x in a])
+        self.layers = _layer_names(lib, bounces)
+        self.radiosity, self.trace, self.error, self.allowance = (
+            {k: _frozen(x[i]) for i, k in enumerate(self.layers)} for x in a)
+
+    def z(self, layer: str) -> np.ndarray:
+        """(radiosity - trace) / error per entry and channel (NaN where the error is 0: exact, e.g. E)."""
+        e = self.error[layer]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(e > 0, (self.radiosity[layer] - self.trace[layer]) / e, np.nan)
+
+    def __repr__(self) -> str:
+        return "<bounce.CrossCheck %s: worst z %.3g (crit %.3g), %d/%d within, %d samples>" % (
+            "pass" if self.passed else "FAIL", self.worst_z, self.crit, self.within, self.family, self.spp)
+
+
+def crosscheck(path: PathLike, unit: UnitName = "m", spp: int = 1024, bounces: int = 3, alpha: float = 0.01,
+               model: Name = "patch", patches: Optional[int] = None, transport: TransportName = "auto",
+               visibility: VisibilityName = "exact", threads: int = 0, progress: bool = False,
+               **more: Any) -> CrossCheck:
+    """`bounce crosscheck` from Python: radiosity (solved to 1e-10) against the independent path tracer
+    (spp samples per patch) on the same patches, every term compared per patch and channel at the
+    family-wise false-failure rate alpha. model "patch" (the tracer estimates the patch-constant
+    transport) or "continuous" (the light itself; a second mesh level's allowance). Options as solve()
+    takes them (seed also keys the tracer). The verdict is CrossCheck.passed; a failed check is an
+    answer, not an exception."""
+    lib = _load()
+    o = _opts(lib, unit, "auto", transport, bounces, None, patches, None, None, threads, progress, visibility, **more)
+    h = ctypes.c_void_p()
+    msg = ctypes.create_string_buffer(2048)
+    st = lib.bn_flat_crosscheck(os.fsencode(path), ctypes.byref(o), _int("spp", spp, unsigned=True),
+                                _int("bounces", bounces, bits=32), _float("alpha", alpha), _name("model", model),
+                                ctypes.byref(h), msg, len(msg))
+    if st != 0:
+        _raise(lib, st, msg)
+    try:
+        return CrossCheck(lib, h, bounces)
+    finally:
+        lib.bn_flat_check_free(h)
 
 
 class Scene(_Traceable):

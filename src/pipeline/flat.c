@@ -190,7 +190,7 @@ static bn_status bn__flat_method(const char *name, bn_solve_method *out, char *m
 }
 
 /* The pipeline options from the flat ones (strings checked; transport copied into f). */
-static bn_status bn__flat_popts(const bn_flat_opts *o, bn_flat *f, char *msg, size_t msglen)
+bn_status bn__flat_popts(const bn_flat_opts *o, bn_flat *f, char *msg, size_t msglen)
 {
     bn_pipeline_opts *po = &f->po;
     bn_pipeline_opts_default(po);

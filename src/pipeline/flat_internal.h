@@ -25,6 +25,8 @@ typedef struct bn__flat_sig {
 } bn__flat_sig;
 void bn__flat_sig_begin(bn__flat_sig *s, int want);
 void bn__flat_sig_end(bn__flat_sig *s);
+/* f->po from the flat options (names checked; the transport's name kept in f). */
+bn_status bn__flat_popts(const bn_flat_opts *o, bn_flat *f, char *msg, size_t msglen);
 /* text into msg (msglen bytes, may be 0); returns st. */
 bn_status bn__flat_fail(bn_status st, const char *text, char *msg, size_t msglen);
 

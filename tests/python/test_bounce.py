@@ -200,6 +200,31 @@ def test_the_tracer_from_python_agrees_with_the_solve_by_its_own_errors():
             r.trace(**kw)
 
 
+def test_crosscheck_from_python_is_the_clis(tmp_path):
+    """bounce.crosscheck: the verdict line's figures are the CLI's for the same scene, seed and samples
+    (a noisy ray-visibility F, which fails: a failed check is an answer, not an exception); the arrays
+    give the worst z again; on exact F the check passes; bad options raise naming them."""
+    args = dict(unit="mm", patches=200, spp=256, visibility="rays", seed=3)
+    c = bounce.crosscheck(CORNELL, **args)
+    out = subprocess.run([EXE, "crosscheck", CORNELL, "--unit", "mm", "--patches", "200", "--spp", "256",
+                          "--ff-visibility", "rays", "--seed", "3"], capture_output=True, text=True).stdout
+    line = [ln for ln in out.splitlines() if ln.startswith("verdict:")][0]
+    v = dict(kv.split("=") for kv in line.split()[2:])
+    assert line.split()[1] == ("pass" if c.passed else "fail")
+    assert v["within"] == "%d/%d" % (c.within, c.family)
+    for k in ("worst_z", "worst_z_raw", "power_worst_z", "crit"):
+        assert float(v[k]) == pytest.approx(getattr(c, k), abs=1e-4), k
+    # the worst judged entry is among the arrays' (entries with too few hits are shown, not judged)
+    zs = np.concatenate([np.abs(c.z(k)).ravel() for k in c.layers])
+    assert np.isclose(zs, c.worst_z_raw, rtol=1e-9).any() and np.nanmax(zs) >= c.worst_z_raw
+    assert c.layers == ["E", "KE", "K2E", "K3E", "rest", "L"] and c.radiosity["L"].shape == (c.family // 18, 3)
+    assert bounce.crosscheck(CORNELL, unit="mm", patches=200, spp=256).passed
+    for kw, needle in ((dict(model="mesh"), "model 'mesh'"), (dict(alpha=2.0), "alpha 2"),
+                       (dict(spp=-1), "spp -1")):
+        with pytest.raises(bounce.BounceError, match=needle):
+            bounce.crosscheck(CORNELL, unit="mm", patches=50, **kw)
+
+
 def test_the_type_hints_names_are_the_librarys():
     """bounce._names (Literal types for method, transport, unit, ...) is what scripts/python_names.py
     makes from the library's tables now: a vocabulary changed in C without regenerating it fails here."""
