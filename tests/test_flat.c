@@ -231,3 +231,31 @@ BN_TEST(tracer_and_crosscheck_in_the_furnace)
     BN_ASSERT_EQ(bn_flat_crosscheck(furnace(), &o, 64, 2, 0, "mesh", &c, msg, sizeof msg), BN_EUSAGE);
     BN_ASSERT(c == NULL && strstr(msg, "'mesh'") != NULL);
 }
+
+/* The study through the flat API in the furnace (rho 0.5, Le 1, L 2): the series cut after K^n E misses
+ * 2 x 0.5^(n+1) = 0.5^n everywhere, the truncated rows' err_inf; a parameter that is not one is refused. */
+BN_TEST(study_in_the_furnace)
+{
+    bn_flat_opts o;
+    bn_flat_study *s = NULL;
+    char msg[512];
+    const double n[] = {0, 1, 3};
+    double row[BN_FLAT_STUDY_NCOLUMNS];
+    size_t found = 0;
+    bn_flat_opts_default(&o);
+    o.patches = 48;
+    BN_ASSERT_EQ(bn_flat_study_run(furnace(), &o, "bounces", n, 3, &s, msg, sizeof msg), BN_OK);
+    BN_ASSERT(strncmp(bn_flat_study_columns(), "x,patches,", 10) == 0);
+    for (size_t r = 0; r < bn_flat_study_rows(s); r++) {
+        if (strcmp(bn_flat_study_label(s, r, 0), "truncated") != 0)
+            continue;
+        bn_flat_study_row(s, r, row);
+        BN_ASSERT_NEAR(row[6], ldexp(1.0, -(int)row[0]), 1e-6);   /* err_inf */
+        found++;
+    }
+    BN_ASSERT_EQ(found, 3);
+    BN_ASSERT(strlen(bn_flat_study_reference(s, NULL)) > 0);
+    bn_flat_study_free(s);
+    BN_ASSERT_EQ(bn_flat_study_run(furnace(), &o, "colour", n, 3, &s, msg, sizeof msg), BN_EUSAGE);
+    BN_ASSERT(s == NULL && strstr(msg, "'colour'") != NULL);
+}

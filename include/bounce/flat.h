@@ -183,6 +183,27 @@ void bn_flat_check_figures(const bn_flat_check *c, double out[BN_FLAT_CHECK_FIGU
  * allowance for what the two estimate differently (0 where none). */
 void bn_flat_check_arrays(const bn_flat_check *c, double *rad, double *trace, double *se, double *tol);
 
+/* `bounce study` on the scene file at path: vary one of bn_study_param_names() ("bounces", "tol",
+ * "patches", "eps", ...) over values (ff and precision: the index of the name in their vocabulary), every
+ * other setting from o (method: the study's default, direct, unless named). Rows: one per setting (and
+ * per method where the study compares methods), BN_FLAT_STUDY_COLUMNS numbers each (NAN where a figure
+ * does not apply), with the method ("truncated", "jacobi", ...) and the value as given. */
+typedef struct bn_flat_study bn_flat_study;
+#define BN_FLAT_STUDY_COLUMNS                                                                                    \
+    "x,patches,k_entries,k_mb,iterations,ground,err_inf,err_inf_rel,err_max_rel,err_rms_rel,err_l1_rel,"       \
+    "err_energy_rel,err_surface_max,err_surface_mean,bound,bound_ke,estimate,t_mesh,t_ff,t_solve,t_output,"  \
+    "t_total,peak_mb,k_norm,se_surface_max,t_iterate"
+#define BN_FLAT_STUDY_NCOLUMNS 26
+bn_status bn_flat_study_run(const char *path, const bn_flat_opts *o, const char *vary, const double *values, size_t n,
+                            bn_flat_study **out, char *msg, size_t msglen);
+void bn_flat_study_free(bn_flat_study *s);   /* NULL is a no-op */
+const char *bn_flat_study_columns(void);     /* BN_FLAT_STUDY_COLUMNS */
+size_t bn_flat_study_rows(const bn_flat_study *s);
+void bn_flat_study_row(const bn_flat_study *s, size_t r, double out[BN_FLAT_STUDY_NCOLUMNS]);
+const char *bn_flat_study_label(const bn_flat_study *s, size_t r, int value);   /* 0: method, 1: value */
+/* What the settings were measured against, and its estimated error (relative, per surface). */
+const char *bn_flat_study_reference(const bn_flat_study *s, double *ref_error);
+
 /* A caller's own operator: apply(user, x, y) sets y = K x for N x 3 interleaved x (no aliasing)
  * and returns 0, or nonzero to stop the solve (BN_EINPUT, "the operator failed"). */
 typedef int (*bn_flat_apply_fn)(void *user, const double *x, double *y);

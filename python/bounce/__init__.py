@@ -219,6 +219,20 @@ def _load() -> Any:
     lib.bn_flat_check_figures.restype = None
     lib.bn_flat_check_arrays.argtypes = [P, D, D, D, D]
     lib.bn_flat_check_arrays.restype = None
+    lib.bn_flat_study_run.argtypes = [ctypes.c_char_p, ctypes.POINTER(_Opts), ctypes.c_char_p, D, S,
+                                      ctypes.POINTER(P), ctypes.c_char_p, S]
+    lib.bn_flat_study_run.restype = I
+    lib.bn_flat_study_free.argtypes = [P]
+    lib.bn_flat_study_free.restype = None
+    lib.bn_flat_study_columns.restype = ctypes.c_char_p
+    lib.bn_flat_study_rows.argtypes = [P]
+    lib.bn_flat_study_rows.restype = S
+    lib.bn_flat_study_row.argtypes = [P, S, D]
+    lib.bn_flat_study_row.restype = None
+    lib.bn_flat_study_label.argtypes = [P, S, I]
+    lib.bn_flat_study_label.restype = ctypes.c_char_p
+    lib.bn_flat_study_reference.argtypes = [P, D]
+    lib.bn_flat_study_reference.restype = ctypes.c_char_p
     lib.bn_layer_name.argtypes = [I, I, ctypes.c_char_p, S]
     lib.bn_layer_name.restype = ctypes.c_char_p
     _lib = lib
@@ -697,6 +711,71 @@ def crosscheck(path: PathLike, unit: UnitName = "m", spp: int = 1024, bounces: i
         return CrossCheck(lib, h, bounces)
     finally:
         lib.bn_flat_check_free(h)
+
+
+class Study:
+    """bounce study's table (bounce.study): one row per setting (and per method where the study compares
+    methods); columns[name] is a float array over the rows (x, patches, iterations, err_inf,
+    err_max_rel, err_rms_rel, err_surface_max, bound, estimate, t_solve, t_total, ... as the CLI's CSV
+    names them; NaN where a figure does not apply), method and value the rows' labels, reference what
+    they were measured against and ref_error its estimated error."""
+
+    def __init__(self, lib: Any, h: Any) -> None:
+        names_ = lib.bn_flat_study_columns().decode().split(",")
+        n = lib.bn_flat_study_rows(h)
+        table = np.zeros((n, len(names_)))
+        Dp = ctypes.POINTER(ctypes.c_double)
+        for r in range(n):
+            lib.bn_flat_study_row(h, r, table[r].ctypes.data_as(Dp))
+        self.columns: Dict[str, np.ndarray] = {k: _frozen(table[:, i].copy()) for i, k in enumerate(names_)}
+        self.method: List[str] = [lib.bn_flat_study_label(h, r, 0).decode() for r in range(n)]
+        self.value: List[str] = [lib.bn_flat_study_label(h, r, 1).decode() for r in range(n)]
+        e = ctypes.c_double()
+        self.reference: str = lib.bn_flat_study_reference(h, ctypes.byref(e)).decode()
+        self.ref_error: float = e.value
+
+    def __len__(self) -> int:
+        return len(self.method)
+
+    def rows(self, method: str) -> Dict[str, np.ndarray]:
+        """The columns of one method's rows ("truncated", "jacobi", ..., or "trace")."""
+        keep = np.array([m == method for m in self.method], dtype=bool)
+        return {k: v[keep] for k, v in self.columns.items()}
+
+    def __repr__(self) -> str:
+        return "<bounce.Study %d rows (%s) against %s>" % (len(self), ",".join(sorted(set(self.method))),
+                                                          self.reference[:60])
+
+
+def study(path: PathLike, vary: str, values: Sequence[Union[float, str]], unit: UnitName = "m",
+          method: MethodName = "auto", patches: Optional[int] = None, transport: TransportName = "auto",
+          visibility: VisibilityName = "exact", threads: int = 0, progress: bool = False, **more: Any) -> Study:
+    """`bounce study --vary VARY=VALUES` from Python: vary "bounces", "max-iter", "tol", "patches",
+    "patch-size", "samples", "ff", "spp", "precision" or "eps" over values (names for ff and precision),
+    the other settings as solve() takes them (method: the study's default, direct, unless named).
+    Returns the table as arrays (Study.columns, Study.rows(method))."""
+    lib = _load()
+    vocab = {"ff": "ff", "precision": "precision"}.get(vary)
+    nums = []
+    for v in values:
+        if vocab and isinstance(v, str):
+            if v not in names(vocab):
+                raise BounceError("EUSAGE", "%s %r is not one of %s" % (vary, v, "|".join(names(vocab))))
+            nums.append(float(names(vocab).index(v)))
+        else:
+            nums.append(_float("values", v))
+    o = _opts(lib, unit, method, transport, 3, None, patches, None, None, threads, progress, visibility, **more)
+    arr = (ctypes.c_double * max(len(nums), 1))(*nums)
+    h = ctypes.c_void_p()
+    msg = ctypes.create_string_buffer(2048)
+    st = lib.bn_flat_study_run(os.fsencode(path), ctypes.byref(o), _name("vary", vary), arr, len(nums),
+                               ctypes.byref(h), msg, len(msg))
+    if st != 0:
+        _raise(lib, st, msg)
+    try:
+        return Study(lib, h)
+    finally:
+        lib.bn_flat_study_free(h)
 
 
 class Scene(_Traceable):

@@ -1,4 +1,4 @@
-/* What the flat API's files share (src/pipeline/flat.c, flat_trace.c): the handle behind bn_flat. Not installed. */
+/* What the flat API's files share (src/pipeline/flat.c, flat_analysis.c): the handle behind bn_flat. Not installed. */
 #ifndef BN_PIPELINE_FLAT_INTERNAL_H
 #define BN_PIPELINE_FLAT_INTERNAL_H
 

@@ -225,6 +225,31 @@ def test_crosscheck_from_python_is_the_clis(tmp_path):
             bounce.crosscheck(CORNELL, unit="mm", patches=50, **kw)
 
 
+def test_a_study_from_python_is_the_clis_table(tmp_path):
+    """bounce.study: the truncation study's rows equal the CLI's CSV for the same settings (errors are
+    deterministic: every printed digit), the a priori bound holds on every truncated row (err_inf <=
+    bound), the error falls with each bounce; a name value (ff) and a bad vary are handled."""
+    s = bounce.study(CORNELL, "bounces", [0, 1, 2, 3, 5], unit="mm", patches=200, visibility="rays")
+    csv = tmp_path / "st.csv"
+    subprocess.run([EXE, "study", CORNELL, "--unit", "mm", "--patches", "200", "--ff-visibility", "rays",
+                    "--vary", "bounces=0,1,2,3,5", "-q", "-o", str(csv)], check=True, stderr=subprocess.DEVNULL)
+    lines = [ln.split(",") for ln in csv.read_text().splitlines() if ln and not ln.startswith("#")]
+    head, rows = lines[0], lines[1:]
+    assert len(rows) == len(s) and [r[head.index("method")] for r in rows] == s.method
+    for col in ("x", "patches", "iterations", "err_inf", "err_max_rel", "err_rms_rel", "bound", "estimate"):
+        want = [float(r[head.index(col)]) for r in rows]
+        got = ["%.9g" % v for v in s.columns[col]]
+        assert got == ["%.9g" % v for v in want], col
+    t = s.rows("truncated")
+    assert list(t["x"]) == [0, 1, 2, 3, 5] and np.all(t["err_inf"] <= t["bound"])
+    assert np.all(np.diff(t["err_max_rel"]) < 0)
+    assert len(bounce.study(CORNELL, "ff", ["analytic", "hemisphere"], unit="mm", patches=60, visibility="rays")) == 2
+    with pytest.raises(bounce.BounceError, match="vary 'colour'"):
+        bounce.study(CORNELL, "colour", [1], unit="mm", patches=60)
+    with pytest.raises(bounce.BounceError, match="'phong'"):
+        bounce.study(CORNELL, "ff", ["phong"], unit="mm", patches=60)
+
+
 def test_the_type_hints_names_are_the_librarys():
     """bounce._names (Literal types for method, transport, unit, ...) is what scripts/python_names.py
     makes from the library's tables now: a vocabulary changed in C without regenerating it fails here."""

@@ -1,12 +1,14 @@
-/* The flat API's path tracer (include/bounce/flat.h): per-patch estimates and camera images of a loaded
- * or solved scene, into the caller's arrays. The tracer shares the scene and the ray scene only, never
- * F, K or the solve (the cross-check's independence): a scene loaded without an operator gets a ray
- * scene of its own here. */
+/* The flat API's analyses (include/bounce/flat.h): the path tracer's per-patch estimates and camera
+ * images of a loaded or solved scene, and the cross-check, into the caller's arrays (the study's is
+ * src/study/flat_study.c, above the pipeline). The
+ * tracer shares the scene and the ray scene only, never F, K or the solve (the cross-check's
+ * independence): a scene loaded without an operator gets a ray scene of its own here. */
 #include "pipeline/flat_internal.h"
 #include "bounce/trace.h"
 #include "bounce/image.h"
 #include "base/internal.h"
 
+#include <stdlib.h>
 #include <string.h>
 
 /* The ray scene (built once and kept), the options checked. */
