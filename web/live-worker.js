@@ -251,11 +251,9 @@ function parsePayload(bytes) {
   const P = { json, npatch: json.patches, materials: json.materials, F: {} };
   for (const [k, spec] of Object.entries(json.arrays)) P[k] = view(spec);
   for (const [k, spec] of Object.entries(json.arrays_F)) P.F[k] = view(spec);
-  P.emitting = json.materials.map((m, k) => {
-    if (!(m.Le[0] > 0 || m.Le[1] > 0 || m.Le[2] > 0)) return false;
-    for (let i = 0; i < P.npatch; i++) if (P.patch_material[i] === k) return true;
-    return false;
-  });
+  const used = new Uint8Array(json.materials.length);   // materials some patch has (one pass)
+  for (let i = 0; i < P.npatch; i++) used[P.patch_material[i]] = 1;
+  P.emitting = json.materials.map((m, k) => used[k] === 1 && (m.Le[0] > 0 || m.Le[1] > 0 || m.Le[2] > 0));
   P.sources = P.emitting.filter((e) => e).length + (P.D_white ? 1 : 0);
   return P;
 }

@@ -813,6 +813,32 @@ bn_status bn_flat_bake(const bn_flat *f, const char *out, int per_bounce, const 
     return st;
 }
 
+bn_status bn__flat_camera(const bn_flat *f, int width, int height, int spp, const double *eye, const double *look,
+                          double fov_deg, bn_camera *cam, char *msg, size_t msglen)
+{
+    bn_error err;
+    bn_status st;
+    bn_error_clear(&err);
+    bn_camera_default(f->p.scene, cam);
+    if ((st = bn_camera_load_sidecar(bn_scene_path(f->p.scene), cam, NULL, &err)) != BN_OK)
+        return bn__flat_fail(st, err.msg, msg, msglen);
+    if (eye)
+        memcpy(cam->eye, eye, sizeof cam->eye);
+    if (look)
+        memcpy(cam->look, look, sizeof cam->look);
+    if (fov_deg > 0)
+        cam->fov_deg = fov_deg;
+    if (width > 0)
+        cam->width = width;
+    if (height > 0)
+        cam->height = height;
+    if (spp > 0)
+        cam->spp = spp;
+    if ((st = bn_camera_validate(cam, &err)) != BN_OK)
+        return bn__flat_fail(st, err.msg, msg, msglen);
+    return BN_OK;
+}
+
 /* The camera of bn_flat_images and bn_flat_render (the scene's sidecar or default, then what is given),
  * validated with the images' memory, and the layers (at most 72); *gather_mode from `gather`. */
 static bn_status bn__flat_view(const bn_flat *f, int width, int height, int spp, const double *eye,
@@ -830,24 +856,10 @@ static bn_status bn__flat_view(const bn_flat *f, int width, int height, int spp,
     if ((st = bn__flat_name("images: gather", gather, bn_gather_mode_names(), bn__gather_index, gather_mode, msg,
                             msglen)))
         return st;
+    if ((st = bn__flat_camera(f, width, height, spp, eye, look, fov_deg, &cam, msg, msglen)) != BN_OK)
+        return st;
     bn_error_clear(&err);
-    bn_camera_default(f->p.scene, &cam);
-    if ((st = bn_camera_load_sidecar(bn_scene_path(f->p.scene), &cam, NULL, &err)) != BN_OK)
-        return bn__flat_fail(st, err.msg, msg, msglen);
-    if (eye)
-        memcpy(cam.eye, eye, sizeof cam.eye);
-    if (look)
-        memcpy(cam.look, look, sizeof cam.look);
-    if (fov_deg > 0)
-        cam.fov_deg = fov_deg;
-    if (width > 0)
-        cam.width = width;
-    if (height > 0)
-        cam.height = height;
-    if (spp > 0)
-        cam.spp = spp;
-    if ((st = bn_camera_validate(&cam, &err)) != BN_OK ||
-        (st = bn_bounces_check_memory(cam.width, cam.height, nb, f->po.ff.max_memory, &err)) != BN_OK)
+    if ((st = bn_bounces_check_memory(cam.width, cam.height, nb, f->po.ff.max_memory, &err)) != BN_OK)
         return bn__flat_fail(st, err.msg, msg, msglen);
     for (int l = 0; l < bn_layer_count(nb); l++)
         layers[l] = l <= nb ? f->p.res.terms[l] : l == nb + 1 ? f->p.rest : f->p.res.L;

@@ -74,21 +74,12 @@ bn_status bn_flat_trace_image(bn_flat *f, int width, int height, size_t spp, int
     bn_status st = bn__flat_trace_setup(f, spp, bounces, seed, threads, &o, msg, msglen);
     if (st != BN_OK)
         return st;
+    if (width < 1 || height < 1)
+        return bn__flat_fail(BN_EUSAGE, "trace: the image's width and height must be >= 1", msg, msglen);
+    /* the tracer takes its samples per pixel from o.spp: the camera's own stays 1 */
+    if ((st = bn__flat_camera(f, width, height, 1, eye, look, fov_deg, &cam, msg, msglen)) != BN_OK)
+        return st;
     bn_error_clear(&err);
-    bn_camera_default(f->p.scene, &cam);
-    if ((st = bn_camera_load_sidecar(bn_scene_path(f->p.scene), &cam, NULL, &err)) != BN_OK)
-        return bn__flat_fail(st, err.msg, msg, msglen);
-    if (eye)
-        memcpy(cam.eye, eye, sizeof cam.eye);
-    if (look)
-        memcpy(cam.look, look, sizeof cam.look);
-    if (fov_deg > 0)
-        cam.fov_deg = fov_deg;
-    cam.width = width;
-    cam.height = height;
-    cam.spp = 1;   /* the tracer takes its samples per pixel from o.spp */
-    if ((st = bn_camera_validate(&cam, &err)) != BN_OK)
-        return bn__flat_fail(st, err.msg, msg, msglen);
     if (!mean || !var)
         return bn__flat_fail(BN_EUSAGE, "trace: mean and var need room for (bounces + 3) x height x width x 3", msg,
                              msglen);

@@ -27,6 +27,10 @@ void bn__flat_sig_begin(bn__flat_sig *s, int want);
 void bn__flat_sig_end(bn__flat_sig *s);
 /* f->po from the flat options (names checked; the transport's name kept in f). */
 bn_status bn__flat_popts(const bn_flat_opts *o, bn_flat *f, char *msg, size_t msglen);
+/* The camera of f's scene (its sidecar, else the default), then what is given (width, height, spp, fov
+ * <= 0 and eye, look NULL keep it), validated; BN_EUSAGE/BN_EINPUT with the message in msg. */
+bn_status bn__flat_camera(const bn_flat *f, int width, int height, int spp, const double *eye, const double *look,
+                          double fov_deg, bn_camera *cam, char *msg, size_t msglen);
 /* text into msg (msglen bytes, may be 0); returns st. */
 bn_status bn__flat_fail(bn_status st, const char *text, char *msg, size_t msglen);
 

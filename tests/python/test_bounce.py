@@ -198,6 +198,8 @@ def test_the_tracer_from_python_agrees_with_the_solve_by_its_own_errors():
     for kw, needle in ((dict(spp=0), "spp 0"), (dict(spp=-2), "spp -2"), (dict(bounces=99), "bounces 99")):
         with pytest.raises(bounce.BounceError, match=needle):
             r.trace(**kw)
+    with pytest.raises(bounce.BounceError, match="width and height"):
+        r.trace_image(size=(0, 8))
 
 
 def test_crosscheck_from_python_is_the_clis(tmp_path):
