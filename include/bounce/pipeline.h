@@ -181,11 +181,9 @@ bn_status bn_bounces_check_memory(int width, int height, int bounces, size_t max
  * to relight the solved scene itself: the patches, their materials and texture factors, the punctual
  * lights' direct light and F as links (bn_transport_links); its worker sums the series for the
  * materials' rho and Le the page's sliders set. ---- */
-#define BN_LIVE_DEFAULT_BUDGET_MB 64
+#define BN_LIVE_DEFAULT_BUDGET_MB 64   /* bounce view --live's default --budget (bn_pipeline_live_bytes) */
 typedef struct bn_live_opts {
     int bounces;              /* terms E .. K^bounces E shown, then rest (default 5; 0 to 64) */
-    size_t budget;            /* the payload's bytes the caller aims at (bn_pipeline_live_bytes; default
-                                 BN_LIVE_DEFAULT_BUDGET_MB MiB); not enforced here */
     const char *note;         /* what the page says about how it was built (may be NULL) */
     const bn_attr *attrs;     /* provenance (borrowed) */
     size_t nattrs;

@@ -142,7 +142,6 @@ int bn_cmd_view_live(int argc, char **argv, bn_cli_common *c)
                            {"transport", bn_transport_name(p.k)}, {"patches", patches}, {"data", bud}};
         bn_live_opts_default(&lo);
         lo.bounces = a.bounces;
-        lo.budget = budget;
         lo.note = note;
         lo.attrs = attrs;
         lo.nattrs = sizeof attrs / sizeof *attrs;

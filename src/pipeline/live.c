@@ -16,7 +16,6 @@ void bn_live_opts_default(bn_live_opts *o)
 {
     memset(o, 0, sizeof *o);
     o->bounces = 5;
-    o->budget = (size_t)BN_LIVE_DEFAULT_BUDGET_MB << 20;
 }
 
 /* Per patch and per triangle: the sizes the page holds besides F's links. */
