@@ -16,7 +16,8 @@ PACKAGES=(
   assimp-testmodels          # tests: real glTF 2.0 files, broken ones among them (/usr/share/assimp/models/glTF2)
   libplplot-dev plplot-driver-cairo      # study plots (PNG, SVG)
   fonts-dejavu-core          # labels on the contact sheet
-  clang libclang-rt-14-dev   # libFuzzer harnesses
+  clang libclang-rt-14-dev   # libFuzzer harnesses; clang also builds the live page's WebAssembly kernel
+  lld                        # wasm-ld: links that kernel (web/live-kernel.c)
   chromium                   # headless browser: tests open the study report page
   python3                    # tests: the glTF bake read back by a reader of its own
   python3-numpy python3-pytest   # the Python package (python/bounce) and its tests

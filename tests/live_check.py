@@ -7,6 +7,8 @@
   changed the red wall's light;
 - the hierarchy's links (tree, clusters, row scaling) at the file's materials: the worker's terms equal
   `bounce solve --transport hierarchical`'s (the same links: refinement is deterministic);
+- both: the page's WebAssembly kernel (web/live-kernel.c) ran and its terms are the JavaScript loop's, bit
+  for bit (the same operations in the same order);
 - punctual lights (glTF KHR_lights_punctual, the Cornell box's light turned into a bulb and a spot):
   the worker's L at the file's lights equals the solve's L the page carries, and scaling them by 2
   doubles every term (they are bounce 1's source);
@@ -50,13 +52,26 @@ def read_csv(path):
     return list(csv.DictReader(rows))
 
 
-def worker(src, page, edits):
+def worker(src, page, edits, js=False):
     r = subprocess.run(["node", os.path.join(src, "tests/live_eval.js"), os.path.join(src, "web/live-worker.js"), page,
-                        json.dumps(edits)], capture_output=True, text=True)
+                        json.dumps(edits)] + (["js"] if js else []), capture_output=True, text=True)
     if r.returncode:
         print(r.stderr[-2000:])
         return None
     return json.loads(r.stdout)
+
+
+def kernel_check(src, page, edits, w, what):
+    """The page's WebAssembly kernel ran and gave the JavaScript loop's doubles, every term, every patch."""
+    if not w["kernel"]:
+        check(False, "%s: the page has a WebAssembly kernel (the build needs clang and wasm-ld: Debian's lld; "
+              "scripts/setup.sh installs it)" % what)
+        return
+    j = worker(src, page, edits, js=True)
+    same = j is not None and w["wasm"] and not j["wasm"] and all(a == b for s, t in zip(w["terms"], j["terms"])
+                                                                 for a, b in zip(s, t))
+    check(same, "%s: the WebAssembly kernel (%d bytes) gives the JavaScript loop's terms bit for bit (%d applications)" %
+          (what, w["kernel"], w["applies"]))
 
 
 def compare(rows, w, names, rel, what):
@@ -85,6 +100,7 @@ def dense_checks(bounce, src, out, base):
     check(len(rows) == len(w["terms"][0]) // 3, "the page has the solve's %d patches" % len(rows))
     compare(rows, w, [(0, "E"), (1, "KE"), (2, "K2E"), (3, "K3E")], 1e-5, "dense, relit")
     compare(rows, w, [(len(w["terms"]) - 1, "L")], 1e-4, "dense, relit")
+    kernel_check(src, page, EDITS, w, "dense")
     red = [i for i, r in enumerate(rows) if r["material"] == "red"]
     ke0 = sum(float(rows0[i]["KE_G"]) for i in red)
     ke1 = sum(float(rows[i]["KE_G"]) for i in red)
@@ -106,6 +122,7 @@ def hierarchy_checks(bounce, src, out, base):
     rows = read_csv(ref)
     compare(rows, w, [(1, "KE"), (2, "K2E"), (3, "K3E")], 1e-5, "hierarchy")
     compare(rows, w, [(len(w["terms"]) - 1, "L")], 1e-4, "hierarchy")
+    kernel_check(src, page, {}, w, "hierarchy")
 
 
 def punctual_checks(bounce, src, out):
@@ -185,7 +202,7 @@ def chromium_checks(page, rows, red):
         err2 = max(abs(a - 2 * b) / abs(2 * b) for a, b in zip(got2["KE"], got["KE"]))
         check(err2 < 1e-6, "the light's slider at +1 EV doubles the shown KE (%.2g)" % err2)
         t = p.eval("document.getElementById('livetime').textContent")
-        check("relit in" in (t or ""), "the page says what the change cost: %s" % t)
+        check("relit in" in (t or "") and "(WebAssembly)" in t, "the page says what the change cost, in WebAssembly: %s" % t)
 
 
 def main():

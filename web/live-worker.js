@@ -7,35 +7,90 @@
 
 const NONE = 0xffffffff;
 
-// The operator from the payload's arrays: y = F x, x and y 3 per patch.
-function makeOperator(a, npatch) {
+// The operator from the payload's arrays: y = F x, x and y 3 per patch. kernel: web/live-kernel.c's bytes
+// (WebAssembly with SIMD), or null/empty for the JavaScript loops; both give the same doubles.
+function makeOperator(a, npatch, kernel) {
   const n = a.child.length, parent = new Uint32Array(n).fill(NONE);
   for (let v = 0; v < n; v++) if (a.child[v] !== NONE) parent[a.child[v]] = parent[a.child[v] + 1] = v;
   const flat = n === npatch && a.cluster.every((c) => c === 0) && a.child.every((c) => c === NONE) &&
     a.leaf_patch.every((p, v) => p === v);
   const anyCluster = a.cluster.some((c) => c !== 0);
   const B = new Float64Array(3 * n), G = new Float64Array(3 * n), Gv = anyCluster ? new Float64Array(9 * n) : null;
-  const op = { n, flat, parent, B, G, Gv, a, npatch };
+  const op = { n, flat, parent, B, G, Gv, a, npatch, wasm: makeKernel(kernel, a, n), clusterRows: clusterRows(a, n) };
   op.apply = (x, y) => (flat ? applyFlat(op, x, y) : applyTree(op, x, y));
   return op;
 }
 
-// Dense or sparse F: y_i = sum over row i's entries of F_ij x_j.
-function applyFlat(op, x, y) {
-  const { start, src, F } = op.a, rs = op.a.rowscale;
-  for (let i = 0; i < op.npatch; i++) {
-    let g0 = 0, g1 = 0, g2 = 0;
-    for (let l = start[i], e = start[i + 1]; l < e; l++) {
-      const j = 3 * src[l], f = F[l];
-      g0 += f * x[j];
-      g1 += f * x[j + 1];
-      g2 += f * x[j + 2];
-    }
-    const s = rs ? rs[i] : 1;
-    y[3 * i] = s * g0;
-    y[3 * i + 1] = s * g1;
-    y[3 * i + 2] = s * g2;
+function clusterRows(a, n) {
+  const out = [];
+  for (let r = 0; r < n; r++) if (a.cluster[r]) out.push(r);
+  return Uint32Array.from(out);
+}
+
+// The WebAssembly gather over a copy of the links in its own memory (after __heap_base: start, src, F, the
+// cluster flags, then x and y, 4 doubles per node), or null where WebAssembly or its SIMD is missing.
+function makeKernel(bytes, a, n) {
+  if (!bytes || !bytes.length || typeof WebAssembly === "undefined") return null;
+  let inst, mem;
+  try {
+    mem = new WebAssembly.Memory({ initial: 32 });
+    inst = new WebAssembly.Instance(new WebAssembly.Module(bytes), { env: { memory: mem } });
+  } catch (e) {
+    return null;
   }
+  const L = a.F.length, up = (v) => Math.ceil(v / 16) * 16, off = [up(inst.exports.__heap_base.value)];
+  for (const size of [4 * (n + 1), 4 * L, 4 * L, n, 32 * n, 32 * n]) off.push(up(off[off.length - 1] + size));
+  const need = off[off.length - 1] - mem.buffer.byteLength;
+  if (need > 0) mem.grow(Math.ceil(need / 65536));
+  const buf = mem.buffer;
+  new Uint32Array(buf, off[0], n + 1).set(a.start);
+  new Uint32Array(buf, off[1], L).set(a.src);
+  new Float32Array(buf, off[2], L).set(a.F);
+  new Uint8Array(buf, off[3], n).set(a.cluster);
+  const x = new Float64Array(buf, off[4], 4 * n), y = new Float64Array(buf, off[5], 4 * n);
+  return { x, y, run: () => inst.exports.gather(n, off[0], off[1], off[2], off[3], off[4], off[5]) };
+}
+
+// y (3 per row) = the links' gather of x (3 per node), by the kernel when there is one.
+function gatherPlanar(op, x, y) {
+  const K = op.wasm;
+  if (!K) return gatherPlanarJs(op, x, y);
+  for (let v = 0, n = op.n; v < n; v++) {
+    K.x[4 * v] = x[3 * v];
+    K.x[4 * v + 1] = x[3 * v + 1];
+    K.x[4 * v + 2] = x[3 * v + 2];
+  }
+  K.run();
+  for (let r = 0, n = op.n; r < n; r++) {
+    y[3 * r] = K.y[4 * r];
+    y[3 * r + 1] = K.y[4 * r + 1];
+    y[3 * r + 2] = K.y[4 * r + 2];
+  }
+}
+
+function gatherPlanarJs(op, x, y) {
+  const { start, src, F, cluster } = op.a;
+  for (let r = 0; r < op.n; r++) {
+    let g0 = 0, g1 = 0, g2 = 0;
+    if (!cluster[r]) {
+      for (let l = start[r], e = start[r + 1]; l < e; l++) {
+        const j = 3 * src[l], f = F[l];
+        g0 += f * x[j];
+        g1 += f * x[j + 1];
+        g2 += f * x[j + 2];
+      }
+    }
+    y[3 * r] = g0;
+    y[3 * r + 1] = g1;
+    y[3 * r + 2] = g2;
+  }
+}
+
+// Dense or sparse F: y_i = sum over row i's entries of F_ij x_j, times the row's scale.
+function applyFlat(op, x, y) {
+  const rs = op.a.rowscale;
+  gatherPlanar(op, x, y);
+  if (rs) for (let k = 0; k < 3 * op.npatch; k++) y[k] *= rs[(k / 3) | 0];
 }
 
 // The octahedral direction of a link (bn_transport_links_dir): 8 bits per axis.
@@ -70,30 +125,45 @@ function pull(op, x) {
   }
 }
 
-// Gather along each receiver's links: a value per channel, or a cluster's vector per channel.
+// Gather along each receiver's links: a value per channel (gatherPlanar), or a cluster's vector per channel.
 function gather(op) {
-  const { start, src, F, dir, cluster } = op.a, { B, G, Gv } = op, u = [0, 0, 0];
-  for (let r = 0; r < op.n; r++) {
-    let g0 = 0, g1 = 0, g2 = 0;
-    if (cluster[r]) {
-      Gv.fill(0, 9 * r, 9 * r + 9);
-      for (let l = start[r]; l < start[r + 1]; l++) {
-        const b = 3 * src[l], f = F[l];
-        octDecode(dir[l], u);
-        for (let c = 0; c < 3; c++) for (let k = 0; k < 3; k++) Gv[9 * r + 3 * c + k] += f * B[b + c] * u[k];
-      }
-    } else {
-      for (let l = start[r], e = start[r + 1]; l < e; l++) {
-        const b = 3 * src[l], f = F[l];
-        g0 += f * B[b];
-        g1 += f * B[b + 1];
-        g2 += f * B[b + 2];
-      }
+  gatherPlanar(op, op.B, op.G);
+  if (op.clusterRows.length) gatherClusters(op);
+}
+
+// A cluster receiver's vector per channel: the sum over its links of F B u, u the link's direction (decoded
+// once, clusterDirs). Gv[9 r + 3 c + k]: channel c, axis k.
+function gatherClusters(op) {
+  const { start, src, F } = op.a, { B, Gv, clusterRows: rows } = op, u = op.clusterDir || (op.clusterDir = clusterDirs(op));
+  for (let i = 0, q = 0; i < rows.length; i++) {
+    const r = rows[i];
+    let a0 = 0, a1 = 0, a2 = 0, a3 = 0, a4 = 0, a5 = 0, a6 = 0, a7 = 0, a8 = 0;
+    for (let l = start[r], e = start[r + 1]; l < e; l++, q += 3) {
+      const b = 3 * src[l], f = F[l], f0 = f * B[b], f1 = f * B[b + 1], f2 = f * B[b + 2];
+      const u0 = u[q], u1 = u[q + 1], u2 = u[q + 2];
+      a0 += f0 * u0; a1 += f0 * u1; a2 += f0 * u2;
+      a3 += f1 * u0; a4 += f1 * u1; a5 += f1 * u2;
+      a6 += f2 * u0; a7 += f2 * u1; a8 += f2 * u2;
     }
-    G[3 * r] = g0;
-    G[3 * r + 1] = g1;
-    G[3 * r + 2] = g2;
+    const g = 9 * r;
+    Gv[g] = a0; Gv[g + 1] = a1; Gv[g + 2] = a2;
+    Gv[g + 3] = a3; Gv[g + 4] = a4; Gv[g + 5] = a5;
+    Gv[g + 6] = a6; Gv[g + 7] = a7; Gv[g + 8] = a8;
   }
+}
+
+// The directions of the cluster receivers' links, 3 per link in clusterRows' order.
+function clusterDirs(op) {
+  const { start, dir } = op.a, rows = op.clusterRows, u = [0, 0, 0];
+  let n = 0;
+  for (const r of rows) n += start[r + 1] - start[r];
+  const out = new Float64Array(3 * n);
+  for (let i = 0, q = 0; i < rows.length; i++)
+    for (let l = start[rows[i]]; l < start[rows[i] + 1]; l++, q += 3) {
+      octDecode(dir[l], u);
+      out.set(u, q);
+    }
+  return out;
 }
 
 // Push: down the tree (clusters' vectors to clusters, dotted with a polygon's normal below a cluster,
@@ -152,6 +222,11 @@ function partial(terms, L, applies) {
   return { terms: terms.concat([rest, Lp]), applies, converged: false, partial: true };
 }
 
+// A first view (rest estimated) only when the terms alone took this long (ms): a quicker series ends within a
+// few times this, and drawing a first view meanwhile slows it (the page, its drawing and the worker share
+// the machine's cores: Cornell's series took 40 ms with a first view drawn, 15-20 ms without).
+const FIRST_VIEW_AFTER_MS = 10;
+
 // The series for emission E and the punctual lights' white light D x s: terms E .. K^b E, then rest
 // (every later term, until a term's sum over patches and channels is below tol times the reflected
 // light's, L - E) and L. Returns
@@ -159,6 +234,7 @@ function partial(terms, L, applies) {
 function series(P, op, rho, E, D, s, b, tol, maxApplies, onPartial) {
   const n3 = 3 * P.npatch, terms = [Float64Array.from(E)], rest = new Float64Array(n3), L = Float64Array.from(E);
   let x = terms[0], applies = 0, converged = false, reflected = 0;
+  const t0 = performance.now();
   while (applies < maxApplies) {
     const y = new Float64Array(n3);
     op.apply(x, y);
@@ -173,7 +249,7 @@ function series(P, op, rho, E, D, s, b, tol, maxApplies, onPartial) {
       reflected += y[k];
     }
     if (applies <= b) terms.push(y);
-    if (applies === b && onPartial) onPartial(partial(terms, L, applies));
+    if (applies === b && onPartial && performance.now() - t0 >= FIRST_VIEW_AFTER_MS) onPartial(partial(terms, L, applies));
     x = y;
     if (applies >= b && ysum <= tol * reflected) {
       converged = true;
@@ -204,7 +280,7 @@ function makeSolver(P, op, opts) {
       out.push({ m: -1, r: series(P, op, rho, new Float64Array(3 * P.npatch), P.D_white, 1, b, tol, maxApplies, onPartial) });
     return out;
   }
-  return function solve(state, onPartial) {
+  function solve(state, onPartial) {
     const rhoMat = Float64Array.from(state.rho), LeMat = Float64Array.from(state.Le);
     const useBasis = P.sources <= opts.maxSources && P.materials.every((m, k) => P.emitting[k] ||
       (LeMat[3 * k] === 0 && LeMat[3 * k + 1] === 0 && LeMat[3 * k + 2] === 0));
@@ -221,7 +297,9 @@ function makeSolver(P, op, opts) {
       fresh = true;
     }
     return combine(P, basis, LeMat, state.punctual, b, fresh);
-  };
+  }
+  solve.loop = op.wasm ? "WebAssembly" : "JavaScript";
+  return solve;
 }
 
 // The terms for Le and s from the sources' own terms (Le per channel times each source's white terms).
@@ -262,7 +340,8 @@ function parsePayload(bytes) {
 // null) receives the first answer before the series is done.
 function run(P, solve, state, send) {
   const t0 = performance.now(), pack = (r) => ({ terms: r.terms.map((t) => Float32Array.from(t)), applies: r.applies,
-                                                 converged: r.converged, partial: !!r.partial, ms: performance.now() - t0 });
+                                                 converged: r.converged, partial: !!r.partial, ms: performance.now() - t0,
+                                                 loop: solve.loop });
   return pack(solve(state, send ? (r) => send(pack(r)) : null));
 }
 
@@ -274,7 +353,7 @@ if (typeof module !== "undefined") {
     const d = e.data;
     if (d.payload) {
       P = parsePayload(new Uint8Array(d.payload));
-      const op = makeOperator(P.F, P.npatch);
+      const op = makeOperator(P.F, P.npatch, d.kernel ? new Uint8Array(d.kernel) : null);
       solve = makeSolver(P, op, d.opts);
       return;
     }

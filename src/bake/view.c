@@ -9,9 +9,10 @@
 #include <stdlib.h>
 #include <string.h>
 
-extern const unsigned char bn__web_viewer[], bn__web_three[], bn__web_orbit[], bn__web_meshopt[], bn__web_worker[];
+extern const unsigned char bn__web_viewer[], bn__web_three[], bn__web_orbit[], bn__web_meshopt[], bn__web_worker[],
+    bn__web_kernel[];
 extern const size_t bn__web_viewer_size, bn__web_three_size, bn__web_orbit_size, bn__web_meshopt_size,
-    bn__web_worker_size;
+    bn__web_worker_size, bn__web_kernel_size;
 extern const int bn__web_have_assets;
 
 static void bn__base64(FILE *fp, const unsigned char *p, size_t n)
@@ -97,9 +98,10 @@ static bn_status bn__view_page(const unsigned char *glb, size_t glen, const unsi
 {
     static const struct {
         const char *key;
-        int what;   /* 0 title, 1 three, 2 orbit, 3 meshopt, 4 glb, 5 live, 6 the live page's worker */
+        int what;   /* 0 title, 1 three, 2 orbit, 3 meshopt, 4 glb, 5 live, 6 the live page's worker, 7 its kernel */
     } keys[] = {{"__BN_TITLE__", 0}, {"__BN_THREE__", 1}, {"__BN_ORBIT__", 2}, {"__BN_MESHOPT__", 3},
-                {"__BN_GLB__", 4},   {"__BN_LIVE__", 5},  {"__BN_WORKER__", 6}};
+                {"__BN_GLB__", 4},   {"__BN_LIVE__", 5},  {"__BN_WORKER__", 6},
+                {"__BN_KERNEL__", 7}};
     const char *t = (const char *)bn__web_viewer, *end = t + bn__web_viewer_size;
     bn__outfile f;
     bn_status st = bn__outfile_open(&f, out, "wb", err);
@@ -127,7 +129,8 @@ static bn_status bn__view_page(const unsigned char *glb, size_t glen, const unsi
         case 3: bn__base64(f.fp, bn__web_meshopt, bn__web_meshopt_size); break;
         case 4: bn__base64(f.fp, glb, glen); break;
         case 5: bn__base64(f.fp, live, llen); break;
-        default: bn__base64(f.fp, live ? bn__web_worker : NULL, live ? bn__web_worker_size : 0); break;
+        case 6: bn__base64(f.fp, live ? bn__web_worker : NULL, live ? bn__web_worker_size : 0); break;
+        default: bn__base64(f.fp, live ? bn__web_kernel : NULL, live ? bn__web_kernel_size : 0); break;
         }
         t = m + strlen(keys[k].key);
     }
