@@ -186,6 +186,45 @@ BN_TEST(errors_carry_the_message)
     bn_flat_free(NULL);
 }
 
+/* The command line's further options by their field names (bn_flat_opts.more, bn_flat_set): taken where
+ * they belong, refused by name elsewhere or out of range, and they act (no_subdivide: one patch per face). */
+BN_TEST(further_options_by_name)
+{
+    bn_flat_opts o;
+    bn_flat *f = NULL;
+    char msg[512];
+    size_t cut;
+    bn_flat_opts_default(&o);
+    o.patches = 48;
+    o.visibility = "rays";
+    BN_ASSERT_EQ(bn_flat_load(furnace(), &o, &f, msg, sizeof msg), BN_OK);
+    cut = bn_flat_patches(f);
+    bn_flat_free(f);
+    o.more = "no_subdivide=1\ncontact_gap=0.001";
+    BN_ASSERT_EQ(bn_flat_load(furnace(), &o, &f, msg, sizeof msg), BN_OK);
+    BN_ASSERT(bn_flat_patches(f) < cut);
+    BN_ASSERT_EQ(bn_flat_set(f, "gather_samples=16\nup=0,0,1\nflat=1\nbake_tol=0.1", msg, sizeof msg), BN_OK);
+    BN_ASSERT_EQ(bn_flat_set(f, "tile=8", msg, sizeof msg), BN_EUSAGE);
+    BN_ASSERT(strstr(msg, "`tile`: 8 is outside [16, 4096]") != NULL);
+    BN_ASSERT_EQ(bn_flat_set(f, "up=0,1", msg, sizeof msg), BN_EUSAGE);
+    BN_ASSERT(strstr(msg, "not three numbers") != NULL);
+    BN_ASSERT_EQ(bn_flat_set(f, "no_contacts=1", msg, sizeof msg), BN_EUSAGE);
+    BN_ASSERT(strstr(msg, "`no_contacts` is an option of the scene") != NULL);
+    o.more = "no_contacts=1";   /* a loaded scene keeps its patches and F: refused at its solve */
+    BN_ASSERT_EQ(bn_flat_solve_loaded(f, &o, msg, sizeof msg), BN_EUSAGE);
+    bn_flat_free(f);
+    const char *bad[][2] = {{"samples=0", "outside"}, {"samples=2.5", "whole number"}, {"gather_rays=9", "of the bake"},
+                            {"orient=up", "normals|winding"}, {"telepathy=1", "no option `telepathy`"},
+                            {"contact_gap", "no option `contact_gap`"}, {"min_area=x", "not a number"}};
+    for (size_t i = 0; i < sizeof bad / sizeof *bad; i++) {
+        f = (bn_flat *)1;
+        o.more = bad[i][0];
+        BN_ASSERT_EQ(bn_flat_load(furnace(), &o, &f, msg, sizeof msg), BN_EUSAGE);
+        BN_ASSERT(f == NULL && strstr(msg, bad[i][1]) != NULL);
+    }
+    BN_ASSERT(strstr(bn_flat_names("image_options"), "gather_filter") && strstr(bn_flat_names("bake_options"), "flat"));
+}
+
 /* The tracer and the cross-check through the flat API, in the furnace (rho 0.5, Le 1): bounce k is
  * 0.5^k everywhere, so every patch's estimate is within 6 of its standard errors of it and the mean
  * over pixels within 5%; radiosity agrees, so the cross-check passes; bad options are refused with a

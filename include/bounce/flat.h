@@ -45,6 +45,11 @@ typedef struct bn_flat_opts {
     const char *cache;        /* --cache FILE: dense and sparse F read from it when its key matches, else
                                  written to it (NULL: none) */
     const char *ff;           /* --ff: one of bn_flat_names("ff") (default analytic) */
+    const char *more;         /* the command line's further scene, form-factor and solve options by their
+                                 field names, one `name=value` per line ("no_contacts=1\ncontact_gap=0.5";
+                                 flags 0 or 1, vectors x,y,z); the names: bn_flat_names("scene_options")
+                                 (read where the scene is loaded) and bn_flat_names("solve_options");
+                                 ranges as the command line's. NULL: none */
 } bn_flat_opts;
 void bn_flat_opts_default(bn_flat_opts *o);
 /* sizeof(bn_flat_opts) in this library: a binding that lays the struct out itself (Python's ctypes)
@@ -131,6 +136,14 @@ double bn_flat_relight_gain(const bn_flat *f);
 bn_status bn_flat_bake(const bn_flat *f, const char *out, int per_bounce, const char *mesh, int ldr, double exposure_ev,
                        double crease_deg, const char *gather, long long vertices, const char *caller, char *msg,
                        size_t msglen);
+
+/* The images' and the bake's further options for the next calls (bn_flat_images, bn_flat_render,
+ * bn_flat_bake) as bn_flat_opts.more gives the solve's: `name=value` lines, the names
+ * bn_flat_names("image_options") (light_samples, gather_samples, gather_filter, hit_emitters,
+ * tree_emitters, tile, exposure, crease, up) and bn_flat_names("bake_options") (gather_rays, bake_tol,
+ * flat, no_colour_sets), as `bounce bounces` and `bounce bake` take them. Every call starts from the
+ * defaults: the options not given are reset. BN_EUSAGE naming a bad name or value (nothing set). */
+bn_status bn_flat_set(bn_flat *f, const char *more, char *msg, size_t msglen);
 
 /* Camera images of every layer as `bounce bounces` writes them: out (FILE.exr, one layer per term,
  * rest and L) and, with previews, FILE.<layer>.png and the contact sheet. The camera is the scene's

@@ -94,7 +94,7 @@ class _Opts(ctypes.Structure):
                 ("quiet", ctypes.c_int), ("sigint", ctypes.c_int), ("visibility", ctypes.c_char_p),
                 ("max_iter", ctypes.c_size_t), ("atol", ctypes.c_double), ("stop", ctypes.c_char_p),
                 ("seed", ctypes.c_uint64), ("precision", ctypes.c_char_p), ("storage", ctypes.c_char_p),
-                ("cache", ctypes.c_char_p), ("ff", ctypes.c_char_p)]
+                ("cache", ctypes.c_char_p), ("ff", ctypes.c_char_p), ("more", ctypes.c_char_p)]
 
 
 _lib = None
@@ -233,6 +233,8 @@ def _load() -> Any:
     lib.bn_flat_study_label.restype = ctypes.c_char_p
     lib.bn_flat_study_reference.argtypes = [P, D]
     lib.bn_flat_study_reference.restype = ctypes.c_char_p
+    lib.bn_flat_set.argtypes = [P, ctypes.c_char_p, ctypes.c_char_p, S]
+    lib.bn_flat_set.restype = I
     lib.bn_layer_name.argtypes = [I, I, ctypes.c_char_p, S]
     lib.bn_layer_name.restype = ctypes.c_char_p
     _lib = lib
@@ -480,36 +482,42 @@ class Result(_Traceable):
         return _form_factors(self._lib, self._h, self.patches, sparse)
 
     def bake(self, path: PathLike, per_bounce: bool = True, mesh: MeshName = "elements", ldr: bool = False,
-             exposure: Optional[float] = None, crease: float = 30.0, gather: Union[bool, GatherName] = True,
-             vertices: Optional[int] = None) -> None:
+             exposure: Optional[float] = None, crease: Optional[float] = None, gather: Union[bool, GatherName] = True,
+             vertices: Optional[int] = None, **more: Any) -> None:
         """Bakes this solution to vertex colours as `bounce bake` does, by the extension of `path`
         (.ply, .om, .obj, .glb, .gltf): per_bounce adds every term; mesh="input" bakes the scene's
         own polygons; ldr writes 8-bit sRGB (glTF: a COLOR_1 set beside the float ones) at
         `exposure` EV (None: automatic). gather (as --gather; True: "final", the default) computes
         each vertex by the final gather, the element mesh refined where L changes up to `vertices`
         vertices (as --bake-vertices; None: 100,000; 0: the patches' own); False or "none" bakes the
-        patches' values. Atomic, as every bounce output."""
+        patches' values. crease: degrees (None: 30). More options of `bounce bake` by their names:
+        names("bake_options") (gather_rays, bake_tol, flat, no_colour_sets). Atomic, as every bounce
+        output."""
         gname = _gather_name(gather)
         msg = ctypes.create_string_buffer(2048)
         ev = float("nan") if exposure is None else float(exposure)
         nv = -1 if vertices is None else _int("vertices", vertices, unsigned=True)
+        cr = 0.0 if crease is None else _float("crease", crease)
+        self._set(("bake_options",), more)
         st = self._lib.bn_flat_bake(self._h, os.fsencode(path), int(per_bounce), _name("mesh", mesh), int(ldr), ev,
-                                    float(crease), _name("gather", gname), nv, b"python bounce package", msg,
-                                    len(msg))
+                                    cr, _name("gather", gname), nv, b"python bounce package", msg, len(msg))
         if st != 0:
             _raise(self._lib, st, msg)
 
     def images(self, path: PathLike, size: Optional[Tuple[int, int]] = None, spp: Optional[int] = None,
                eye: Optional[Sequence[float]] = None, look: Optional[Sequence[float]] = None,
                fov: Optional[float] = None, previews: bool = True, smooth: bool = False, half: bool = False,
-               gather: Union[bool, GatherName] = True) -> None:
+               gather: Union[bool, GatherName] = True, **more: Any) -> None:
         """Camera images of every layer as `bounce bounces` writes them: path (FILE.exr, a layer per
         term, rest and L) and with previews FILE.<layer>.png and the contact sheet. The camera is the
         scene's NAME.camera sidecar, else in front of the box; size=(w, h), spp, eye, look (scene
         units) and fov (degrees) override it. gather: a names("gather") name, "final" (or True) the
         final gather per pixel (as `bounce bounces` by default; the solve must keep KE, bounces >= 1),
-        "none" (or False) each pixel the value of the patch it sees."""
+        "none" (or False) each pixel the value of the patch it sees. More options of `bounce bounces`
+        by their names: names("image_options") (light_samples, gather_samples, gather_filter,
+        hit_emitters, tree_emitters, tile, exposure, crease, up)."""
         gname = _gather_name(gather)
+        self._set(("image_options",), more)
         Dp = ctypes.POINTER(ctypes.c_double)
         vec = lambda v: None if v is None else (ctypes.c_double * 3)(*[float(x) for x in v])
         e, lk = vec(eye), vec(look)
@@ -525,11 +533,12 @@ class Result(_Traceable):
     def render(self, size: Tuple[int, int] = (256, 256), spp: Optional[int] = None,
                eye: Optional[Sequence[float]] = None, look: Optional[Sequence[float]] = None,
                fov: Optional[float] = None, smooth: bool = False,
-               gather: Union[bool, GatherName] = True) -> Dict[str, np.ndarray]:
+               gather: Union[bool, GatherName] = True, **more: Any) -> Dict[str, np.ndarray]:
         """The images of images() in memory, no file: {"E": ..., "KE": ..., "K2E": ..., "rest": ...,
         "L": ...}, each a float32 array of shape (height, width, 3), rows from the top, radiance in
-        W m^-2 sr^-1 (camera and gather as images() takes them)."""
+        W m^-2 sr^-1 (camera, gather and further options as images() takes them)."""
         gname = _gather_name(gather)
+        self._set(("image_options",), more)
         w, h = (_int("size", v, bits=32) for v in size)
         lib, nl = self._lib, self._lib.bn_flat_layers(self._h)
         out = np.zeros((max(nl, 1), h, w, 3), dtype=np.float32) if w > 0 and h > 0 else np.zeros(0, np.float32)
@@ -545,6 +554,13 @@ class Result(_Traceable):
             _raise(lib, st, msg)
         buf = ctypes.create_string_buffer(32)
         return {lib.bn_flat_layer_name(self._h, k, buf, len(buf)).decode(): _frozen(out[k]) for k in range(nl)}
+
+    def _set(self, vocabularies: Sequence[str], more: Mapping[str, Any]) -> None:
+        """The call's further options into the library (bn_flat_set: those not given are reset)."""
+        msg = ctypes.create_string_buffer(2048)
+        st = self._lib.bn_flat_set(self._h, _more_text(vocabularies, more), msg, len(msg))
+        if st != 0:
+            _raise(self._lib, st, msg)
 
     def __del__(self):
         if getattr(self, "_h", None) and getattr(self, "_scene", None) is None:
@@ -596,12 +612,36 @@ def _float(option, v):
 _MORE = ("max_iter", "atol", "stop", "seed", "precision", "storage", "cache", "ff")
 
 
+def _more_text(vocabularies: Sequence[str], more: Mapping[str, Any]) -> Optional[bytes]:
+    """The library's further options (names("scene_options"), ...: the command line's flags by their
+    struct names) as its `name=value` lines: bools as 1/0, numbers as they are, (x, y, z) as x,y,z,
+    names as strings; None values left out. Names the library does not take raise BounceError."""
+    known = [n for v in vocabularies for n in names(v)]
+    lines = []
+    for k, v in more.items():
+        if k not in known:
+            raise BounceError("EUSAGE", "unknown option %s (here: %s)" % (k, ", ".join(known)))
+        if v is None:
+            continue
+        if isinstance(v, (bool, np.bool_)):
+            text = "1" if v else "0"
+        elif isinstance(v, (int, float, np.integer, np.floating)):
+            text = repr(float(v)) if isinstance(v, (float, np.floating)) else str(int(v))
+        elif isinstance(v, str) and "\n" not in v and v:
+            text = v
+        elif isinstance(v, (list, tuple, np.ndarray)) and len(v) == 3:
+            text = ",".join(repr(_float(k, x)) for x in v)
+        else:
+            raise BounceError("EUSAGE", "%s: %r is not a flag, a number, a name or three numbers" % (k, v))
+        lines.append("%s=%s" % (k, text))
+    return "\n".join(lines).encode() if lines else None
+
+
 def _more(o: Any, more: Mapping[str, Any]) -> None:
-    """max_iter, atol, stop, seed, precision, storage, cache, ff into the flat options (types checked
-    here, values and names by the library)."""
-    unknown = set(more) - set(_MORE)
-    if unknown:
-        raise BounceError("EUSAGE", "unknown option %s (the solve options are %s)" % (sorted(unknown)[0], ", ".join(_MORE)))
+    """max_iter, atol, stop, seed, precision, storage, cache, ff into the flat options, the rest
+    (names("scene_options"), names("solve_options")) into its `more` lines (types checked here,
+    values and names by the library)."""
+    o.more = _more_text(("scene_options", "solve_options"), {k: v for k, v in more.items() if k not in _MORE})
     if more.get("max_iter") is not None:
         o.max_iter = _int("max_iter", more["max_iter"], unsigned=True)
     if more.get("atol") is not None:

@@ -96,7 +96,9 @@ static int bn__gather_index(const char *s)
     X("storage", bn_storage_names) X("precision", bn_precision_names) X("ff", bn_ff_method_names)        \
     X("visibility", bn_ff_visibility_names) X("unit", bn_unit_names) X("stop", bn_solve_stop_names)      \
     X("mesh", bn_bake_mesh_names) X("gather", bn_gather_mode_names) X("strategy", bn_trace_strategy_names) \
-    X("model", bn_trace_model_names)
+    X("model", bn_trace_model_names) X("scene_options", bn__flat_scene_options)                             \
+    X("solve_options", bn__flat_solve_options) X("image_options", bn__flat_image_options)                   \
+    X("bake_options", bn__flat_bake_options)
 #define BN__FLAT_VOCAB(k, f) {k, f},
 
 const char *bn_flat_names(const char *vocabulary)
@@ -235,7 +237,8 @@ bn_status bn__flat_popts(const bn_flat_opts *o, bn_flat *f, char *msg, size_t ms
     po->keep_rt = 1;   /* images (bn_flat_images) */
     po->ff.quiet = po->hier.quiet = po->solve.quiet = o->quiet;
     po->load.log.quiet = po->ff.log.quiet = po->hier.log.quiet = po->solve.log_sink.quiet = 1;   /* warnings only */
-    return BN_OK;
+    bn__flat_call_default(&f->call);
+    return bn__flat_more_pipeline(o->more, 0, f, po, msg, msglen);
 }
 
 /* The solver's monitor: keeps every row (a failed allocation drops the row, never the solve). */
@@ -425,8 +428,11 @@ bn_status bn_flat_solve_loaded(bn_flat *f, const bn_flat_opts *o, char *msg, siz
     memset(&tmp, 0, sizeof tmp);
     if (!f || !f->p.scene || !o)
         return bn__flat_fail(BN_EUSAGE, "solve: no loaded scene (or no options)", msg, msglen);
-    if ((st = bn__flat_popts(o, &tmp, msg, msglen)) != BN_OK)   /* checked as at load; the solver's taken */
+    if ((st = bn__flat_popts(o, &tmp, msg, msglen)) != BN_OK ||   /* checked as at load; the solver's taken */
+        (st = bn__flat_more_pipeline(o->more, 1, &tmp, &tmp.po, msg, msglen)) != BN_OK)
         return st;
+    f->po.solve.symmetric = tmp.po.solve.symmetric;
+    f->po.solve.singular_threshold = tmp.po.solve.singular_threshold;
     f->po.solve.method = tmp.po.solve.method;
     f->po.method_auto = tmp.po.method_auto;
     f->po.solve.bounces = tmp.po.solve.bounces;
@@ -657,6 +663,8 @@ static bn_status bn__flat_op_make(size_t n, const double *E, bn_flat_apply_fn ap
     double *ones = bn__malloc_array(3 * n, sizeof(double));
     bn_status st = BN_ENOMEM;
     *out = NULL;
+    if (f)
+        bn__flat_call_default(&f->call);
     if (f && op && ones && (f->p.E = bn__malloc_array(3 * n, sizeof(double)))) {
         for (size_t i = 0; i < 3 * n; i++)
             ones[i] = 1;
@@ -733,12 +741,16 @@ static bn_status bn__flat_bake_gather(const bn_flat *f, bn_bake *b, int input_me
     bn_error err;
     bn_bake_gather_opts go;
     bn_status st = bn__flat_name("bake: gather", gather, bn_gather_mode_names(), bn__gather_index, &mode, msg, msglen);
-    if (st == BN_OK && vertices >= 0 && (mode != BN_GATHER_FINAL || input_mesh))
+    if (st == BN_OK && vertices >= 0 && (mode != BN_GATHER_FINAL || input_mesh || f->call.flat))
         return bn__flat_fail(BN_EUSAGE, "bake: `vertices`: the refined mesh is the element mesh's with the gather at its "
-                             "vertices (not with gather none or the input mesh)", msg, msglen);
+                             "vertices (not with gather none, the input mesh or flat)", msg, msglen);
     if (st != BN_OK || mode != BN_GATHER_FINAL)
         return st;
     bn_bake_gather_opts_default(&go);
+    go.gather_rays = f->call.gather_rays;
+    go.tol = f->call.bake_tol;
+    if (f->call.flat)
+        vertices = 0;   /* the flat bake's own vertices */
     if (vertices >= 0 || input_mesh)   /* the input mesh: gathered at its own vertices, as `bounce bake` does */
         go.max_vertices = input_mesh ? 0 : (size_t)vertices;
     go.seed = f->po.ff.seed;
@@ -779,10 +791,14 @@ bn_status bn_flat_bake(const bn_flat *f, const char *out, int per_bounce, const 
         layers[l] = (bn_bake_layer){names[l], layer <= nb ? f->p.res.terms[layer] : f->p.rest, NULL};
     }
     bn_error_clear(&err);
-    st = bn_bake_create(f->p.scene, crease_deg > 0 ? crease_deg : BN_BAKE_DEFAULT_CREASE, &b, &err);
+    if (f->call.flat && crease_deg > 0)
+        return bn__flat_fail(BN_EUSAGE, "bake: `flat` and `crease`: a flat bake shares no vertices, so no crease applies",
+                             msg, msglen);
+    st = bn_bake_create(f->p.scene, f->call.flat ? BN_BAKE_FLAT : crease_deg > 0 ? crease_deg : BN_BAKE_DEFAULT_CREASE,
+                        &b, &err);
     if (st != BN_OK)
         return bn__flat_fail(st, err.msg, msg, msglen);
-    if (f->p.rt)
+    if (f->p.rt && !f->call.flat)
         bn_bake_exclude_enclosed(b, f->p.rt);   /* as `bounce bake` */
     if ((st = bn__flat_bake_gather(f, b, input_mesh, gather, vertices, layers, nl, &vbuf, msg, msglen)) != BN_OK) {
         bn_bake_destroy(b);
@@ -800,7 +816,7 @@ bn_status bn_flat_bake(const bn_flat *f, const char *out, int per_bounce, const 
         memset(&wo, 0, sizeof wo);
         wo.input_mesh = input_mesh;
         wo.ldr = ldr;
-        wo.colour_sets = 1;   /* as bounce bake writes them */
+        wo.colour_sets = !f->call.no_colour_sets;   /* as bounce bake writes them */
         wo.exposure_ev = isfinite(exposure_ev) ? exposure_ev : bn_bake_auto_exposure(f->p.res.L, f->p.n);
         wo.attrs = attrs;
         wo.nattrs = sizeof attrs / sizeof attrs[0];
@@ -826,6 +842,8 @@ bn_status bn__flat_camera(const bn_flat *f, int width, int height, int spp, cons
         memcpy(cam->eye, eye, sizeof cam->eye);
     if (look)
         memcpy(cam->look, look, sizeof cam->look);
+    if (f->call.has_up)
+        memcpy(cam->up, f->call.up, sizeof cam->up);
     if (fov_deg > 0)
         cam->fov_deg = fov_deg;
     if (width > 0)
@@ -890,7 +908,7 @@ bn_status bn_flat_render(const bn_flat *f, int width, int height, int spp, const
         return bn__flat_fail(BN_EUSAGE, "render: width and height must be given (> 0) with room for them in out",
                              msg, msglen);
     memset(imgs, 0, sizeof imgs);
-    bn_bounces_opts_default(&bo);
+    bo = f->call.bo;   /* the defaults and bn_flat_set's options */
     bo.smooth = smooth;
     bo.gather = mode == BN_GATHER_FINAL;
     bo.log.quiet = 1;
@@ -934,7 +952,7 @@ bn_status bn_flat_images(const bn_flat *f, const char *out, int width, int heigh
             {"bounce:units", "radiance, W m^-2 sr^-1 (L = E + K L solved in radiance)"},
             {"bounce:layers", "E = K^0 E (emission), KE = K^1 E (direct), K2E = K^2 E, ...; rest = L - their sum"},
         };
-        bn_bounces_opts_default(&bo);
+        bo = f->call.bo;   /* the defaults and bn_flat_set's options */
         bo.output = out;
         bo.previews = previews;
         bo.smooth = smooth;

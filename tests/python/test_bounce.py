@@ -2,6 +2,7 @@
 through every method, the CLI's own CSV for the Cornell box, bounce's errors as exceptions, and
 arrays that are the library's memory, not copies. Run by ctest (tests/python/run.sh)."""
 import ctypes
+import inspect
 import os
 import re
 import subprocess
@@ -663,3 +664,72 @@ def test_the_options_layout_is_checked_against_the_library(monkeypatch):
     monkeypatch.setattr(bounce, "_Opts", Longer)
     with pytest.raises(bounce.BounceError, match="lays bn_flat_opts out in .* bytes, this package in"):
         bounce._check_layout(bounce._lib, "libbounce.so")
+
+
+# The command line's flags with no keyword of the same name, and why (every other flag of solve, bounces and
+# bake is a keyword of bounce.solve / Scene.load, Result.images / render, or Result.bake).
+NOT_KEYWORDS = {
+    "output": "the path argument of solve's CSV (Result holds the arrays), images() and bake()",
+    "quiet": "progress=False (the default)", "help": "help(bounce)", "version": "bounce.__version__",
+    "set-rho": "Result.relight(rho=...)", "set-Le": "Result.relight(Le=...)",
+    "log": "Result.history (the convergence table as arrays)",
+    "no-previews": "images(previews=False)", "patches-out": "Result's per-patch arrays (area, L, terms)",
+    "for": "a CLI hint; for Blender's PLY: bake(ldr=True)",
+    "bake-vertices": "bake(vertices=...)", "ff-visibility": "visibility=...",
+}
+
+
+def _cli_flags(command):
+    text = subprocess.run([EXE, command, "--help"], capture_output=True, text=True).stdout
+    return sorted(set(re.findall(r"^\s+(?:-\w, )?--([a-zA-Z][\w-]*)", text, re.M)))
+
+
+@pytest.mark.skipif(not os.path.exists(EXE), reason="no bounce executable (BOUNCE_EXE)")
+def test_every_cli_option_of_solve_bounces_and_bake_is_a_keyword():
+    """Each flag of `bounce solve`, `bounce bounces` and `bounce bake --help` is a keyword of the matching Python
+    call by the same name (dashes as underscores), or listed above with the way Python does it."""
+    solve_kw = set(inspect.signature(bounce.solve).parameters) | set(bounce._MORE) | \
+        set(bounce.names("scene_options")) | set(bounce.names("solve_options"))
+    image_kw = set(inspect.signature(bounce.Result.images).parameters) | set(bounce.names("image_options"))
+    bake_kw = set(inspect.signature(bounce.Result.bake).parameters) | set(bounce.names("bake_options"))
+    missing = []
+    for command, kws in (("solve", solve_kw), ("bounces", solve_kw | image_kw), ("bake", solve_kw | bake_kw)):
+        flags = _cli_flags(command)
+        assert len(flags) > 25, (command, flags)
+        missing += ["%s --%s" % (command, f) for f in flags if f.replace("-", "_") not in kws and f not in NOT_KEYWORDS]
+    assert not missing, missing
+
+
+def test_further_options_take_effect_and_bad_ones_name_the_value(tmp_path):
+    kw = dict(unit="mm", patches=60, visibility="rays", bounces=2)
+    a = bounce.solve(CORNELL, **kw)
+    b = bounce.solve(CORNELL, no_contacts=True, **kw)
+    assert b.patches < a.patches   # the blocks' contact lines cut the floor (no_contacts: not cut)
+    for bad, needle in ((dict(contact_gap=-1), "contact_gap=: -1 is outside"), (dict(samples=0), "samples=: 0"),
+                        (dict(orient="up"), "'up' is not one of normals|winding"), (dict(foo=1), "unknown option foo"),
+                        (dict(samples=1.5), "1.5 is not a whole number")):
+        with pytest.raises(bounce.BounceError) as e:
+            bounce.solve(CORNELL, **bad, **kw)
+        assert needle in str(e.value), str(e.value)
+    s = bounce.Scene.load(CORNELL, **kw)
+    with pytest.raises(bounce.BounceError, match="option of the scene and F"):
+        bounce.solve(s, no_contacts=True)
+    # images: the gather's filter off and fewer rays make a different (noisier) K2E; a bad one names itself
+    sm = dict(size=(24, 24), spp=1)
+    r1, r2 = a.render(**sm), a.render(gather_filter=0, gather_samples=4, **sm)
+    assert np.abs(r1["K2E"] - r2["K2E"]).max() > 0 and np.array_equal(r1["E"], r2["E"])
+    assert np.array_equal(a.render(**sm)["K2E"], r1["K2E"])   # options not given are reset
+    with pytest.raises(bounce.BounceError, match="gather_filter=: 99 is outside"):
+        a.render(gather_filter=99, **sm)
+    with pytest.raises(bounce.BounceError, match="unknown option gather_rays"):
+        a.render(gather_rays=4, **sm)
+    with pytest.raises(bounce.BounceError, match=r"up: \(0, 1\) is not"):
+        a.render(up=(0, 1), **sm)
+    # the bake: flat gives each patch its own vertices (3 per triangle, more than the shared mesh)
+    p1, p2 = str(tmp_path / "shared.ply"), str(tmp_path / "flat.ply")
+    a.bake(p1, gather=False)
+    a.bake(p2, gather=False, flat=True)
+    nv = [int(re.search(rb"element vertex (\d+)", open(p, "rb").read(4096)).group(1)) for p in (p1, p2)]
+    assert nv[1] > nv[0], nv
+    with pytest.raises(bounce.BounceError, match="flat.*crease"):
+        a.bake(p2, flat=True, crease=10)
