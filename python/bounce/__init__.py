@@ -497,6 +497,11 @@ class Result(_Traceable):
         msg = ctypes.create_string_buffer(2048)
         ev = float("nan") if exposure is None else float(exposure)
         nv = -1 if vertices is None else _int("vertices", vertices, unsigned=True)
+        if "bake_vertices" in more:   # the command line's name of vertices=
+            if vertices is not None:
+                raise BounceError("EUSAGE", "vertices= and bake_vertices= name the same option: give one")
+            nv = -1 if more["bake_vertices"] is None else _int("bake_vertices", more["bake_vertices"], unsigned=True)
+            more = {k: v for k, v in more.items() if k != "bake_vertices"}
         cr = 0.0 if crease is None else _float("crease", crease)
         self._set(("bake_options",), more)
         st = self._lib.bn_flat_bake(self._h, os.fsencode(path), int(per_bounce), _name("mesh", mesh), int(ldr), ev,
@@ -659,6 +664,10 @@ def _opts(lib, unit="m", method="auto", transport="auto", bounces=3, tol=None, p
           eps=None, threads=0, progress=False, visibility="exact", **more):
     """The flat options: the library's defaults, then what was given (None: the default). Values are
     checked by the library, once for every front end; here only their Python types."""
+    if "ff_visibility" in more:   # the command line's name of visibility=
+        if visibility != "exact":
+            raise BounceError("EUSAGE", "visibility= and ff_visibility= name the same option: give one")
+        visibility = more.pop("ff_visibility")
     o = _Opts()
     lib.bn_flat_opts_default(ctypes.byref(o))
     o.unit, o.method = _name("unit", unit), _name("method", method)

@@ -675,7 +675,6 @@ NOT_KEYWORDS = {
     "log": "Result.history (the convergence table as arrays)",
     "no-previews": "images(previews=False)", "patches-out": "Result's per-patch arrays (area, L, terms)",
     "for": "a CLI hint; for Blender's PLY: bake(ldr=True)",
-    "bake-vertices": "bake(vertices=...)", "ff-visibility": "visibility=...",
 }
 
 
@@ -688,10 +687,11 @@ def _cli_flags(command):
 def test_every_cli_option_of_solve_bounces_and_bake_is_a_keyword():
     """Each flag of `bounce solve`, `bounce bounces` and `bounce bake --help` is a keyword of the matching Python
     call by the same name (dashes as underscores), or listed above with the way Python does it."""
-    solve_kw = set(inspect.signature(bounce.solve).parameters) | set(bounce._MORE) | \
+    solve_kw = set(inspect.signature(bounce.solve).parameters) | set(bounce._MORE) | {"ff_visibility"} | \
         set(bounce.names("scene_options")) | set(bounce.names("solve_options"))
     image_kw = set(inspect.signature(bounce.Result.images).parameters) | set(bounce.names("image_options"))
-    bake_kw = set(inspect.signature(bounce.Result.bake).parameters) | set(bounce.names("bake_options"))
+    bake_kw = set(inspect.signature(bounce.Result.bake).parameters) | set(bounce.names("bake_options")) | \
+        {"bake_vertices"}
     missing = []
     for command, kws in (("solve", solve_kw), ("bounces", solve_kw | image_kw), ("bake", solve_kw | bake_kw)):
         flags = _cli_flags(command)
@@ -703,8 +703,10 @@ def test_every_cli_option_of_solve_bounces_and_bake_is_a_keyword():
 def test_further_options_take_effect_and_bad_ones_name_the_value(tmp_path):
     kw = dict(unit="mm", patches=60, visibility="rays", bounces=2)
     a = bounce.solve(CORNELL, **kw)
-    b = bounce.solve(CORNELL, no_contacts=True, **kw)
+    b = bounce.solve(CORNELL, no_contacts=True, **{**kw, "visibility": "exact", "ff_visibility": "rays"})
     assert b.patches < a.patches   # the blocks' contact lines cut the floor (no_contacts: not cut)
+    with pytest.raises(bounce.BounceError, match="name the same option"):
+        bounce.solve(CORNELL, ff_visibility="exact", **kw)
     for bad, needle in ((dict(contact_gap=-1), "contact_gap=: -1 is outside"), (dict(samples=0), "samples=: 0"),
                         (dict(orient="up"), "'up' is not one of normals|winding"), (dict(foo=1), "unknown option foo"),
                         (dict(samples=1.5), "1.5 is not a whole number")):
@@ -728,7 +730,7 @@ def test_further_options_take_effect_and_bad_ones_name_the_value(tmp_path):
     # the bake: flat gives each patch its own vertices (3 per triangle, more than the shared mesh)
     p1, p2 = str(tmp_path / "shared.ply"), str(tmp_path / "flat.ply")
     a.bake(p1, gather=False)
-    a.bake(p2, gather=False, flat=True)
+    a.bake(p2, gather=False, flat=True, bake_vertices=None)
     nv = [int(re.search(rb"element vertex (\d+)", open(p, "rb").read(4096)).group(1)) for p in (p1, p2)]
     assert nv[1] > nv[0], nv
     with pytest.raises(bounce.BounceError, match="flat.*crease"):
