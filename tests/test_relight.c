@@ -96,6 +96,16 @@ BN_TEST(dense_relight_equals_a_fresh_solve_of_the_edited_scene)
     o.load.nedits = 2;
     run(&o, &q);   /* F computed again for the edited file */
     same_answer(&p, &q, 1e-6);
+    /* a Neumann relight reads its spectral radius from its terms, no power steps
+     * (bn_solve_opts.power_lazy): within 1% of the fresh solve's power iteration on the same K */
+    o.method_auto = 0;
+    o.solve.method = BN_SOLVE_NEUMANN;
+    if (bn_pipeline_relight(&o, &p, e, 2, 0, &err) != BN_OK)
+        BN_FAIL("relight: %s", err.msg);
+    same_answer(&p, &q, 1e-6);
+    BN_ASSERT_EQ(p.res.power_iterations, 0);
+    BN_ASSERT_GT(q.res.power_iterations, 2);
+    BN_ASSERT_LE(fabs(p.res.spectral_radius - q.res.spectral_radius), 0.01 * q.res.spectral_radius);
     free(L0);
     bn_pipeline_free(&p);
     bn_pipeline_free(&q);

@@ -346,6 +346,9 @@ typedef struct bn__solve {
     double kpow;                    /* ||K||^(s k + 1) at iteration k (s sweeps per iteration) */
     double *diag, *r, *Lprev, *y;   /* diag NULL when K_ii = 0 for every i (or unknown) */
     int filled;                     /* terms K^0 E .. K^(filled-1) E made so far */
+    int lazy;                       /* the spectral radius from the residuals (bn_solve_opts.power_lazy) */
+    double rch[4][3];               /* lazy: the largest residual per channel, the last four rows */
+    int r0_signed;                  /* lazy: r0 has a negative entry (a start near the answer) */
     bn_solve_row row;
 } bn__solve;
 
@@ -493,14 +496,19 @@ static bn_status bn__solve_start(bn__solve *S)
     memset(&S->row, 0, sizeof S->row);
     bn__residual_norms(S->r, S->n, &S->row);
     S->r0max = S->row.residual_max;
+    for (size_t i = 0; S->lazy && i < S->m; i++)
+        S->r0_signed |= S->r[i] < 0;
     S->target = o->tol * res->norm_E;
     tgt = fmax(S->target, o->atol);
     if (S->stop == BN_SOLVE_STOP_BOUND && S->knorm < 1)
         tgt *= 1.0 - S->knorm;   /* ||r|| / (1 - ||K||) <= target */
-    res->predicted_iterations = bn__predict(res->spectral_radius, S->r0max, tgt);
+    res->predicted_iterations = S->lazy ? SIZE_MAX : bn__predict(res->spectral_radius, S->r0max, tgt);
     if (S->type->sweeps == 2 && res->predicted_iterations != SIZE_MAX)
         res->predicted_iterations = (res->predicted_iterations + 1) / 2;
-    if (res->predicted_iterations == SIZE_MAX)
+    if (S->lazy)
+        bn__note(o, BN_LOG_INFO, "||K||_inf = %.9g < 1: no power iteration first; the spectral radius from the "
+                 "iterations' residuals", S->knorm);
+    else if (res->predicted_iterations == SIZE_MAX)
         bn__note(o, BN_LOG_INFO, "spectral radius ~ %.9g (>= %.9g, %zu power steps); ||K||_inf = %.9g; the tolerance "
                  "cannot be predicted", res->spectral_radius, res->spectral_radius_lower, res->power_iterations, S->knorm);
     else
@@ -522,7 +530,9 @@ static bn_status bn__solve_analyse(bn__solve *S)
     bn_status st = bn__solve_norm(S);
     if (st == BN_OK)
         st = bn__solve_diag(S);
-    if (st == BN_OK)
+    S->lazy = st == BN_OK && S->o->power_lazy && !S->o->log && !S->type->solve && S->type->sweeps == 1 &&
+              S->o->method != BN_SOLVE_GAUSS_SEIDEL && S->knorm < 1.0 - S->o->singular_threshold;
+    if (st == BN_OK && !S->lazy)
         st = S->o->power_start
                  ? bn_solve_spectral_radius_from(S->k, S->o->power_iter, S->o->power_start, &S->res->spectral_radius,
                                                  &S->res->spectral_radius_lower, &S->res->power_iterations, S->err)
@@ -681,6 +691,10 @@ static bn_status bn__solve_iterate(bn__solve *S)
             break;
         bn__solve_bounds(S, it);
         bn__solve_capture(S, it);
+        if (S->lazy) {
+            memmove(S->rch[1], S->rch[0], 3 * sizeof S->rch[0]);
+            memcpy(S->rch[0], S->row.residual_ch, sizeof S->rch[0]);
+        }
         S->res->iterations = it;
         bad = bn__first_nonfinite(S->res->L, S->m);
         if (bad != SIZE_MAX || !isfinite(S->row.residual_max)) {
@@ -754,6 +768,40 @@ static bn_status bn__solve_source(bn__solve *S)
     return BN_OK;
 }
 
+/* lazy: the spectral radius from the last residuals, r_k = K^k r_0 with r_0 >= 0 (K >= 0: the largest
+ * entry's ratio tends to rho(K)), over two steps (an eigenvalue near -rho makes one step's ratio
+ * alternate), taken when the last two such estimates agree within 1%; the last residual is then the next
+ * power iteration's start. Otherwise (a signed r_0, too few iterations, not settled) the power iteration
+ * after all, from power_start. */
+static double bn__lazy_est(const double a[3], const double b[3])
+{
+    double est = 0;
+    for (int c = 0; c < 3; c++)
+        if (b[c] > 0)
+            est = fmax(est, sqrt(a[c] / b[c]));
+    return est;
+}
+
+static bn_status bn__solve_lazy_radius(bn__solve *S)
+{
+    bn_solve_result *res = S->res;
+    if (!S->lazy)
+        return BN_OK;
+    double now = bn__lazy_est(S->rch[0], S->rch[2]), before = bn__lazy_est(S->rch[1], S->rch[3]);
+    if (!S->r0_signed && res->iterations >= 3 && now > 0 && fabs(now - before) <= 0.01 * now) {
+        res->spectral_radius = now;
+        if (S->o->power_start)
+            for (size_t i = 0; i < S->m; i++)
+                S->o->power_start[i] = fabs(S->r[i]);
+        return BN_OK;
+    }
+    return S->o->power_start
+               ? bn_solve_spectral_radius_from(S->k, S->o->power_iter, S->o->power_start, &res->spectral_radius,
+                                               &res->spectral_radius_lower, &res->power_iterations, S->err)
+               : bn_solve_spectral_radius(S->k, S->o->power_iter, &res->spectral_radius, &res->spectral_radius_lower,
+                                          &res->power_iterations, S->err);
+}
+
 static void bn__solve_record(bn__solve *S)
 {
     bn_solve_result *res = S->res;
@@ -768,7 +816,7 @@ static bn_status bn__solve_body(const bn_transport *k, const double *E, const bn
                    bn_error *err)
 {
     bn__solve S;
-    bn_status st, run = BN_OK;
+    bn_status st, run = BN_OK, lz;
     double t;
     memset(&S, 0, sizeof S);
     memset(res, 0, sizeof *res);
@@ -798,6 +846,8 @@ static bn_status bn__solve_body(const bn_transport *k, const double *E, const bn
         run = S.type->solve ? bn__solve_direct(&S) : bn__solve_iterate(&S);
         res->seconds_iterate = bn__now() - t;
         bn__solve_record(&S);
+        if (run == BN_OK || run == BN_ENOTCONV)   /* a lazy spectral radius (its failure is the run's) */
+            run = (lz = bn__solve_lazy_radius(&S)) != BN_OK ? lz : run;
         /* The iteration limit is a failure that keeps its answer (the caller may want it). */
         st = run == BN_ENOTCONV ? BN_OK : run;
     }
