@@ -342,7 +342,7 @@ static long bn__sample(const bn__gather *G, const double o[3], const double d[3]
  * beside it is darker than the side's mean: corner vertices of a bake came out 60-260% too bright), so
  * they come from a small gather at the hit itself, one level more, whose hits are farther away. */
 #define BN__NEAR 0.5
-#define BN__NEAR_SIDE 4   /* its rays per side of the stratified grid */
+#define BN__NEAR_SIDE 2   /* its rays per side of the stratified grid: 4 (16 gave the same 95th percentiles at 1.6x the bake's time) */
 
 static void bn__hit_values_near(const bn__gather *G, const bn_hit *q, const bn__rng *r0, double wt, double *hv,
                                 double *rays)
