@@ -17,10 +17,12 @@ files=()
 # would triple their form factors' time (and more under the sanitizers)
 vis=(--ff-visibility rays)
 "$bounce" bake "$src/meshes/cornell-box.obj" --unit mm -q --patches 400 --per-bounce "${vis[@]}" -o "$out/cornell.glb" 2>/dev/null
-"$bounce" bake "$src/meshes/cornell-box.obj" --unit mm -q --patches 400 --mesh input --ldr "${vis[@]}" -o "$out/cornell-input.gltf" 2>/dev/null
+"$bounce" bake "$src/meshes/cornell-box.obj" --unit mm -q --patches 400 --mesh input --ldr --gather none "${vis[@]}" -o "$out/cornell-input.gltf" 2>/dev/null
+# (the input-mesh bakes take the patches' values, --gather none: the file's layout is what is checked; the
+# gathered, refined mesh is the .glb bakes')
 # from a glTF input: Blender's export of the box (every material doubleSided: each side baked)
 "$bounce" bake "$src/meshes/cornell-box-blender.glb" -q --patches 300 --per-bounce "${vis[@]}" -o "$out/blender.glb" 2>/dev/null
-"$bounce" bake "$src/meshes/cornell-box-blender.glb" -q --patches 300 --mesh input "${vis[@]}" -o "$out/blender-input.gltf" 2>/dev/null
+"$bounce" bake "$src/meshes/cornell-box-blender.glb" -q --patches 300 --mesh input --gather none "${vis[@]}" -o "$out/blender-input.gltf" 2>/dev/null
 files+=("$out/cornell.glb" "$out/cornell-input.gltf" "$out/blender.glb" "$out/blender-input.gltf")
 mcguire="$src/../shared/data/external/mcguire-cornell/CornellBox-Original.obj"
 if [ -f "$mcguire" ]; then
