@@ -222,6 +222,14 @@ BN_TEST(further_options_by_name)
         BN_ASSERT_EQ(bn_flat_load(furnace(), &o, &f, msg, sizeof msg), BN_EUSAGE);
         BN_ASSERT(f == NULL && strstr(msg, bad[i][1]) != NULL);
     }
+    char longline[800];   /* a line the parser cannot hold is refused, never cut short */
+    memset(longline, 'a', sizeof longline - 1);
+    memcpy(longline, "two_sided=", 10);
+    longline[sizeof longline - 1] = '\0';
+    f = (bn_flat *)1;
+    o.more = longline;
+    BN_ASSERT_EQ(bn_flat_load(furnace(), &o, &f, msg, sizeof msg), BN_EUSAGE);
+    BN_ASSERT(f == NULL && strstr(msg, "longer than") != NULL);
     BN_ASSERT(strstr(bn_flat_names("image_options"), "gather_filter") && strstr(bn_flat_names("bake_options"), "flat"));
 }
 

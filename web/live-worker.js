@@ -41,7 +41,11 @@ function makeKernel(bytes, a, n) {
   const L = a.F.length, up = (v) => Math.ceil(v / 16) * 16, off = [up(inst.exports.__heap_base.value)];
   for (const size of [4 * (n + 1), 4 * L, 4 * L, n, 32 * n, 32 * n]) off.push(up(off[off.length - 1] + size));
   const need = off[off.length - 1] - mem.buffer.byteLength;
-  if (need > 0) mem.grow(Math.ceil(need / 65536));
+  try {
+    if (need > 0) mem.grow(Math.ceil(need / 65536));
+  } catch (e) {
+    return null;   // above WebAssembly's 4 GiB (or the browser's limit): the JavaScript loop
+  }
   const buf = mem.buffer;
   new Uint32Array(buf, off[0], n + 1).set(a.start);
   new Uint32Array(buf, off[1], L).set(a.src);

@@ -99,7 +99,6 @@ typedef struct bn_pipeline {
     bn_solve_method method_used;  /* the solver that ran (method_auto may have chosen it) */
     double *rest;              /* N*3: L - sum of the kept terms (NULL when none are kept) */
     double *power;             /* N*3: the power iteration's last iterate (bn_solve_opts.power_start) */
-    int relighting;            /* bn_pipeline_relight's solve: bn_solve_opts.power_lazy */
     size_t n;                  /* patches */
     double singular_threshold; /* the threshold the solve used */
     double seconds_load, seconds_mesh, seconds_operator, seconds_solve;

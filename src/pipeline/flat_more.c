@@ -6,6 +6,7 @@
 #include "pipeline/flat_internal.h"
 
 #include <math.h>
+#include <pthread.h>
 #include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -61,16 +62,24 @@ static const bn__more_opt bn__more[] = {
 #undef C_
 #define BN__NMORE (sizeof bn__more / sizeof *bn__more)
 
+static char bn__more_joined[4][512];
+
+static void bn__more_join(void)
+{
+    size_t k[4] = {0, 0, 0, 0};
+    for (size_t i = 0; i < BN__NMORE; i++) {
+        int s = bn__more[i].stage;
+        k[s] += (size_t)snprintf(bn__more_joined[s] + k[s], sizeof bn__more_joined[s] - k[s], "%s%s", k[s] ? "|" : "",
+                                 bn__more[i].name);
+    }
+}
+
+/* The names of a stage's options, "|"-separated (joined once, thread-safe). */
 static const char *bn__more_names(int stage)
 {
-    static char names[4][512];
-    if (!names[stage][0]) {
-        size_t k = 0;
-        for (size_t i = 0; i < BN__NMORE; i++)
-            if (bn__more[i].stage == stage)
-                k += (size_t)snprintf(names[stage] + k, sizeof names[stage] - k, "%s%s", k ? "|" : "", bn__more[i].name);
-    }
-    return names[stage];
+    static pthread_once_t once = PTHREAD_ONCE_INIT;
+    pthread_once(&once, bn__more_join);
+    return bn__more_joined[stage];
 }
 const char *bn__flat_scene_options(void) { return bn__more_names(BN__M_SCENE); }
 const char *bn__flat_solve_options(void) { return bn__more_names(BN__M_SOLVE); }
@@ -160,7 +169,8 @@ static int bn__more_store(const bn__more_opt *o, char *base, const char *v, char
     case BN__M_SIZE: *(size_t *)dst = (size_t)x; break;
     case BN__M_FLAG: *(int *)dst = x != 0; break;
     case BN__M_NOT: *(int *)dst = x == 0; break;
-    default: ((bn__flat_call *)base)->bo.ev = x, ((bn__flat_call *)base)->bo.auto_exposure = 0; break;
+    case BN__M_EV: ((bn__flat_call *)base)->bo.ev = x, ((bn__flat_call *)base)->bo.auto_exposure = 0; break;
+    default: return snprintf(msg, msglen, "`%s`: no such kind of option", o->name), -1;
     }
     return 0;
 }
@@ -177,7 +187,9 @@ static bn_status bn__more_parse(const char *text, int lo, int hi, bn_pipeline_op
     for (const char *p = text; p && *p;) {
         const char *e = strchr(p, '\n');
         size_t n = e ? (size_t)(e - p) : strlen(p);
-        snprintf(line, sizeof line, "%.*s", (int)(n < sizeof line ? n : sizeof line - 1), p);
+        if (n >= sizeof line)
+            return bn__more_fail(BN_EUSAGE, "an option line is longer than 639 characters", msg, msglen);
+        snprintf(line, sizeof line, "%.*s", (int)n, p);
         p = e ? e + 1 : NULL;
         char *eq = strchr(line, '=');
         if (!line[0])

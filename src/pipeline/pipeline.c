@@ -545,7 +545,6 @@ bn_status bn_pipeline_solve(const bn_pipeline_opts *o, bn_pipeline *p, bn_error 
     if (!p->power && !(p->power = bn__calloc(3 * p->n + 1, sizeof(double))))
         return bn_error_set(err, BN_ENOMEM, "out of memory for the power iteration of %zu patches", p->n);
     so.power_start = p->power;   /* a relight's solve starts where the last one ended */
-    so.power_lazy = p->relighting;   /* a relight's: no power steps where ||K|| < 1 already bounds it */
     st = bn_solve(p->k, p->E, &so, &p->res, err);
     if ((st == BN_OK || st == BN_ENOTCONV) && p->res.nterms > 0) {
         p->rest = bn__malloc_array(3 * p->n + 1, sizeof(double));
@@ -637,9 +636,9 @@ bn_status bn_pipeline_relight(const bn_pipeline_opts *o, bn_pipeline *p, const b
     free(p->E);
     p->rest = p->E = NULL;
     if (st == BN_OK) {
-        p->relighting = 1;
-        st = bn_pipeline_solve(o, p, err);
-        p->relighting = 0;
+        bn_pipeline_opts ro = *o;
+        ro.solve.power_lazy = 1;   /* no power steps where ||K|| < 1 already bounds the solve */
+        st = bn_pipeline_solve(&ro, p, err);
     }
     if (st == BN_OK || st == BN_ENOTCONV)
         bn__relight_note(o, p, refine ? NULL : L0);
