@@ -7,11 +7,12 @@ usage: bake_gather_check.py BOUNCE SOURCE_DIR OUTDIR
   a point sums to 1 over the cube's faces), to 1e-3.
 - The Cornell box: the gathered bake's values at its vertices against `bounce trace --points` at the
   same points (the path tracer, which shares only the scene), relative error with the tracer's variance
-  subtracted: median at most 1% for L and 2% for K2E, 95th percentile at most 8% and 8% (issue 36 asks
-  3% and 6%: K2E's is the bake's own noise at the default 2,048 rays; L's are dark points at the blocks'
-  feet, and the refined mesh puts a good share of its vertices there, where light changes: 9.7% while a
-  gather's hits all read their patches' means of K2E and beyond, 6.0% since near hits gather once more
-  themselves); the
+  subtracted: median at most 1% for L and 2% for K2E, 95th percentile at most 6% and 8% (issue 36 asks
+  3% and 6%, met against a 65,536-path reference: L 2.7%, K2E 4.1%; this 4,096-path one reads L 4.4%, K2E
+  6.7%, its own noise at the 95th percentile. L's worst are dark points at the blocks' feet, and the
+  refined mesh puts a good share of its vertices there, where light changes: 9.7% while a gather's hits
+  all read their patches' means of K2E and beyond, 6.1% with near hits gathering once more, 3.2% since
+  they take KE from the emitters and gather again where near again, three levels); the
   patch-average bake (--gather none) measured the same way must be worse by a wide margin (its 95th
   percentile above 3x the gathered one's), so the test fails if the gather stopped being used.
 Points where the tracer's face and the bake's vertex differ in emission (the light is set into the
@@ -115,7 +116,7 @@ def main():
             mode, 100 * res[mode]["L"][0], 100 * res[mode]["L"][1], 100 * res[mode]["K2E"][0], 100 * res[mode]["K2E"][1]))
     g, n = res["final"], res["none"]
     check(g["L"][0] <= 0.01 and g["K2E"][0] <= 0.02, "gathered: medians within 1% (L) and 2% (K2E)")
-    check(g["L"][1] <= 0.08 and g["K2E"][1] <= 0.08, "gathered: 95th percentiles within 8% (L) and 8% (K2E)")
+    check(g["L"][1] <= 0.06 and g["K2E"][1] <= 0.08, "gathered: 95th percentiles within 6% (L) and 8% (K2E)")
     check(n["L"][1] > 3 * g["L"][1] and n["K2E"][1] > 3 * g["K2E"][1],
           "the patch-average bake's 95th percentiles are over 3x the gathered ones")
     print("%d failures" % len(failures))
