@@ -178,6 +178,15 @@ raceref="$root/bench/data/cornell-trace-256-65536.exr"
             timeout "$timeout_s" "$build/bench/race_bench" "$bounce" "$raceref" ${opts:+--} ${opts:+"$opts"} ||
                 echo "| $opts | failed | | | | |"
         done
+        echo
+        echo "Image means per term (issue 35: K3E and K4E within 1%), \`bounce bounces -n 4\` with the defaults at"
+        echo "256x256 against the same reference, per channel R G B; the reference's own standard error of its mean"
+        echo "beside it (a lower bound: its half-float variances of dim pixels round to 0). E's +1% is the light's"
+        echo "edge pixels: one sample each at the pixel's centre against the reference's 65,536 over the pixel."
+        echo
+        echo "| term | image mean - the reference's | the reference's standard error |"
+        echo "|---|---|---|"
+        timeout "$timeout_s" "$build/bench/race_bench" "$bounce" "$raceref" --means || echo "| means | failed | |"
     else
         echo "_not run: $raceref or $build/bench/race_bench missing._"
     fi
