@@ -43,6 +43,17 @@ const bn_scene *bn_rt_scene(const bn_rt *rt);
  * fixed rays from the patch's centroid over its hemisphere meet a back face. enclosed: one flag per
  * patch of the rt's scene. Returns how many. Deterministic, for any thread count. */
 size_t bn_rt_enclosed_patches(const bn_rt *rt, unsigned char *enclosed);
+/* The same rays, four classes (bn_cover), so that patches whose views of the scene differ this much
+ * never share a node of the hierarchy (a node hands every patch below it its mean form factor: the
+ * floor under an object took the light its open neighbours see, 3 to 7 times its own). Returns how
+ * many are partly covered (BACK or SHUT). */
+enum bn_cover {
+    BN_COVER_OPEN = 0,
+    BN_COVER_SHUT = 1,       /* half the rays meet a back face or a face nearer than the patch's size */
+    BN_COVER_BACK = 2,       /* a quarter of the rays meet a back face */
+    BN_COVER_ENCLOSED = 3    /* bn_rt_enclosed_patches's */
+};
+size_t bn_rt_cover_classes(const bn_rt *rt, unsigned char *cls);
 
 #ifdef __cplusplus
 }

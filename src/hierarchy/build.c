@@ -335,15 +335,15 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
         return st;
     if (!rt || bn_rt_scene(rt) != scene)
         return bn_error_set(err, BN_EINTERNAL, "bn_hierarchy_build: rt was built for another scene");
-    {   /* covered patches (under a block) kept apart from open ones in the tree */
+    {   /* covered patches (under a block, a slab, the bunny) kept apart from open ones in the tree */
         size_t np;
         bn_scene_patches(scene, &np);
-        unsigned char *enclosed = bn__calloc(np ? np : 1, 1);
-        if (!enclosed)
+        unsigned char *cover = bn__calloc(np ? np : 1, 1);
+        if (!cover)
             return bn_error_set(err, BN_ENOMEM, "out of memory for %zu patches", np);
-        bn_rt_enclosed_patches(rt, enclosed);
-        st = bn__tree_build(scene, !(o->eps == 0 || o->exact_leaf_links), enclosed, &B.t, err);
-        free(enclosed);
+        bn_rt_cover_classes(rt, cover);
+        st = bn__tree_build(scene, !(o->eps == 0 || o->exact_leaf_links), cover, &B.t, err);
+        free(cover);
         if (st != BN_OK)
             return st;
     }

@@ -7,6 +7,7 @@
 #include "bounce/hierarchy.h"
 #include "base/internal.h"
 #include "transport/links.h"
+#include "bounce/rt.h"
 
 /* Nodes in flat arrays (structure of arrays), a binary tree: node 0 is the root, children are
  * allocated in pairs after their parent (so a reverse sweep sees children before parents, a
@@ -40,10 +41,10 @@ typedef struct bn__tree {
  * light F ~ 1e-7 across, far below any eps the hierarchy is run at. */
 #define BN__COPLANAR 1e-3
 
-/* merge: group coplanar connected polygons into one plane (off for exact leaf links). enclosed (may
- * be NULL): per patch, inside a closed object; each plane's covered and open patches are split
- * apart first (no node holds both). */
-bn_status bn__tree_build(const bn_scene *s, int merge, const unsigned char *enclosed, bn__tree *t, bn_error *err);
+/* merge: group coplanar connected polygons into one plane (off for exact leaf links). cover (may be
+ * NULL): per patch, its bn_cover class (bn_rt_cover_classes); each plane's patches of different
+ * classes are split apart first (no node holds two). */
+bn_status bn__tree_build(const bn_scene *s, int merge, const unsigned char *cover, bn__tree *t, bn_error *err);
 void bn__tree_free(bn__tree *t);
 static inline int bn__tree_is_leaf(const bn__tree *t, uint32_t v) { return t->child[v] == BN__NONE; }
 static inline uint32_t bn__tree_patch(const bn__tree *t, uint32_t v) { return t->order[t->lo[v]]; }

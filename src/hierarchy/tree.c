@@ -29,7 +29,7 @@ typedef struct bn__tb {
     double *pc;               /* patch centroids */
     double *fc;               /* plane centroids (area-weighted), per plane */
     const uint32_t *plane_of; /* per input face: its plane */
-    const unsigned char *enclosed;   /* per patch: inside a closed object (NULL: none known) */
+    const unsigned char *cover;      /* per patch: its bn_cover class (NULL: none known) */
     uint32_t *face_first, *face_count, *byface;   /* per plane */
     size_t cursor;            /* next free slot in order */
     bn__key *keys;
@@ -150,27 +150,48 @@ static void bn__build_patches(bn__tb *b, uint32_t v, size_t lo, size_t hi)
     bn__node_finish(b, v);
 }
 
-/* A plane's planar nodes over order[lo..hi): the patches inside a closed object (the floor under a
- * block) and the others first split apart, so that no node holds both: the covered ones receive
- * nothing, and a node's mean F would hand them the light their uncovered neighbours see. */
+/* Planar nodes over order[lo..hi), sorted by cover class: each class's patches apart from the next's. */
+static void bn__build_classes(bn__tb *b, uint32_t v, size_t lo, size_t hi)
+{
+    bn__tree *t = b->t;
+    size_t mid = lo;
+    while (mid < hi && b->cover[t->order[mid]] == b->cover[t->order[lo]])
+        mid++;
+    if (mid == hi) {
+        bn__build_patches(b, v, lo, hi);
+        return;
+    }
+    t->lo[v] = (uint32_t)lo;
+    t->hi[v] = (uint32_t)hi;
+    uint32_t a = bn__node_new(t, v);
+    bn__node_new(t, v);
+    t->child[v] = a;
+    bn__build_patches(b, a, lo, mid);
+    bn__build_classes(b, a + 1, mid, hi);
+    bn__node_finish(b, v);
+}
+
+/* A plane's planar nodes over order[lo..hi): its patches of each cover class (bn_rt_cover_classes:
+ * open, shut under something near, seeing back faces, enclosed) first split apart, so that no node holds
+ * two kinds: the covered ones receive little or nothing, and a node's mean F would hand them the light
+ * their open neighbours see (the floor under a slab 1 mm above it: 3.6x what dense F gives it at 3,000
+ * patches, 7x at 6,000; under the bunny of the bunny box, 20 to 40 times the tracer's). */
 static void bn__build_plane(bn__tb *b, uint32_t v, size_t lo, size_t hi)
 {
     bn__tree *t = b->t;
-    size_t mid = lo, e = 0;
-    uint32_t *covered = b->enclosed ? bn__malloc_array(hi - lo, sizeof(uint32_t)) : NULL;
-    if (covered) {   /* stable partition: the open patches first, then the covered ones */
-        for (size_t k = lo; k < hi; k++)
-            if (b->enclosed[t->order[k]])
-                covered[e++] = t->order[k];
-            else
-                t->order[mid++] = t->order[k];
-        memcpy(t->order + mid, covered, e * sizeof(uint32_t));
-        free(covered);
-    }
-    if (mid == lo || mid == hi)
+    uint32_t *tmp = b->cover ? bn__malloc_array(hi - lo, sizeof(uint32_t)) : NULL;
+    if (!tmp) {
         bn__build_patches(b, v, lo, hi);
-    else
-        bn__build_split(b, v, lo, mid, hi);
+        return;
+    }
+    size_t n = 0;
+    for (unsigned c = BN_COVER_OPEN; c <= BN_COVER_ENCLOSED; c++)   /* stable, by class */
+        for (size_t k = lo; k < hi; k++)
+            if (b->cover[t->order[k]] == c)
+                tmp[n++] = t->order[k];
+    memcpy(t->order + lo, tmp, n * sizeof(uint32_t));
+    free(tmp);
+    bn__build_classes(b, v, lo, hi);
 }
 
 /* Clusters over planes[0..m). */
@@ -439,7 +460,7 @@ static bn_status bn__by_plane(bn__tb *b, size_t np, size_t nf, uint32_t *faces, 
     return BN_OK;
 }
 
-bn_status bn__tree_build(const bn_scene *s, int merge, const unsigned char *enclosed, bn__tree *t, bn_error *err)
+bn_status bn__tree_build(const bn_scene *s, int merge, const unsigned char *cover, bn__tree *t, bn_error *err)
 {
     size_t np, nf, nm, npv, nfaces = 0;
     bn__tb b;
@@ -451,7 +472,7 @@ bn_status bn__tree_build(const bn_scene *s, int merge, const unsigned char *encl
     bn_scene_faces(s, &nf);
     b.mat = bn_scene_materials(s, &nm);
     b.pverts = bn_scene_patch_vertices(s, &npv);
-    b.enclosed = enclosed;
+    b.cover = cover;
     if (np == 0)
         return bn_error_set(err, BN_EINPUT, "%s: no patches (mesh the scene first)", bn_scene_path(s));
     if (np >= (size_t)UINT32_MAX / 2)

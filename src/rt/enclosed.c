@@ -6,22 +6,31 @@
 #include "base/vec.h"
 
 #include <math.h>
+#include <stdlib.h>
 
 /* Rays per patch, and the share of them that must meet a back face. */
 #define BN__ENCLOSED_RAYS 16
 #define BN__ENCLOSED_SHARE 0.9
+/* Partly covered: a quarter of the rays meet a back face (the floor under an object with an open base:
+ * the Stanford bunny's), or half meet a back face or a face nearer than the patch's own size (the floor
+ * 2 mm under the bunny's closed base, or under a slab). */
+#define BN__BACK_SHARE 0.25
+#define BN__SHUT_SHARE 0.5
 
-size_t bn_rt_enclosed_patches(const bn_rt *rt, unsigned char *enclosed)
+/* Per patch, how many of BN__ENCLOSED_RAYS fixed rays from just above its centroid meet a back face
+ * (back), and how many meet a back face or any face nearer than the patch's size (shut: NULL or filled). */
+static void bn__back_counts(const bn_rt *rt, unsigned char *back, unsigned char *shut)
 {
-    size_t np, count = 0;
+    size_t np;
     const bn_patch *patches = bn_scene_patches(bn_rt_scene(rt), &np);
     double eps = bn_rt_epsilon(rt);
     long ln = (long)np;
-#pragma omp parallel for schedule(dynamic, 256) reduction(+ : count)
+#pragma omp parallel for schedule(dynamic, 256)
     for (long lp = 0; lp < ln; lp++) {
         const bn_patch *p = &patches[lp];
         double s[3], t[3], o[3];
-        int back = 0;
+        int n = 0, m = 0;
+        double size = sqrt(p->area);
         bn_v3_basis(p->normal, s, t);
         for (int k = 0; k < 3; k++)
             o[k] = p->centroid[k] + eps * p->normal[k];
@@ -30,10 +39,49 @@ size_t bn_rt_enclosed_patches(const bn_rt *rt, unsigned char *enclosed)
             bn_hit h;
             for (int k = 0; k < 3; k++)
                 d[k] = rr * cos(ph) * s[k] + rr * sin(ph) * t[k] + sqrt(1 - u) * p->normal[k];
-            back += bn_rt_intersect(rt, o, d, 0, INFINITY, &h) && !h.front;
+            if (bn_rt_intersect(rt, o, d, 0, INFINITY, &h)) {
+                n += !h.front;
+                m += !h.front || h.t < size;
+            }
         }
-        enclosed[lp] = back >= BN__ENCLOSED_SHARE * BN__ENCLOSED_RAYS;
-        count += enclosed[lp];
+        back[lp] = (unsigned char)n;
+        if (shut)
+            shut[lp] = (unsigned char)m;
     }
+}
+
+size_t bn_rt_enclosed_patches(const bn_rt *rt, unsigned char *enclosed)
+{
+    size_t np, count = 0;
+    bn_scene_patches(bn_rt_scene(rt), &np);
+    bn__back_counts(rt, enclosed, NULL);
+    for (size_t i = 0; i < np; i++) {
+        enclosed[i] = enclosed[i] >= BN__ENCLOSED_SHARE * BN__ENCLOSED_RAYS;
+        count += enclosed[i];
+    }
+    return count;
+}
+
+size_t bn_rt_cover_classes(const bn_rt *rt, unsigned char *cls)
+{
+    size_t np, count = 0;
+    bn_scene_patches(bn_rt_scene(rt), &np);
+    unsigned char *shut = malloc(np ? np : 1);
+    if (!shut) {   /* the enclosed ones alone: the tree as it was before these classes */
+        bn_rt_enclosed_patches(rt, cls);
+        for (size_t i = 0; i < np; i++)
+            cls[i] = cls[i] ? BN_COVER_ENCLOSED : BN_COVER_OPEN;
+        return 0;
+    }
+    bn__back_counts(rt, cls, shut);
+    for (size_t i = 0; i < np; i++) {
+        unsigned n = cls[i];
+        cls[i] = n >= BN__ENCLOSED_SHARE * BN__ENCLOSED_RAYS ? BN_COVER_ENCLOSED
+                 : n >= BN__BACK_SHARE * BN__ENCLOSED_RAYS   ? BN_COVER_BACK
+                 : shut[i] >= BN__SHUT_SHARE * BN__ENCLOSED_RAYS ? BN_COVER_SHUT
+                                                              : BN_COVER_OPEN;
+        count += cls[i] == BN_COVER_BACK || cls[i] == BN_COVER_SHUT;
+    }
+    free(shut);
     return count;
 }
