@@ -26,7 +26,8 @@ typedef struct cornell {
     size_t n;
 } cornell;
 
-static void cornell_open(cornell *c, size_t patches)
+/* A scene in millimetres (path), meshed to about `patches`, with its ray scene. */
+static void scene_open(cornell *c, const char *path, size_t patches)
 {
     bn_load_opts lo;
     bn_mesh_opts mo;
@@ -34,13 +35,15 @@ static void cornell_open(cornell *c, size_t patches)
     bn_load_opts_default(&lo);
     lo.unit = BN_UNIT_MM;
     lo.log.quiet = 1;
-    BN_ASSERT_STATUS(bn_scene_load(bn_test_path("meshes/cornell-box.obj"), &lo, &c->s, &err), BN_OK);
+    BN_ASSERT_STATUS(bn_scene_load(path, &lo, &c->s, &err), BN_OK);
     bn_mesh_opts_default(&mo);
     mo.target_patches = patches;
     BN_ASSERT_STATUS(bn_scene_mesh(c->s, &mo, &err), BN_OK);
     bn_scene_patches(c->s, &c->n);
     BN_ASSERT_STATUS(bn_rt_create(c->s, 0, &c->rt, &err), BN_OK);
 }
+
+static void cornell_open(cornell *c, size_t patches) { scene_open(c, bn_test_path("meshes/cornell-box.obj"), patches); }
 
 static void cornell_close(cornell *c)
 {
@@ -720,18 +723,7 @@ static void slab_scene(cornell *c, size_t patches)
     BN_ASSERT(fclose(f) == 0);
     free(obj);
     free(m);
-    bn_load_opts lo;
-    bn_mesh_opts mo;
-    bn_error err;
-    bn_load_opts_default(&lo);
-    lo.unit = BN_UNIT_MM;
-    lo.log.quiet = 1;
-    BN_ASSERT_STATUS(bn_scene_load(bn_test_tmp("slab.obj"), &lo, &c->s, &err), BN_OK);
-    bn_mesh_opts_default(&mo);
-    mo.target_patches = patches;
-    BN_ASSERT_STATUS(bn_scene_mesh(c->s, &mo, &err), BN_OK);
-    bn_scene_patches(c->s, &c->n);
-    BN_ASSERT_STATUS(bn_rt_create(c->s, 0, &c->rt, &err), BN_OK);
+    scene_open(c, bn_test_tmp("slab.obj"), patches);
 }
 
 /* Floor patch i's place: 1 well under the slab (its centroid 35 mm inside the outline), 0 in the open

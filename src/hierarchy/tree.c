@@ -121,9 +121,11 @@ static void bn__median_sort(bn__tb *b, uint32_t *ids, size_t m, const double *ce
 }
 
 static void bn__build_patches(bn__tb *b, uint32_t v, size_t lo, size_t hi);
+static void bn__build_classes(bn__tb *b, uint32_t v, size_t lo, size_t hi);
 
-/* Node v over order[lo..hi), its two children over [lo, mid) and [mid, hi). */
-static void bn__build_split(bn__tb *b, uint32_t v, size_t lo, size_t mid, size_t hi)
+/* Node v over order[lo..hi), its two children over [lo, mid) and [mid, hi); the second split by cover
+ * class first when by_class. */
+static void bn__build_split(bn__tb *b, uint32_t v, size_t lo, size_t mid, size_t hi, int by_class)
 {
     bn__tree *t = b->t;
     t->lo[v] = (uint32_t)lo;
@@ -132,7 +134,10 @@ static void bn__build_split(bn__tb *b, uint32_t v, size_t lo, size_t mid, size_t
     bn__node_new(t, v);
     t->child[v] = a;
     bn__build_patches(b, a, lo, mid);
-    bn__build_patches(b, a + 1, mid, hi);
+    if (by_class)
+        bn__build_classes(b, a + 1, mid, hi);
+    else
+        bn__build_patches(b, a + 1, mid, hi);
     bn__node_finish(b, v);
 }
 
@@ -142,7 +147,7 @@ static void bn__build_patches(bn__tb *b, uint32_t v, size_t lo, size_t hi)
     bn__tree *t = b->t;
     if (hi - lo > 1) {
         bn__median_sort(b, t->order + lo, hi - lo, b->pc);
-        bn__build_split(b, v, lo, lo + (hi - lo) / 2, hi);
+        bn__build_split(b, v, lo, lo + (hi - lo) / 2, hi, 0);
         return;
     }
     t->lo[v] = (uint32_t)lo;
@@ -157,18 +162,10 @@ static void bn__build_classes(bn__tb *b, uint32_t v, size_t lo, size_t hi)
     size_t mid = lo;
     while (mid < hi && b->cover[t->order[mid]] == b->cover[t->order[lo]])
         mid++;
-    if (mid == hi) {
+    if (mid == hi)
         bn__build_patches(b, v, lo, hi);
-        return;
-    }
-    t->lo[v] = (uint32_t)lo;
-    t->hi[v] = (uint32_t)hi;
-    uint32_t a = bn__node_new(t, v);
-    bn__node_new(t, v);
-    t->child[v] = a;
-    bn__build_patches(b, a, lo, mid);
-    bn__build_classes(b, a + 1, mid, hi);
-    bn__node_finish(b, v);
+    else
+        bn__build_split(b, v, lo, mid, hi, 1);
 }
 
 /* A plane's planar nodes over order[lo..hi): its patches of each cover class (bn_rt_cover_classes:
