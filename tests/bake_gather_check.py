@@ -13,7 +13,7 @@ usage: bake_gather_check.py BOUNCE SOURCE_DIR OUTDIR
   refined mesh puts a good share of its vertices there, where light changes: 9.7% while a gather's hits
   all read their patches' means of K2E and beyond, 6.1% with near hits gathering once more, 3.2% since
   they take KE from the emitters and gather again where near again, three levels); the
-  patch-average bake (--gather none) measured the same way must be worse by a wide margin (its 95th
+  patch-average bake (--gather none) measured the same way (at every third vertex) must be worse by a wide margin (its 95th
   percentile above 3x the gathered one's), so the test fails if the gather stopped being used.
 Points where the tracer's face and the bake's vertex differ in emission (the light is set into the
 ceiling: a rim point is on both) are left out.
@@ -111,7 +111,8 @@ def main():
         glb = os.path.join(outdir, "cornell-%s.glb" % mode)
         run([bounce, "bake", scene, "--unit", "mm", "-q", "--per-bounce", "--gather", mode,   # one F for both
              "--cache", os.path.join(outdir, "cornell.bnff"), "-o", glb] + RAYS)
-        res[mode] = errors(bounce, scene, glb, outdir, 4096)
+        res[mode] = errors(bounce, scene, glb, outdir, 4096, 1 if mode == "final" else 3)   # the patch means:
+        # every 3rd vertex (they only need to be worse by a wide margin: 51% against 4.4% at the 95th)
         print("--gather %s: L median %.2f%% 95th %.2f%%; K2E median %.2f%% 95th %.2f%%" % (
             mode, 100 * res[mode]["L"][0], 100 * res[mode]["L"][1], 100 * res[mode]["K2E"][0], 100 * res[mode]["K2E"][1]))
     g, n = res["final"], res["none"]
