@@ -683,7 +683,11 @@ BN_TEST(furnace_with_a_sphere_inside) /* BN_SLOW */
 BN_TEST(furnace_with_a_small_sphere_inside) { furnace(3, 0.03, 0.25, 1); }
 
 /* Receivers only polygons' nodes (hierarchy.h: flat_clusters 0). */
-BN_TEST(furnace_without_cluster_receivers) { furnace(3, 0.03, 0.25, 0); }
+BN_TEST(furnace_without_cluster_receivers) /* BN_SLOW */
+{
+    BN_SKIP_IF_SLOW_RUN();   /* 26 s under the sanitizers; the small sphere with cluster receivers runs there */
+    furnace(3, 0.03, 0.25, 0);
+}
 
 /* The small sphere's furnace with every sphere triangle cut into 4 in its own plane (5,126
  * polygons): the planes are the uncut polygons again, and with the smallest element an uncut
