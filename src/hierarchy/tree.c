@@ -277,14 +277,93 @@ static int bn__on_plane(const bn_face *f, const size_t *idx, const double *v, co
 /* plane_of[f] for every face, and the planes' normal, point and thickness: with merge, faces that
  * share an edge join the plane of the face that started it while they lie within BN__COPLANAR of
  * it (measured against that first face, so a finely cut curved surface cannot creep into one plane). */
+/* The faces sharing an edge with each face: adj[adj_start[k] .. adj_start[k + 1]) (both allocated here,
+ * NULL without memory: 0). */
+static int bn__face_adjacency(const bn_scene *s, size_t **adj_start_out, uint32_t **adj_out)
+{
+    size_t nf, ni, ne = 0;
+    const bn_face *f = bn_scene_faces(s, &nf);
+    const size_t *idx = bn_scene_face_indices(s, &ni);
+    bn__edge *e = bn__malloc_array(4 * nf + 1, sizeof *e);
+    size_t *adj_start = bn__calloc(nf + 1, sizeof *adj_start), *pos = NULL;
+    uint32_t *adj = NULL;
+    if (!e || !adj_start)
+        goto fail;
+    for (size_t k = 0; k < nf; k++)
+        for (unsigned j = 0; j < f[k].nverts; j++) {
+            size_t x = idx[f[k].first + j], y = idx[f[k].first + (j + 1) % f[k].nverts];
+            e[ne].a = x < y ? x : y;
+            e[ne].b = x < y ? y : x;
+            e[ne++].f = (uint32_t)k;
+        }
+    qsort(e, ne, sizeof *e, bn__edge_cmp);
+    for (int fill = 0; fill < 2; fill++) {   /* count, then fill (both directions) */
+        if (fill) {
+            for (size_t k = 0; k < nf; k++)
+                adj_start[k + 1] += adj_start[k];
+            adj = bn__malloc_array(adj_start[nf] + 1, sizeof *adj);
+            pos = bn__malloc_array(nf + 1, sizeof *pos);
+            if (!adj || !pos)
+                goto fail;
+            memcpy(pos, adj_start, nf * sizeof *pos);
+        }
+        for (size_t i = 0, j; i < ne; i = j) {
+            for (j = i + 1; j < ne && e[j].a == e[i].a && e[j].b == e[i].b; j++)
+                ;
+            for (size_t p = i; p < j; p++)
+                for (size_t q = i; q < j; q++)
+                    if (e[p].f != e[q].f) {
+                        if (fill)
+                            adj[pos[e[p].f]++] = e[q].f;
+                        else
+                            adj_start[e[p].f + 1]++;
+                    }
+        }
+    }
+    free(pos);
+    free(e);
+    *adj_start_out = adj_start;
+    *adj_out = adj;
+    return 1;
+fail:
+    free(pos);
+    free(e);
+    free(adj_start);
+    free(adj);
+    return 0;
+}
+
+/* Plane ng from face k: every face reached across shared edges (adjacency adj_start, adj) that lies on
+ * k's plane within tol joins it (breadth first; queue: nf entries). */
+static void bn__flood_plane(const bn_scene *s, bn__tree *t, uint32_t *plane_of, const size_t *adj_start,
+                            const uint32_t *adj, uint32_t *queue, size_t k, size_t ng, double tol)
+{
+    size_t nv, ni, head = 0, tail = 0;
+    const bn_face *f = bn_scene_faces(s, NULL);
+    const double *v = bn_scene_vertices(s, &nv);
+    const size_t *idx = bn_scene_face_indices(s, &ni);
+    const double *n = t->pn + 3 * ng, *p = t->pp + 3 * ng;
+    bn__on_plane(&f[k], idx, v, n, p, tol, &t->pthick[ng]);
+    queue[tail++] = (uint32_t)k;
+    while (head < tail) {
+        uint32_t g = queue[head++];
+        for (size_t a = adj_start[g]; a < adj_start[g + 1]; a++) {
+            uint32_t h = adj[a];
+            if (plane_of[h] == UINT32_MAX && bn__on_plane(&f[h], idx, v, n, p, tol, &t->pthick[ng])) {
+                plane_of[h] = (uint32_t)ng;
+                queue[tail++] = h;
+            }
+        }
+    }
+}
+
 static bn_status bn__planes(const bn_scene *s, int merge, bn__tree *t, uint32_t *plane_of, bn_error *err)
 {
-    size_t nf, nv, ni, ne = 0, ng = 0;
+    size_t nf, nv, ni, ng = 0;
     const bn_face *f = bn_scene_faces(s, &nf);
     const double *v = bn_scene_vertices(s, &nv);
     const size_t *idx = bn_scene_face_indices(s, &ni);
     double lo[3], hi[3], tol;
-    bn__edge *e = NULL;
     size_t *adj_start = NULL;
     uint32_t *adj = NULL, *queue = NULL;
     bn_status st = BN_OK;
@@ -293,83 +372,25 @@ static bn_status bn__planes(const bn_scene *s, int merge, bn__tree *t, uint32_t 
     t->pn = bn__malloc_array(3 * nf + 1, sizeof(double));
     t->pp = bn__malloc_array(3 * nf + 1, sizeof(double));
     t->pthick = bn__calloc(nf + 1, sizeof(double));
-    if (!t->pn || !t->pp || !t->pthick)
-        goto oom;
+    if (!t->pn || !t->pp || !t->pthick ||
+        (merge && (!(queue = bn__malloc_array(nf + 1, sizeof *queue)) || !bn__face_adjacency(s, &adj_start, &adj)))) {
+        st = bn_error_set(err, BN_ENOMEM, "out of memory for the planes of %zu polygons", nf);
+        goto done;
+    }
     for (size_t k = 0; k < nf; k++)
         plane_of[k] = UINT32_MAX;
-    if (merge) {
-        e = bn__malloc_array(4 * nf + 1, sizeof *e);
-        adj_start = bn__calloc(nf + 1, sizeof *adj_start);
-        queue = bn__malloc_array(nf + 1, sizeof *queue);
-        if (!e || !adj_start || !queue)
-            goto oom;
-        for (size_t k = 0; k < nf; k++)
-            for (unsigned j = 0; j < f[k].nverts; j++) {
-                size_t x = idx[f[k].first + j], y = idx[f[k].first + (j + 1) % f[k].nverts];
-                e[ne].a = x < y ? x : y;
-                e[ne].b = x < y ? y : x;
-                e[ne++].f = (uint32_t)k;
-            }
-        qsort(e, ne, sizeof *e, bn__edge_cmp);
-        /* faces sharing an edge: count, then fill (both directions) */
-        for (int fill = 0; fill < 2; fill++) {
-            size_t *pos = NULL;
-            if (fill) {
-                for (size_t k = 0; k < nf; k++)
-                    adj_start[k + 1] += adj_start[k];
-                adj = bn__malloc_array(adj_start[nf] + 1, sizeof *adj);
-                pos = bn__malloc_array(nf + 1, sizeof *pos);
-                if (!adj || !pos) {
-                    free(pos);
-                    goto oom;
-                }
-                memcpy(pos, adj_start, nf * sizeof *pos);
-            }
-            for (size_t i = 0, j; i < ne; i = j) {
-                for (j = i + 1; j < ne && e[j].a == e[i].a && e[j].b == e[i].b; j++)
-                    ;
-                for (size_t p = i; p < j; p++)
-                    for (size_t q = i; q < j; q++)
-                        if (e[p].f != e[q].f) {
-                            if (fill)
-                                adj[pos[e[p].f]++] = e[q].f;
-                            else
-                                adj_start[e[p].f + 1]++;
-                        }
-            }
-            free(pos);
-        }
-    }
     for (size_t k = 0; k < nf; k++) {
         if (plane_of[k] != UINT32_MAX)
             continue;
-        double *n = t->pn + 3 * ng, *p = t->pp + 3 * ng;
-        memcpy(n, f[k].normal, 3 * sizeof(double));
-        memcpy(p, v + 3 * idx[f[k].first], 3 * sizeof(double));
+        memcpy(t->pn + 3 * ng, f[k].normal, 3 * sizeof(double));
+        memcpy(t->pp + 3 * ng, v + 3 * idx[f[k].first], 3 * sizeof(double));
         plane_of[k] = (uint32_t)ng;
-        if (merge) {
-            size_t head = 0, tail = 0;
-            bn__on_plane(&f[k], idx, v, n, p, tol, &t->pthick[ng]);
-            queue[tail++] = (uint32_t)k;
-            while (head < tail) {
-                uint32_t g = queue[head++];
-                for (size_t a = adj_start[g]; a < adj_start[g + 1]; a++) {
-                    uint32_t h = adj[a];
-                    if (plane_of[h] == UINT32_MAX && bn__on_plane(&f[h], idx, v, n, p, tol, &t->pthick[ng])) {
-                        plane_of[h] = (uint32_t)ng;
-                        queue[tail++] = h;
-                    }
-                }
-            }
-        }
+        if (merge)
+            bn__flood_plane(s, t, plane_of, adj_start, adj, queue, k, ng, tol);
         ng++;
     }
     t->nplanes = ng;
-    goto done;
-oom:
-    st = bn_error_set(err, BN_ENOMEM, "out of memory for the planes of %zu polygons", nf);
 done:
-    free(e);
     free(adj_start);
     free(adj);
     free(queue);
