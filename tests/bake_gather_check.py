@@ -35,8 +35,8 @@ def run(cmd):
 
 
 def vertices(glb):
-    """The bake's vertices: positions (metres), normals (each its largest triangle's: on a curved mesh an averaged
-    normal can lean further from every face than `trace --points` accepts), the float layers."""
+    """The bake's vertices: positions (metres), normals (_FACE_NORMAL: the face each vertex's values were gathered
+    on, where a curved mesh's facets meet; without it each vertex's largest triangle's), the float layers."""
     gl, b = read_glb(glb)
     prims = [p for m in gl["meshes"] for p in m["primitives"]]
     at = prims[0]["attributes"]
@@ -55,7 +55,10 @@ def vertices(glb):
                 used.add(q)
                 if area2 > sum(x * x for x in nrm[q]):
                     nrm[q] = cr
-    layers = {n[1:]: accessor(gl, b, at[n])[0] for n in at if n.startswith("_")}
+    if "_FACE_NORMAL" in at:
+        fn, _ = accessor(gl, b, at["_FACE_NORMAL"])
+        nrm = [list(fn[3 * i:3 * i + 3]) for i in range(len(fn) // 3)]
+    layers = {n[1:]: accessor(gl, b, at[n])[0] for n in at if n.startswith("_") and n != "_FACE_NORMAL"}
     return pos, nrm, sorted(used), layers
 
 

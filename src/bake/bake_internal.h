@@ -67,6 +67,9 @@ typedef struct bn__bake_out {
     const unsigned *face_object;
     size_t nobjects;
     const char *const *object_names;
+    /* nv x 3 or NULL: the normal of the face each vertex's values were gathered on (bn_bake_vertex_patch's;
+       at a vertex of a curved mesh several faces meet), glTF's _FACE_NORMAL */
+    const float *face_normal;
 } bn__bake_out;
 
 /* glTF 2.0: binary .glb (binary = 1), or .gltf with a .bin of the same stem beside it. Atomic per

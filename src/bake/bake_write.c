@@ -303,7 +303,21 @@ static bn_status bn__job_ldr(bn__bake_job *j, double exposure_ev, bn_error *err)
     return BN_OK;
 }
 
-/* glTF: each face's material, the layers' names and each layer's power pi sum_p A_p x_p (W). */
+/* Each vertex's face normal (bn__bake_out.face_normal: the face its values were gathered on), nv x 3;
+ * NULL when out of memory. */
+static float *bn__vertex_face_normals(const bn_bake *b, size_t nv)
+{
+    const bn_patch *pa = bn_scene_patches(bn_bake_scene(b), NULL);
+    float *fn = bn__malloc_array(nv + 1, 3 * sizeof(float));
+    for (size_t v = 0; fn && v < nv; v++)
+        for (int c = 0; c < 3; c++)
+            fn[3 * v + c] = (float)pa[bn_bake_vertex_patch(b, v)].normal[c];
+    return fn;
+}
+
+/* glTF: each face's material, the layers' names and each layer's power pi sum_p A_p x_p (W); in a
+ * per-bounce bake on the element mesh, each vertex's face normal (_FACE_NORMAL: `bounce trace --points`
+ * given it meets the face the vertex's values belong to). */
 static bn_status bn__bake_gltf(const bn_bake *b, const char *path, int is_glb, const bn_bake_layer *layers,
                                const bn_bake_write_opts *o, const bn__bake_job *j, bn_error *err)
 {
@@ -316,7 +330,9 @@ static bn_status bn__bake_gltf(const bn_bake *b, const char *path, int is_glb, c
     unsigned *fm = bn__malloc_array(j->nf + 1, sizeof *fm), *fo = bn__malloc_array(j->nf + 1, sizeof *fo);
     const char **lnames = bn__malloc_array(nl, sizeof *lnames), **onames = bn__malloc_array(nobj + 1, sizeof *onames);
     double *power = bn__calloc(3 * nl, sizeof(double));
-    bn_status st = fm && fo && lnames && onames && power ? BN_OK : bn__bake_oom(j->nv, err);
+    float *fn = nl > 1 && !o->input_mesh ? bn__vertex_face_normals(b, j->nv) : NULL;
+    bn_status st = fm && fo && lnames && onames && power && (fn || nl == 1 || o->input_mesh) ? BN_OK
+                                                                                              : bn__bake_oom(j->nv, err);
     for (size_t k = 0; st == BN_OK && k < j->nf; k++) {
         fm[k] = o->input_mesh ? faces[k].material : patches[fp[k]].material;
         fo[k] = faces[o->input_mesh ? k : patches[fp[k]].face].object;
@@ -330,7 +346,7 @@ static bn_status bn__bake_gltf(const bn_bake *b, const char *path, int is_glb, c
     if (st == BN_OK) {
         bn__bake_out g = {j->nv,  j->pos, j->nf,          j->face_n, j->face_idx, fm,
                           nl,     (const float *const *)j->vals, lnames, j->c8, o->exposure_ev, o->colour_sets,
-                          power,  fo, nobj, onames};
+                          power,  fo, nobj, onames, fn};
         st = bn__write_gltf(path, is_glb, &g, s, o, err);
     }
     free(fm);
@@ -338,6 +354,7 @@ static bn_status bn__bake_gltf(const bn_bake *b, const char *path, int is_glb, c
     free(onames);
     free(lnames);
     free(power);
+    free(fn);
     return st;
 }
 

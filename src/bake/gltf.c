@@ -73,6 +73,8 @@ typedef struct bn__gltf {
     size_t nslice;                 /* vertex slices: 1 (flat), else one per mesh */
     size_t *slice_v, *slice_nv;    /* per slice: its first output vertex, and count */
     size_t *vsrc;                  /* per output vertex: the bake's vertex it copies */
+    bn__bake_out mtree;            /* m without face normals when written in the input's node tree (whose
+                                      local frames they are not in) */
     size_t nvout;
     const char *flat_why;          /* flat: why the input's tree is not kept (NULL: it is) */
     float (*lo)[3], (*hi)[3];      /* per slice: its positions' bounds */
@@ -279,8 +281,8 @@ static void bn__gltf_position(const bn__gltf *g, size_t sl, size_t j, float out[
  * layer 0 is L, which COLOR_0 shows), none otherwise. */
 static size_t bn__ncolours(const bn__bake_out *m) { return m->colour_sets && m->nlayers > 1 ? m->nlayers - 1 : 0; }
 
-/* Vertex attributes per slice: POSITION, COLOR_0, the layers' radiance, COLOR_1 .. COLOR_n. */
-static size_t bn__nattr(const bn__bake_out *m) { return 2 + m->nlayers + bn__ncolours(m); }
+/* Vertex attributes per slice: POSITION, COLOR_0, the layers' radiance, COLOR_1 .. COLOR_n, _FACE_NORMAL. */
+static size_t bn__nattr(const bn__bake_out *m) { return 2 + m->nlayers + bn__ncolours(m) + (m->face_normal != NULL); }
 
 /* Layer l's values at the output vertices as what a display shows: x 2^EV, clamped to [0, 1], linear
  * (glTF's COLOR_n are linear: the light and the brightest spots saturate). */
@@ -320,6 +322,11 @@ static bn_status bn__gltf_vertices(bn__gltf *g)
     }
     for (size_t k = 1; k <= bn__ncolours(m); k++) {
         bn__gltf_display(g, k, f3);
+        bn__gltf_view(g, f3, n3, 34962, 12);
+    }
+    if (m->face_normal) {
+        for (size_t j = 0; j < nv; j++)
+            memcpy(f3 + 3 * j, m->face_normal + 3 * g->vsrc[j], 3 * sizeof(float));
         bn__gltf_view(g, f3, n3, 34962, 12);
     }
     free(f3);
@@ -429,7 +436,7 @@ static void bn__gltf_json_accessors(bn__gltf *g, const char *binname)
         for (size_t l = 0; l <= m->nlayers; l++)   /* COLOR_0, then the layers */
             bn__str_add(js, ",{\"bufferView\":%zu,\"byteOffset\":%zu,\"componentType\":5126,\"count\":%zu,"
                             "\"type\":\"VEC3\"}", 1 + l, 12 * o, n);
-        for (size_t k = 1; k <= bn__ncolours(m); k++)   /* COLOR_1 .. COLOR_n */
+        for (size_t k = 1; k <= bn__ncolours(m) + (m->face_normal != NULL); k++)   /* COLOR_1 .. COLOR_n, _FACE_NORMAL */
             bn__str_add(js, ",{\"bufferView\":%zu,\"byteOffset\":%zu,\"componentType\":5126,\"count\":%zu,"
                             "\"type\":\"VEC3\"}", 1 + m->nlayers + k, 12 * o, n);
     }
@@ -491,6 +498,8 @@ static void bn__gltf_json_prims(bn__gltf *g, size_t s, size_t a0, size_t *acc)
         }
         for (size_t q = 1; q <= bn__ncolours(m); q++)
             bn__str_add(js, ",\"COLOR_%zu\":%zu", q, a0 + 1 + m->nlayers + q);
+        if (m->face_normal)
+            bn__str_add(js, ",\"_FACE_NORMAL\":%zu", a0 + 2 + m->nlayers + bn__ncolours(m));
         bn__str_add(js, "},\"indices\":%zu,\"material\":%zu,\"mode\":4}", (*acc)++, k);
     }
     bn__str_add(js, "]");
@@ -761,6 +770,11 @@ static bn_status bn__gltf_build(bn__gltf *g, const bn_scene *scene, const bn_bak
     if (st != BN_OK)
         return st;
     g->flat_why = why;
+    if (g->tree && g->m->face_normal) {
+        g->mtree = *g->m;
+        g->mtree.face_normal = NULL;
+        g->m = &g->mtree;
+    }
     g->ngroups = g->nmesh * g->nmat;
     g->mat_tris = bn__calloc(g->ngroups + 1, sizeof(size_t));
     g->mat_first = bn__calloc(g->ngroups + 1, sizeof(size_t));

@@ -14,25 +14,29 @@
 /* The front of the face within tol of x along n: a ray from x + tol n towards -n, 2 tol long, that
  * arrives on a patch's front side; a point on a face's edge or corner (a bake's vertex) may slip past
  * it, so more rays around it, on rings tol / 4, tol / 2 and 9 tol / 10 aside, 32 a ring (a sliver's
- * corner a few degrees wide is met), look for the face it bounds; at a convex corner a ray may graze
- * the other face there, so the face's normal must agree with n (BN__POINT_AGREE). 1 and the patch, or 0. */
+ * corner a few degrees wide is met), look for the faces it bounds. Of the faces met, the one whose
+ * normal agrees best with n (at a vertex of a curved mesh several faces meet, and their radiances differ
+ * near a shadow's edge: n says which is wanted); at least BN__POINT_AGREE (at a convex corner a ray may
+ * graze the other face there). 1 and the patch, or 0. */
 static int bn__point_patch(const bn_rt *rt, const double x[3], const double n[3], double tol, size_t *patch)
 {
     static const double ring[3] = {0.25, 0.5, 0.9};
-    double d[3] = {-n[0], -n[1], -n[2]}, s[3], t[3];
+    const bn_patch *pa = bn_scene_patches(bn_rt_scene(rt), NULL);
+    double d[3] = {-n[0], -n[1], -n[2]}, s[3], t[3], best = BN__POINT_AGREE;
+    int found = 0;
     bn_v3_basis(n, s, t);
-    for (int k = 0; k < 1 + 3 * 32; k++) {
+    for (int k = 0; k < 1 + 3 * 32 && best < 1 - 1e-12; k++) {
         double o[3], a = 2 * 3.14159265358979323846 * ((k - 1) % 32) / 32, r = k ? ring[(k - 1) / 32] * tol : 0;
         bn_hit h;
         for (int c = 0; c < 3; c++)
             o[c] = x[c] + tol * n[c] + r * (cos(a) * s[c] + sin(a) * t[c]);
-        if (bn_rt_intersect(rt, o, d, 0, 2 * tol, &h) && h.front &&
-            bn_v3_dot(bn_scene_patches(bn_rt_scene(rt), NULL)[h.patch].normal, n) >= BN__POINT_AGREE) {
+        if (bn_rt_intersect(rt, o, d, 0, 2 * tol, &h) && h.front && bn_v3_dot(pa[h.patch].normal, n) >= best) {
+            best = bn_v3_dot(pa[h.patch].normal, n);
             *patch = h.patch;
-            return 1;
+            found = 1;
         }
     }
-    return 0;
+    return found;
 }
 
 /* One line's point: 1 placed, 0 blank or a comment, -1 bad (err set). */
