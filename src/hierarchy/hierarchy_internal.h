@@ -28,6 +28,8 @@ typedef struct bn__tree {
     double *normal;           /* 3 per node: the axis of the normals below (area-weighted mean, unit;
                                  the polygon's normal for planar nodes) */
     double *spread;           /* per node: the largest angle between that axis and a normal below */
+    unsigned char *cover;     /* per node: the bn_cover class of every patch below (BN_COVER_OPEN when mixed
+                                 or unknown) */
     uint32_t *order;          /* npatch: patches in depth-first order */
     uint32_t *leaf;           /* npatch: each patch's leaf node */
     double *cum_area;         /* npatch + 1: prefix sums of the areas in `order` */

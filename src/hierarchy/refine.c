@@ -21,6 +21,17 @@
 #define BN__LEAF_RAYS 16
 /* Partly visible links are split down to this fraction of eps. */
 #define BN__PARTIAL 0.125
+/* Receivers under something near (cover classes SHUT and BACK: the floor under an object) are held to
+ * this fraction of eps: they are dark, and eps is absolute, so the error eps allows everywhere is a
+ * large part of their light (the bunny box's floor under the bunny: K2E 1 to 15 times the tracer's at eps). */
+#define BN__COVERED 0.125
+
+/* eps in radiance for links into r: BN__COVERED x eps when r's patches are all covered. */
+static double bn__eps_at(const bn__ref *R, uint32_t r)
+{
+    unsigned c = R->t->cover[r];
+    return c == BN_COVER_SHUT || c == BN_COVER_BACK ? BN__COVERED * R->eps_abs : R->eps_abs;
+}
 
 void bn__vec_push(bn__vec *v, uint32_t r, uint32_t s, float F, int partial)
 {
@@ -148,7 +159,7 @@ static double bn__link_ftol(const bn__ref *R, uint32_t r, uint32_t s)
     double m = bn__link_weight(R, r, s);
     if (R->force)
         return 0;
-    return m > 0 ? BN__PARTIAL * R->eps_abs / m : INFINITY;
+    return m > 0 ? BN__PARTIAL * bn__eps_at(R, r) / m : INFINITY;
 }
 
 /* Is an existing link between patches (no pass can split it), its F from a first look that found it
@@ -394,9 +405,9 @@ static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int par
     if (sr || ss) {
         double e = R->force || !bn__separated(t, r, s) || !bn__can_receive(R, r, s) ? INFINITY
                                                                                     : bn__link_error(R, r, s);
-        split = e > (F >= 0 && partial ? BN__PARTIAL : 1.0) * R->eps_abs;
+        split = e > (F >= 0 && partial ? BN__PARTIAL : 1.0) * bn__eps_at(R, r);
         if (!split && F < 0) {   /* accepted as it stands: its F, and a second look if partly visible */
-            int split_if_partial = e > BN__PARTIAL * R->eps_abs;
+            int split_if_partial = e > BN__PARTIAL * bn__eps_at(R, r);
             F = bn__link_F(R, r, s, split_if_partial, w, &partial);
             split = partial && split_if_partial;
             if (split)

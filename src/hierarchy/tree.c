@@ -66,6 +66,7 @@ static void bn__node_finish(bn__tb *b, uint32_t v)
         t->plane[v] = (int32_t)b->plane_of[p->face];
         memcpy(t->normal + 3 * v, p->normal, 3 * sizeof(double));
         t->spread[v] = 0;
+        t->cover[v] = b->cover ? b->cover[t->order[t->lo[v]]] : BN_COVER_OPEN;
         return;
     }
     uint32_t a = t->child[v], c2 = a + 1;
@@ -76,6 +77,7 @@ static void bn__node_finish(bn__tb *b, uint32_t v)
         t->rho_max[3 * v + c] = fmaxf(t->rho_max[3 * a + c], t->rho_max[3 * c2 + c]);
     }
     t->plane[v] = t->plane[a] == t->plane[c2] ? t->plane[a] : -1;
+    t->cover[v] = t->cover[a] == t->cover[c2] ? t->cover[a] : BN_COVER_OPEN;
     {   /* the normal cone: axis the area-weighted mean, spread bounded through the children's cones */
         double *nv = t->normal + 3 * v, len;
         for (int c = 0; c < 3; c++)
@@ -228,6 +230,7 @@ void bn__tree_free(bn__tree *t)
     free(t->rho_max);
     free(t->normal);
     free(t->spread);
+    free(t->cover);
     free(t->order);
     free(t->leaf);
     free(t->cum_area);
@@ -236,7 +239,7 @@ void bn__tree_free(bn__tree *t)
 
 size_t bn__tree_bytes(const bn__tree *t)
 {
-    return t->n * (5 * sizeof(uint32_t) + 11 * sizeof(double) + 3 * sizeof(float)) +
+    return t->n * (5 * sizeof(uint32_t) + 11 * sizeof(double) + 3 * sizeof(float) + 1) +
            t->npatch * (2 * sizeof(uint32_t) + sizeof(double)) + t->nplanes * 7 * sizeof(double);
 }
 
@@ -410,11 +413,12 @@ static int bn__tree_alloc(bn__tree *t, size_t cap, size_t np)
     t->rho_max = bn__malloc_array(3 * cap, sizeof(float));
     t->normal = bn__malloc_array(3 * cap, sizeof(double));
     t->spread = bn__malloc_array(cap, sizeof(double));
+    t->cover = bn__malloc_array(cap, 1);
     t->order = bn__malloc_array(np, sizeof(uint32_t));
     t->leaf = bn__malloc_array(np, sizeof(uint32_t));
     t->cum_area = bn__malloc_array(np + 1, sizeof(double));
     return t->parent && t->child && t->lo && t->hi && t->plane && t->area && t->box && t->rho_max && t->normal &&
-           t->spread && t->order && t->leaf && t->cum_area;
+           t->spread && t->cover && t->order && t->leaf && t->cum_area;
 }
 
 /* The builder's scratch over np patches and nf faces; 0 when out of memory. */
