@@ -13,6 +13,7 @@ Checks, on the element mesh with --per-bounce:
 - each primitive's material carries the MTL's Kd and Ke, and E is nonzero only on emitters;
 - the triangles are the PLY's faces fanned (same count, indices in range);
 - COLOR_1 .. COLOR_5 = min(1, term x colour_scale) for E .. rest, each named in the extras;
+- _FACE_NORMAL: unit, along the normal of one of each vertex's triangles;
 and on the input mesh as .gltf + .bin with --ldr: the external buffer, no sRGB-encoded colour set (glTF's
 vertex colours are linear: --ldr changes nothing there), fewer vertices than the element mesh, provenance
 naming the command;
@@ -205,6 +206,31 @@ def check_against_solve(bounce, scene, unit, outdir):
     print("against the solve: %d patches, worst relative difference %.2e" % (len(want), worst))
 
 
+def check_face_normals(gl, binary, attrs, pos, prims):
+    """_FACE_NORMAL: each vertex's is a unit vector along the normal of one of its triangles (the face its
+    values were gathered on)."""
+    check("_FACE_NORMAL" in attrs, "_FACE_NORMAL present in a per-bounce bake")
+    if "_FACE_NORMAL" not in attrs:
+        return
+    fn, _ = accessor(gl, binary, attrs["_FACE_NORMAL"])
+    best = [-2.0] * (len(pos) // 3)
+    for p in prims:
+        idx, _ = accessor(gl, binary, p["indices"])
+        for t in range(0, len(idx), 3):
+            a, b, c = idx[t:t + 3]
+            u = [pos[3 * b + k] - pos[3 * a + k] for k in range(3)]
+            v = [pos[3 * c + k] - pos[3 * a + k] for k in range(3)]
+            n = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+            ln = sum(x * x for x in n) ** 0.5
+            if ln > 0:
+                for q in (a, b, c):
+                    best[q] = max(best[q], sum(fn[3 * q + k] * n[k] for k in range(3)) / ln)
+    used = [x for x in best if x > -2]
+    worst_len = max(abs(sum(fn[3 * i + k] ** 2 for k in range(3)) - 1) for i in range(len(best)))
+    check(worst_len < 1e-5 and min(used) > 1 - 1e-4, "_FACE_NORMAL: unit (worst %.1e) and along one of each vertex's "
+          "triangles' normals (worst cosine %.6f)" % (worst_len, min(used)))
+
+
 def main():
     bounce, scene, unit, outdir = sys.argv[1:5]
     scale_m = {"m": 1.0, "cm": 0.01, "mm": 0.001}[unit]
@@ -276,6 +302,7 @@ def main():
         if max(want["Ke"]) > 0:
             emitters.update(idx)
     check(ntri == sum(len(f) - 2 for f in faces), "triangles %d == the PLY's faces fanned" % ntri)
+    check_face_normals(gl, binary, attrs, pos, prim)
     lit = {i for i in range(nv) if max(vals["_E"][3 * i:3 * i + 3]) > 0}
     check(lit and lit <= emitters, "E is nonzero on %d vertices, all of emitters" % len(lit))
     check("bake" in extras["provenance"].get("command line", ""), "provenance records the command line")

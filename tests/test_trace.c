@@ -429,6 +429,50 @@ BN_TEST(light_tree_nee_matches_power_nee)
         }
 }
 
+/* A point where several faces meet (a bake's vertex on a curved mesh) takes the face whose normal agrees
+ * best with its own: on the ridge of a roof of two quads 10 degrees apart, each side's normal picks
+ * that side whichever face the first ray meets. */
+BN_TEST(points_on_a_ridge_take_the_face_their_normal_names)
+{
+    const char *obj = bn_test_tmp("ridge.obj");
+    FILE *f = fopen(obj, "w");
+    BN_ASSERT(f);
+    double h = tan(5 * BN_PI / 180);   /* each side 5 degrees from the horizontal */
+    fprintf(f, "v -1 0 -1\nv -1 0 1\nv 0 %.17g 1\nv 0 %.17g -1\nv 1 0 -1\nv 1 0 1\n", h, h);
+    fprintf(f, "f 1 2 3 4\nf 4 3 6 5\n");
+    BN_ASSERT(fclose(f) == 0);
+    bn_load_opts lo;
+    bn_scene *s = NULL;
+    bn_error err;
+    bn_load_opts_default(&lo);
+    lo.log.quiet = 1;
+    BN_ASSERT_STATUS(bn_scene_load(obj, &lo, &s, &err), BN_OK);
+    BN_ASSERT_STATUS(bn_scene_mesh(s, NULL, &err), BN_OK);
+    bn_rt *rt = make_rt(s);
+    const bn_patch *pa = bn_scene_patches(s, NULL);
+    const char *path = bn_test_tmp("ridge.txt");
+    f = fopen(path, "w");
+    BN_ASSERT(f);
+    for (int k = 0; k < 6; k++) {   /* along the ridge, each side's normal in turn */
+        double sgn = k % 2 ? 1 : -1, c = cos(5 * BN_PI / 180), sn = sin(5 * BN_PI / 180);
+        fprintf(f, "0 %.17g %.3f %.17g %.17g 0\n", h, -0.8 + 0.3 * k, sgn * sn, c);
+    }
+    BN_ASSERT(fclose(f) == 0);
+    bn_trace_point *pts = NULL;
+    size_t n;
+    BN_ASSERT_STATUS(bn_trace_points_read(path, rt, &pts, &n, &err), BN_OK);
+    BN_ASSERT_EQ(n, 6);
+    for (size_t i = 0; i < n; i++) {
+        double want = i % 2 ? 1 : -1;   /* the normal's x: -sin 5 on the left side, +sin 5 on the right */
+        const double *nn = pa[pts[i].patch].normal;
+        if (!(nn[0] * want > 0.08))
+            BN_FAIL("point %zu took a face with normal (%g, %g, %g), the other side's", i, nn[0], nn[1], nn[2]);
+    }
+    free(pts);
+    bn_rt_destroy(rt);
+    bn_scene_destroy(s);
+}
+
 /* Points (bounce trace --points): in the furnace every point's layers are rho^k Le whatever its place
  * (centres, near edges and corners, every wall); each estimate within 5 standard errors of it; a file
  * line that is not six numbers, a zero normal and a point with no face whose front agrees are refused
