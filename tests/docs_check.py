@@ -13,6 +13,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import time
 
 src, exe = os.path.abspath(sys.argv[1]), os.path.abspath(sys.argv[2])
 fails = 0
@@ -77,9 +78,11 @@ def run_examples(src, exe):
                 if "mpirun" in block and not shutil.which("mpirun"):
                     print("skip %s: %s (no mpirun here)" % (name, first))
                     continue
+                t0 = time.monotonic()
                 r = subprocess.run(["bash", "-e", "-c", block], cwd=here, env=env, capture_output=True, text=True)
                 ran += 1
-                print("%s %s: %s (exit %d)" % ("ok  " if r.returncode == 0 else "FAIL", name, first, r.returncode))
+                print("%s %s: %s (exit %d, %.1f s)" % ("ok  " if r.returncode == 0 else "FAIL", name, first, r.returncode,
+                                                      time.monotonic() - t0))
                 if r.returncode != 0:
                     bad += 1
                     print(r.stdout[-2000:] + r.stderr[-2000:])

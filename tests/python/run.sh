@@ -26,4 +26,4 @@ cp "$src/doc/python.md" "$work/src/doc/"
 unset BOUNCE_LIBRARY PYTHONPATH
 export BOUNCE_EXE=$exe BOUNCE_SOURCE_DIR=$src BOUNCE_INSTALLED_IN="$work/venv"
 cd "$work"
-exec "$work/venv/bin/python" -m pytest -q -p no:cacheprovider "$src/tests/python"
+exec "$work/venv/bin/python" -m pytest -q --durations=12 -p no:cacheprovider "$src/tests/python"
