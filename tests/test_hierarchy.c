@@ -731,7 +731,8 @@ static void slab_scene(cornell *c, size_t patches)
 }
 
 /* Floor patch i's place: 1 well under the slab (its centroid 35 mm inside the outline), 0 in the open
- * (60 mm outside it), -1 neither or not the floor. */
+ * (60 mm outside it and from the box's walls: a floor patch in a corner is shut in by the walls within
+ * 5% of the scene's size), -1 neither or not the floor. */
 static int slab_where(const bn_patch *p)
 {
     const double *c = p->centroid;
@@ -739,7 +740,8 @@ static int slab_where(const bn_patch *p)
         return -1;
     if (c[0] > SLAB_LO + 35 && c[0] < SLAB_HI - 35 && c[2] > SLAB_LO + 35 && c[2] < SLAB_HI - 35)
         return 1;
-    if (c[0] < SLAB_LO - 60 || c[0] > SLAB_HI + 60 || c[2] < SLAB_LO - 60 || c[2] > SLAB_HI + 60)
+    if ((c[0] < SLAB_LO - 60 || c[0] > SLAB_HI + 60 || c[2] < SLAB_LO - 60 || c[2] > SLAB_HI + 60) && c[0] > 60 &&
+        c[0] < 556 - 60 && c[2] > 60 && c[2] < 559 - 60)
         return 0;
     return -1;
 }

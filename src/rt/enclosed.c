@@ -12,34 +12,41 @@
 #define BN__ENCLOSED_RAYS 16
 #define BN__ENCLOSED_SHARE 0.9
 /* Partly covered: a quarter of the rays meet a back face (the floor under an object with an open base:
- * the Stanford bunny's), or half meet a back face or a face nearer than the patch's own size (the floor
+ * the Stanford bunny's), or half meet a back face or a face nearer than the patch's own size or BN__SHUT_NEAR (the floor
  * 2 mm under the bunny's closed base, or under a slab). */
 #define BN__BACK_SHARE 0.25
 #define BN__SHUT_SHARE 0.5
+/* "Near" for shut: within the patch's size or this fraction of the scene's diameter, whichever is more
+ * (a large floor patch 11 mm under the bunny's belly: with its own 13 mm most rays leave the gap sideways
+ * further than that, and it shared an open node's mean light, 20 times the tracer's K2E). */
+#define BN__SHUT_NEAR 0.05
 
 /* Per patch, how many of BN__ENCLOSED_RAYS fixed rays from just above its centroid meet a back face
- * (back), and how many meet a back face or any face nearer than the patch's size (shut: NULL or filled). */
+ * (back), and how many meet a back face or any face nearer than the patch's size or BN__SHUT_NEAR of the scene's diameter (shut: NULL or filled). */
 static void bn__back_counts(const bn_rt *rt, unsigned char *back, unsigned char *shut)
 {
     size_t np;
     const bn_patch *patches = bn_scene_patches(bn_rt_scene(rt), &np);
-    double eps = bn_rt_epsilon(rt);
+    double eps = bn_rt_epsilon(rt), lo[3], hi[3], d[3];
     long ln = (long)np;
+    bn_scene_bounds(bn_rt_scene(rt), lo, hi);
+    bn_v3_sub(hi, lo, d);
+    double near = BN__SHUT_NEAR * bn_v3_len(d);
 #pragma omp parallel for schedule(dynamic, 256)
     for (long lp = 0; lp < ln; lp++) {
         const bn_patch *p = &patches[lp];
         double s[3], t[3], o[3];
         int n = 0, m = 0;
-        double size = sqrt(p->area);
+        double size = fmax(sqrt(p->area), near);
         bn_v3_basis(p->normal, s, t);
         for (int k = 0; k < 3; k++)
             o[k] = p->centroid[k] + eps * p->normal[k];
         for (int r = 0; r < BN__ENCLOSED_RAYS; r++) {   /* a fixed spiral of directions: deterministic */
-            double u = (r + 0.5) / BN__ENCLOSED_RAYS, ph = 2.399963229728653 * r, rr = sqrt(u), d[3];
+            double u = (r + 0.5) / BN__ENCLOSED_RAYS, ph = 2.399963229728653 * r, rr = sqrt(u), dir[3];
             bn_hit h;
             for (int k = 0; k < 3; k++)
-                d[k] = rr * cos(ph) * s[k] + rr * sin(ph) * t[k] + sqrt(1 - u) * p->normal[k];
-            if (bn_rt_intersect(rt, o, d, 0, INFINITY, &h)) {
+                dir[k] = rr * cos(ph) * s[k] + rr * sin(ph) * t[k] + sqrt(1 - u) * p->normal[k];
+            if (bn_rt_intersect(rt, o, dir, 0, INFINITY, &h)) {
                 n += !h.front;
                 m += !h.front || h.t < size;
             }
