@@ -24,7 +24,7 @@ import subprocess
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from gltf_check import RAYS, accessor, check, failures, read_glb  # noqa: E402
+from gltf_check import RAYS, accessor, check, failures, read_glb, triangles  # noqa: E402
 
 
 def run(cmd):
@@ -43,18 +43,12 @@ def vertices(glb):
     pos, _ = accessor(gl, b, at["POSITION"])
     nrm = [[0.0, 0.0, 0.0] for _ in range(len(pos) // 3)]
     used = set()
-    for p in prims:
-        idx, _ = accessor(gl, b, p["indices"])
-        for t in range(0, len(idx), 3):
-            a, bb, c = idx[t:t + 3]
-            u = [pos[3 * bb + k] - pos[3 * a + k] for k in range(3)]
-            v = [pos[3 * c + k] - pos[3 * a + k] for k in range(3)]
-            cr = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
-            area2 = sum(x * x for x in cr)
-            for q in (a, bb, c):
-                used.add(q)
-                if area2 > sum(x * x for x in nrm[q]):
-                    nrm[q] = cr
+    for tri, cr in triangles(gl, b, pos, prims):
+        area2 = sum(x * x for x in cr)
+        for q in tri:
+            used.add(q)
+            if area2 > sum(x * x for x in nrm[q]):
+                nrm[q] = cr
     if "_FACE_NORMAL" in at:
         fn, _ = accessor(gl, b, at["_FACE_NORMAL"])
         nrm = [list(fn[3 * i:3 * i + 3]) for i in range(len(fn) // 3)]

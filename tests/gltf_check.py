@@ -206,6 +206,18 @@ def check_against_solve(bounce, scene, unit, outdir):
     print("against the solve: %d patches, worst relative difference %.2e" % (len(want), worst))
 
 
+def triangles(gl, binary, pos, prims):
+    """Each triangle of the primitives: its three vertex indices and its (unnormalised) normal, the cross
+    product of its edges."""
+    for p in prims:
+        idx, _ = accessor(gl, binary, p["indices"])
+        for t in range(0, len(idx), 3):
+            a, b, c = idx[t:t + 3]
+            u = [pos[3 * b + k] - pos[3 * a + k] for k in range(3)]
+            v = [pos[3 * c + k] - pos[3 * a + k] for k in range(3)]
+            yield (a, b, c), [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+
+
 def check_face_normals(gl, binary, attrs, pos, prims):
     """_FACE_NORMAL: each vertex's is a unit vector along the normal of one of its triangles (the face its
     values were gathered on)."""
@@ -214,17 +226,11 @@ def check_face_normals(gl, binary, attrs, pos, prims):
         return
     fn, _ = accessor(gl, binary, attrs["_FACE_NORMAL"])
     best = [-2.0] * (len(pos) // 3)
-    for p in prims:
-        idx, _ = accessor(gl, binary, p["indices"])
-        for t in range(0, len(idx), 3):
-            a, b, c = idx[t:t + 3]
-            u = [pos[3 * b + k] - pos[3 * a + k] for k in range(3)]
-            v = [pos[3 * c + k] - pos[3 * a + k] for k in range(3)]
-            n = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
-            ln = sum(x * x for x in n) ** 0.5
-            if ln > 0:
-                for q in (a, b, c):
-                    best[q] = max(best[q], sum(fn[3 * q + k] * n[k] for k in range(3)) / ln)
+    for tri, n in triangles(gl, binary, pos, prims):
+        ln = sum(x * x for x in n) ** 0.5
+        if ln > 0:
+            for q in tri:
+                best[q] = max(best[q], sum(fn[3 * q + k] * n[k] for k in range(3)) / ln)
     used = [x for x in best if x > -2]
     worst_len = max(abs(sum(fn[3 * i + k] ** 2 for k in range(3)) - 1) for i in range(len(best)))
     check(worst_len < 1e-5 and min(used) > 1 - 1e-4, "_FACE_NORMAL: unit (worst %.1e) and along one of each vertex's "
