@@ -49,8 +49,8 @@ size_t bn_rt_enclosed_patches(const bn_rt *rt, unsigned char *enclosed);
  * many are partly covered (BACK or SHUT). */
 enum bn_cover {
     BN_COVER_OPEN = 0,
-    BN_COVER_SHUT = 1,       /* half the rays meet a back face or a face nearer than the patch's size or 5% of the scene's
-                                diameter */
+    BN_COVER_SHUT = 1,       /* half the rays meet a back face or a face nearer than the patch's size
+                                or 5% of the scene's diameter */
     BN_COVER_BACK = 2,       /* a quarter of the rays meet a back face */
     BN_COVER_ENCLOSED = 3    /* bn_rt_enclosed_patches's */
 };

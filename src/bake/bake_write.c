@@ -331,8 +331,8 @@ static bn_status bn__bake_gltf(const bn_bake *b, const char *path, int is_glb, c
     const char **lnames = bn__malloc_array(nl, sizeof *lnames), **onames = bn__malloc_array(nobj + 1, sizeof *onames);
     double *power = bn__calloc(3 * nl, sizeof(double));
     float *fn = nl > 1 && !o->input_mesh ? bn__vertex_face_normals(b, j->nv) : NULL;
-    bn_status st = fm && fo && lnames && onames && power && (fn || nl == 1 || o->input_mesh) ? BN_OK
-                                                                                              : bn__bake_oom(j->nv, err);
+    int ok = fm && fo && lnames && onames && power && (fn || nl == 1 || o->input_mesh);
+    bn_status st = ok ? BN_OK : bn__bake_oom(j->nv, err);
     for (size_t k = 0; st == BN_OK && k < j->nf; k++) {
         fm[k] = o->input_mesh ? faces[k].material : patches[fp[k]].material;
         fo[k] = faces[o->input_mesh ? k : patches[fp[k]].face].object;

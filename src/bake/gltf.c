@@ -436,7 +436,8 @@ static void bn__gltf_json_accessors(bn__gltf *g, const char *binname)
         for (size_t l = 0; l <= m->nlayers; l++)   /* COLOR_0, then the layers */
             bn__str_add(js, ",{\"bufferView\":%zu,\"byteOffset\":%zu,\"componentType\":5126,\"count\":%zu,"
                             "\"type\":\"VEC3\"}", 1 + l, 12 * o, n);
-        for (size_t k = 1; k <= bn__ncolours(m) + (m->face_normal != NULL); k++)   /* COLOR_1 .. COLOR_n, _FACE_NORMAL */
+        /* COLOR_1 .. COLOR_n, then _FACE_NORMAL */
+        for (size_t k = 1; k <= bn__ncolours(m) + (m->face_normal != NULL); k++)
             bn__str_add(js, ",{\"bufferView\":%zu,\"byteOffset\":%zu,\"componentType\":5126,\"count\":%zu,"
                             "\"type\":\"VEC3\"}", 1 + m->nlayers + k, 12 * o, n);
     }

@@ -12,8 +12,8 @@
 #define BN__ENCLOSED_RAYS 16
 #define BN__ENCLOSED_SHARE 0.9
 /* Partly covered: a quarter of the rays meet a back face (the floor under an object with an open base:
- * the Stanford bunny's), or half meet a back face or a face nearer than the patch's own size or BN__SHUT_NEAR (the floor
- * 2 mm under the bunny's closed base, or under a slab). */
+ * the Stanford bunny's), or half meet a back face or a face nearer than the patch's own size or
+ * BN__SHUT_NEAR (the floor 2 mm under the bunny's closed base, or under a slab). */
 #define BN__BACK_SHARE 0.25
 #define BN__SHUT_SHARE 0.5
 /* "Near" for shut: within the patch's size or this fraction of the scene's diameter, whichever is more
@@ -22,7 +22,8 @@
 #define BN__SHUT_NEAR 0.05
 
 /* Per patch, how many of BN__ENCLOSED_RAYS fixed rays from just above its centroid meet a back face
- * (back), and how many meet a back face or any face nearer than the patch's size or BN__SHUT_NEAR of the scene's diameter (shut: NULL or filled). */
+ * (back), and how many meet a back face or any face nearer than the patch's size or BN__SHUT_NEAR of the
+ * scene's diameter (shut: NULL or filled). */
 static void bn__back_counts(const bn_rt *rt, unsigned char *back, unsigned char *shut)
 {
     size_t np;
