@@ -405,9 +405,10 @@ static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int par
     if (sr || ss) {
         double e = R->force || !bn__separated(t, r, s) || !bn__can_receive(R, r, s) ? INFINITY
                                                                                     : bn__link_error(R, r, s);
-        split = e > (F >= 0 && partial ? BN__PARTIAL : 1.0) * bn__eps_at(R, r);
+        double eps = bn__eps_at(R, r);
+        split = e > (F >= 0 && partial ? BN__PARTIAL : 1.0) * eps;
         if (!split && F < 0) {   /* accepted as it stands: its F, and a second look if partly visible */
-            int split_if_partial = e > BN__PARTIAL * bn__eps_at(R, r);
+            int split_if_partial = e > BN__PARTIAL * eps;
             F = bn__link_F(R, r, s, split_if_partial, w, &partial);
             split = partial && split_if_partial;
             if (split)

@@ -277,9 +277,6 @@ static int bn__on_plane(const bn_face *f, const size_t *idx, const double *v, co
     return 1;
 }
 
-/* plane_of[f] for every face, and the planes' normal, point and thickness: with merge, faces that
- * share an edge join the plane of the face that started it while they lie within BN__COPLANAR of
- * it (measured against that first face, so a finely cut curved surface cannot creep into one plane). */
 /* The faces sharing an edge with each face: adj[adj_start[k] .. adj_start[k + 1]) (both allocated here,
  * NULL without memory: 0). */
 static int bn__face_adjacency(const bn_scene *s, size_t **adj_start_out, uint32_t **adj_out)
@@ -360,6 +357,9 @@ static void bn__flood_plane(const bn_scene *s, bn__tree *t, uint32_t *plane_of, 
     }
 }
 
+/* plane_of[f] for every face, and the planes' normal, point and thickness: with merge, faces that
+ * share an edge join the plane of the face that started it while they lie within BN__COPLANAR of
+ * it (measured against that first face, so a finely cut curved surface cannot creep into one plane). */
 static bn_status bn__planes(const bn_scene *s, int merge, bn__tree *t, uint32_t *plane_of, bn_error *err)
 {
     size_t nf, nv, ni, ng = 0;
