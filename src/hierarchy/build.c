@@ -213,8 +213,10 @@ static bn_status bn__between_passes(bn__build *B, bn_error *err)
                 "held %.2fx the mean); %llu links moved", bn_dist_size(), imb, mv);
     if (st == BN_OK)
         st = bn__estimate(&B->t, &B->work, B->R.bound, B->E, B->rho, B->R.eps_abs, B->L, err);
-    if (st == BN_OK)
+    if (st == BN_OK) {
         bn__bmax(&B->t, B->L, B->R.Bmax);
+        B->R.btyp = bn__typical_radiance(&B->t, B->L, B->E);
+    }
     return st;
 }
 

@@ -27,6 +27,7 @@ typedef struct bn__ref {
     bn__leaf_geom *leaf;      /* npatch, in leaf order */
     double *Bmax;             /* 3 per node: the largest radiance estimate below (oracle) */
     double eps_abs;
+    double btyp;              /* the scene's typical reflected radiance (0 before the first estimate) */
     double min_area;          /* planar nodes below this area are not split */
     int force;                /* eps == 0: refine every link to the patches */
     double tol, ray_eps;
@@ -75,6 +76,9 @@ bn_status bn__pass(const bn__ref *R, bn__worker *W, int nt, bn__vec *work, bn__p
                    bn_error *err);
 /* Bmax from per-patch radiances L (N*3): the largest below each node. */
 void bn__bmax(const bn__tree *t, const double *L, double *Bmax);
+/* The area-weighted mean over patches of the largest channel of L - E: the light a typical surface
+ * reflects, what a dark covered receiver's brightness is measured against (bn__eps_at). */
+double bn__typical_radiance(const bn__tree *t, const double *L, const double *E);
 /* Keeps the links with F > 0, in place; returns their count. */
 size_t bn__compact(bn__vec *v);
 /* L ~ E + K_H L by a few Jacobi sweeps over the current links (the oracle's brightness). */
