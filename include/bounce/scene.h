@@ -230,6 +230,8 @@ void bn_light_power(const bn_light *l, double watts[3]);
 
 /* Axis-aligned bounding box of the faces, scene units. */
 void               bn_scene_bounds(const bn_scene *s, double lo[3], double hi[3]);
+/* The scene's diameter: the length of that box's diagonal, scene units (what tolerances scale with). */
+double             bn_scene_diameter(const bn_scene *s);
 /* A digest of geometry, materials and patches (FNV-1a 64), for cache keys. */
 unsigned long long bn_scene_digest(const bn_scene *s);
 /* The same over the geometry alone (unit, vertices, polygons, patches), not the materials: what

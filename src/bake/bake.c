@@ -245,7 +245,7 @@ bn_status bn_bake_create(const bn_scene *scene, double crease_deg, bn_bake **out
     size_t np, npv, *local = NULL;
     const bn_patch *patches = bn_scene_patches(scene, &np);
     const double *pv = bn_scene_patch_vertices(scene, &npv);
-    double lo[3], hi[3], d[3], eps, cos_crease = cos(crease_deg * BN_PI / 180.0);
+    double eps, cos_crease = cos(crease_deg * BN_PI / 180.0);
     int flat = crease_deg == BN_BAKE_FLAT;
     bn__bake_tmp t = {0};
     bn_bake *b;
@@ -256,11 +256,9 @@ bn_status bn_bake_create(const bn_scene *scene, double crease_deg, bn_bake **out
         return bn_error_set(err, BN_EINPUT, "crease angle %g is not within [0, 180] degrees", crease_deg);
     if (np == 0)
         return bn_error_set(err, BN_EINPUT, "%s: the scene has no patches to bake", bn_scene_path(scene));
-    bn_scene_bounds(scene, lo, hi);
-    bn_v3_sub(hi, lo, d);
     /* Points computed from two faces' grids agree to rounding (~1e-16 relative); genuinely distinct
      * points are a patch edge apart. 1e-9 of the scene's diameter sits safely between. */
-    eps = 1e-9 * bn_v3_len(d);
+    eps = 1e-9 * bn_scene_diameter(scene);
     b = calloc(1, sizeof *b);
     t.weld = bn__malloc_array(npv, sizeof *t.weld);
     t.inc_start = bn__calloc(npv + 1, sizeof *t.inc_start);

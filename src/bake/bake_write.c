@@ -115,16 +115,14 @@ static bn_status bn__input_faces(const bn_bake *b, unsigned *face_n, size_t *fac
     const double *v = bn_scene_vertices(s, &nv), *pv = bn_scene_patch_vertices(s, &npv);
     const size_t *idx = bn_scene_face_indices(s, &ni);
     size_t *start = bn__calloc(nf + 1, sizeof(size_t)), *order = bn__malloc_array(np + 1, sizeof(size_t));
-    double lo[3], hi[3], eps;
+    double eps;
     bn_status st = BN_OK;
     if (!start || !order) {
         free(start);
         free(order);
         return bn_error_set(err, BN_ENOMEM, "out of memory baking %zu polygons", nf);
     }
-    bn_scene_bounds(s, lo, hi);
-    eps = 1e-9 * sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
-                      (hi[2] - lo[2]) * (hi[2] - lo[2]));
+    eps = 1e-9 * bn_scene_diameter(s);
     for (size_t p = 0; p < np; p++)
         start[pa[p].face + 1]++;
     for (size_t k = 0; k < nf; k++)

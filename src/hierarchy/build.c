@@ -87,7 +87,6 @@ static bn_status bn__ref_init(bn__build *B, const bn_scene *scene, const bn_rt *
                               bn_error *err)
 {
     bn__ref *R = &B->R;
-    double lo[3], hi[3];
     size_t npv;
     R->t = &B->t;
     R->scene = scene;
@@ -95,8 +94,7 @@ static bn_status bn__ref_init(bn__build *B, const bn_scene *scene, const bn_rt *
     R->o = o;
     R->patch = bn_scene_patches(scene, &B->np);
     R->pverts = bn_scene_patch_vertices(scene, &npv);
-    bn_scene_bounds(scene, lo, hi);
-    R->tol = 1e-9 * fmax(bn_v3_dist(lo, hi), 1e-300);
+    R->tol = 1e-9 * fmax(bn_scene_diameter(scene), 1e-300);
     R->ray_eps = bn_rt_epsilon(rt);
     R->force = o->eps == 0;
     R->min_area = o->min_area > 0 ? o->min_area : o->min_area == 0 ? ldexp(B->t.area[0], -20) : 0;

@@ -366,12 +366,11 @@ static bn_status bn__planes(const bn_scene *s, int merge, bn__tree *t, uint32_t 
     const bn_face *f = bn_scene_faces(s, &nf);
     const double *v = bn_scene_vertices(s, &nv);
     const size_t *idx = bn_scene_face_indices(s, &ni);
-    double lo[3], hi[3], tol;
+    double tol;
     size_t *adj_start = NULL;
     uint32_t *adj = NULL, *queue = NULL;
     bn_status st = BN_OK;
-    bn_scene_bounds(s, lo, hi);
-    tol = 1e-9 * fmax(bn_v3_dist(lo, hi), 1e-300);
+    tol = 1e-9 * fmax(bn_scene_diameter(s), 1e-300);
     t->pn = bn__malloc_array(3 * nf + 1, sizeof(double));
     t->pp = bn__malloc_array(3 * nf + 1, sizeof(double));
     t->pthick = bn__calloc(nf + 1, sizeof(double));

@@ -28,11 +28,9 @@ static void bn__back_counts(const bn_rt *rt, unsigned char *back, unsigned char 
 {
     size_t np;
     const bn_patch *patches = bn_scene_patches(bn_rt_scene(rt), &np);
-    double eps = bn_rt_epsilon(rt), lo[3], hi[3], d[3];
+    double eps = bn_rt_epsilon(rt);
     long ln = (long)np;
-    bn_scene_bounds(bn_rt_scene(rt), lo, hi);
-    bn_v3_sub(hi, lo, d);
-    double near = BN__SHUT_NEAR * bn_v3_len(d);
+    double near = BN__SHUT_NEAR * bn_scene_diameter(bn_rt_scene(rt));
 #pragma omp parallel for schedule(dynamic, 256)
     for (long lp = 0; lp < ln; lp++) {
         const bn_patch *p = &patches[lp];

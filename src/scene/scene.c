@@ -718,6 +718,13 @@ void bn_scene_bounds(const bn_scene *s, double lo[3], double hi[3])
     memcpy(hi, s->hi, sizeof s->hi);
 }
 
+double bn_scene_diameter(const bn_scene *s)
+{
+    double d[3];
+    bn_v3_sub(s->hi, s->lo, d);
+    return bn_v3_len(d);
+}
+
 const bn_material *bn_patch_material(const bn_scene *s, size_t patch) { return &s->mats[s->patches[patch].material]; }
 
 static int bn__emits(const bn_material *m) { return m->Le[0] > 0 || m->Le[1] > 0 || m->Le[2] > 0; }

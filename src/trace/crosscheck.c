@@ -91,14 +91,13 @@ bn_status bn_crosscheck_mesh_tolerance(const bn_scene *fine, const double *fine_
     const bn_patch *p = bn_scene_patches(fine, &n), *q = bn_scene_patches(other, &n2);
     const double *qv = bn_scene_patch_vertices(other, &npv2);
     size_t *start, *order, nl = (size_t)bn_layer_count(bounces);
-    double lo[3], hi[3], eps;
+    double eps;
     bn_scene_faces(fine, &nf);
     bn_scene_faces(other, &nf2);
     if (nf != nf2)
         return bn_error_set(err, BN_EINPUT, "crosscheck: the two mesh levels have different faces (%zu and %zu)", nf,
                             nf2);
-    bn_scene_bounds(fine, lo, hi);
-    eps = 1e-9 * fmax(bn_v3_dist(lo, hi), 1e-300);   /* containment slack: rounding, far below any patch */
+    eps = 1e-9 * fmax(bn_scene_diameter(fine), 1e-300);   /* containment slack: rounding, far below any patch */
     /* Bucket the other level's patches by face (counting sort). */
     start = bn__calloc(nf + 1, sizeof(size_t));
     order = bn__malloc_array(n2 ? n2 : 1, sizeof(size_t));

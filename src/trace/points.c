@@ -88,7 +88,6 @@ static int bn__points_grow(bn_trace_point **pts, size_t *cap)
 bn_status bn_trace_points_read(const char *path, const bn_rt *rt, bn_trace_point **pts, size_t *n, bn_error *err)
 {
     const bn_scene *s = bn_rt_scene(rt);
-    double lo[3], hi[3], d[3];
     size_t cap = 0;
     unsigned line = 0;
     char buf[1024];
@@ -98,9 +97,7 @@ bn_status bn_trace_points_read(const char *path, const bn_rt *rt, bn_trace_point
     *n = 0;
     if (!f)
         return bn_error_set(err, BN_EIO, "%s: %s", path, strerror(errno));
-    bn_scene_bounds(s, lo, hi);
-    bn_v3_sub(hi, lo, d);
-    double tol = fmax(1e-6 * bn_v3_len(d), 4 * bn_rt_epsilon(rt));
+    double tol = fmax(1e-6 * bn_scene_diameter(s), 4 * bn_rt_epsilon(rt));
     while (st == BN_OK && fgets(buf, sizeof buf, f)) {
         bn_trace_point pt;
         size_t len = strlen(buf);
