@@ -261,8 +261,9 @@ static bn_scene *cornell_like(int blocks, double patch)
     return sb_scene(&s, patch);
 }
 
-BN_TEST(occlusion_bounds_cornell_like)
+BN_TEST(occlusion_bounds_cornell_like) /* BN_SLOW */
 {
+    BN_SKIP_IF_SLOW_RUN();   /* 18 s under the sanitizers; test_ff_cornell's occluded Cornell box runs there */
     bn_scene *with = cornell_like(1, 0.125), *without = cornell_like(0, 0.125);
     bn_formfactor_opts o = opts(BN_FF_ANALYTIC, 0, 1);
     bn_ff_diagnostics dw, dn;
