@@ -522,27 +522,22 @@ void bn_crosscheck_result_free(bn_crosscheck_result *r)
 
 static const char bn__ch[3] = {'R', 'G', 'B'};
 
-void bn_crosscheck_print(const bn_crosscheck_input *in, const bn_crosscheck_result *r, FILE *fp)
+/* The per-entry test: its bounds, and each layer's share within and worst z_excess. */
+static void bn__print_layers(const bn_crosscheck_input *in, const bn_crosscheck_result *r, FILE *fp)
 {
     const bn_trace_patches *tr = in->trace;
-    int bounces = tr->bounces;
-    size_t n = tr->n, nmat;
-    const bn_material *mats = bn_scene_materials(in->scene, &nmat);
-    size_t np;
-    const bn_patch *patches = bn_scene_patches(in->scene, &np);
-    const char *item = in->part ? "region" : "patch";
+    size_t n = tr->n;
     char name[16];
-
     fprintf(fp, "\nper-%s test: %zu %s x %d layers x 3 channels = %zu tests; alpha %g (family-wise), "
                 "Sidak per test %.3g, bound |z| <= %.3f (Student t, %zu dof)\n",
-            item, n, in->part ? "regions" : "patches", r->nlayers, r->family, r->alpha, r->alpha_each, r->crit,
-            tr->spp - 1);
+            in->part ? "region" : "patch", n, in->part ? "regions" : "patches", r->nlayers, r->family, r->alpha,
+            r->alpha_each, r->crit, tr->spp - 1);
     fprintf(fp, "  z = (radiosity - trace) / se;  z_excess = max(0, |radiosity - trace| - tol) / se, skew-corrected "
                 "(Hall),  tol = %g x discretisation estimate%s\n",
             in->tol_scale, in->rtol > 0 ? " + rtol |radiosity|" : "");
     fprintf(fp, "  %-6s %12s %12s\n", "layer", "within", "worst z_exc");
     for (int l = 0; l < r->nlayers; l++)
-        fprintf(fp, "  %-6s %11.2f%% %12.3f\n", bn_layer_name(l, bounces, name, sizeof name),
+        fprintf(fp, "  %-6s %11.2f%% %12.3f\n", bn_layer_name(l, tr->bounces, name, sizeof name),
                 100.0 * (double)r->layer_within[l] / (double)(n * 3), r->layer_worst_z[l]);
     fprintf(fp, "  all    %11.2f%% %12.3f   (without the discretisation allowance: %.2f%% within, worst |z| %.3f)\n",
             100.0 * (double)r->within / (double)r->family, r->worst_z, 100.0 * (double)r->within_raw / (double)r->family,
@@ -550,43 +545,62 @@ void bn_crosscheck_print(const bn_crosscheck_input *in, const bn_crosscheck_resu
     fprintf(fp, "  %zu entr%s with fewer than %.0f effective nonzero samples %s shown, not judged one by one (the normal "
                 "tail does not hold there; the power test below covers their light)\n",
             r->few_hits, r->few_hits == 1 ? "y" : "ies", BN__MIN_HITS, r->few_hits == 1 ? "is" : "are");
-    if (r->nworst > 0) {
-        fprintf(fp, "\nworst entries:\n  %7s %6s %-6s %2s %13s %13s %11s %11s %9s %9s\n", item,
-                in->part ? "mat" : "face", "layer", "ch", "radiosity", "trace", "se", "tol", "z", "z_excess");
-        for (int k = 0; k < r->nworst; k++) {
-            const bn_crosscheck_entry *e = &r->worst[k];
-            fprintf(fp, "  %7zu %6zu %-6s %2c %13.6g %13.6g %11.4g %11.4g %9.3f %9.3f\n", e->patch,
-                    in->part ? (size_t)in->part->material[e->patch] : patches[e->patch].face,
-                    bn_layer_name(e->layer, bounces, name, sizeof name),
-                    bn__ch[e->channel], e->radiosity, e->trace, e->se, e->tol, e->z, e->z_excess);
-        }
+}
+
+/* The worst entries, and with a partition where the regions they name are. */
+static void bn__print_worst(const bn_crosscheck_input *in, const bn_crosscheck_result *r, FILE *fp)
+{
+    const bn_patch *patches = bn_scene_patches(in->scene, NULL);
+    const bn_material *mats = bn_scene_materials(in->scene, NULL);
+    char name[16];
+    if (r->nworst <= 0)
+        return;
+    fprintf(fp, "\nworst entries:\n  %7s %6s %-6s %2s %13s %13s %11s %11s %9s %9s\n", in->part ? "region" : "patch",
+            in->part ? "mat" : "face", "layer", "ch", "radiosity", "trace", "se", "tol", "z", "z_excess");
+    for (int k = 0; k < r->nworst; k++) {
+        const bn_crosscheck_entry *e = &r->worst[k];
+        fprintf(fp, "  %7zu %6zu %-6s %2c %13.6g %13.6g %11.4g %11.4g %9.3f %9.3f\n", e->patch,
+                in->part ? (size_t)in->part->material[e->patch] : patches[e->patch].face,
+                bn_layer_name(e->layer, in->trace->bounces, name, sizeof name), bn__ch[e->channel], e->radiosity,
+                e->trace, e->se, e->tol, e->z, e->z_excess);
     }
-    if (in->part && r->nworst > 0) {   /* where the regions named above are */
-        fprintf(fp, "\nregions above: %7s %-12s %12s %12s %12s %12s\n", "region", "material", "area", "cx", "cy", "cz");
-        for (int k = 0; k < r->nworst; k++) {
-            size_t g = r->worst[k].patch;
-            int seen = 0;
-            for (int q = 0; q < k; q++)
-                seen |= r->worst[q].patch == g;
-            if (seen)
-                continue;
+    if (!in->part)
+        return;
+    fprintf(fp, "\nregions above: %7s %-12s %12s %12s %12s %12s\n", "region", "material", "area", "cx", "cy", "cz");
+    for (int k = 0; k < r->nworst; k++) {
+        size_t g = r->worst[k].patch;
+        int seen = 0;
+        for (int q = 0; q < k; q++)
+            seen |= r->worst[q].patch == g;
+        if (!seen)
             fprintf(fp, "               %7zu %-12s %12.6g %12.6g %12.6g %12.6g\n", g, mats[in->part->material[g]].name,
                     in->part->area[g], in->part->centroid[3 * g], in->part->centroid[3 * g + 1],
                     in->part->centroid[3 * g + 2]);
-        }
     }
+}
+
+/* Power per layer, radiosity against the tracer, and the power test's bound. */
+static void bn__print_power(const bn_crosscheck_input *in, const bn_crosscheck_result *r, FILE *fp)
+{
+    char name[16];
     fprintf(fp, "\npower per layer, pi sum_i A_i L_i (W; R G B), radiosity | trace +- se | (rad - trace)/se | tol:\n");
     for (int l = 0; l < r->nlayers; l++) {
         const double *a = r->power_rad + 3 * l, *b = r->power_pt + 3 * l, *s = r->power_se + 3 * l,
                      *t = r->power_tol + 3 * l;
         fprintf(fp, "  %-5s %11.5g %11.5g %11.5g | %11.5g %11.5g %11.5g +- %9.3g %9.3g %9.3g | %7.2f %7.2f %7.2f | "
                     "%8.3g %8.3g %8.3g\n",
-                bn_layer_name(l, bounces, name, sizeof name), a[0], a[1], a[2], b[0], b[1], b[2], s[0], s[1],
-                s[2], s[0] > 0 ? (a[0] - b[0]) / s[0] : 0.0, s[1] > 0 ? (a[1] - b[1]) / s[1] : 0.0,
+                bn_layer_name(l, in->trace->bounces, name, sizeof name), a[0], a[1], a[2], b[0], b[1], b[2], s[0],
+                s[1], s[2], s[0] > 0 ? (a[0] - b[0]) / s[0] : 0.0, s[1] > 0 ? (a[1] - b[1]) / s[1] : 0.0,
                 s[2] > 0 ? (a[2] - b[2]) / s[2] : 0.0, t[0], t[1], t[2]);
     }
     fprintf(fp, "  power test: %zu tests, bound %.3f (normal, Sidak), worst z_excess %.3f\n", r->power_family,
             r->power_crit, r->power_worst_z);
+}
+
+/* Area-weighted L per surface (material), radiosity against the tracer. */
+static void bn__print_surfaces(const bn_crosscheck_input *in, const bn_crosscheck_result *r, FILE *fp)
+{
+    const bn_material *mats = bn_scene_materials(in->scene, NULL);
     fprintf(fp, "\nper surface (material), area-weighted L (W m^-2 sr^-1; R G B), radiosity | trace +- se | "
                 "relative difference:\n");
     for (size_t s = 0; s < r->nsurfaces; s++) {
@@ -599,8 +613,17 @@ void bn_crosscheck_print(const bn_crosscheck_input *in, const bn_crosscheck_resu
                 b[0] != 0 ? 100 * (a[0] - b[0]) / b[0] : 0.0, b[1] != 0 ? 100 * (a[1] - b[1]) / b[1] : 0.0,
                 b[2] != 0 ? 100 * (a[2] - b[2]) / b[2] : 0.0);
     }
+}
+
+void bn_crosscheck_print(const bn_crosscheck_input *in, const bn_crosscheck_result *r, FILE *fp)
+{
+    bn__print_layers(in, r, fp);
+    bn__print_worst(in, r, fp);
+    bn__print_power(in, r, fp);
+    bn__print_surfaces(in, r, fp);
     fprintf(fp, "\nverdict: %s alpha=%g family=%zu crit=%.4f within=%zu/%zu worst_z=%.4f worst_z_raw=%.4f "
                 "tol_scale=%g rtol=%g power_family=%zu power_crit=%.4f power_worst_z=%.4f spp=%zu bounces=%d few_hits=%zu\n",
             r->pass ? "pass" : "fail", r->alpha, r->family, r->crit, r->within, r->family, r->worst_z, r->worst_z_raw,
-            in->tol_scale, in->rtol, r->power_family, r->power_crit, r->power_worst_z, tr->spp, bounces, r->few_hits);
+            in->tol_scale, in->rtol, r->power_family, r->power_crit, r->power_worst_z, in->trace->spp,
+            in->trace->bounces, r->few_hits);
 }
