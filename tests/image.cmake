@@ -8,8 +8,8 @@ endif()
 # the first jobs instead of after bounce_cli has linked (a target's objects wait for its dependencies).
 add_library(test_image_readback_obj OBJECT ${CMAKE_CURRENT_SOURCE_DIR}/image_readback.cpp)
 target_include_directories(test_image_readback_obj PRIVATE ${PROJECT_SOURCE_DIR}/include ${PROJECT_SOURCE_DIR}/src)
-target_include_directories(test_image_readback_obj SYSTEM PRIVATE /usr/include/OpenMesh
-  $<TARGET_PROPERTY:OpenImageIO::OpenImageIO,INTERFACE_INCLUDE_DIRECTORIES>)
+target_include_directories(test_image_readback_obj SYSTEM PRIVATE /usr/include/OpenMesh)
+target_link_libraries(test_image_readback_obj PRIVATE OpenImageIO::OpenImageIO)   # imported: its usage, no build order
 target_compile_definitions(test_image_readback_obj PRIVATE BN_TEST_SOURCE_DIR="${PROJECT_SOURCE_DIR}"
   BN_TEST_BINARY_DIR="${CMAKE_CURRENT_BINARY_DIR}/tmp/test_image_readback"
   BN_TEST_BOUNCE_EXE="$<TARGET_FILE:bounce_cli>")
