@@ -5,7 +5,10 @@ page's test (tests/live_check.py) and the viewer's benches (bench/view_fps.py, b
     with Page(browser, url) as page:
         page.wait("document.title === 'ready'", timeout=60)
         text = page.eval("document.getElementById('x').textContent")
+        page.goto(other_url)                  # a new tab in the same browser (one launch for many pages)
+        png = page.screenshot()               # PNG bytes of the viewport after the next two frames
 """
+import base64
 import json
 import os
 import shutil
@@ -28,14 +31,35 @@ class Page:
 
         self.proc = subprocess.Popen([browser, "--headless", "--no-sandbox", "--use-gl=swiftshader",
                                       "--enable-unsafe-swiftshader", "--window-size=%d,%d" % size,
-                                      "--remote-debugging-pipe", "about:blank"],
+                                      "--hide-scrollbars", "--remote-debugging-pipe", "about:blank"],
                                      preexec_fn=fds, pass_fds=(3, 4), stdout=subprocess.DEVNULL,
                                      stderr=subprocess.DEVNULL)
         os.close(r1)
         os.close(w2)
         self.out, self.inp, self.buf, self.n = os.fdopen(w1, "wb"), r2, b"", 0
-        target = self.call("Target.createTarget", {"url": url})["targetId"]
-        self.session = self.call("Target.attachToTarget", {"targetId": target, "flatten": True})["sessionId"]
+        self.target, self.size = None, size
+        self.goto(url)
+
+    def goto(self, url):
+        """Opens url in a new tab (a full load, even where only the fragment differs) and closes the last one.
+        The tab's viewport is the size asked for (the window's, less the headless browser's own frame, is not)."""
+        old = self.target
+        self.target = self.call("Target.createTarget", {"url": "about:blank"})["targetId"]
+        self.session = self.call("Target.attachToTarget", {"targetId": self.target, "flatten": True})["sessionId"]
+        self.call("Emulation.setDeviceMetricsOverride", {"width": self.size[0], "height": self.size[1],
+                                                         "deviceScaleFactor": 1, "mobile": False}, self.session)
+        self.call("Page.navigate", {"url": url}, self.session)
+        if old:
+            self.call("Target.closeTarget", {"targetId": old})
+
+    def screenshot(self):
+        """The viewport as PNG bytes, after two animation frames (what is drawn has reached the screen)."""
+        self.call("Runtime.evaluate", {"expression": "new Promise((r) => requestAnimationFrame(() => "
+                                       "requestAnimationFrame(() => r(1))))", "awaitPromise": True}, self.session)
+        return base64.b64decode(self.call("Page.captureScreenshot", {"format": "png"}, self.session)["data"])
+
+    def dom(self):
+        return self.eval("document.documentElement.outerHTML")
 
     def call(self, method, params=None, session=None):
         self.n += 1

@@ -127,43 +127,32 @@ def main():
         print("SKIP (the browser part, in the sanitized run): the page's screenshots are JavaScript and "
               "SwiftShader, checked by the normal run")
         sys.exit(1 if failures else 0)
-    base = [browser, "--headless", "--no-sandbox", "--use-gl=swiftshader", "--enable-unsafe-swiftshader",
-            "--virtual-time-budget=8000", "--window-size=%d,%d" % (W, H), "--hide-scrollbars"]
     url = "file://" + os.path.abspath(page)
-    # where the probes land: the light's centre, the tall block's face toward the red wall, the short
-    # block's face toward the green wall (centroids, metres), the floor between the blocks
-    probes = [(0.278, 0.5485, 0.2795), (0.4475, 0.165, 0.3265), (0.106, 0.0825, 0.145), (0.28, 0.0, 0.06)]
-    q = ";".join(",".join("%g" % c for c in p) for p in probes)
-    fixed = "#panel=0&size=%dx%d&" % (W, H)   # the same canvas and projection in every run
-    dom = subprocess.run(base + ["--dump-dom", url + fixed + "lod=1&probe=" + q], capture_output=True, text=True).stdout
-    mark = '<pre id="probe" style'
-    check(mark in dom, "the page ran (its probe output is in the DOM)")
-    if mark not in dom:
-        sys.exit(1)
-    txt = dom.rsplit(mark, 1)[1].split(">", 1)[1].split("</pre>")[0]
-    pts = [tuple(float(v) for v in ln.split()) for ln in txt.strip().splitlines()]
-    light, red_face, green_face, floor = pts
-    # the simplified copy drawn while the camera moves (forced here with #lod=1; by default above 20k triangles)
-    m = re.search(r'id="info">(\d+) vertices, (\d+) triangles;[^<]*?; (\d+) while the camera moves', dom)
-    check("no antialiasing (software WebGL)" in dom,
-          "SwiftShader is recognised as software WebGL: antialiasing off by default (a third of the frame rate)")
-    check(m is not None and int(m.group(3)) < int(m.group(2)),
-          "#lod=1: a simplified copy for when the camera moves (%s)" % (", ".join(m.groups()) if m else "none"))
-    shots = {}
-    for name, frag in (("L", ""), ("E", "terms=E"), ("KE", "terms=KE&ev=3"), ("K2E", "terms=K2E&ev=3"),
-                       ("K2E-moving", "terms=K2E&ev=3&lod=1&moving=1")):
-        png = os.path.join(out, "view-%s.png" % name)
-        if os.path.exists(png):
-            os.remove(png)
-        subprocess.run(base + ["--screenshot=" + png, url + fixed + frag], capture_output=True)
-        check(os.path.exists(png), "screenshot %s" % name)
-        if not os.path.exists(png):
-            sys.exit(1)
-        shots[name] = read_png(png)
+    # one browser for every view: each opens in a new tab (a launch costs ~5 s, a tab well under one)
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    import cdp
+    with cdp.Page(browser, "about:blank", (W, H)) as tab:
+        shots = views(tab, url, out)
+        if shots:
+            physics(shots)
+            url_round_trip(tab, url, out)
+    bake_again(bounce, page, out)
+    print("%d failures" % len(failures))
+    sys.exit(1 if failures else 0)
 
-    def lit_fraction(img):
-        return sum(1 for row in img for p in row if max(p) > 12) / float(len(img) * len(img[0]))
 
+def mean_diff(a, b):
+    return sum(abs(p[c] - q[c]) for ra, rb in zip(a, b) for p, q in zip(ra, rb) for c in range(3)) / (
+        3.0 * 255 * len(a) * len(a[0]))
+
+
+def lit_fraction(img):
+    return sum(1 for row in img for p in row if max(p) > 12) / float(len(img) * len(img[0]))
+
+
+def physics(shots):
+    """What the light's paths say about the screenshots (see the module's doc)."""
+    light, red_face, green_face, floor = shots["probes"]
     fe, fl = lit_fraction(shots["E"]), lit_fraction(shots["L"])
     check(fe < 0.03, "E alone: %.2f%% of the pixels lit (only the light)" % (100 * fe))
     check(fl > 0.3, "L: %.1f%% of the pixels lit" % (100 * fl))
@@ -183,23 +172,57 @@ def main():
     check(k2_green[1] > 2 * (12.0 / 17.0) * k2_green[0] and k2_green[1] > 0.02,
           "K2E: the short block's face toward the green wall is green (G/R %.2f, the light's 0.71)"
           % (k2_green[1] / max(k2_green[0], 1e-9)))
-
     # the simplified copy keeps the colour bleeding where the full mesh has it (the same independent answer)
     m_red, m_green = patch_mean(shots["K2E-moving"], *red_face), patch_mean(shots["K2E-moving"], *green_face)
     check(m_red[0] > 3 * (17.0 / 12.0) * m_red[1] and m_green[1] > 2 * (12.0 / 17.0) * m_green[0],
           "K2E, simplified copy: red-facing R/G %.2f, green-facing G/R %.2f"
           % (m_red[0] / max(m_red[1], 1e-9), m_green[1] / max(m_green[0], 1e-9)))
-
-    def mean_diff(a, b):
-        return sum(abs(p[c] - q[c]) for ra, rb in zip(a, b) for p, q in zip(ra, rb) for c in range(3)) / (
-            3.0 * 255 * len(a) * len(a[0]))
-
     check(mean_diff(shots["L"], shots["E"]) > 0.02, "L and E alone differ (%.3f)" % mean_diff(shots["L"], shots["E"]))
     check(mean_diff(shots["KE"], shots["K2E"]) > 0.01,
           "KE and K2E alone differ (%.3f)" % mean_diff(shots["KE"], shots["K2E"]))
-    url_round_trip(bounce, base, url, fixed, out, page, mean_diff)
-    print("%d failures" % len(failures))
-    sys.exit(1 if failures else 0)
+
+
+def open_view(tab, url):
+    """Opens a view of the page and waits until it has drawn (its title says ready); the DOM then."""
+    tab.goto(url)
+    ok = tab.wait("document.title === 'ready'", timeout=120) is not None
+    check(ok, "the page drew %s" % url.rsplit("#", 1)[-1])
+    return tab.dom() if ok else ""
+
+
+def shoot(tab, url, out, name):
+    """A screenshot of a view, kept as OUT/view-NAME.png and read back: its rows of pixels (None if none)."""
+    open_view(tab, url)
+    png = os.path.join(out, "view-%s.png" % name)
+    with open(png, "wb") as fh:
+        fh.write(tab.screenshot())
+    return read_png(png)
+
+
+def views(tab, url, out):
+    """The probes' pixels and the screenshots of L, E, KE, K2E (and K2E's simplified copy); None on failure."""
+    # where the probes land: the light's centre, the tall block's face toward the red wall, the short
+    # block's face toward the green wall (centroids, metres), the floor between the blocks
+    probes = [(0.278, 0.5485, 0.2795), (0.4475, 0.165, 0.3265), (0.106, 0.0825, 0.145), (0.28, 0.0, 0.06)]
+    q = ";".join(",".join("%g" % c for c in p) for p in probes)
+    dom = open_view(tab, url + FIXED + "lod=1&probe=" + q)
+    mark = '<pre id="probe" style'
+    check(mark in dom, "the page ran (its probe output is in the DOM)")
+    if mark not in dom:
+        return None
+    txt = dom.rsplit(mark, 1)[1].split(">", 1)[1].split("</pre>")[0]
+    pts = [tuple(float(v) for v in ln.split()) for ln in txt.strip().splitlines()]
+    # the simplified copy drawn while the camera moves (forced here with #lod=1; by default above 20k triangles)
+    m = re.search(r'id="info">(\d+) vertices, (\d+) triangles;[^<]*?; (\d+) while the camera moves', dom)
+    check("no antialiasing (software WebGL)" in dom,
+          "SwiftShader is recognised as software WebGL: antialiasing off by default (a third of the frame rate)")
+    check(m is not None and int(m.group(3)) < int(m.group(2)),
+          "#lod=1: a simplified copy for when the camera moves (%s)" % (", ".join(m.groups()) if m else "none"))
+    shots = {"probes": pts}
+    for name, frag in (("L", ""), ("E", "terms=E"), ("KE", "terms=KE&ev=3"), ("K2E", "terms=K2E&ev=3"),
+                       ("K2E-moving", "terms=K2E&ev=3&lod=1&moving=1")):
+        shots[name] = shoot(tab, url + FIXED + frag, out, name)
+    return shots
 
 
 def k2e_auto_ev(glb):
@@ -214,35 +237,37 @@ def k2e_auto_ev(glb):
     return math.log2(0.9 / lum[int(0.99 * (len(lum) - 1))])
 
 
-def url_round_trip(bounce, base, url, fixed, out, page, mean_diff):
+FIXED = "#panel=0&size=%dx%d&" % (W, H)   # the same canvas and projection in every view
+
+
+def url_round_trip(tab, url, out):
     """The address follows the view: a page opened at a view (terms, automatic exposure, camera, folded panel)
-    links to that view, and the link opens the same picture; the bake kept beside the page is shown again
-    without solving."""
+    links to that view, and the link opens the same picture."""
     state = "terms=K2E&ev=auto&cam=0.52,0.41,-0.62,0.27,0.2,0.3"
-    dom = subprocess.run(base + ["--dump-dom", url + fixed + state], capture_output=True, text=True).stdout
+    dom = open_view(tab, url + FIXED + state)
     m = re.search(r'<a id="link" href="#([^"]*)"', dom)
     link = m.group(1).replace("&amp;", "&") if m else ""
-    want = dict(kv.split("=", 1) for kv in (fixed[1:] + state).split("&") if kv)
+    want = dict(kv.split("=", 1) for kv in (FIXED[1:] + state).split("&") if kv)
     got = dict(kv.split("=", 1) for kv in link.split("&") if kv)
     check(all(got.get(k) == v for k, v in want.items()), "the page's link holds its view: %s" % link)
     ev = re.search(r'id="evtext">([-0-9.]+)<', dom)
-    kept = page[:-5] + ".bake.glb"
+    kept = os.path.join(out, "cornell.bake.glb")
     check(os.path.exists(kept), "bounce view kept the bake beside the page (%s)" % os.path.basename(kept))
     if ev and os.path.exists(kept):
         want_ev = k2e_auto_ev(kept)
         check(abs(float(ev.group(1)) - want_ev) < 0.06,
               "ev=auto on K2E alone: %s EV, its 99th percentile luminance at 0.9 says %.2f" % (ev.group(1), want_ev))
-    shots = []
-    for i, frag in enumerate((fixed + state, "#" + link)):
-        png = os.path.join(out, "view-link-%d.png" % i)
-        subprocess.run(base + ["--screenshot=" + png, url + frag], capture_output=True)
-        shots.append(read_png(png) if os.path.exists(png) else None)
-    check(all(shots) and mean_diff(shots[0], shots[1]) < 1e-3, "the link opens the same picture (mean difference %s)"
-          % ("%.2g" % mean_diff(shots[0], shots[1]) if all(shots) else "no screenshot"))
-    dom = subprocess.run(base + ["--dump-dom", url + "#panel=folded"], capture_output=True, text=True).stdout
+    shots = [shoot(tab, url + frag, out, "link-%d" % i) for i, frag in enumerate((FIXED + state, "#" + link))]
+    check(mean_diff(shots[0], shots[1]) < 1e-3, "the link opens the same picture (mean difference %.2g)"
+          % mean_diff(shots[0], shots[1]))
+    dom = open_view(tab, url + "#panel=folded")
     check('id="body" style="display: none;"' in dom and "panel=folded" in dom,
           "#panel=folded folds the panel, and its link says so")
-    again = os.path.join(out, "again.html")
+
+
+def bake_again(bounce, page, out):
+    """The bake kept beside the page is shown again without solving."""
+    kept, again = page[:-5] + ".bake.glb", os.path.join(out, "again.html")
     r = subprocess.run([bounce, "view", kept, "-o", again], capture_output=True, text=True)
     check(r.returncode == 0 and "transport" not in r.stderr and os.path.exists(again),
           "bounce view of the kept bake builds the page without solving (exit %d)" % r.returncode)
