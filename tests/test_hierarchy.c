@@ -322,6 +322,84 @@ BN_TEST(error_falls_with_eps)
     cornell_close(&c);
 }
 
+/* ---- a crease: the Cornell box's red wall, the original's non-planar quad as two triangles ---- */
+
+/* Per node of the exported links: its face when every patch below is on that face, else SIZE_MAX. */
+static size_t *node_faces(const bn_transport_links *lk, const bn_scene *s)
+{
+    const bn_patch *p = bn_scene_patches(s, NULL);
+    size_t *f = malloc(lk->nnodes * sizeof(size_t));
+    for (size_t v = lk->nnodes; v-- > 0;) {   /* children come after their parents */
+        uint32_t a = lk->child[v];
+        f[v] = a == BN_LINK_NONE ? p[lk->leaf_patch[v]].face : (f[a] == f[a + 1] ? f[a] : SIZE_MAX);
+    }
+    return f;
+}
+
+/* The red wall's two triangles meet at a concave crease, their normals 0.47 degrees apart: F between
+ * them is at most (1 - n_a . n_b) / 2 (the share of a's hemisphere facing b's front), 1.7e-5, which the
+ * exact form factors (dense F) obey. Their bounding spheres overlap along the crease, where refinement
+ * used to split every pair down to the patches (10% of the box's links for light F never above 1.7e-5):
+ * the hierarchy's F from one triangle to the other obeys the same bound, with few links between them. */
+BN_TEST(crease_links_are_few_and_bounded)
+{
+    cornell c;
+    bn_formfactor_opts fo;
+    bn_transport *kd = NULL, *kh;
+    bn_hierarchy_report rep;
+    bn_transport_links lk;
+    bn_error err;
+    cornell_open(&c, 1200);
+    const bn_patch *p = bn_scene_patches(c.s, NULL);
+    size_t nf, fa = SIZE_MAX, fb = SIZE_MAX, wall = SIZE_MAX;
+    const bn_face *f = bn_scene_faces(c.s, &nf);
+    for (size_t k = 0; k < bn_scene_object_count(c.s); k++)
+        if (!strcmp(bn_scene_object_name(c.s, k), "left_wall"))
+            wall = k;
+    for (size_t i = 0; i < nf; i++)
+        if (f[i].object == wall)
+            *(fa == SIZE_MAX ? &fa : &fb) = i;
+    BN_ASSERT(fa != SIZE_MAX && fb != SIZE_MAX);
+    double bound = 0.5 * (1 - (f[fa].normal[0] * f[fb].normal[0] + f[fa].normal[1] * f[fb].normal[1] +
+                               f[fa].normal[2] * f[fb].normal[2]));
+    bn_formfactor_opts_default(&fo);
+    fo.quiet = 1;
+    fo.exact_visibility = 0;   /* VISIBILITY */
+    BN_ASSERT_STATUS(bn_formfactor_build(c.s, c.rt, &fo, &kd, NULL, &err), BN_OK);
+    kh = hierarchy(&c, 1e-3, 1, &rep);
+    /* F x with x = 1 on face b: per patch of face a, F from it to b (dense and hierarchy) */
+    double *x = calloc(3 * c.n, sizeof(double)), *yd = calloc(3 * c.n, sizeof(double));
+    double *yh = calloc(3 * c.n, sizeof(double));
+    for (size_t i = 0; i < c.n; i++)
+        for (int ch = 0; ch < 3; ch++)
+            x[3 * i + ch] = p[i].face == fb;
+    BN_ASSERT_STATUS(bn_transport_apply_F(kd, x, yd, &err), BN_OK);
+    BN_ASSERT_STATUS(bn_transport_apply_F(kh, x, yh, &err), BN_OK);
+    double dense = 0, hier = 0;
+    for (size_t i = 0; i < c.n; i++)
+        if (p[i].face == fa) {
+            dense = fmax(dense, yd[3 * i]);
+            hier = fmax(hier, yh[3 * i]);
+        }
+    BN_ASSERT_STATUS(bn_transport_links_get(kh, &lk, &err), BN_OK);
+    size_t *nodef = node_faces(&lk, c.s), between = 0;
+    for (size_t r = 0; r < lk.nnodes; r++)
+        for (size_t l = lk.start[r]; l < lk.start[r + 1]; l++)
+            between += (nodef[r] == fa && nodef[lk.src[l]] == fb) || (nodef[r] == fb && nodef[lk.src[l]] == fa);
+    printf("crease: F bound %.3g; largest F from a patch of one triangle to the other: dense %.3g, hierarchy %.3g; "
+           "%zu of %zu links between the triangles\n", bound, dense, hier, between, lk.nlinks);
+    BN_ASSERT_LT(bound, 1e-4);
+    BN_ASSERT_LE(dense, bound);
+    BN_ASSERT_LE(hier, bound * (1 + 1e-6));
+    BN_ASSERT_LE((double)between, 0.01 * (double)lk.nlinks);
+    free(nodef);
+    bn_transport_links_free(&lk);
+    free(x), free(yd), free(yh);
+    bn_transport_destroy(kd);
+    bn_transport_destroy(kh);
+    cornell_close(&c);
+}
+
 /* ---- the furnace: a closed box, rho 0.9 and Le 1 everywhere, with a watertight sphere inside ---- */
 
 typedef struct ico {

@@ -30,6 +30,9 @@
  * from 77 M to 137 M (92 M now). */
 #define BN__COVERED 0.125
 #define BN__DARK 0.25
+/* Nodes whose bounding spheres overlap are split whatever their light, unless their normals bound F
+ * below this (bn__F_dihedral: nearly coplanar surfaces meeting at a crease); then the oracle decides. */
+#define BN__CREASE 1e-3
 
 /* eps in radiance for links into r: for a covered r, eps times its brightness against BN__DARK of the
  * typical reflected radiance, between BN__COVERED and 1 (1 before the first estimate of brightness). */
@@ -85,6 +88,18 @@ static int bn__culled(const bn__ref *R, uint32_t r, uint32_t s)
     if (fs >= 0 && bn__box_behind(t, r, t->pn + 3 * fs, t->pp + 3 * fs, R->tol - t->pthick[fs]))
         return 1;
     return 0;
+}
+
+/* A bound of F from r to s by their normals alone, however close: from a point of r (normal n, within
+ * spread_r of r's axis) the fronts below s (normals within spread_s of s's axis a) lie where d . n > 0 and
+ * d . a < sin spread_s. That set's cosine-weighted share of the hemisphere is at most (1 - cos psi) / 2,
+ * psi the largest angle between n and a (the wedge between two planes), plus 4 sin spread_s (the band
+ * |d . a| < sin spread_s, solid angle 4 pi sin spread_s, over pi). Two planes at 0.01 rad: 2.5e-5. */
+static double bn__F_dihedral(const bn__tree *t, uint32_t r, uint32_t s)
+{
+    double c = bn_v3_dot(t->normal + 3 * (size_t)r, t->normal + 3 * (size_t)s);
+    double psi = fmin(BN_PI, acos(bn_clamp(c, -1, 1)) + t->spread[r]);
+    return fmin(1.0, 0.5 * (1 - cos(psi)) + 4 * sin(fmin(t->spread[s], 0.5 * BN_PI)));
 }
 
 /* A bound of the form factor between r and s: A / (pi d_min^2) between their bounding spheres,
@@ -158,6 +173,18 @@ static double bn__link_error(const bn__ref *R, uint32_t r, uint32_t s)
 {
     double m = bn__link_weight(R, r, s);
     return m > 0 ? m * bn__F_bound(R->t, r, s) : 0;
+}
+
+/* The oracle for any pair: overlapping nodes are split whatever their light (INFINITY; see
+ * bn__separated) unless their normals alone bound F below BN__CREASE (nearly coplanar surfaces meeting
+ * at a crease), then rho_r B_s times that bound. */
+static double bn__link_error_near(const bn__ref *R, uint32_t r, uint32_t s)
+{
+    double b;
+    if (bn__separated(R->t, r, s))
+        return bn__link_error(R, r, s);
+    b = bn__F_dihedral(R->t, r, s);
+    return b <= BN__CREASE ? bn__link_weight(R, r, s) * b : INFINITY;
 }
 
 /* The F error a link may keep from its first look at visibility: BN__PARTIAL x eps in radiance (as
@@ -378,11 +405,14 @@ static float bn__link_F(const bn__ref *R, uint32_t r, uint32_t s, int split_if_p
             double sigma;
             F = bn__ff_pair_quick(R->pairs, w->ff, i, j, BN__LEAF_RAYS, BN__LEAF_RTOL, bn__link_ftol(R, r, s), &sigma,
                                   partial);
+            F = fmin(F, bn__F_dihedral(t, r, s));   /* an estimate, never above what the normals allow */
         }
     } else {
         F = bn__F_sampled(R, r, s, split_if_partial, w, partial);
         if (F < 0)
             return -1;
+        if (t->plane[r] >= 0)   /* a polygon's node: F per unit area, never above what the normals allow */
+            F = fmin(F, bn__F_dihedral(t, r, s));
     }
     return (float)fmin(fmax(F, 0.0), 1.0);
 }
@@ -413,8 +443,7 @@ static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int par
         return;
     split = 0;
     if (sr || ss) {
-        double e = R->force || !bn__separated(t, r, s) || !bn__can_receive(R, r, s) ? INFINITY
-                                                                                    : bn__link_error(R, r, s);
+        double e = R->force || !bn__can_receive(R, r, s) ? INFINITY : bn__link_error_near(R, r, s);
         double eps = bn__eps_at(R, r);
         split = e > (F >= 0 && partial ? BN__PARTIAL : 1.0) * eps;
         if (!split && F < 0) {   /* accepted as it stands: its F, and a second look if partly visible */
