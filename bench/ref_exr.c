@@ -58,22 +58,35 @@ static int read_layer(const char *path, const char *layer, exr_img *im, float *o
 
 int exr_img_load(const char *path, const char *layer, exr_img *im, int with_var)
 {
-    exr_img probe = {0};
     char var[256];
     exr_context_t ctx;
     exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
     exr_attr_box2i_t dw;
-    if (exr_start_read(&ctx, path, &init) != EXR_ERR_SUCCESS)
+    *im = (exr_img){0};   /* freeable whatever happens below */
+    if (exr_start_read(&ctx, path, &init) != EXR_ERR_SUCCESS) {
+        fprintf(stderr, "%s: cannot be read as OpenEXR\n", path);
         return 0;
+    }
     exr_get_data_window(ctx, 0, &dw);
     exr_finish(&ctx);
-    probe.w = dw.max.x - dw.min.x + 1;
-    probe.h = dw.max.y - dw.min.y + 1;
-    *im = probe;
-    im->L = calloc((size_t)3 * probe.w * probe.h, sizeof(float));
-    im->var = with_var ? calloc((size_t)3 * probe.w * probe.h, sizeof(float)) : NULL;
+    im->w = dw.max.x - dw.min.x + 1;
+    im->h = dw.max.y - dw.min.y + 1;
+    im->L = calloc((size_t)3 * im->w * im->h, sizeof(float));
+    im->var = with_var ? calloc((size_t)3 * im->w * im->h, sizeof(float)) : NULL;
+    if (!im->L || (with_var && !im->var)) {
+        fprintf(stderr, "%s: out of memory for a %dx%d layer\n", path, im->w, im->h);
+        return 0;
+    }
     snprintf(var, sizeof var, "%s_var", layer);
-    return read_layer(path, layer, im, im->L) && (!with_var || read_layer(path, var, im, im->var));
+    if (!read_layer(path, layer, im, im->L)) {
+        fprintf(stderr, "%s: no layer %s (channels %s.R, %s.G, %s.B)\n", path, layer, layer, layer, layer);
+        return 0;
+    }
+    if (with_var && !read_layer(path, var, im, im->var)) {
+        fprintf(stderr, "%s: no layer %s (a reference from `bounce trace` has one per term)\n", path, var);
+        return 0;
+    }
+    return 1;
 }
 
 void exr_img_free(exr_img *im)

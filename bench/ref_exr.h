@@ -10,7 +10,8 @@ typedef struct exr_img {
     float *L, *var;   /* 3wh each (var NULL when absent) */
 } exr_img;
 
-/* Layer `layer` (and `layer`_var with with_var) of an EXR into im (allocated); 0 when absent. */
+/* Layer `layer` (and `layer`_var with with_var) of an EXR into im (allocated; free it with exr_img_free
+ * whatever the result); 0, with a message on stderr naming the file and layer, when absent. */
 int exr_img_load(const char *path, const char *layer, exr_img *im, int with_var);
 void exr_img_free(exr_img *im);
 /* The median relative error (noise-corrected), raw, and the reference's own median standard error. */
