@@ -844,7 +844,7 @@ BN_TEST(floor_under_a_slab_is_kept_apart)
     unsigned char *cls = malloc(c.n);
     bn_trace_point *pts = malloc(c.n * sizeof *pts);
     size_t np = 0, bad = 0;
-    bn_rt_cover_classes(c.rt, cls);
+    BN_ASSERT(bn_rt_cover_classes(c.rt, cls) != SIZE_MAX);
     for (size_t i = 0; i < c.n; i++) {
         int w = slab_where(&pt[i]);
         bad += (w == 1 && cls[i] != BN_COVER_SHUT) || (w == 0 && cls[i] != BN_COVER_OPEN);

@@ -4,6 +4,7 @@
 #define BOUNCE_RT_H
 
 #include <stddef.h>
+#include <stdint.h>
 #include "bounce/scene.h"
 
 #ifdef __cplusplus
@@ -46,7 +47,7 @@ size_t bn_rt_enclosed_patches(const bn_rt *rt, unsigned char *enclosed);
 /* The same rays, four classes (bn_cover), so that patches whose views of the scene differ this much
  * never share a node of the hierarchy (a node hands every patch below it its mean form factor: the
  * floor under an object took the light its open neighbours see, 3 to 7 times its own). Returns how
- * many are partly covered (BACK or SHUT). */
+ * many are partly covered (BACK or SHUT), or SIZE_MAX when out of memory (cls then unset). */
 enum bn_cover {
     BN_COVER_OPEN = 0,
     BN_COVER_SHUT = 1,       /* half the rays meet a back face or a face nearer than the patch's size

@@ -341,7 +341,10 @@ static bn_status bn__hierarchy_body(const bn_scene *scene, const bn_rt *rt, cons
         unsigned char *cover = bn__calloc(np ? np : 1, 1);
         if (!cover)
             return bn_error_set(err, BN_ENOMEM, "out of memory for %zu patches", np);
-        bn_rt_cover_classes(rt, cover);
+        if (bn_rt_cover_classes(rt, cover) == SIZE_MAX) {
+            free(cover);
+            return bn_error_set(err, BN_ENOMEM, "out of memory for the cover classes of %zu patches", np);
+        }
         st = bn__tree_build(scene, !(o->eps == 0 || o->exact_leaf_links), cover, &B.t, err);
         free(cover);
         if (st != BN_OK)

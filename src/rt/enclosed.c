@@ -6,6 +6,7 @@
 #include "base/vec.h"
 
 #include <math.h>
+#include <stdint.h>
 #include <stdlib.h>
 
 /* Rays per patch, and the share of them that must meet a back face. */
@@ -73,12 +74,8 @@ size_t bn_rt_cover_classes(const bn_rt *rt, unsigned char *cls)
     size_t np, count = 0;
     bn_scene_patches(bn_rt_scene(rt), &np);
     unsigned char *shut = malloc(np ? np : 1);
-    if (!shut) {   /* the enclosed ones alone: the tree as it was before these classes */
-        bn_rt_enclosed_patches(rt, cls);
-        for (size_t i = 0; i < np; i++)
-            cls[i] = cls[i] ? BN_COVER_ENCLOSED : BN_COVER_OPEN;
-        return 0;
-    }
+    if (!shut)
+        return SIZE_MAX;   /* the caller says so: classes quietly missing would change the hierarchy's links */
     bn__back_counts(rt, cls, shut);
     for (size_t i = 0; i < np; i++) {
         unsigned n = cls[i];
