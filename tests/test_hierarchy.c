@@ -13,6 +13,7 @@
 #include "bounce/pipeline.h"
 #include "bounce/rt.h"
 #include "bounce/trace.h"
+#include "base/vec.h"
 #include "formfactor/ff_internal.h"
 #include "formfactor/ff_pair.h"
 
@@ -360,8 +361,7 @@ BN_TEST(crease_links_are_few_and_bounded)
         if (f[i].object == wall)
             *(fa == SIZE_MAX ? &fa : &fb) = i;
     BN_ASSERT(fa != SIZE_MAX && fb != SIZE_MAX);
-    double bound = 0.5 * (1 - (f[fa].normal[0] * f[fb].normal[0] + f[fa].normal[1] * f[fb].normal[1] +
-                               f[fa].normal[2] * f[fb].normal[2]));
+    double bound = 0.5 * (1 - bn_v3_dot(f[fa].normal, f[fb].normal));
     bn_formfactor_opts_default(&fo);
     fo.quiet = 1;
     fo.exact_visibility = 0;   /* VISIBILITY */
