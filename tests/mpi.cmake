@@ -7,7 +7,8 @@ if(BOUNCE_MPI)
   set_tests_properties(mpi.identical_to_one_process PROPERTIES LABELS mpi TIMEOUT 900 SKIP_RETURN_CODE 77)
   if(BOUNCE_SANITIZE)
     # identity checks only (no kill or interrupt rows, whose timing wants the machine to itself): beside
-    # the other tests, started early (26 s, most of it LeakSanitizer's slow unwinding in every rank)
+    # the other tests, started early (17 s alone, most of it LeakSanitizer's slow unwinding in the ranks
+    # whose leaks are looked for: tests/mpi_check.sh says which)
     set_tests_properties(mpi.identical_to_one_process PROPERTIES ENVIRONMENT "BN_TEST_SANITIZED=1" COST 30)
   else()
     set_tests_properties(mpi.identical_to_one_process PROPERTIES RUN_SERIAL TRUE)
