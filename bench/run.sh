@@ -145,12 +145,14 @@ run_prog() {   # run_prog NAME TITLE ARGS...
 if [ "$quick" = 1 ]; then
     run_prog ff_bench "Form factors: assembly throughput against the raw Embree ray rate" --quick
     run_prog solve_bench "Solves: K application against the STREAM triad; iterative against direct" --quick
+    run_prog hop_bench "The hierarchy's K application against the STREAM triad" --eps 1e-4
     run_prog trace_bench "Path tracer: rays/s against the raw Embree ray rate; equal error" --quick
     run_prog gather_bench "Final gather: time to 1% median per-pixel error against the path tracer" --quick --size 128 \
         --ref-spp 1024 --ref-cache "$build/bench/gather-ref-128-1024.bin"
 else
     run_prog ff_bench "Form factors: assembly throughput against the raw Embree ray rate"
     run_prog solve_bench "Solves: K application against the STREAM triad; iterative against direct"
+    run_prog hop_bench "The hierarchy's K application against the STREAM triad"
     run_prog trace_bench "Path tracer: rays/s against the raw Embree ray rate; equal error"
     # the reference (the tracer at 4096 spp, ~130 s here) is cached beside the program for later runs
     run_prog gather_bench "Final gather: time to 1% median per-pixel error against the path tracer" \

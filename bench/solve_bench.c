@@ -5,6 +5,7 @@
 #include "bounce/solve.h"
 #include "bounce/transport.h"
 #include "base/internal.h"
+#include "triad.h"
 
 #include <math.h>
 #include <omp.h>
@@ -12,46 +13,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return x < y ? -1 : x > y;
-}
-
-static double median(double *v, int n)
-{
-    qsort(v, (size_t)n, sizeof *v, cmp_double);
-    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
-/* STREAM triad a = b + s c over arrays far larger than the caches; bytes counted as STREAM does
- * (3 x 8 per element, no write-allocate). Returns GB/s (median of reps). */
-static double triad_gbs(size_t n, int reps)
-{
-    double *a = malloc(n * sizeof(double)), *b = malloc(n * sizeof(double)), *c = malloc(n * sizeof(double));
-    double t[32], s = 3.0;
-    long ln = (long)n;
-#pragma omp parallel for schedule(static)
-    for (long i = 0; i < ln; i++) {
-        a[i] = 0;
-        b[i] = 1;
-        c[i] = 2;
-    }
-    for (int r = 0; r < reps; r++) {
-        double t0 = bn__now();
-#pragma omp parallel for schedule(static)
-        for (long i = 0; i < ln; i++)
-            a[i] = b[i] + s * c[i];
-        t[r] = bn__now() - t0;
-    }
-    if (a[n / 2] != 7.0)
-        fprintf(stderr, "triad check failed\n");
-    free(a);
-    free(b);
-    free(c);
-    return 3.0 * 8.0 * (double)n / median(t, reps) / 1e9;
-}
 
 static uint64_t rng = 0x2545F4914F6CDD1DULL;
 static double urand(void)
@@ -155,9 +116,9 @@ int main(int argc, char **argv)
     {
         size_t tn = quick ? (size_t)1 << 22 : (size_t)1 << 25;
         omp_set_num_threads(1);
-        triad1 = triad_gbs(tn, reps);
+        triad1 = bench_triad_gbs(tn, reps);
         omp_set_num_threads(threads);
-        triad = triad_gbs(tn, reps);
+        triad = bench_triad_gbs(tn, reps);
     }
     printf("# solve_bench: dense-float K application and solves (%d threads; median of %d)\n\n", threads, reps);
     printf("STREAM-like triad: %.1f GB/s on 1 thread, %.1f GB/s on %d threads\n\n", triad1, triad, threads);
@@ -183,7 +144,7 @@ int main(int argc, char **argv)
             bn_transport_apply(k, x, y, NULL);
             t[r] = bn__now() - t0;
         }
-        apply = median(t, reps);
+        apply = bench_median(t, reps);
         omp_set_num_threads(1);
         for (int r = 0; r < reps; r++) {
             double t0 = bn__now();
@@ -191,7 +152,7 @@ int main(int argc, char **argv)
             t1[r] = bn__now() - t0;
         }
         omp_set_num_threads(threads);
-        apply1 = median(t1, reps);
+        apply1 = bench_median(t1, reps);
         {
             double t0 = bn__now();
             for (size_t i = 0; i < n; i++) {

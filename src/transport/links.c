@@ -71,7 +71,7 @@ size_t bn__hop_link_bytes(const bn__hop *h)
 size_t bn__hop_bytes(const void *ctx)
 {
     const bn__hop *h = ctx;
-    return h->n * (4 * sizeof(uint32_t) + sizeof(double) + 3 * sizeof(float) + sizeof(size_t) + 6 * sizeof(double)) +
+    return h->n * (4 * sizeof(uint32_t) + sizeof(double) + 3 * sizeof(float) + sizeof(size_t) + 7 * sizeof(double)) +
            h->nclusters * 9 * sizeof(double) + bn__hop_link_bytes(h) +
            (h->distributed ? h->npatch * (sizeof(uint32_t) + 3 * sizeof(double)) : 0) +
            (h->rowscale ? h->npatch * sizeof(double) : 0);
@@ -101,7 +101,7 @@ bn_status bn__hop_make(const bn__hop_shape *t, const bn__link *links, size_t nli
     h->src = bn__malloc_array(kept ? kept : 1, sizeof *h->src);
     h->F = bn__malloc_array(kept ? kept : 1, sizeof *h->F);
     h->dir = bn__calloc(kept ? kept : 1, sizeof *h->dir);
-    h->Bn = bn__malloc_array(3 * n, sizeof(double));
+    h->Bn = bn__malloc_array(4 * n, sizeof(double));
     h->distributed = bn_dist_size() > 1;
     if (h->distributed) {
         size_t P = (size_t)bn_dist_size();
@@ -154,21 +154,23 @@ oom:
     return bn_error_set(err, BN_ENOMEM, "out of memory for %zu links of the hierarchy", kept);
 }
 
-/* Pull: each node's B, the area-weighted mean of its children's, children before parents. */
+/* Pull: each node's B, the area-weighted mean of its children's, children before parents; four
+ * doubles a node (the fourth 0), so that a link's source is one aligned load. */
 static void bn__hop_pull(bn__hop *h, const double *x)
 {
     double *B = h->Bn;
     for (size_t v = h->n; v-- > 0;) {
         uint32_t c = h->child[v];
+        B[4 * v + 3] = 0;
         if (c == BN__NONE) {
             const double *xp = x + 3 * (size_t)h->leaf_patch[v];
-            B[3 * v] = xp[0];
-            B[3 * v + 1] = xp[1];
-            B[3 * v + 2] = xp[2];
+            B[4 * v] = xp[0];
+            B[4 * v + 1] = xp[1];
+            B[4 * v + 2] = xp[2];
         } else {
             double a0 = h->area[c], a1 = h->area[c + 1], inv = 1.0 / h->area[v];
             for (int k = 0; k < 3; k++)
-                B[3 * v + k] = (a0 * B[3 * (size_t)c + k] + a1 * B[3 * ((size_t)c + 1) + k]) * inv;
+                B[4 * v + k] = (a0 * B[4 * (size_t)c + k] + a1 * B[4 * ((size_t)c + 1) + k]) * inv;
         }
     }
 }
@@ -180,7 +182,7 @@ static void bn__hop_gather_cluster(const bn__hop *h, size_t v)
     memset(gv, 0, 9 * sizeof(double));
     h->G[3 * v] = h->G[3 * v + 1] = h->G[3 * v + 2] = 0;
     for (size_t l = h->start[v]; l < h->start[v + 1]; l++) {
-        const double *b = h->Bn + 3 * (size_t)h->src[l];
+        const double *b = h->Bn + 4 * (size_t)h->src[l];
         double f = h->F[l], u[3];
         bn__oct_decode(h->dir[l], u);
         for (int c = 0; c < 3; c++)
@@ -189,28 +191,50 @@ static void bn__hop_gather_cluster(const bn__hop *h, size_t v)
     }
 }
 
-/* Gather along each receiver's links (each sum in link order: the same for any thread count). */
+/* AVX2 where the CPU has it (chosen at run time), SSE2 otherwise; ISO C mode (-std=c17) keeps
+ * floating-point contraction off, so both clones compute the very same sums. */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(__SANITIZE_ADDRESS__)
+#define BN__CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define BN__CLONES
+#endif
+
+/* A planar receiver's links [lo, hi): g = sum F B over four partial sums (link l into sum l mod 4,
+ * added in a fixed order at the end: the same for any thread count). Each link is one 4-double
+ * source; four independent chains keep the adds' latency off the critical path. */
+BN__CLONES static void bn__hop_gather_planar(const uint32_t *src, const float *F, size_t lo, size_t hi,
+                                             const double *B, double g[3])
+{
+    double a[4][4] = {{0}};
+    size_t l = lo;
+    for (; l + 4 <= hi; l += 4)
+        for (int m = 0; m < 4; m++) {
+            const double *b = B + 4 * (size_t)src[l + (size_t)m];
+            double f = (double)F[l + (size_t)m];
+            for (int k = 0; k < 4; k++)
+                a[m][k] += f * b[k];
+        }
+    for (size_t m = 0; l + m < hi; m++) {
+        const double *b = B + 4 * (size_t)src[l + m];
+        double f = (double)F[l + m];
+        for (int k = 0; k < 4; k++)
+            a[m][k] += f * b[k];
+    }
+    for (int k = 0; k < 3; k++)
+        g[k] = (a[0][k] + a[1][k]) + (a[2][k] + a[3][k]);
+}
+
+/* Gather along each receiver's links (each sum in a fixed order: the same for any thread count). */
 static void bn__hop_gather(bn__hop *h)
 {
     long ln = (long)h->n;
 #pragma omp parallel for schedule(dynamic, 1024)
     for (long lv = 0; lv < ln; lv++) {
         size_t v = (size_t)lv;
-        double g0 = 0, g1 = 0, g2 = 0;
-        if (h->cl[v] != BN__NONE) {
+        if (h->cl[v] != BN__NONE)
             bn__hop_gather_cluster(h, v);
-            continue;
-        }
-        for (size_t l = h->start[v]; l < h->start[v + 1]; l++) {
-            const double *b = h->Bn + 3 * (size_t)h->src[l];
-            double f = h->F[l];
-            g0 += f * b[0];
-            g1 += f * b[1];
-            g2 += f * b[2];
-        }
-        h->G[3 * v] = g0;
-        h->G[3 * v + 1] = g1;
-        h->G[3 * v + 2] = g2;
+        else
+            bn__hop_gather_planar(h->src, h->F, h->start[v], h->start[v + 1], h->Bn, h->G + 3 * v);
     }
 }
 

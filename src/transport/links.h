@@ -53,7 +53,7 @@ typedef struct bn__hop {
     uint16_t *dir;            /* per link: the direction to the source (cluster receivers) */
     double *rowscale;         /* npatch: each leaf's row scaled to its exact sum (NULL: none; set by
                                  src/hierarchy after freezing, owned) */
-    double *Bn, *G;           /* 3n each: scratch of apply */
+    double *Bn, *G;           /* scratch of apply: 4n (a node's B and a 0), 3n */
     double *Gv;               /* 9 per cluster: what it gathers, per channel as a vector */
     /* under mpirun (P > 1): rank q's leaves are [bound[q], bound[q + 1]) in the tree's leaf order; a rank
      * holds the links of every receiver whose leaves meet its own, so its leaves' values are exact, and
