@@ -397,7 +397,7 @@ static void check_grazing_points(const char *name, const double *A, const double
             uint32_t mask;
             for (int c = 0; c < 3; c++)
                 x[c] = (1 - s) * (1 - t) * A[c] + s * (1 - t) * A[3 + c] + s * t * A[6 + c] + (1 - s) * t * A[9 + c];
-            f[a][k] = bn__ff_point_visible(x, n, b, 4, bn_, occ, occ_n, nocc, tol, &mask);
+            f[a][k] = bn__ff_point_visible(x, n, b, 4, bn_, occ, occ_n, NULL, nocc, tol, &mask);
             u[a][k] = bn__ff_point_polygon(x, n, b, 4);
             bad += !(f[a][k] >= 0 && f[a][k] <= u[a][k] * (1 + 1e-9));
             shadowed += mask != 0;
@@ -412,6 +412,48 @@ static void check_grazing_points(const char *name, const double *A, const double
     BN_ASSERT_GT(shadowed, 0);
     BN_ASSERT_EQ(bad, 0);
     BN_ASSERT_EQ(outliers, 0);
+}
+
+/* A convex solid's faces seen from behind, left out (the cull planes bn__exact_visible gives when
+ * every point is outside the solid), change nothing: a unit cube floating between a floor patch and
+ * a wall, its six faces the occluders, from a grid of floor points whose views the cube crosses;
+ * what each point sees of the wall equals the value with every face clipped and cut, to 1e-12 of
+ * F(x -> b), and some faces are left out at every point. */
+BN_TEST(point_visible_back_faces_left_out_agree)
+{
+    /* the cube [1, 2] x [0.5, 1.5] x [1, 2], each face counter-clockwise seen from outside */
+    static const double occ[72] = {
+        1, 0.5, 1, 1, 1.5, 1, 2, 1.5, 1, 2, 0.5, 1,   2, 0.5, 2, 2, 1.5, 2, 1, 1.5, 2, 1, 0.5, 2,
+        1, 0.5, 1, 1, 0.5, 2, 1, 1.5, 2, 1, 1.5, 1,   2, 0.5, 1, 2, 1.5, 1, 2, 1.5, 2, 2, 0.5, 2,
+        1, 0.5, 1, 2, 0.5, 1, 2, 0.5, 2, 1, 0.5, 2,   1, 1.5, 1, 1, 1.5, 2, 2, 1.5, 2, 2, 1.5, 1};
+    static const double out[6][4] = {{0, 0, -1, -1}, {0, 0, 1, 2}, {-1, 0, 0, -1}, {1, 0, 0, 2}, {0, -1, 0, -0.5},
+                                      {0, 1, 0, 1.5}};
+    const unsigned on[6] = {4, 4, 4, 4, 4, 4};
+    const double b[12] = {0, 0, 3, 0, 3, 3, 3, 3, 3, 3, 0, 3}, bn_[3] = {0, 0, -1}, n[3] = {0, 1, 0};
+    double cull[24], worst = 0;
+    size_t shadowed = 0, points = 0;
+    for (int f = 0; f < 6; f++)
+        memcpy(cull + 4 * f, out[f], sizeof out[f]);
+    for (int a = 0; a < 40; a++)
+        for (int k = 0; k < 40; k++) {
+            double x[3] = {0.05 + 2.9 * a / 39.0, 0, 0.05 + 0.9 * k / 39.0};
+            uint32_t m1, m2;
+            double all = bn__ff_point_visible(x, n, b, 4, bn_, occ, on, NULL, 6, 1e-9, &m1);
+            double front = bn__ff_point_visible(x, n, b, 4, bn_, occ, on, cull, 6, 1e-9, &m2);
+            double u = bn__ff_point_polygon(x, n, b, 4);
+            int behind = 0;   /* faces x sees from behind: left out */
+            for (int f = 0; f < 6; f++)
+                behind += out[f][0] * x[0] + out[f][1] * x[1] + out[f][2] * x[2] <= out[f][3];
+            BN_ASSERT_GE(behind, 2);
+            worst = fmax(worst, fabs(all - front) / u);
+            shadowed += m1 != 0 && all < u * (1 - 1e-6);
+            BN_ASSERT_EQ(m1 != 0, m2 != 0);
+            points++;
+        }
+    fprintf(stderr, "cube between floor and wall: %zu points, %zu shadowed; largest |left out - all| %.2e of F\n",
+            points, shadowed, worst);
+    BN_ASSERT_GT(shadowed, points / 4);
+    BN_ASSERT_LT(worst, 1e-12);
 }
 
 BN_TEST(point_visible_grazing_is_continuous)

@@ -26,9 +26,12 @@ double bn__ff_point_polygon(const double x[3], const double n[3], const double *
  * boundary of b minus the occluders' projections from x); tol: the scene's geometric tolerance.
  * *shadowed: bit q set if occluder q's projection from x meets b (the value is below F(x -> b) only
  * if some bit is set; once one projection covers b the later occluders are not looked at); where
- * it changes over a patch, the integrand has a crease. */
+ * it changes over a patch, the integrand has a crease. cull: NULL, or per occluder a plane (unit normal,
+ * offset; NAN offset: none): an occluder with x on the plane's inner side is left out (a convex solid's
+ * face seen from behind, when bn__solid_back_faces_hidden says its front faces hide all it would). */
 double bn__ff_point_visible(const double x[3], const double n[3], const double *b, size_t nb, const double bn[3],
-                            const double *occ, const unsigned *occ_n, size_t nocc, double tol, uint32_t *shadowed);
+                            const double *occ, const unsigned *occ_n, const double *cull, size_t nocc, double tol,
+                            uint32_t *shadowed);
 
 /* Clips the convex polygon v (nv corners) to the half-space n.(y - p) >= 0; corners within
  * `tol` of the plane are snapped onto it. out needs room for nv + 1 corners. Returns the count
@@ -58,8 +61,8 @@ double bn__ff_polygon_integral(const double *pi, size_t ni, const double ni_n[3]
  * same adaptive rules. Zero wherever no occluder is in view, so the rules spend nothing there and
  * the unoccluded kernel's own peaks (shared edges, near pairs) are left to the closed form. */
 double bn__ff_blocked_integral(const double *pi, size_t ni, const double ni_n[3], const double *pj, size_t nj,
-                               const double *occ, const unsigned *occ_n, size_t nocc, double gtol, int split,
-                               double rtol, double atol, bn__quad_stats *st);
+                               const double *occ, const unsigned *occ_n, const double *cull, size_t nocc, double gtol,
+                               int split, double rtol, double atol, bn__quad_stats *st);
 
 /* The same integral, A_i F_ij, as a double contour integral whose inner integral is closed-form and
  * whose outer one is adaptive Gauss-Kronrod to max(rtol |A_i F_ij|, atol) (see kernel.c): exact to that at every
@@ -98,6 +101,15 @@ size_t bn__solid_of(const bn__solids *s, size_t f);
  * solid)? Exact up to tol: every segment meets the solid's interior shrunk by tol. */
 int bn__solid_blocks_all(const bn__solids *s, size_t k, const double *a, size_t na, const double *b, size_t nb,
                          double tol);
+/* May the faces of solid k seen from behind be left out of what hides anything from every point x of
+ * polygon v (nv corners)? Yes when v lies beyond tol outside one of H's planes and on the inner side
+ * of its missing facet (if any): a segment from such an x that meets a face of k seen from behind
+ * enters H first, nearer x, through a face seen from the front, which hides the same points. */
+int bn__solid_back_faces_hidden(const bn__solids *s, size_t k, const double *v, size_t nv, double tol);
+/* The outward plane (unit normal, offset: inside n.x <= d) of solid k that holds the face with unit
+ * normal fn through point p, into out; 0 when none does. */
+int bn__solid_face_plane(const bn__solids *s, size_t k, const double fn[3], const double p[3], double tol,
+                         double out[4]);
 
 /* Uniform point in a convex polygon from (u, v) in [0,1)^2 (fan triangles chosen by area). */
 void bn__poly_sample(const double *v, size_t nv, double u, double w, double out[3]);

@@ -618,6 +618,23 @@ static int bn__face_blocks_all(const bn__ffg *g, size_t f, const bn__pair *p)
     return 1;
 }
 
+/* Per occluder, the plane that leaves it out where it is seen from behind (bn__ff_point_visible's cull):
+ * a face of a convex solid that neither patch is on, when every point x of polygon v (the integrated
+ * patch) is outside the solid (bn__solid_back_faces_hidden); NAN offset otherwise. Cornell box: 12.0 M of
+ * the 27.2 M faces the points would clip (44%), and 28% of the form factors' CPU time. */
+static void bn__cull_planes(const bn__ffg *g, const size_t *occ, size_t nocc, size_t i, size_t j, const double *v,
+                            size_t nv, double *cull)
+{
+    size_t si = bn__solid_of(g->solids, g->patch[i].face), sj = bn__solid_of(g->solids, g->patch[j].face);
+    for (size_t q = 0; q < nocc; q++) {
+        size_t k = bn__solid_of(g->solids, occ[q]);
+        cull[4 * q + 3] = NAN;
+        if (k != SIZE_MAX && k != si && k != sj && bn__solid_back_faces_hidden(g->solids, k, v, nv, g->tol) &&
+            !bn__solid_face_plane(g->solids, k, g->fn + 3 * occ[q], g->fv + 12 * occ[q], g->tol, cull + 4 * q))
+            cull[4 * q + 3] = NAN;
+    }
+}
+
 /* A_i F_ij with visibility for a pair whose shaft holds at most BN__VIS_OCC_MAX faces, none of
  * which hides it wholly (bn__face_blocks_all, tried first by the caller), exactly: I, the
  * unoccluded value (closed form), minus the integral over one patch of the part of the other that
@@ -641,7 +658,8 @@ static int bn__face_blocks_all(const bn__ffg *g, size_t f, const bn__pair *p)
 static double bn__exact_visible(const bn__ffg *g, double I, size_t i, size_t j, const bn__pair *p,
                                 const size_t *occ, size_t nocc, bn__counts *cnt)
 {
-    double ov[12 * BN__VIS_OCC_MAX], G, da = bn__diam(p->a, p->na), db = bn__diam(p->b, p->nb);
+    double ov[12 * BN__VIS_OCC_MAX], cull[4 * BN__VIS_OCC_MAX], G;
+    double da = bn__diam(p->a, p->na), db = bn__diam(p->b, p->nb);
     unsigned on[BN__VIS_OCC_MAX];
     bn__quad_stats qs;
     const double *ni = g->patch[i].normal, *nj = g->patch[j].normal;
@@ -655,10 +673,11 @@ static double bn__exact_visible(const bn__ffg *g, double I, size_t i, size_t j, 
         on[q] = g->fnc[occ[q]];
         memcpy(ov + 12 * q, g->fv + 12 * occ[q], 3 * on[q] * sizeof(double));
     }
-    G = from_b ? bn__ff_blocked_integral(p->b, p->nb, nj, p->a, p->na, ov, on, nocc, g->tol, split, BN__VIS_RTOL,
-                                         1e-3 * BN__VIS_RTOL * I, &qs)
-               : bn__ff_blocked_integral(p->a, p->na, ni, p->b, p->nb, ov, on, nocc, g->tol, split, BN__VIS_RTOL,
-                                         1e-3 * BN__VIS_RTOL * I, &qs);
+    bn__cull_planes(g, occ, nocc, i, j, from_b ? p->b : p->a, from_b ? p->nb : p->na, cull);
+    G = from_b ? bn__ff_blocked_integral(p->b, p->nb, nj, p->a, p->na, ov, on, cull, nocc, g->tol, split,
+                                         BN__VIS_RTOL, 1e-3 * BN__VIS_RTOL * I, &qs)
+               : bn__ff_blocked_integral(p->a, p->na, ni, p->b, p->nb, ov, on, cull, nocc, g->tol, split,
+                                         BN__VIS_RTOL, 1e-3 * BN__VIS_RTOL * I, &qs);
     cnt->evals += qs.evals;
     /* the visible part of P is a part of P; where no point saw any of it, the rules' integral of
      * it is 0 exactly (I - G would be the rules' error on the unoccluded kernel instead) */

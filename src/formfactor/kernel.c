@@ -54,6 +54,7 @@ typedef struct bn__qctx {
     double tol_per_area;   /* tolerance per unit area of P_i */
     bn__quad_stats *st;
     const double *occ;     /* occluders (bn__ff_point_visible), or none */
+    const double *cull;    /* their planes for leaving faces seen from behind out, or NULL */
     const unsigned *occ_n;
     size_t nocc;
     double gtol;
@@ -79,7 +80,8 @@ static double bn__eval(bn__qctx *q, const double a[3], const double b[3], const 
     q->st->evals++;
     if (q->nocc) {
         uint32_t mask;
-        double f = bn__ff_point_visible(x, q->ni_n, q->pj, q->nj, q->nj_n, q->occ, q->occ_n, q->nocc, q->gtol, &mask);
+        double f = bn__ff_point_visible(x, q->ni_n, q->pj, q->nj, q->nj_n, q->occ, q->occ_n, q->cull, q->nocc, q->gtol,
+                                        &mask);
         q->st->seen += f > 0;
         if (q->npoints++ == 0)
             q->shadowed = mask != 0;
@@ -349,13 +351,14 @@ double bn__ff_polygon_integral(const double *pi, size_t ni, const double ni_n[3]
 #define BN__VIS_MIXED_DEPTH 4
 
 double bn__ff_blocked_integral(const double *pi, size_t ni, const double ni_n[3], const double *pj, size_t nj,
-                               const double *occ, const unsigned *occ_n, size_t nocc, double gtol, int split,
-                               double rtol, double atol, bn__quad_stats *st)
+                               const double *occ, const unsigned *occ_n, const double *cull, size_t nocc, double gtol,
+                               int split, double rtol, double atol, bn__quad_stats *st)
 {
     bn__qctx q;
     memset(&q, 0, sizeof q);
     q.occ = occ;
     q.occ_n = occ_n;
+    q.cull = cull;
     q.nocc = nocc;
     q.gtol = gtol;
     q.split = split;

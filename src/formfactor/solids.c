@@ -437,3 +437,28 @@ int bn__solid_blocks_all(const bn__solids *s, size_t k, const double *a, size_t 
         }
     return 1;
 }
+
+int bn__solid_back_faces_hidden(const bn__solids *s, size_t k, const double *v, size_t nv, double tol)
+{
+    const double *pl = s->plane + k * 4 * BN__SOLID_PLANES_MAX;
+    int np = s->nplanes[k], mi = s->missing[k];
+    if (!bn__outside(pl, np, v, nv, -tol))   /* beyond tol of one plane */
+        return 0;
+    for (size_t c = 0; mi >= 0 && c < nv; c++)
+        if (bn_v3_dot(pl + 4 * mi, v + 3 * c) - pl[4 * mi + 3] > tol)
+            return 0;
+    return 1;
+}
+
+int bn__solid_face_plane(const bn__solids *s, size_t k, const double fn[3], const double p[3], double tol,
+                         double out[4])
+{
+    const double *pl = s->plane + k * 4 * BN__SOLID_PLANES_MAX;
+    for (int q = 0; q < s->nplanes[k]; q++)
+        if (q != s->missing[k] && fabs(bn_v3_dot(pl + 4 * q, fn)) > 1 - 1e-9 &&
+            fabs(bn_v3_dot(pl + 4 * q, p) - pl[4 * q + 3]) <= tol) {
+            memcpy(out, pl + 4 * q, 4 * sizeof(double));
+            return 1;
+        }
+    return 0;
+}

@@ -360,7 +360,8 @@ static void bn__vis_edge(const bn__vis *V, size_t q, size_t k, const double *ts,
 }
 
 double bn__ff_point_visible(const double x[3], const double n[3], const double *b, size_t nb, const double bn[3],
-                            const double *occ, const unsigned *occ_n, size_t nocc, double tol, uint32_t *shadowed)
+                            const double *occ, const unsigned *occ_n, const double *cull, size_t nocc, double tol,
+                            uint32_t *shadowed)
 {
     bn__vis V;
     double sum = 0;
@@ -375,7 +376,10 @@ double bn__ff_point_visible(const double x[3], const double n[3], const double *
     V.np = 1;
     /* occluders: clipped to the pyramid, projected from x onto b's plane */
     for (size_t q = 0; q < nocc; q++) {
-        int kept = bn__vis_occluder(&V, x, bn, occ + 12 * q, occ_n[q], tol);
+        int kept;
+        if (cull && !isnan(cull[4 * q + 3]) && bn_v3_dot(cull + 4 * q, x) <= cull[4 * q + 3])
+            continue;   /* a solid's face seen from behind: its front faces hide all it would */
+        kept = bn__vis_occluder(&V, x, bn, occ + 12 * q, occ_n[q], tol);
         if (kept == 0)
             continue;
         *shadowed |= 1u << (q & 31);
