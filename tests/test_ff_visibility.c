@@ -418,7 +418,8 @@ static void check_grazing_points(const char *name, const double *A, const double
  * every point is outside the solid), change nothing: a unit cube floating between a floor patch and
  * a wall, its six faces the occluders, from a grid of floor points whose views the cube crosses;
  * what each point sees of the wall equals the value with every face clipped and cut, to 1e-12 of
- * F(x -> b), and some faces are left out at every point. */
+ * F(x -> b), and some faces are left out at every point. The blocked part from the boundary of
+ * what is hidden (bn__ff_point_blocked, what the quadrature integrates) is F(x -> b) minus it. */
 BN_TEST(point_visible_back_faces_left_out_agree)
 {
     /* the cube [1, 2] x [0.5, 1.5] x [1, 2], each face counter-clockwise seen from outside */
@@ -430,7 +431,7 @@ BN_TEST(point_visible_back_faces_left_out_agree)
                                       {0, 1, 0, 1.5}};
     const unsigned on[6] = {4, 4, 4, 4, 4, 4};
     const double b[12] = {0, 0, 3, 0, 3, 3, 3, 3, 3, 3, 0, 3}, bn_[3] = {0, 0, -1}, n[3] = {0, 1, 0};
-    double cull[24], worst = 0;
+    double cull[24], worst = 0, worst_g = 0;
     size_t shadowed = 0, points = 0;
     for (int f = 0; f < 6; f++)
         memcpy(cull + 4 * f, out[f], sizeof out[f]);
@@ -445,15 +446,20 @@ BN_TEST(point_visible_back_faces_left_out_agree)
             for (int f = 0; f < 6; f++)
                 behind += out[f][0] * x[0] + out[f][1] * x[1] + out[f][2] * x[2] <= out[f][3];
             BN_ASSERT_GE(behind, 2);
+            int sees;
+            double g = bn__ff_point_blocked(x, n, b, 4, bn_, occ, on, cull, 6, 1e-9, &m2, &sees);
             worst = fmax(worst, fabs(all - front) / u);
+            worst_g = fmax(worst_g, fabs(g - (u - all)) / u);
+            BN_ASSERT_EQ(sees, all > 0);
             shadowed += m1 != 0 && all < u * (1 - 1e-6);
             BN_ASSERT_EQ(m1 != 0, m2 != 0);
             points++;
         }
-    fprintf(stderr, "cube between floor and wall: %zu points, %zu shadowed; largest |left out - all| %.2e of F\n",
-            points, shadowed, worst);
+    fprintf(stderr, "cube between floor and wall: %zu points, %zu shadowed; largest |left out - all| %.2e of F, "
+            "|blocked - (F - seen)| %.2e\n", points, shadowed, worst, worst_g);
     BN_ASSERT_GT(shadowed, points / 4);
     BN_ASSERT_LT(worst, 1e-12);
+    BN_ASSERT_LT(worst_g, 1e-12);
 }
 
 BN_TEST(point_visible_grazing_is_continuous)

@@ -32,6 +32,12 @@ double bn__ff_point_polygon(const double x[3], const double n[3], const double *
 double bn__ff_point_visible(const double x[3], const double n[3], const double *b, size_t nb, const double bn[3],
                             const double *occ, const unsigned *occ_n, const double *cull, size_t nocc, double tol,
                             uint32_t *shadowed);
+/* The part the occluders hide, F(x -> b) minus bn__ff_point_visible, from the boundary of what they
+ * hide of b (no difference of two sums: 0 where no occluder is in view, without a term); *sees
+ * whether x sees any of b. */
+double bn__ff_point_blocked(const double x[3], const double n[3], const double *b, size_t nb, const double bn[3],
+                            const double *occ, const unsigned *occ_n, const double *cull, size_t nocc, double tol,
+                            uint32_t *shadowed, int *sees);
 
 /* Clips the convex polygon v (nv corners) to the half-space n.(y - p) >= 0; corners within
  * `tol` of the plane are snapped onto it. out needs room for nv + 1 corners. Returns the count

@@ -80,15 +80,16 @@ static double bn__eval(bn__qctx *q, const double a[3], const double b[3], const 
     q->st->evals++;
     if (q->nocc) {
         uint32_t mask;
-        double f = bn__ff_point_visible(x, q->ni_n, q->pj, q->nj, q->nj_n, q->occ, q->occ_n, q->cull, q->nocc, q->gtol,
-                                        &mask);
-        q->st->seen += f > 0;
+        int sees;
+        /* the blocked part, F(x -> b) minus what x sees of b: 0 wherever no occluder is in view */
+        double g = bn__ff_point_blocked(x, q->ni_n, q->pj, q->nj, q->nj_n, q->occ, q->occ_n, q->cull, q->nocc, q->gtol,
+                                        &mask, &sees);
+        q->st->seen += sees;
         if (q->npoints++ == 0)
             q->shadowed = mask != 0;
         else if ((mask != 0) != q->shadowed)
             q->mixed = 1;
-        /* the blocked part, F(x -> b) minus what x sees of b: 0 wherever no occluder is in view */
-        return mask ? bn__ff_point_polygon(x, q->ni_n, q->pj, q->nj) - f : 0;
+        return g;
     }
     return bn__ff_point_polygon(x, q->ni_n, q->pj, q->nj);
 }

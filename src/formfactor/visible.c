@@ -316,17 +316,27 @@ static size_t bn__vis_cuts(const bn__vis *V, size_t q, size_t k, double tol, dou
     return nt;
 }
 
-/* The pieces of edge k of poly[q] between its cuts that have the visible region on exactly one
- * side, each one's Lambert term added to *sum in order (the visible region on the left:
- * counter-clockwise). A piece lying on an edge of an earlier polygon is that polygon's to count. */
+/* What the pieces of edge k add: the visible region's boundary (or, with `blocked`, the boundary of
+ * what the occluders hide of b), each piece's Lambert term added to *sum in order, the region on
+ * its left (counter-clockwise); *sees set when a piece bounds the visible region. */
+typedef struct bn__vis_sum {
+    int blocked, sees;
+    double sum;
+} bn__vis_sum;
+
+/* The pieces of edge k of poly[q] between its cuts. A piece of b's edge bounds the visible region
+ * where no occluder covers its inner side, the hidden one where one does; a piece of an occluder's
+ * edge bounds both where its outer side is in b and no other occluder covers it (the visible
+ * region on that side, the hidden one on its own). A piece lying on an edge of an earlier polygon
+ * is that polygon's to count. */
 static void bn__vis_edge(const bn__vis *V, size_t q, size_t k, const double *ts, size_t nt, const double x[3],
-                         const double n[3], double tol, double *sum)
+                         const double n[3], double tol, bn__vis_sum *out)
 {
     const double *p0 = V->poly[q].p + 2 * k, *d = V->poly[q].d + 2 * k, *left = V->poly[q].nl + 2 * k;
     double dlen = V->poly[q].len[k], right[2] = {-left[0], -left[1]};
     for (size_t a = 0; a + 1 < nt; a++) {
         double m[2], A[3], B[3], pa[2], pb[2];
-        int dup = 0, in_l, in_r;
+        int dup = 0, in_l, in_r, forward;
         if (!((ts[a + 1] - ts[a]) * dlen > tol))
             continue;
         m[0] = p0[0] + 0.5 * (ts[a] + ts[a + 1]) * d[0];
@@ -351,26 +361,27 @@ static void bn__vis_edge(const bn__vis *V, size_t q, size_t k, const double *ts,
             if (in_r && bn__inside_moved(&V->poly[s], m, right, tol))
                 in_r = 0;
         }
-        if (in_l == in_r)
+        out->sees |= in_l || in_r;
+        if (out->blocked ? (q == 0 ? in_l : !in_r) : in_l == in_r)
             continue;
+        forward = out->blocked || in_l;   /* the counted region on the piece's left */
         bn__lift(&V->fr, pa, A);
         bn__lift(&V->fr, pb, B);
-        *sum += in_l ? bn__edge_term(x, n, A, B) : bn__edge_term(x, n, B, A);
+        out->sum += forward ? bn__edge_term(x, n, A, B) : bn__edge_term(x, n, B, A);
     }
 }
 
-double bn__ff_point_visible(const double x[3], const double n[3], const double *b, size_t nb, const double bn[3],
+/* bn__ff_point_visible's work: what x sees of b past the occluders, or (blocked) what they hide of
+ * it; *sees whether x sees any of b. */
+static double bn__point_vis(const double x[3], const double n[3], const double *b, size_t nb, const double bn[3],
                             const double *occ, const unsigned *occ_n, const double *cull, size_t nocc, double tol,
-                            uint32_t *shadowed)
+                            uint32_t *shadowed, int blocked, int *sees)
 {
     bn__vis V;
-    double sum = 0;
+    bn__vis_sum S = {blocked, 0, 0};
     *shadowed = 0;
-    if (nocc == 0)
-        return bn__ff_point_polygon(x, n, b, nb);
-    if (nb < 3 || nb > BN__FF_POLY_MAX || nocc > BN__VIS_OCC_MAX)
-        return 0;
-    if (!bn__vis_base(&V, x, b, nb, bn))
+    *sees = 0;
+    if (nb < 3 || nb > BN__FF_POLY_MAX || nocc > BN__VIS_OCC_MAX || !bn__vis_base(&V, x, b, nb, bn))
         return 0;
     bn__vis_pyramid(&V, x, n, b, nb, bn, tol);
     V.np = 1;
@@ -384,13 +395,15 @@ double bn__ff_point_visible(const double x[3], const double n[3], const double *
             continue;
         *shadowed |= 1u << (q & 31);
         if (kept < 0)
-            return 0;
+            return blocked ? bn__ff_point_polygon(x, n, b, nb) : 0;
         V.np++;
     }
-    if (V.np == 1)
-        return bn__ff_point_polygon(x, n, b, nb);
-    /* the boundary of b minus the union: every piece of every edge, cut where other edges cross it,
-     * that has the visible region on exactly one side */
+    if (V.np == 1) {
+        *sees = 1;
+        return blocked ? 0 : bn__ff_point_polygon(x, n, b, nb);
+    }
+    /* the boundary of b minus the union (or of b and the union): every piece of every edge, cut
+     * where other edges cross it, that bounds the region */
     for (size_t q = 0; q < V.np; q++)
         for (size_t k = 0; k < V.poly[q].n; k++) {
             double ts[2 + 2 * (1 + BN__VIS_OCC_MAX) * BN__VIS_CORNERS];
@@ -398,7 +411,27 @@ double bn__ff_point_visible(const double x[3], const double n[3], const double *
             if (!(V.poly[q].len[k] > tol))
                 continue;
             nt = bn__vis_cuts(&V, q, k, tol, ts);
-            bn__vis_edge(&V, q, k, ts, nt, x, n, tol, &sum);
+            bn__vis_edge(&V, q, k, ts, nt, x, n, tol, &S);
         }
-    return fmax(-sum / (2 * BN_PI), 0);
+    *sees = S.sees;
+    return fmax(-S.sum / (2 * BN_PI), 0);
+}
+
+double bn__ff_point_visible(const double x[3], const double n[3], const double *b, size_t nb, const double bn[3],
+                            const double *occ, const unsigned *occ_n, const double *cull, size_t nocc, double tol,
+                            uint32_t *shadowed)
+{
+    int sees;
+    if (nocc == 0) {
+        *shadowed = 0;
+        return bn__ff_point_polygon(x, n, b, nb);
+    }
+    return bn__point_vis(x, n, b, nb, bn, occ, occ_n, cull, nocc, tol, shadowed, 0, &sees);
+}
+
+double bn__ff_point_blocked(const double x[3], const double n[3], const double *b, size_t nb, const double bn[3],
+                            const double *occ, const unsigned *occ_n, const double *cull, size_t nocc, double tol,
+                            uint32_t *shadowed, int *sees)
+{
+    return bn__point_vis(x, n, b, nb, bn, occ, occ_n, cull, nocc, tol, shadowed, 1, sees);
 }
