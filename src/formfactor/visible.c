@@ -316,9 +316,9 @@ static size_t bn__vis_cuts(const bn__vis *V, size_t q, size_t k, double tol, dou
     return nt;
 }
 
-/* What the pieces of edge k add: the visible region's boundary (or, with `blocked`, the boundary of
- * what the occluders hide of b), each piece's Lambert term added to *sum in order, the region on
- * its left (counter-clockwise); *sees set when a piece bounds the visible region. */
+/* The boundary sum of one point: the visible region's (or, with `blocked`, that of what the occluders
+ * hide of b), each piece's Lambert term added to sum in order with the region on its left
+ * (counter-clockwise); sees set once a piece bounds the visible region. */
 typedef struct bn__vis_sum {
     int blocked, sees;
     double sum;
