@@ -135,7 +135,7 @@ def main():
         shots = views(tab, url, out)
         if shots:
             physics(shots)
-            url_round_trip(tab, url, out)
+            url_round_trip(tab, url, page)
     bake_again(bounce, page, out)
     print("%d failures" % len(failures))
     sys.exit(1 if failures else 0)
@@ -240,9 +240,10 @@ def k2e_auto_ev(glb):
 FIXED = "#panel=0&size=%dx%d&" % (W, H)   # the same canvas and projection in every view
 
 
-def url_round_trip(tab, url, out):
+def url_round_trip(tab, url, page):
     """The address follows the view: a page opened at a view (terms, automatic exposure, camera, folded panel)
     links to that view, and the link opens the same picture."""
+    out = os.path.dirname(page)
     state = "terms=K2E&ev=auto&cam=0.52,0.41,-0.62,0.27,0.2,0.3"
     dom = open_view(tab, url + FIXED + state)
     m = re.search(r'<a id="link" href="#([^"]*)"', dom)
@@ -251,7 +252,7 @@ def url_round_trip(tab, url, out):
     got = dict(kv.split("=", 1) for kv in link.split("&") if kv)
     check(all(got.get(k) == v for k, v in want.items()), "the page's link holds its view: %s" % link)
     ev = re.search(r'id="evtext">([-0-9.]+)<', dom)
-    kept = os.path.join(out, "cornell.bake.glb")
+    kept = page[:-5] + ".bake.glb"   # bounce view keeps its bake beside the page, as bake_again reads it
     check(os.path.exists(kept), "bounce view kept the bake beside the page (%s)" % os.path.basename(kept))
     if ev and os.path.exists(kept):
         want_ev = k2e_auto_ev(kept)
