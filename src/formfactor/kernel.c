@@ -611,84 +611,105 @@ static void bn__panel_eval(const bn__cctx *cc, const double *pi, size_t ni, bn__
     pn->mag = half * m;
 }
 
-double bn__ff_contour(const double *pi, size_t ni, const double *pj, size_t nj, double rtol, double atol,
-                      bn__quad_stats *st)
+/* The contour integral's context: pj's unit edges and lengths, and the log of the pair's scale (the
+ * larger of the centroids' distance and either polygon's radius) that keeps its terms well scaled. */
+static void bn__contour_ctx(bn__cctx *cc, const double *pi, size_t ni, const double *pj, size_t nj)
 {
-    bn__cctx cc;
-    bn__panel inl[64], *pan = inl;
-    size_t np = 0, cap = 64, evals = 0;
-    double ci[3] = {0, 0, 0}, cj[3] = {0, 0, 0}, sum = 0, err = 0, mag = 0;
-    if (ni < 3 || nj < 3 || ni > BN__FF_POLY_MAX || nj > BN__FF_POLY_MAX)
-        return 0;
-    cc.pj = pj;
-    cc.nj = nj;
+    double ci[3] = {0, 0, 0}, cj[3] = {0, 0, 0}, di = 0, dj = 0;
+    cc->pj = pj;
+    cc->nj = nj;
     for (size_t q = 0; q < nj; q++) {
-        bn_v3_sub(pj + 3 * ((q + 1) % nj), pj + 3 * q, cc.v[q]);
-        cc.L[q] = bn_v3_normalize(cc.v[q]);
+        bn_v3_sub(pj + 3 * ((q + 1) % nj), pj + 3 * q, cc->v[q]);
+        cc->L[q] = bn_v3_normalize(cc->v[q]);
         bn_v3_madd(cj, 1.0 / nj, pj + 3 * q, cj);
     }
     for (size_t p = 0; p < ni; p++)
         bn_v3_madd(ci, 1.0 / ni, pi + 3 * p, ci);
-    {
-        double di = 0, dj = 0;
-        for (size_t p = 0; p < ni; p++)
-            di = fmax(di, bn_v3_dist(pi + 3 * p, ci));
-        for (size_t q = 0; q < nj; q++)
-            dj = fmax(dj, bn_v3_dist(pj + 3 * q, cj));
-        cc.lnc = log(fmax(bn_v3_dist(ci, cj), fmax(di, dj)));
-    }
+    for (size_t p = 0; p < ni; p++)
+        di = fmax(di, bn_v3_dist(pi + 3 * p, ci));
     for (size_t q = 0; q < nj; q++)
-        cc.Lc[q] = cc.L[q] * (1 + cc.lnc);
-    for (size_t p = 0; p < ni; p++) {
+        dj = fmax(dj, bn_v3_dist(pj + 3 * q, cj));
+    cc->lnc = log(fmax(bn_v3_dist(ci, cj), fmax(di, dj)));
+    for (size_t q = 0; q < nj; q++)
+        cc->Lc[q] = cc->L[q] * (1 + cc->lnc);
+}
+
+/* The panels of the contour integral, grown as they are halved (inline storage first). */
+typedef struct bn__panels {
+    bn__panel inl[64], *pan;
+    size_t np, cap, evals;
+    double sum, err, mag;   /* running sums of the panels' values, error estimates and magnitudes */
+} bn__panels;
+
+/* The panel with the largest error halved; 0 when out of memory for one more. */
+static int bn__panel_halve(const bn__cctx *cc, const double *pi, size_t ni, bn__panels *P)
+{
+    size_t w = 0;
+    bn__panel a, b;
+    for (size_t k = 1; k < P->np; k++)
+        if (P->pan[k].err > P->pan[w].err)
+            w = k;
+    if (P->np + 1 > P->cap) {
+        bn__panel *nw = bn__malloc_array(2 * P->cap, sizeof *nw);
+        if (!nw)
+            return 0;
+        memcpy(nw, P->pan, P->np * sizeof *nw);
+        if (P->pan != P->inl)
+            free(P->pan);
+        P->pan = nw;
+        P->cap *= 2;
+    }
+    a = P->pan[w];
+    b = P->pan[w];
+    a.s1 = b.s0 = 0.5 * (P->pan[w].s0 + P->pan[w].s1);
+    bn__panel_eval(cc, pi, ni, &a, &P->evals);
+    bn__panel_eval(cc, pi, ni, &b, &P->evals);
+    P->sum += a.val + b.val - P->pan[w].val;
+    P->err += a.err + b.err - P->pan[w].err;
+    P->mag += a.mag + b.mag - P->pan[w].mag;
+    P->pan[w] = a;
+    P->pan[P->np++] = b;
+    return 1;
+}
+
+double bn__ff_contour(const double *pi, size_t ni, const double *pj, size_t nj, double rtol, double atol,
+                      bn__quad_stats *st)
+{
+    bn__cctx cc;
+    bn__panels P;
+    double sum = 0, err = 0, mag = 0;
+    if (ni < 3 || nj < 3 || ni > BN__FF_POLY_MAX || nj > BN__FF_POLY_MAX)
+        return 0;
+    bn__contour_ctx(&cc, pi, ni, pj, nj);
+    P.pan = P.inl;
+    P.np = P.evals = 0;
+    P.cap = 64;
+    P.sum = P.err = P.mag = 0;
+    for (size_t p = 0; p < ni; p++) {   /* a panel per edge of pi */
         double L = bn_v3_dist(pi + 3 * p, pi + 3 * ((p + 1) % ni));
+        bn__panel *pn = &P.pan[P.np];
         if (!(L > 0))
             continue;
-        pan[np].p = p;
-        pan[np].s0 = 0;
-        pan[np].s1 = L;
-        bn__panel_eval(&cc, pi, ni, &pan[np], &evals);
-        sum += pan[np].val;
-        err += pan[np].err;
-        mag += pan[np].mag;
-        np++;
+        pn->p = p;
+        pn->s0 = 0;
+        pn->s1 = L;
+        bn__panel_eval(&cc, pi, ni, pn, &P.evals);
+        P.sum += pn->val;
+        P.err += pn->err;
+        P.mag += pn->mag;
+        P.np++;
     }
-    for (int it = 0; it < 4000; it++) {
-        size_t w = 0;
-        bn__panel a, b;
-        /* or the absolute floor (atol, on A_i F_ij), or the rounding floor: terms of total size
-         * mag cancel to the result */
-        if (err <= fmax(fmax(rtol * fabs(sum), 2 * BN_PI * atol), DBL_EPSILON * mag))
+    /* to the tolerance, or the absolute floor (atol, on A_i F_ij), or the rounding floor: terms of
+     * total size mag cancel to the result */
+    for (int it = 0; it < 4000; it++)
+        if (P.err <= fmax(fmax(rtol * fabs(P.sum), 2 * BN_PI * atol), DBL_EPSILON * P.mag) ||
+            !bn__panel_halve(&cc, pi, ni, &P))
             break;
-        for (size_t k = 1; k < np; k++)
-            if (pan[k].err > pan[w].err)
-                w = k;
-        if (np + 1 > cap) {
-            bn__panel *nw = bn__malloc_array(2 * cap, sizeof *nw);
-            if (!nw)
-                break;
-            memcpy(nw, pan, np * sizeof *nw);
-            if (pan != inl)
-                free(pan);
-            pan = nw;
-            cap *= 2;
-        }
-        a = pan[w];
-        b = pan[w];
-        a.s1 = b.s0 = 0.5 * (pan[w].s0 + pan[w].s1);
-        bn__panel_eval(&cc, pi, ni, &a, &evals);
-        bn__panel_eval(&cc, pi, ni, &b, &evals);
-        sum += a.val + b.val - pan[w].val;
-        err += a.err + b.err - pan[w].err;
-        mag += a.mag + b.mag - pan[w].mag;
-        pan[w] = a;
-        pan[np++] = b;
-    }
     /* the running sums drift by rounding: add the panels afresh */
-    sum = err = mag = 0;
-    for (size_t k = 0; k < np; k++) {
-        sum += pan[k].val;
-        err += pan[k].err;
-        mag += pan[k].mag;
+    for (size_t k = 0; k < P.np; k++) {
+        sum += P.pan[k].val;
+        err += P.pan[k].err;
+        mag += P.pan[k].mag;
     }
     /* the integrand is >= 0: a result below zero by no more than its error and rounding (terms of
      * size mag cancelling to nothing, as between polygons that see each other edge-on) is 0 */
@@ -696,12 +717,12 @@ double bn__ff_contour(const double *pi, size_t ni, const double *pj, size_t nj, 
         sum = 0;
     if (st) {
         memset(st, 0, sizeof *st);
-        st->evals = evals;
-        st->triangles = np;
+        st->evals = P.evals;
+        st->triangles = P.np;
         st->capped = err > fmax(rtol * fabs(sum), 2 * BN_PI * atol);   /* the rounding floor or the panel limit */
     }
-    if (pan != inl)
-        free(pan);
+    if (P.pan != P.inl)
+        free(P.pan);
     return sum / (2 * BN_PI);
 }
 
