@@ -618,7 +618,7 @@ static int bn__face_blocks_all(const bn__ffg *g, size_t f, const bn__pair *p)
     return 1;
 }
 
-/* Per occluder, the plane that leaves it out where it is seen from behind (bn__ff_point_visible's cull):
+/* Per occluder, the plane that leaves it out where it is seen from behind (bn__ff_point_blocked's cull):
  * a face of a convex solid that neither patch is on, when every point x of polygon v (the integrated
  * patch) is outside the solid (bn__solid_back_faces_hidden); NAN offset otherwise. Cornell box: 12.0 M of
  * the 27.2 M faces the points would clip (44%), and 28% of the form factors' CPU time. */
@@ -638,7 +638,7 @@ static void bn__cull_planes(const bn__ffg *g, const size_t *occ, size_t nocc, si
 /* A_i F_ij with visibility for a pair whose shaft holds at most BN__VIS_OCC_MAX faces, none of
  * which hides it wholly (bn__face_blocks_all, tried first by the caller), exactly: I, the
  * unoccluded value (closed form), minus the integral over one patch of the part of the other that
- * the occluders hide from each point (bn__ff_point_visible), clamped to [0, I]. No shadow rays.
+ * the occluders hide from each point (bn__ff_point_blocked), clamped to [0, I]. No shadow rays.
  * - The blocked part is 0 wherever no occluder is in view, so the rules spend nothing there and the
  *   unoccluded kernel's own peaks (shared edges, near pairs) are left to the closed form.
  * - It is continuous but creased where shadow edges cross the patch, over widths that scale with

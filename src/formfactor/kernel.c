@@ -53,7 +53,7 @@ typedef struct bn__qctx {
     double ni_n[3];
     double tol_per_area;   /* tolerance per unit area of P_i */
     bn__quad_stats *st;
-    const double *occ;     /* occluders (bn__ff_point_visible), or none */
+    const double *occ;     /* occluders (bn__ff_point_blocked), or none */
     const double *cull;    /* their planes for leaving faces seen from behind out, or NULL */
     const unsigned *occ_n;
     size_t nocc;

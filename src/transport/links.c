@@ -101,7 +101,7 @@ bn_status bn__hop_make(const bn__hop_shape *t, const bn__link *links, size_t nli
     h->src = bn__malloc_array(kept ? kept : 1, sizeof *h->src);
     h->F = bn__malloc_array(kept ? kept : 1, sizeof *h->F);
     h->dir = bn__calloc(kept ? kept : 1, sizeof *h->dir);
-    h->Bn = bn__malloc_array(4 * n, sizeof(double));
+    h->Bn = bn__calloc(4 * n, sizeof(double));   /* each node's fourth value stays 0 */
     h->distributed = bn_dist_size() > 1;
     if (h->distributed) {
         size_t P = (size_t)bn_dist_size();
@@ -155,13 +155,12 @@ oom:
 }
 
 /* Pull: each node's B, the area-weighted mean of its children's, children before parents; four
- * doubles a node (the fourth 0), so that a link's source is one aligned load. */
+ * doubles a node (the fourth 0 from allocation), so that a link's source is one aligned load. */
 static void bn__hop_pull(bn__hop *h, const double *x)
 {
     double *B = h->Bn;
     for (size_t v = h->n; v-- > 0;) {
         uint32_t c = h->child[v];
-        B[4 * v + 3] = 0;
         if (c == BN__NONE) {
             const double *xp = x + 3 * (size_t)h->leaf_patch[v];
             B[4 * v] = xp[0];
