@@ -73,6 +73,10 @@ typedef struct bn_hierarchy_opts {
     const double *direct;   /* the punctual lights' direct radiance per patch (N x 3; NULL: none): part of the
                                source the links are refined for (bn_solve_opts.direct) */
     bn_log log;
+    int    volume_links; /* 1 (default): a patch whose bounding sphere meets a cluster's (foliage, a part
+                            among its neighbours) takes F into it from its own hemisphere rays, one link
+                            while the radiance spread below the cluster allows (doc/hierarchy.md);
+                            0: such pairs are split down to the patches */
 } bn_hierarchy_opts;
 void bn_hierarchy_opts_default(bn_hierarchy_opts *o);
 

@@ -135,6 +135,7 @@ typedef struct bn_cli_ff {
     double eps;               /* hierarchy: link tolerance (< 0: the default) */
     int    no_clusters;       /* hierarchy: start from every pair of polygons */
     int    no_flat_clusters;  /* hierarchy: only polygons' nodes receive */
+    int    no_volume_links;   /* hierarchy: near pairs into clusters split to the patches */
     int    normalize_rows;    /* hierarchy: each leaf's row of F_H scaled to its exact sum */
     int    link_samples;      /* hierarchy: point pairs per link above the patches (0: default) */
     double min_area;          /* hierarchy: smallest element split (0: default; < 0: none) */

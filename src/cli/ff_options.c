@@ -9,6 +9,7 @@ void bn_cli_hier_opts(const bn_cli_ff *ff, bn_hierarchy_opts *h)
         h->eps = ff->eps;
     h->clusters = !ff->no_clusters;
     h->flat_clusters = !ff->no_flat_clusters;
+    h->volume_links = !ff->no_volume_links;
     h->normalize_rows = ff->normalize_rows;
     if (ff->link_samples > 0)
         h->samples = ff->link_samples;
@@ -33,6 +34,9 @@ void bn_cli_add_ff(bn_optset *s, bn_cli_ff *o)
     bn_optset_add(s, (bn_opt){"no-flat-clusters", 0, BN_OPT_FLAG, &o->no_flat_clusters, NULL, 0, 0, NULL,
                               "hierarchy: clusters never receive as one node, only polygons' nodes do (default: "
                               "nearly flat clusters facing a source may, each polygon taking its cosine's share)"});
+    bn_optset_add(s, (bn_opt){"no-volume-links", 0, BN_OPT_FLAG, &o->no_volume_links, NULL, 0, 0, NULL,
+                              "hierarchy: a patch near a cluster (foliage) is not linked to it by its own hemisphere "
+                              "rays; such pairs are split down to the patches (doc/hierarchy.md, \"Volume links\")"});
     bn_optset_add(s, (bn_opt){"normalize-rows", 0, BN_OPT_FLAG, &o->normalize_rows, NULL, 0, 0, NULL,
                               "hierarchy: scale each leaf's row of F to its exact sum, the share of its hemisphere "
                               "that reaches a surface (default: rows as the links make them; doc/hierarchy.md)"});

@@ -23,6 +23,7 @@ void bn_hierarchy_opts_default(bn_hierarchy_opts *o)
     o->samples = 8;
     o->max_passes = 12;
     o->flat_clusters = 1;
+    o->volume_links = 1;
     bn_formfactor_opts_default(&o->ff);
 }
 
@@ -45,6 +46,7 @@ typedef struct bn__build {
     bn__ref R;
     bn__vec work;             /* the links */
     bn__pass_stats ps;        /* splits of the last pass; rays and the peak of link bytes so far */
+    size_t vol_bytes;         /* the volume links' kept rays (R.vol) */
     bn__worker *W;
     int nt;
     size_t np;
@@ -55,6 +57,8 @@ typedef struct bn__build {
 /* Every leaf's corners, normal and fan share, in leaf order (bn__leaf_geom). */
 static bn_status bn__leaf_geoms(bn__ref *R, size_t np, bn_error *err)
 {
+    if (!(R->vol = bn__calloc(np + 1, sizeof *R->vol)))
+        return bn_error_set(err, BN_ENOMEM, "out of memory for the hierarchy of %zu patches", np);
     if (!(R->leaf = bn__calloc(np + 1, sizeof *R->leaf)))
         return bn_error_set(err, BN_ENOMEM, "out of memory for the hierarchy of %zu patches", np);
     for (size_t q = 0; q < np; q++) {
@@ -89,6 +93,7 @@ static bn_status bn__ref_init(bn__build *B, const bn_scene *scene, const bn_rt *
     bn__ref *R = &B->R;
     size_t npv;
     R->t = &B->t;
+    R->vol_bytes = &B->vol_bytes;
     R->scene = scene;
     R->rt = rt;
     R->o = o;
@@ -117,8 +122,9 @@ static bn_status bn__build_buffers(bn__build *B, bn_error *err)
     B->rho = bn__malloc_array(3 * np, sizeof(double));
     B->L = bn__malloc_array(3 * np, sizeof(double));
     B->R.Bmax = bn__malloc_array(3 * B->t.n, sizeof(double));
+    B->R.Bmin = bn__malloc_array(3 * B->t.n, sizeof(double));
     B->W = bn__calloc((size_t)B->nt, sizeof *B->W);
-    if (!B->E || !B->rho || !B->L || !B->R.Bmax || !B->W)
+    if (!B->E || !B->rho || !B->L || !B->R.Bmax || !B->R.Bmin || !B->W)
         return bn_error_set(err, BN_ENOMEM, "out of memory for the hierarchy of %zu patches", np);
     if ((st = bn__ff_pairs_create(B->R.scene, B->R.rt, &B->R.o->ff, &B->R.pairs, err)) != BN_OK)
         return st;
@@ -133,7 +139,7 @@ static bn_status bn__build_buffers(bn__build *B, bn_error *err)
     for (size_t k = 0; k < 3 * np; k++)
         emax = fmax(emax, B->E[k]);
     B->R.eps_abs = B->R.o->eps * emax;
-    bn__bmax(&B->t, B->E, B->R.Bmax);
+    bn__bmax(&B->t, B->E, B->R.Bmax, B->R.Bmin);
     return BN_OK;
 }
 
@@ -212,7 +218,7 @@ static bn_status bn__between_passes(bn__build *B, bn_error *err)
     if (st == BN_OK)
         st = bn__estimate(&B->t, &B->work, B->R.bound, B->E, B->rho, B->R.eps_abs, B->L, err);
     if (st == BN_OK) {
-        bn__bmax(&B->t, B->L, B->R.Bmax);
+        bn__bmax(&B->t, B->L, B->R.Bmax, B->R.Bmin);
         B->R.btyp = bn__typical_radiance(&B->t, B->L, B->E);
     }
     return st;
@@ -289,13 +295,14 @@ static bn_status bn__freeze(bn__build *B, bn_hierarchy_report *rep, bn_transport
     rep->bytes = bn__hop_bytes(h);
     rep->bytes_per_link = h->nlinks ? (double)bn__hop_link_bytes(h) / (double)h->nlinks : 0;
     {   /* the links with the operator made from them (as every estimate between passes, with fewer) */
-        size_t held = B->work.cap * sizeof(bn__link) + bn__hop_link_bytes(h);
+        size_t held = B->work.cap * sizeof(bn__link) + bn__hop_link_bytes(h) + B->vol_bytes;
         rep->peak_link_bytes = held > B->ps.peak_bytes ? held : B->ps.peak_bytes;
         rep->peak_bytes_per_link = held_links ? (double)rep->peak_link_bytes / (double)held_links : 0;
     }
-    bn_logf(&B->R.o->log, BN_LOG_INFO, "hierarchy: refinement held at most %.1f MiB of links, %.1f B per link of the "
-            "%zu it ended with (%.1f B per link of the %zu with F > 0 kept); the frozen operator %.1f B per link",
-            (double)rep->peak_link_bytes / 1048576.0, rep->peak_bytes_per_link, held_links,
+    bn_logf(&B->R.o->log, BN_LOG_INFO, "hierarchy: refinement held at most %.1f MiB of links (the volume links' rays "
+            "%.1f MiB of it), %.1f B per link of the %zu it ended with (%.1f B per link of the %zu with F > 0 kept); "
+            "the frozen operator %.1f B per link", (double)rep->peak_link_bytes / 1048576.0,
+            (double)B->vol_bytes / 1048576.0, rep->peak_bytes_per_link, held_links,
             h->nlinks ? (double)rep->peak_link_bytes / (double)h->nlinks : 0.0, h->nlinks, rep->bytes_per_link);
     rep->seconds_refine = bn__now() - B->t0;
     return bn_transport_create(B->np, B->rho, &bn__hop_ops, h, out, err);   /* h owned by *out, or destroyed */
@@ -312,6 +319,10 @@ static void bn__build_free(bn__build *B)
     free(B->W);
     bn__ff_pairs_destroy(B->R.pairs);
     free(B->R.Bmax);
+    free(B->R.Bmin);
+    for (size_t q = 0; B->R.vol && q < B->np; q++)
+        free(B->R.vol[q]);
+    free(B->R.vol);
     free(B->R.leaf);
     free(B->R.bound);
     free(B->work.a);

@@ -241,7 +241,7 @@ static void bn__find_leaves(const bn__tree *t, int m, const uint32_t *v, const d
 }
 
 /* The point of leaf q (in leaf order) at (u2, u3) in [0,1)^2, uniform in area; its normal. */
-static void bn__leaf_point(const bn__ref *R, size_t q, double u2, double u3, double x[3], const double **n)
+void bn__leaf_point(const bn__ref *R, size_t q, double u2, double u3, double x[3], const double **n)
 {
     const bn__leaf_geom *g = &R->leaf[q];
     const double *pa = g->v[0], *pb = g->v[1], *pc = g->v[2];
@@ -417,6 +417,137 @@ static float bn__link_F(const bn__ref *R, uint32_t r, uint32_t s, int split_if_p
     return (float)fmin(fmax(F, 0.0), 1.0);
 }
 
+/* ---- links from a leaf into a cluster around it, by the leaf's own hemisphere rays ---- */
+
+static int bn__u32_cmp(const void *a, const void *b)
+{
+    uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
+    return x < y ? -1 : x > y;
+}
+
+/* Is (r, s) a volume pair: a leaf receiver whose bounding sphere meets a cluster's (foliage, a leaf
+ * among its neighbours)? Point pairs cannot bound F there, and splitting s to the patches makes a
+ * link per neighbouring patch; the leaf's hemisphere rays give F into any such s at once. */
+static int bn__vol_pair(const bn__ref *R, uint32_t r, uint32_t s)
+{
+    const bn__tree *t = R->t;
+    return !R->force && R->o->volume_links && bn__tree_is_leaf(t, r) && t->plane[s] < 0 && !bn__separated(t, r, s);
+}
+
+/* Leaf r's hits: the leaf positions of the front faces that BN__VOL_RAYS cosine-distributed rays from
+ * stratified points of r hit first (count, then sorted), cast once and kept in R->vol (the first
+ * thread to finish publishes them; every thread casts the same rays, from r's own random stream, so
+ * the links do not depend on which). Out of memory: w's scratch, not kept. */
+static const uint32_t *bn__vol_hits(const bn__ref *R, uint32_t r, bn__worker *w)
+{
+    const bn__tree *t = R->t;
+    const int side = 16;   /* side x side = BN__VOL_RAYS */
+    size_t q = t->lo[r];
+    uint32_t *h = __atomic_load_n(&R->vol[q], __ATOMIC_ACQUIRE), *c = w->vol, *expected = NULL;
+    if (h)
+        return h;
+    bn__rng g = bn__rng_make(R->o->ff.seed ^ 0x766f6c756d65ULL, r, 0);
+    double bs[3], bt[3];
+    const double *n = R->leaf[q].n;
+    bn_v3_basis(n, bs, bt);
+    c[0] = 0;
+    for (int k = 0; k < side * side; k++) {
+        double x[3], o[3], d[3], u1 = bn__rng_uniform(&g), u2 = bn__rng_uniform(&g);
+        double a = ((k / side) + bn__rng_uniform(&g)) / side, b = ((k % side) + bn__rng_uniform(&g)) / side;
+        double rad = sqrt(a), z = sqrt(fmax(0.0, 1 - a)), cp = cos(2 * BN_PI * b), sp = sin(2 * BN_PI * b);
+        const double *nx;
+        bn_hit hit;
+        bn__leaf_point(R, q, u1, u2, x, &nx);
+        for (int m = 0; m < 3; m++) {
+            d[m] = rad * cp * bs[m] + rad * sp * bt[m] + z * n[m];
+            o[m] = x[m] + R->ray_eps * n[m];
+        }
+        if (bn_rt_intersect(R->rt, o, d, 0, INFINITY, &hit) && hit.front)
+            c[1 + c[0]++] = t->lo[t->leaf[hit.patch]];
+    }
+    w->rays += (size_t)(side * side);
+    qsort(c + 1, c[0], sizeof *c, bn__u32_cmp);
+    if (!(h = bn__malloc_array((size_t)c[0] + 1, sizeof *h)))
+        return c;
+    memcpy(h, c, ((size_t)c[0] + 1) * sizeof *h);
+    if (!__atomic_compare_exchange_n(&R->vol[q], &expected, h, 0, __ATOMIC_ACQ_REL, __ATOMIC_ACQUIRE)) {
+        free(h);
+        return expected;
+    }
+    __atomic_add_fetch(R->vol_bytes, ((size_t)c[0] + 1) * sizeof *h, __ATOMIC_RELAXED);
+    return h;
+}
+
+/* F from leaf r (its hits h) into s: its rays' share that hit a face below s; *sigma its standard error
+ * (binomial, at least that of one hit). */
+static double bn__vol_F(const bn__ref *R, const uint32_t *h, uint32_t s, double *sigma)
+{
+    uint32_t lo = R->t->lo[s], hi = R->t->hi[s], a = 0, b = h[0], m = 0;
+    const uint32_t *pos = h + 1;
+    while (a < b) {   /* the first hit at or after lo */
+        uint32_t mid = a + (b - a) / 2;
+        if (pos[mid] < lo)
+            a = mid + 1;
+        else
+            b = mid;
+    }
+    while (a + m < h[0] && pos[a + m] < hi)
+        m++;
+    double F = (double)m / BN__VOL_RAYS;
+    *sigma = sqrt(fmax(F * (1 - F), 1.0 / BN__VOL_RAYS) / BN__VOL_RAYS);
+    return F;
+}
+
+/* What the volume link r <- s may get wrong in r's radiance: the spread of the radiance below s
+ * (the link hands r their area mean) over F, and twice F's standard error times the brightest. */
+static double bn__vol_error(const bn__ref *R, uint32_t r, uint32_t s, double F, double sigma)
+{
+    const float *rho = R->t->rho_max + 3 * (size_t)r;
+    const double *hi = R->Bmax + 3 * (size_t)s, *lo = R->Bmin + 3 * (size_t)s;
+    double e = 0;
+    for (int c = 0; c < 3; c++)
+        e = fmax(e, (double)rho[c] * (F * (hi[c] - lo[c]) + 2 * sigma * hi[c]));
+    return e;
+}
+
+static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int partial, int depth, bn__worker *w);
+
+/* A cluster's self-link: its children's four pairs (a plane does not see itself). */
+static void bn__visit_self(const bn__ref *R, uint32_t r, int depth, bn__worker *w)
+{
+    const bn__tree *t = R->t;
+    if (bn__tree_is_leaf(t, r) || t->plane[r] >= 0)
+        return;
+    if (depth == 0) {
+        bn__vec_push(&w->pending, r, r, -1, 0);
+        return;
+    }
+    for (uint32_t a = t->child[r]; a < t->child[r] + 2; a++)
+        for (uint32_t b = t->child[r]; b < t->child[r] + 2; b++)
+            bn__visit(R, a, b, -1, 0, depth - 1, w);
+}
+
+/* A volume pair (bn__vol_pair): one link when its error is within eps, else s split. */
+static void bn__visit_vol(const bn__ref *R, uint32_t r, uint32_t s, int depth, bn__worker *w)
+{
+    const bn__tree *t = R->t;
+    double sigma, F, eps = bn__eps_at(R, r);
+    int ss = bn__splittable(R, s);
+    /* the least error any F could have (F = 0, one hit's standard error): above eps, no rays */
+    if (ss && bn__vol_error(R, r, s, 0, 1.0 / BN__VOL_RAYS) > eps)
+        F = -1;
+    else
+        F = bn__vol_F(R, bn__vol_hits(R, r, w), s, &sigma);
+    if (F >= 0 && (bn__vol_error(R, r, s, F, sigma) <= eps || !ss)) {
+        bn__vec_push(&w->links, r, s, (float)F, 0);
+        return;
+    }
+    /* the same depth for the parts: a receiver's descent into the clusters around it is one round's
+     * work (no rays after its first; bounded by the tree's depth) */
+    bn__visit(R, r, t->child[s], -1, 0, depth, w);
+    bn__visit(R, r, t->child[s] + 1, -1, 0, depth, w);
+}
+
 /* Refines the pair (r, s) (F: its coefficient when it is an existing link, else < 0; partial: its
  * rays found partial visibility) up to `depth` more levels: accepted links go to w->links, deeper
  * work to w->pending. Partly visible links are held to BN__PARTIAL x eps: a shadow's edge crosses
@@ -428,19 +559,15 @@ static void bn__visit(const bn__ref *R, uint32_t r, uint32_t s, float F, int par
     if (!bn__receiver_here(R, r))
         return;   /* another rank's receiver */
     if (r == s) {
-        if (lr || t->plane[r] >= 0)
-            return;   /* a plane does not see itself */
-        if (depth == 0) {
-            bn__vec_push(&w->pending, r, s, -1, 0);
-            return;
-        }
-        for (uint32_t a = t->child[r]; a < t->child[r] + 2; a++)
-            for (uint32_t b = t->child[r]; b < t->child[r] + 2; b++)
-                bn__visit(R, a, b, -1, 0, depth - 1, w);
+        bn__visit_self(R, r, depth, w);
         return;
     }
     if (F < 0 && bn__culled(R, r, s))
         return;
+    if (bn__vol_pair(R, r, s)) {
+        bn__visit_vol(R, r, s, depth, w);
+        return;
+    }
     split = 0;
     if (sr || ss) {
         double e = R->force || !bn__can_receive(R, r, s) ? INFINITY : bn__link_error_near(R, r, s);
@@ -522,9 +649,9 @@ static size_t bn__held(const bn__vec *work, const bn__vec *out, const bn__worker
 
 /* After a round: the workers' accepted links appended to out, their deeper work to *work (whose items
  * are refined), their splits counted; the peak of link bytes noted first. 0 when out of memory. */
-static int bn__round_collect(bn__worker *W, int nt, bn__vec *work, bn__vec *out, bn__pass_stats *st)
+static int bn__round_collect(bn__worker *W, int nt, bn__vec *work, bn__vec *out, size_t extra, bn__pass_stats *st)
 {
-    size_t held = bn__held(work, out, W, nt);
+    size_t held = bn__held(work, out, W, nt) + extra;
     st->peak_bytes = held > st->peak_bytes ? held : st->peak_bytes;
     work->n = 0;
     for (int k = 0; k < nt; k++) {
@@ -595,7 +722,7 @@ bn_status bn__pass(const bn__ref *R, bn__worker *W, int nt, bn__vec *work, bn__p
             return bn_error_set(err, bn_interrupted(), "hierarchy refinement interrupted");
         }
         if (!oom)
-            oom = !bn__round_collect(W, nt, work, &out, st);
+            oom = !bn__round_collect(W, nt, work, &out, __atomic_load_n(R->vol_bytes, __ATOMIC_RELAXED), st);
         if (oom) {
             free(out.a);
             return bn_error_set(err, BN_ENOMEM, "out of memory for the hierarchy's links (%zu so far): raise eps",
@@ -615,16 +742,19 @@ bn_status bn__pass(const bn__ref *R, bn__worker *W, int nt, bn__vec *work, bn__p
     return BN_OK;
 }
 
-/* Bmax from per-patch radiances L (N*3): the largest below each node. */
-void bn__bmax(const bn__tree *t, const double *L, double *Bmax)
+/* Bmax and Bmin from per-patch radiances L (N*3): the largest and smallest below each node. */
+void bn__bmax(const bn__tree *t, const double *L, double *Bmax, double *Bmin)
 {
     for (size_t v = t->n; v-- > 0;) {
         uint32_t c = t->child[v];
-        if (c == BN__NONE)
+        if (c == BN__NONE) {
             memcpy(Bmax + 3 * v, L + 3 * (size_t)bn__tree_patch(t, (uint32_t)v), 3 * sizeof(double));
-        else
-            for (int k = 0; k < 3; k++)
+            memcpy(Bmin + 3 * v, Bmax + 3 * v, 3 * sizeof(double));
+        } else
+            for (int k = 0; k < 3; k++) {
                 Bmax[3 * v + k] = fmax(Bmax[3 * (size_t)c + k], Bmax[3 * ((size_t)c + 1) + k]);
+                Bmin[3 * v + k] = fmin(Bmin[3 * (size_t)c + k], Bmin[3 * ((size_t)c + 1) + k]);
+            }
     }
 }
 

@@ -26,6 +26,10 @@ typedef struct bn__ref {
     const double *pverts;
     bn__leaf_geom *leaf;      /* npatch, in leaf order */
     double *Bmax;             /* 3 per node: the largest radiance estimate below (oracle) */
+    double *Bmin;             /* 3 per node: the smallest */
+    uint32_t **vol;           /* npatch, in leaf order: a leaf's hits (count, then sorted leaf positions), cast
+                                 when its first volume link is made (NULL until then) */
+    size_t *vol_bytes;        /* what vol holds (atomic) */
     double eps_abs;
     double btyp;              /* the scene's typical reflected radiance (0 before the first estimate) */
     double min_area;          /* planar nodes below this area are not split */
@@ -56,13 +60,20 @@ typedef struct bn__vec {
 
 void bn__vec_push(bn__vec *v, uint32_t r, uint32_t s, float F, int partial);
 
+/* Hemisphere rays from a leaf receiver (volume links, refine.c): cast once for the whole build, the
+ * leaf positions of the front faces they hit kept per leaf (R->vol). */
+#define BN__VOL_RAYS 256
+
 typedef struct bn__worker {
     bn__vec links, pending;
+    uint32_t vol[1 + BN__VOL_RAYS];   /* scratch: a leaf's hits before they are kept */
     bn__ff_worker *ff;
     size_t rays, splits;
     size_t ff_rays;           /* ff's rays counted already (it counts from its creation) */
 } bn__worker;
 
+/* The point of leaf q (in leaf order) at (u2, u3) in [0,1)^2, uniform in area; its normal. */
+void bn__leaf_point(const bn__ref *R, size_t q, double u2, double u3, double x[3], const double **n);
 /* Links ordered by receiver, then source (qsort). */
 int bn__link_cmp(const void *a, const void *b);
 /* What a pass counts: existing links split (this pass), shadow rays and the most bytes of links held
@@ -75,7 +86,7 @@ typedef struct bn__pass_stats {
 bn_status bn__pass(const bn__ref *R, bn__worker *W, int nt, bn__vec *work, bn__pass_stats *st, const char *label,
                    bn_error *err);
 /* Bmax from per-patch radiances L (N*3): the largest below each node. */
-void bn__bmax(const bn__tree *t, const double *L, double *Bmax);
+void bn__bmax(const bn__tree *t, const double *L, double *Bmax, double *Bmin);
 /* The area-weighted mean over patches of the largest channel of L - E: the light a typical surface
  * reflects, what a dark covered receiver's brightness is measured against (bn__eps_at). */
 double bn__typical_radiance(const bn__tree *t, const double *L, const double *E);

@@ -34,6 +34,7 @@ static const bn__more_opt bn__more[] = {
     {"two_sided", BN__M_SCENE, BN__M_STR, P_(load.two_sided), 0, 0},
     {"no_clusters", BN__M_SCENE, BN__M_NOT, P_(hier.clusters), 0, 1},
     {"no_flat_clusters", BN__M_SCENE, BN__M_NOT, P_(hier.flat_clusters), 0, 1},
+    {"no_volume_links", BN__M_SCENE, BN__M_NOT, P_(hier.volume_links), 0, 1},
     {"normalize_rows", BN__M_SCENE, BN__M_FLAG, P_(hier.normalize_rows), 0, 1},
     {"link_samples", BN__M_SCENE, BN__M_INT, P_(hier.samples), 1, 1 << 16},
     {"min_area", BN__M_SCENE, BN__M_DBL, P_(hier.min_area), -1, 1e300},
