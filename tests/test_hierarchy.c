@@ -832,7 +832,8 @@ static bn_scene *thicket_make(bn_rt **rt)
     bn_error err;
     bn_load_opts_default(&lo);
     lo.log.quiet = 1;
-    BN_ASSERT_STATUS(bn_scene_from_arrays("thicket", v, 8 + 64 * 8, polys, 6 + 64 * 6, pm, &mat, 1, &lo, &s, &err), BN_OK);
+    BN_ASSERT_STATUS(bn_scene_from_arrays("thicket", v, 8 + 64 * 8, polys, 6 + 64 * 6, pm, &mat, 1, &lo, &s, &err),
+                     BN_OK);
     bn_mesh_opts_default(&mo);
     mo.target_patches = 0;
     mo.patch_size = 0.5;
