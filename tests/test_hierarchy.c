@@ -848,8 +848,9 @@ static bn_scene *thicket_make(bn_rt **rt)
  * at most, a patch in the thicket taking a few) and within 0.5% in the area mean; every row of F_H
  * within 6% of 1 (a volume link's F from 256 rays: a few per cent of noise) and their mean within
  * 0.5% (the rays' F is unbiased). */
-BN_TEST(volume_links_in_a_thicket_of_cubes)
+BN_TEST(volume_links_in_a_thicket_of_cubes) /* BN_SLOW */
 {
+    BN_SKIP_IF_SLOW_RUN();   /* the sanitized run meets volume links in the small spheres' furnaces */
     bn_rt *rt;
     bn_scene *s = thicket_make(&rt);
     size_t n, links[2];
