@@ -50,6 +50,15 @@ static inline void bn_v3_basis(const double n[3], double s[3], double t[3])
     t[1] = sign + n[1] * n[1] * a;
     t[2] = -n[1];
 }
+/* The cosine-weighted direction about unit n (basis s, t: bn_v3_basis) at (u1, u2) in [0,1)^2:
+ * sin^2 theta = u1, phi = 2 pi u2 (Malley's method). */
+static inline void bn_v3_cosine_dir(const double n[3], const double s[3], const double t[3], double u1, double u2,
+                                    double d[3])
+{
+    double rr = sqrt(u1), ph = 2 * BN_PI * u2, lx = rr * cos(ph), ly = rr * sin(ph), lz = sqrt(1 - u1);
+    for (int k = 0; k < 3; k++)
+        d[k] = lx * s[k] + ly * t[k] + lz * n[k];
+}
 static inline double bn_v3_dist(const double a[3], const double b[3])
 {
     double d[3];

@@ -845,12 +845,10 @@ static void bn__hemisphere_row(const bn_rt *rt, const bn__ffg *g, const bn_formf
         double u1 = ((double)k + bn__rng_uniform(&r)) * inv, v1 = ((double)s->perm[k] + bn__rng_uniform(&r)) * inv;
         double u2 = ((double)s->perm[s->S + k] + bn__rng_uniform(&r)) * inv;
         double v2 = ((double)s->perm[2 * s->S + k] + bn__rng_uniform(&r)) * inv;
-        double x[3], d[3], ct = sqrt(1 - u2), st = sqrt(u2), ph = 2 * BN_PI * v2;
+        double x[3], d[3];
         bn_hit h;
         bn__poly_sample(bn__pc(g, i), pa->ncorners, u1, v1, x);
-        /* cosine-weighted direction: sin^2(theta) = u2 */
-        for (int c = 0; c < 3; c++)
-            d[c] = st * cos(ph) * t[c] + st * sin(ph) * b[c] + ct * n[c];
+        bn_v3_cosine_dir(n, t, b, u2, v2, d);
         bn_v3_madd(x, g->eps, n, x);
         if (bn_rt_intersect(rt, x, d, 0, INFINITY, &h) && h.front && h.patch != i)
             s->row[h.patch] += 1;

@@ -32,12 +32,11 @@ static int bn__row_hits(const bn_rt *rt, const bn_scene *s, size_t i, int rays, 
         /* direction strata on a side x side grid of (u2, v2); the point uniform on the patch */
         double u2 = ((double)(k % side) + bn__rng_uniform(&r)) / side;
         double v2 = ((double)((k / side) % side) + bn__rng_uniform(&r)) / side;
-        double x[3], d[3], st = sqrt(u2), ct = sqrt(1 - u2), ph = 2 * BN_PI * v2;
+        double x[3], d[3];
         bn_hit h;
         double p1 = bn__rng_uniform(&r), p2 = bn__rng_uniform(&r);   /* in this order on every compiler */
         bn__poly_sample(corners, pa->ncorners, p1, p2, x);
-        for (int c = 0; c < 3; c++)
-            d[c] = st * cos(ph) * t[c] + st * sin(ph) * b[c] + ct * pa->normal[c];
+        bn_v3_cosine_dir(pa->normal, t, b, u2, v2, d);
         bn_v3_madd(x, eps, pa->normal, x);
         hits += bn_rt_intersect(rt, x, d, 0, INFINITY, &h) && h.front && h.patch != i;
     }

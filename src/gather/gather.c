@@ -356,9 +356,7 @@ static void bn__cosine_dir(const double n[3], const double s[3], const double t[
                            bn__rng *r, double dir[3])
 {
     double u1 = (a + bn__rng_uniform(r)) / side, u2 = (b + bn__rng_uniform(r)) / side;
-    double rr = sqrt(u1), ph = 2 * BN_PI * u2, lx = rr * cos(ph), ly = rr * sin(ph), lz = sqrt(1 - u1);
-    for (int k = 0; k < 3; k++)
-        dir[k] = lx * s[k] + ly * t[k] + lz * n[k];
+    bn_v3_cosine_dir(n, s, t, u1, u2, dir);
 }
 
 /* The gather at a near hit q, level `depth` (0: a first gather's hit): the sums over its rays' hits of

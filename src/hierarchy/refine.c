@@ -454,14 +454,11 @@ static const uint32_t *bn__vol_hits(const bn__ref *R, uint32_t r, bn__worker *w)
     for (int k = 0; k < side * side; k++) {
         double x[3], o[3], d[3], u1 = bn__rng_uniform(&g), u2 = bn__rng_uniform(&g);
         double a = ((k / side) + bn__rng_uniform(&g)) / side, b = ((k % side) + bn__rng_uniform(&g)) / side;
-        double rad = sqrt(a), z = sqrt(fmax(0.0, 1 - a)), cp = cos(2 * BN_PI * b), sp = sin(2 * BN_PI * b);
         const double *nx;
         bn_hit hit;
         bn__leaf_point(R, q, u1, u2, x, &nx);
-        for (int m = 0; m < 3; m++) {
-            d[m] = rad * cp * bs[m] + rad * sp * bt[m] + z * n[m];
-            o[m] = x[m] + R->ray_eps * n[m];
-        }
+        bn_v3_cosine_dir(n, bs, bt, a, b, d);
+        bn_v3_madd(x, R->ray_eps, n, o);
         if (bn_rt_intersect(R->rt, o, d, 0, INFINITY, &hit) && hit.front)
             c[1 + c[0]++] = t->lo[t->leaf[hit.patch]];
     }
@@ -480,19 +477,22 @@ static const uint32_t *bn__vol_hits(const bn__ref *R, uint32_t r, bn__worker *w)
 
 /* F from leaf r (its hits h) into s: its rays' share that hit a face below s; *sigma its standard error
  * (binomial, at least that of one hit). */
-static double bn__vol_F(const bn__ref *R, const uint32_t *h, uint32_t s, double *sigma)
+static uint32_t bn__first_at_or_after(const uint32_t *pos, uint32_t n, uint32_t key)
 {
-    uint32_t lo = R->t->lo[s], hi = R->t->hi[s], a = 0, b = h[0], m = 0;
-    const uint32_t *pos = h + 1;
-    while (a < b) {   /* the first hit at or after lo */
+    uint32_t a = 0, b = n;
+    while (a < b) {
         uint32_t mid = a + (b - a) / 2;
-        if (pos[mid] < lo)
+        if (pos[mid] < key)
             a = mid + 1;
         else
             b = mid;
     }
-    while (a + m < h[0] && pos[a + m] < hi)
-        m++;
+    return a;
+}
+
+static double bn__vol_F(const bn__ref *R, const uint32_t *h, uint32_t s, double *sigma)
+{
+    uint32_t m = bn__first_at_or_after(h + 1, h[0], R->t->hi[s]) - bn__first_at_or_after(h + 1, h[0], R->t->lo[s]);
     double F = (double)m / BN__VOL_RAYS;
     *sigma = sqrt(fmax(F * (1 - F), 1.0 / BN__VOL_RAYS) / BN__VOL_RAYS);
     return F;
