@@ -141,19 +141,28 @@ typedef struct bn__heap {
     bn__leaf inline_[48];
 } bn__heap;
 
+/* An array that starts in inline storage (inl), moved to cap elements of its own (its n kept); the
+ * old block freed unless it is inl. NULL when out of memory (a untouched). */
+static void *bn__grow_inline(void *a, const void *inl, size_t n, size_t cap, size_t size)
+{
+    void *na = bn__malloc_array(cap, size);
+    if (!na)
+        return NULL;
+    memcpy(na, a, n * size);
+    if (a != inl)
+        free(a);
+    return na;
+}
+
 static int bn__heap_push(bn__heap *h, const bn__leaf *l)
 {
     size_t k;
     if (h->n == h->cap) {
-        size_t cap = 4 * h->cap;
-        bn__leaf *na = bn__malloc_array(cap, sizeof *na);
+        bn__leaf *na = bn__grow_inline(h->a, h->inline_, h->n, 4 * h->cap, sizeof *na);
         if (!na)
             return 0;
-        memcpy(na, h->a, h->n * sizeof *na);
-        if (h->a != h->inline_)
-            free(h->a);
         h->a = na;
-        h->cap = cap;
+        h->cap *= 4;
     }
     k = h->n++;
     while (k > 0) {
@@ -650,12 +659,9 @@ static int bn__panel_halve(const bn__cctx *cc, const double *pi, size_t ni, bn__
         if (P->pan[k].err > P->pan[w].err)
             w = k;
     if (P->np + 1 > P->cap) {
-        bn__panel *nw = bn__malloc_array(2 * P->cap, sizeof *nw);
+        bn__panel *nw = bn__grow_inline(P->pan, P->inl, P->np, 2 * P->cap, sizeof *nw);
         if (!nw)
             return 0;
-        memcpy(nw, P->pan, P->np * sizeof *nw);
-        if (P->pan != P->inl)
-            free(P->pan);
         P->pan = nw;
         P->cap *= 2;
     }
