@@ -314,3 +314,22 @@ BN_TEST(cli_budget_and_bad_values)
         free(out);
     }
 }
+
+/* A contact cut a hair from an object's corner (tests/data/table-leg.obj, a table leg standing on the living
+ * room's floor: the floor's cut point 3e-8 m from the leg's own corner, two points 4 eps apart): the closure
+ * ends, in a mesh of the size the patches and the budget say (it once split the two triangles holding both
+ * points for ever, into all of the machine's memory). */
+BN_TEST(closure_ends_where_a_contact_point_nearly_meets_a_corner)
+{
+    char cmd[1024], *out = NULL;
+    unsigned long nv = 0, nf = 0, np = 0;
+    snprintf(cmd, sizeof cmd, "bake %s --unit m --patch-size 0.3 --transport hierarchical -o %s",
+             bn_test_path("tests/data/table-leg.obj"), bn_test_tmp("leg.glb"));
+    BN_ASSERT_EQ(bn_test_bounce(cmd, &out), 0);
+    const char *w = strstr(out, "refined where L changes: ");
+    BN_ASSERT(w && sscanf(w, "refined where L changes: %lu vertices, %lu faces in %lu patches", &nv, &nf, &np) == 3);
+    fprintf(stderr, "%lu vertices, %lu triangles for %lu patches\n", nv, nf, np);
+    BN_ASSERT_GT(np, 500);
+    BN_ASSERT_LT(nf, 4 * np);
+    free(out);
+}

@@ -269,15 +269,21 @@ static int bn__choose(bn__refine *R, size_t t, int *k, size_t *s)
     return 1;
 }
 
-/* Cuts triangles until none has a split edge: the mesh is conforming again. */
+/* Cuts triangles until none has a split edge: the mesh is conforming again. The closure of a split adds
+ * a few triangles (Rivara's propagation); far more than every split's share is a cycle, stopped with an
+ * error rather than left to take the machine's memory. */
 static bn_status bn__conform(bn__refine *R, bn_error *err)
 {
+    size_t limit = 8 * R->b->ntri + 64 * R->split.n + 4096;
     for (int sweep = 0; sweep < BN__REFINE_SWEEPS; sweep++) {
         size_t cuts = 0;
         for (size_t t = 0; t < R->b->ntri; t++) {
             int k, c;
             size_t s;
             while ((c = bn__choose(R, t, &k, &s)) == 1) {
+                if (R->b->ntri > limit)
+                    return bn_error_set(err, BN_EINTERNAL, "bake: the refined mesh does not close: %zu triangles "
+                                        "for %zu splits (a cycle of cuts; please report the scene)", R->b->ntri, R->split.n);
                 if (bn__cut(R, t, k, s) != BN_OK)
                     return bn_error_set(err, BN_ENOMEM, "bake: out of memory refining %zu triangles", R->b->ntri);
                 cuts++;
@@ -337,16 +343,20 @@ static bn_status bn__split_chain(bn__refine *R, size_t a, size_t b, const bn__ha
     return bn__split_chain(R, h[m].p, b, h + m + 1, n - m - 1);
 }
 
-/* The points (with vertices) strictly inside edge a-b, within 100 eps of its line, sorted along it. */
+/* The points (with vertices) strictly inside edge a-b, within BN__HANG eps of its line and farther than that
+ * from both ends, sorted along it. A point nearer an end is that end: a contact's cut point 3e-8 m from a
+ * table leg's own corner (two points, 4 eps apart) split the leg's edge at the leg's corner, and the two
+ * triangles it made, each holding both points, split each other for ever (the living room's bake, 24 GB). */
+#define BN__HANG 100
 static size_t bn__hanging_on(const bn__refine *R, const bn__xkey *ox, size_t nx, size_t a, size_t b, bn__hang **h,
                              size_t *cap)
 {
     const double *A = R->ppos + 3 * a, *B = R->ppos + 3 * b;
-    double eps = R->b->eps, xhi = fmax(A[0], B[0]) + 100 * eps, t;
+    double tol = BN__HANG * R->b->eps, xhi = fmax(A[0], B[0]) + tol, t;
     size_t n = 0;
-    for (size_t k = bn__xfirst(ox, nx, fmin(A[0], B[0]) - 100 * eps); k < nx && ox[k].x <= xhi; k++) {
+    for (size_t k = bn__xfirst(ox, nx, fmin(A[0], B[0]) - tol); k < nx && ox[k].x <= xhi; k++) {
         size_t q = ox[k].i;
-        if (q == a || q == b || !bn__inside_segment(A, B, R->ppos + 3 * q, eps, 100 * eps, &t))
+        if (q == a || q == b || !bn__inside_segment(A, B, R->ppos + 3 * q, tol, tol, &t))
             continue;
         if (bn__grow(h, cap, n + 1, sizeof **h) != BN_OK)
             return SIZE_MAX;
