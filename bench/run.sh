@@ -627,7 +627,7 @@ if [ "$big" = 1 ]; then
             echo
             echo "\`bounce bake SCENE --per-bounce -o X.glb\` with the defaults (the gather at each vertex, the mesh refined where L"
             echo "changes up to 100,000 vertices) and with \`--gather none\`; errors per vertex against \`bounce trace --points\` at"
-            echo "every 40th vertex, 4,096 paths each, the tracer's variance subtracted (targets, issue 36: L 1% median and 3% at"
+            echo "every 40th vertex, 65,536 paths each, the tracer's variance subtracted (targets, issue 36: L 1% median and 3% at"
             echo "the 95th, K2E 2% and 6%; time solve included: the bunny box 2 minutes, the living room 4)."
             echo
             bash "$root/bench/bake_bench.sh" "$bounce" "$work/bunny-box.obj" mm "$work/bake" 40 2>/dev/null
