@@ -649,3 +649,49 @@ BN_TEST(contacts_between_objects)
     BN_ASSERT_EQ(nobj, 2);   /* white, light */
     BN_ASSERT_EQ(dflt, 7);
 }
+
+/* A table leg's foot on the living room's floor (tests/data/table-leg.obj): two contact cuts cross a few
+ * 1e-8 m apart near the leg's corner. Their cut points are one (within the contacts' resolution, 1e-6 of
+ * the scene's diameter), so no floor patch is a sliver between them: every patch is wider than that, the
+ * floor's patches still cover its 20 m2, and the default solve (dense, the closed form) accepts its F (a
+ * sliver 2.7e-8 m wide got F = -0.011 to the leg, and the run refused it). */
+BN_TEST(cuts_crossing_near_an_objects_corner_make_no_sliver)
+{
+    bn_load_opts lo;
+    bn_mesh_opts mo;
+    bn_scene *s;
+    bn_error err;
+    size_t np, nv;
+    double floor_area = 0, thinnest = INFINITY, diam = sqrt(5.0 * 5.0 + 2.6 * 2.6 + 4.0 * 4.0);
+    bn_load_opts_default(&lo);
+    lo.log.quiet = 1;
+    BN_ASSERT_STATUS(bn_scene_load(bn_test_path("tests/data/table-leg.obj"), &lo, &s, &err), BN_OK);
+    bn_mesh_opts_default(&mo);
+    BN_ASSERT_STATUS(bn_scene_mesh(s, &mo, &err), BN_OK);
+    const bn_patch *pt = bn_scene_patches(s, &np);
+    const double *pv = bn_scene_patch_vertices(s, &nv);
+    for (size_t i = 0; i < np; i++) {
+        double lmax = 0;
+        for (unsigned k = 0; k < pt[i].ncorners; k++) {
+            const double *a = pv + 3 * pt[i].corner[k], *b = pv + 3 * pt[i].corner[(k + 1) % pt[i].ncorners];
+            double d[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+            lmax = fmax(lmax, sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]));
+        }
+        thinnest = fmin(thinnest, (pt[i].ncorners == 3 ? 2 : 1) * pt[i].area / lmax);
+        if (pt[i].face <= 1)   /* the floor: the file's first two triangles */
+            floor_area += pt[i].area;
+    }
+    fprintf(stderr, "%zu patches, the thinnest %.3g m wide (1e-6 of the diameter: %.3g m), floor %.12g m2\n", np,
+            thinnest, 1e-6 * diam, floor_area);
+    BN_ASSERT_GT(thinnest, 1e-6 * diam);
+    BN_ASSERT_REL(floor_area, 20.0, 1e-9);
+    bn_scene_destroy(s);
+    char cmd[1024], *out = NULL;
+    snprintf(cmd, sizeof cmd, "solve %s --unit m -o %s", bn_test_path("tests/data/table-leg.obj"),
+             bn_test_tmp("leg.csv"));
+    int rc = bn_test_bounce(cmd, &out);
+    if (rc != 0)
+        fprintf(stderr, "%s", out);
+    BN_ASSERT_EQ(rc, 0);
+    free(out);
+}

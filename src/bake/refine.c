@@ -283,7 +283,8 @@ static bn_status bn__conform(bn__refine *R, bn_error *err)
             while ((c = bn__choose(R, t, &k, &s)) == 1) {
                 if (R->b->ntri > limit)
                     return bn_error_set(err, BN_EINTERNAL, "bake: the refined mesh does not close: %zu triangles "
-                                        "for %zu splits (a cycle of cuts; please report the scene)", R->b->ntri, R->split.n);
+                                        "for %zu splits (a cycle of cuts; please report the scene)", R->b->ntri,
+                                        R->split.n);
                 if (bn__cut(R, t, k, s) != BN_OK)
                     return bn_error_set(err, BN_ENOMEM, "bake: out of memory refining %zu triangles", R->b->ntri);
                 cuts++;
