@@ -13,7 +13,8 @@
  *   K^k E(x), k >= 2: rho(x) times the cosine-weighted mean of the solved K^(k-1) E over the
  *           hemisphere (stratified rays; the value at each hit read from its patch, or interpolated
  *           across patches with `smooth`); for K^2 E, KE at each hit is the hit's own direct light
- *           (one shadow ray per emitting face, Omega cos V / pi) while the scene has at most
+ *           (the faces' closed forms less one picked face's blocked part, Omega cos (1 - V) / pi /
+ *           its probability) while the scene has at most
  *           hit_emitters emitting faces;
  *   rest(x) rho(x) times the mean of K^n E + rest at the hits, and L(x) the sum of the layers.
  * The gathered (indirect) means are smooth inside a face, so each pixel's is averaged with those of
@@ -60,8 +61,9 @@ typedef struct bn_gather_opts {
     uint64_t seed;
     int filter;                      /* the gathered (indirect) terms averaged over the pixels within this
                                         radius that see the same face (0: none; default BN_GATHER_FILTER) */
-    int hit_emitters;                /* K^2 E gathers, at each hit, KE from the emitting faces (one shadow
-                                        ray each) when the scene has at most this many, else the hit
+    int hit_emitters;                /* K^2 E gathers, at each hit, KE from the emitting faces (their closed
+                                        forms summed, one shadow ray to one face picked in proportion to
+                                        its Le F) when the scene has at most this many, else the hit
                                         patch's KE (0: always the patch's; default BN_GATHER_HIT_EMITTERS);
                                         with the light tree, one ray to one picked face, whatever the count */
     int tree_emitters;               /* more emitting faces than this: each pixel sample picks light_samples

@@ -212,6 +212,48 @@ static void bn__direct_em_one(const bn__gather *G, const bn__emitter *em, const 
  * median per-pixel error 0.241% against 0.238%) and the gather's time falls 2.6x. */
 #define BN__HIT_FAR_SINE 0.3
 
+/* rho-free direct light at x (normal n, on face f) from a few emitting faces (2 .. BN__PICK_MAX), added to
+ * out: every face's unoccluded F by the closed form, Le F summed, less the blocked part of one face picked
+ * in proportion to its Le F (one shadow ray, bn__em_sample's estimate, over the pick's probability).
+ * Unbiased as a ray to each face is, exact where the picked face is wholly in view (a furnace: every
+ * face), one ray instead of one per face: a gather's hits in the living room (8 emitting faces) spent 72%
+ * of its bake there. */
+#define BN__PICK_MAX 64
+static void bn__direct_em_pick(const bn__gather *G, const double x[3], const double n[3], size_t f, bn__rng *r,
+                               double out[3], double *rays)
+{
+    double w[BN__PICK_MAX], Fe[BN__PICK_MAX], W = 0, F, est, u;
+    size_t e = 0;
+    int seen;
+    for (size_t k = 0; k < G->nem; k++) {
+        const bn__emitter *em = &G->em[k];
+        bn__em_view v;
+        Fe[k] = w[k] = 0;
+        if (em->face == f || !bn__em_view_make(G, em, x, n, 0, &v))
+            continue;
+        Fe[k] = v.F;
+        w[k] = (em->Le[0] + em->Le[1] + em->Le[2]) * v.F;
+        W += w[k];
+        for (int c = 0; c < 3; c++)
+            out[c] += em->Le[c] * v.F;
+    }
+    if (!(W > 0))
+        return;
+    u = bn__rng_uniform(r) * W;
+    while (e + 1 < G->nem && (u >= w[e] || !(w[e] > 0))) {
+        u -= w[e];
+        e++;
+    }
+    if (!(w[e] > 0))
+        return;
+    if (!bn__em_sample(G, &G->em[e], x, n, r, &F, &est, &seen, rays)) {
+        est = Fe[e];   /* no sample of it (a degenerate view): taken as hidden, as a ray to each face takes it */
+        seen = 0;
+    }
+    for (int c = 0; !seen && c < 3; c++)
+        out[c] -= G->em[e].Le[c] * est * W / w[e];
+}
+
 /* rho-free direct light at x (normal n) from the punctual lights, added to out: each light's irradiance
  * over pi, where one shadow ray reaches it (a point light is a point: its shadow is sharp, no noise). */
 static void bn__direct_punctual(const bn__gather *G, const double x[3], const double n[3], double out[3],
@@ -243,6 +285,10 @@ static void bn__direct_one(const bn__gather *G, const double x[3], const double 
         size_t e = bn__lights_pick(G->tree, x, n, bn__rng_uniform(r), BN__HIT_FAR_SINE, &pdf);
         if (e != BN__LIGHTS_NONE && G->em[e].face != f && pdf > 0)
             bn__direct_em_one(G, &G->em[e], x, n, r, 1 / pdf, out, rays);
+        return;
+    }
+    if (G->nem > 1 && G->nem <= BN__PICK_MAX) {
+        bn__direct_em_pick(G, x, n, f, r, out, rays);
         return;
     }
     for (size_t e = 0; e < G->nem; e++)
