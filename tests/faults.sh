@@ -123,6 +123,8 @@ term "contact lines" "hierarchy refinement" "SIGTERM while refining the hierarch
   "$exe" bounces "$cornell" --unit mm --transport hierarchical --eps 1e-6 --ff-visibility rays --size 64x64 -o h.exr
 term "camera:" gather "SIGTERM in the gather" \
   "$exe" bounces "$cornell" $verbose --size 1024x1024 --spp 16 -o g.exr
+term "left out of the vertex averages" "gather at points:" "SIGTERM in the bake's gather at its vertices" \
+  "$exe" bake "$cornell" --unit mm --patches 20000 --transport hierarchical --ff-visibility rays -o b.glb
 }
 
 case $part in

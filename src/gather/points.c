@@ -46,7 +46,7 @@ static bn_status bn__gather_points_body(const bn_rt *rt, const double *const *te
 {
     bn__gather G;
     bn_status st;
-    int bad = 0;
+    int bad = 0, stop = 0;
     memset(&G, 0, sizeof G);
     if (n < 1 || n > 20)
         return bn_error_set(err, BN_EUSAGE, "gather at points: %d terms kept (1 to 20: KE at least)", n);
@@ -59,14 +59,26 @@ static bn_status bn__gather_points_body(const bn_rt *rt, const double *const *te
         double *hv = malloc((size_t)(n + 1) * 3 * sizeof *hv);
         bad += !hv;
 #pragma omp for schedule(dynamic, 64)
-        for (size_t i = 0; i < npts; i++)
-            if (hv)
-                bn__gather_point(&G, x + 3 * i, patch[i], i, npts, o->seed, hv, out);
+        for (size_t i = 0; i < npts; i++) {
+            int halt;
+#pragma omp atomic read
+            halt = stop;
+            if (halt || !hv)
+                continue;
+            if (i % 64 == 0 && bn_interrupted() != BN_OK) {   /* Ctrl-C: a room's bake gathers for minutes */
+#pragma omp atomic write
+                stop = 1;
+                continue;
+            }
+            bn__gather_point(&G, x + 3 * i, patch[i], i, npts, o->seed, hv, out);
+        }
         free(hv);
     }
     bn__gather_free(&G);
     if (bad)
         return bn_error_set(err, BN_ENOMEM, "gather at points: out of memory for a thread's buffers");
+    if (stop)
+        return bn_error_set(err, bn_interrupted(), "gather at points: interrupted");
     for (size_t k = 0; k < (size_t)(n + 3) * npts * 3; k++)
         if (!isfinite(out[k]))
             return bn_error_set(err, BN_ENUMERIC, "gather at points: point %zu's value %g is not finite",
