@@ -401,6 +401,33 @@ static size_t bn__ring_clean(const size_t *ring, size_t n, size_t *out)
     return m;
 }
 
+/* A ring with no corner whose neighbours are both corners: a fan from its area centroid (a new vertex
+ * inside) to each edge. 0 on OOM. */
+static int bn__emit_fan(bn__cx *c, size_t face, const bn_patch *orig, const size_t *ring, size_t n,
+                        const double (*xy)[2])
+{
+    double cen[3] = {0, 0, 0}, w = 0;
+    size_t cv;
+    for (size_t j = 1; j + 1 < n; j++) {
+        const double *a = c->pv + 3 * ring[0], *b = c->pv + 3 * ring[j], *d = c->pv + 3 * ring[j + 1];
+        double ar = fabs(bn__cross2(xy[0], xy[j], xy[j + 1]));
+        for (int k = 0; k < 3; k++)
+            cen[k] += ar * (a[k] + b[k] + d[k]) / 3.0;
+        w += ar;
+    }
+    if (!(w > 0) || !bn__grow((void **)&c->pv, &c->nv_cap, c->nv + 1, 3 * sizeof(double)))
+        return 0;
+    bn_v3_scale(cen, 1.0 / w, cen);
+    memcpy(c->pv + 3 * c->nv, cen, sizeof cen);
+    cv = c->nv++;
+    for (size_t j = 0; j < n; j++) {
+        size_t tri[3] = {cv, ring[j], ring[(j + 1) % n]};
+        if (!bn__emit(c, face, orig, tri, 3))
+            return 0;
+    }
+    return 1;
+}
+
 /* A convex ring of n >= 3 points (some possibly on the straight line between their neighbours)
  * as triangles and quads that keep every point as a corner; fewer than 3 distinct points (a sliver
  * whose cut points merged) make none. */
@@ -437,29 +464,8 @@ static int bn__emit_piece(bn__cx *c, size_t face, const bn_patch *orig, const si
                 goto done;
         }
         ok = 1;
-    } else {
-        /* no such corner: a fan from the area centroid, a new vertex inside */
-        double cen[3] = {0, 0, 0}, w = 0;
-        size_t cv;
-        for (size_t j = 1; j + 1 < n; j++) {
-            const double *a = c->pv + 3 * ring[0], *b = c->pv + 3 * ring[j], *d = c->pv + 3 * ring[j + 1];
-            double ar = fabs(bn__cross2(xy[0], xy[j], xy[j + 1]));
-            for (int k = 0; k < 3; k++)
-                cen[k] += ar * (a[k] + b[k] + d[k]) / 3.0;
-            w += ar;
-        }
-        if (!(w > 0) || !bn__grow((void **)&c->pv, &c->nv_cap, c->nv + 1, 3 * sizeof(double)))
-            goto done;
-        bn_v3_scale(cen, 1.0 / w, cen);
-        memcpy(c->pv + 3 * c->nv, cen, sizeof cen);
-        cv = c->nv++;
-        for (size_t j = 0; j < n; j++) {
-            size_t tri[3] = {cv, ring[j], ring[(j + 1) % n]};
-            if (!bn__emit(c, face, orig, tri, 3))
-                goto done;
-        }
-        ok = 1;
-    }
+    } else
+        ok = bn__emit_fan(c, face, orig, ring, n, (const double(*)[2])xy);
 done:
     free(xy);
     free(corner);
