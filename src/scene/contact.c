@@ -402,7 +402,7 @@ static size_t bn__ring_clean(const size_t *ring, size_t n, size_t *out)
 }
 
 /* A ring with no corner whose neighbours are both corners: a fan from its area centroid (a new vertex
- * inside) to each edge. 0 on OOM. */
+ * inside) to each edge; none when it has no area. 0 on OOM only (a flat ring was reported as out of memory). */
 static int bn__emit_fan(bn__cx *c, size_t face, const bn_patch *orig, const size_t *ring, size_t n,
                         const double (*xy)[2])
 {
@@ -415,7 +415,9 @@ static int bn__emit_fan(bn__cx *c, size_t face, const bn_patch *orig, const size
             cen[k] += ar * (a[k] + b[k] + d[k]) / 3.0;
         w += ar;
     }
-    if (!(w > 0) || !bn__grow((void **)&c->pv, &c->nv_cap, c->nv + 1, 3 * sizeof(double)))
+    if (!(w > 0))
+        return 1;   /* no area (its points on one line, within the contacts' resolution): no patch, not an error */
+    if (!bn__grow((void **)&c->pv, &c->nv_cap, c->nv + 1, 3 * sizeof(double)))
         return 0;
     bn_v3_scale(cen, 1.0 / w, cen);
     memcpy(c->pv + 3 * c->nv, cen, sizeof cen);
