@@ -2,9 +2,12 @@
  * triangles (the same surface and radiance, so the same light and the same reference), each solved
  * once (not timed), then the final gather alone timed at several light sample counts, with the
  * median per-pixel error of KE and of L against the kept 64k-spp path-traced reference
- * (bench/data). Above BN_GATHER_TREE_EMITTERS faces the gather picks its faces from the light tree,
- * one ray each, so its cost per pixel should not grow with their number: the table gives each
- * gather's time as a multiple of the one face's at the default light samples, and its errors.
+ * (bench/data). By default the gather merges the cut light's coplanar pieces back into one light
+ * (src/gather/emitters.c): one row each at the default light samples. Not merged (merge_emitters 0, as
+ * for pieces that are not coplanar), above BN_GATHER_TREE_EMITTERS faces the gather picks its faces
+ * from the light tree, one ray each, so its cost per pixel should not grow with their number: the
+ * table gives each gather's time as a multiple of the one face's at the default light samples, and
+ * its errors.
  *
  * With --interior ROOM.obj (the living room): each emitting material rendered alone (the other
  * emitters' Ke set to 0 in a copy of the MTL), KE only, twice with two seeds at the default light
@@ -96,8 +99,8 @@ static void solve(const char *path, bn_pipeline *p)
 }
 
 /* One gather of p at the reference's size with `light` samples: its time, KE and L errors. */
-static double gather(const bn_pipeline *p, const exr_img *rke, const exr_img *rk2, const exr_img *rl, int light, double eke[3],
-                     double ek2[3], double el[3], double *rays_per)
+static double gather(const bn_pipeline *p, const exr_img *rke, const exr_img *rk2, const exr_img *rl, int light,
+                     int merge, double eke[3], double ek2[3], double el[3], double *rays_per, size_t *lights)
 {
     bn_camera cam;
     bn_image g[7];
@@ -118,6 +121,7 @@ static double gather(const bn_pipeline *p, const exr_img *rke, const exr_img *rk
         bn_image_alloc(&g[l], cam.width, cam.height, &err);
     bn_gather_opts_default(&go);
     go.light_samples = light;
+    go.merge_emitters = merge;
     go.quiet = 1;
     t0 = bn__now();
     if (bn_gather_render(p->rt, &cam, terms, 4, p->rest, &go, g, &gs, &err) != BN_OK) {
@@ -129,6 +133,7 @@ static double gather(const bn_pipeline *p, const exr_img *rke, const exr_img *rk
     exr_median_err(rk2, g[2].rgb, ek2);
     exr_median_err(rl, g[6].rgb, el);
     *rays_per = gs.shadow_rays / gs.camera_rays;
+    *lights = gs.lights;
     for (int l = 0; l < 7; l++)
         bn_image_free(&g[l]);
     return t;
@@ -314,12 +319,18 @@ int main(int argc, char **argv)
         else
             write_cut(dir, na[s], nb[s], path, sizeof path);
         solve(path, &p);
-        for (int l = 0; l < 3; l++) {
-            double eke[3], ek2[3], el[3], rays, t = gather(&p, &rke, &rk2, &rl, light[l], eke, ek2, el, &rays);
-            if (s == 0 && light[l] == BN_GATHER_LIGHT_SAMPLES)
+        for (int l = s ? -1 : 0; l < 3; l++) {   /* l = -1: the cut light merged (the default) */
+            double eke[3], ek2[3], el[3], rays, t;
+            size_t nl;
+            int ls = light[l < 0 ? 0 : l];
+            char how[64];
+            t = gather(&p, &rke, &rk2, &rl, ls, l < 0 || !s, eke, ek2, el, &rays, &nl);
+            if (s == 0 && ls == BN_GATHER_LIGHT_SAMPLES)
                 t1 = t;
-            printf("| %d | %d | %s | %.2f | %.2f | %.1f | %.3f%% | %.3f%% | %.3f%% |\n", s ? 2 * na[s] * nb[s] : 1,
-                   light[l], s ? "light tree" : "every face", t, t / t1, rays, 100 * eke[0], 100 * ek2[0], 100 * el[0]);
+            snprintf(how, sizeof how, "%s (%zu light%s)",
+                     !s ? "every face" : l < 0 ? "merged" : "light tree, not merged", nl, nl == 1 ? "" : "s");
+            printf("| %d | %d | %s | %.2f | %.2f | %.1f | %.3f%% | %.3f%% | %.3f%% |\n", s ? 2 * na[s] * nb[s] : 1, ls,
+                   how, t, t / t1, rays, 100 * eke[0], 100 * ek2[0], 100 * el[0]);
             fflush(stdout);
         }
         bn_pipeline_free(&p);

@@ -160,6 +160,12 @@ int main(int argc, char **argv)
  * surface, the same emitted radiance, so the same light): written beside its material file. */
 const char *bn_test_cornell_cut_light(int nx)
 {
+    return bn_test_cornell_cut_light_without(nx, -1);
+}
+
+/* The same without the grid's cell `cell` (b nx + a; -1: none), a hole or a notch in the light. */
+const char *bn_test_cornell_cut_light_without(int nx, int cell)
+{
     static char path[4096];
     const double v0[3] = {343.0, 548.8, 227.0}, v1[3] = {343.0, 548.8, 332.0}, v3[3] = {213.0, 548.8, 227.0};
     size_t size;
@@ -178,6 +184,8 @@ const char *bn_test_cornell_cut_light(int nx)
     for (int b = 0; b < nx; b++)
         for (int a = 0; a < nx; a++) {
             int g = (nx + 1) * (nx + 1), i = b * (nx + 1) + a - g;   /* relative: from the end */
+            if (b * nx + a == cell)
+                continue;
             fprintf(fp, "f %d %d %d\nf %d %d %d\n", i, i + 1, i + nx + 2, i, i + nx + 2, i + nx + 1);
         }
     BN_ASSERT(fputs(after, fp) >= 0 && fclose(fp) == 0);

@@ -108,6 +108,8 @@ int bn_test_file_exists(const char *path);
 /* meshes/cornell-box.obj with its light cut into an nx x nx grid of quads, two triangles each (the
  * same light), written with its .mtl into the test's folder: the file's path (static). */
 const char *bn_test_cornell_cut_light(int nx);
+/* The same without one cell (b nx + a; -1: none): a hole or a notch in the light. */
+const char *bn_test_cornell_cut_light_without(int nx, int cell);
 
 /* Writes `json` to "<tmpdir>/<name>" with every "@URI@" replaced by the data URI of bin[0 .. n) and "@N@"
  * by n (a glTF with its buffer inline): the path (bn_test_tmp's). */

@@ -5,8 +5,9 @@
  *           integral over the part of e in front of x (exact), V_e the visible fraction of e seen
  *           from x, estimated with the same stratified directions (uniform in e's solid angle,
  *           weighted by the cosine at x) as sum cos V / sum cos: exact where e is wholly visible or
- *           wholly hidden, and sharp to the pixel at a shadow's edge. Above tree_emitters emitting
- *           faces, the sum is estimated instead from light_samples faces picked from a light tree
+ *           wholly hidden, and sharp to the pixel at a shadow's edge. Emitting faces that tile one
+ *           flat convex light are one e (merge_emitters). Above tree_emitters of them, the sum is
+ *           estimated instead from light_samples faces picked from a light tree
  *           (in proportion to a bound on each one's contribution), each Le F (1 - blocked) / pdf with
  *           one shadow ray (the blocked part by one direction): unbiased, exact where the picked face
  *           is wholly visible, and as costly for 10,000 faces as for 20;
@@ -69,7 +70,13 @@ typedef struct bn_gather_opts {
     int tree_emitters;               /* more emitting faces than this: each pixel sample picks light_samples
                                         of them from a light tree (src/rt/lights.h) in proportion to their
                                         likely contribution, one ray each, so the cost per pixel does not
-                                        grow with their number (default BN_GATHER_TREE_EMITTERS) */
+                                        grow with their number (default BN_GATHER_TREE_EMITTERS); counted
+                                        after merging (merge_emitters) */
+    int merge_emitters;              /* 1 (default): emitting faces that share corners, lie in one plane,
+                                        emit the same radiance and tile a convex polygon of at most 6
+                                        corners are one light (a quad cut into two triangles, a panel into
+                                        a grid): their closed forms are one, and one face's visibility
+                                        samples; 0: every face its own */
     int threads;                     /* 0: the caller's */
     int quiet;                       /* no progress bar */
 } bn_gather_opts;
@@ -80,6 +87,7 @@ typedef struct bn_gather_stats {
     double shadow_rays, gather_rays, camera_rays;
     double front_hits;               /* camera rays that met a surface's front (0: a black image) */
     size_t emitters;                 /* emitting faces */
+    size_t lights;                   /* the lights they make once merged (merge_emitters) */
     int hit_direct;                  /* 1: K^2 E's hits took KE from the emitters (hit_emitters) */
     int light_tree;                  /* 1: emitting faces were picked from the light tree (tree_emitters) */
     double seconds;

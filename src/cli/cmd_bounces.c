@@ -133,9 +133,10 @@ static void bn__bounces_options(bn_optset *set, bn__bounces_cli *a, bn_cli_commo
                                 "emitting faces (default " BN__STR(BN_GATHER_HIT_EMITTERS) "; 0: always the patch's; "
                                 "with the light tree, one ray each to one picked face)"});
     bn_optset_add(set, (bn_opt){"tree-emitters", 0, BN_OPT_INT, &a->tree_emitters, NULL, 0, 1 << 30, "N",
-                                "gather: with more than N emitting faces, each pixel sample picks --light-samples "
-                                "of them from a light tree in proportion to their likely contribution (one ray "
-                                "each), so a lamp cut into 10,000 triangles costs about what one face does (default "
+                                "gather: with more than N lights (emitting faces, the coplanar pieces of one convex "
+                                "light merged), each pixel sample picks --light-samples of them from a light tree in "
+                                "proportion to their likely contribution (one ray each), so a lampshade cut into "
+                                "10,000 triangles costs about what one face does (default "
                                 BN__STR(BN_GATHER_TREE_EMITTERS) ")"});
     bn_optset_add(set, (bn_opt){"patches-out", 0, BN_OPT_STRING, &a->patches_out, NULL, 0, 0, "FILE.csv",
                                 "also write the per-patch CSV of `bounce solve -n K` (L and every term) from the "

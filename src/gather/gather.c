@@ -24,6 +24,7 @@ void bn_gather_opts_default(bn_gather_opts *o)
     o->filter = BN_GATHER_FILTER;
     o->hit_emitters = BN_GATHER_HIT_EMITTERS;
     o->tree_emitters = BN_GATHER_TREE_EMITTERS;
+    o->merge_emitters = 1;
     o->seed = 1;
 }
 
@@ -229,7 +230,7 @@ static void bn__direct_em_pick(const bn__gather *G, const double x[3], const dou
         const bn__emitter *em = &G->em[k];
         bn__em_view v;
         Fe[k] = w[k] = 0;
-        if (em->face == f || !bn__em_view_make(G, em, x, n, 0, &v))
+        if (bn__em_self(G, k, f) || !bn__em_view_make(G, em, x, n, 0, &v))
             continue;
         Fe[k] = v.F;
         w[k] = (em->Le[0] + em->Le[1] + em->Le[2]) * v.F;
@@ -283,7 +284,7 @@ static void bn__direct_one(const bn__gather *G, const double x[3], const double 
     if (G->tree) {
         double pdf;
         size_t e = bn__lights_pick(G->tree, x, n, bn__rng_uniform(r), BN__HIT_FAR_SINE, &pdf);
-        if (e != BN__LIGHTS_NONE && G->em[e].face != f && pdf > 0)
+        if (e != BN__LIGHTS_NONE && !bn__em_self(G, e, f) && pdf > 0)
             bn__direct_em_one(G, &G->em[e], x, n, r, 1 / pdf, out, rays);
         return;
     }
@@ -292,7 +293,7 @@ static void bn__direct_one(const bn__gather *G, const double x[3], const double 
         return;
     }
     for (size_t e = 0; e < G->nem; e++)
-        if (G->em[e].face != f)
+        if (!bn__em_self(G, e, f))
             bn__direct_em_one(G, &G->em[e], x, n, r, 1, out, rays);
 }
 
@@ -309,7 +310,7 @@ static void bn__direct_tree(const bn__gather *G, const double x[3], const double
         double pdf, F, est;
         int seen;
         size_t e = bn__lights_pick(G->tree, x, n, (i + bn__rng_uniform(r)) / m, 0, &pdf);
-        if (e == BN__LIGHTS_NONE || G->em[e].face == f || !(pdf > 0) ||
+        if (e == BN__LIGHTS_NONE || bn__em_self(G, e, f) || !(pdf > 0) ||
             !bn__em_sample(G, &G->em[e], x, n, r, &F, &est, &seen, rays))
             continue;
         for (int k = 0; k < 3; k++) {
@@ -335,7 +336,7 @@ static void bn__direct(const bn__gather *G, const double x0[3], const double n[3
     if (G->tree)
         bn__direct_tree(G, x0, n, f, r, side * side, out, rays);
     for (size_t e = 0; !G->tree && e < G->nem; e++)
-        if (G->em[e].face != f)
+        if (!bn__em_self(G, e, f))
             bn__direct_em(G, &G->em[e], x0, n, r, side, out, rays);
     for (int c = 0; c < 3; c++)
         out[c] += pl[c];
@@ -583,39 +584,6 @@ static bn_status bn__gather_check(const bn_camera *cam, int n, const bn_gather_o
     return BN_OK;
 }
 
-/* The emitting faces (their polygons, normals and radiance), for the closed-form direct light. */
-static bn_status bn__gather_emitters(bn__gather *G, bn_error *err)
-{
-    size_t nf, nvert, nidx;
-    const bn_face *faces = bn_scene_faces(G->scene, &nf);
-    const double *verts = bn_scene_vertices(G->scene, &nvert);
-    const size_t *idx = bn_scene_face_indices(G->scene, &nidx);
-    G->em = bn__calloc(bn_scene_emitter_count(G->scene) + 1, sizeof *G->em);
-    if (!G->em)
-        return bn_error_set(err, BN_ENOMEM, "out of memory");
-    for (size_t f = 0; f < nf; f++) {
-        double Le[3];
-        bn__emitter *e = &G->em[G->nem];
-        bn_scene_face_emission(G->scene, f, Le);
-        if (!(Le[0] > 0 || Le[1] > 0 || Le[2] > 0))
-            continue;
-        e->nv = faces[f].nverts;
-        for (size_t k = 0; k < e->nv; k++)
-            memcpy(e->v + 3 * k, verts + 3 * idx[faces[f].first + k], 3 * sizeof(double));
-        memcpy(e->n, faces[f].normal, sizeof e->n);
-        memcpy(e->Le, Le, sizeof e->Le);
-        e->face = f;
-        e->area = bn__poly_area(e->v, e->nv, NULL);
-        for (size_t k = 0; k < e->nv; k++) {
-            bn_v3_madd(e->c, 1.0 / (double)e->nv, e->v + 3 * k, e->c);
-            for (size_t m = k + 1; m < e->nv; m++)
-                e->diam = fmax(e->diam, bn_v3_dist(e->v + 3 * k, e->v + 3 * m));
-        }
-        G->nem++;
-    }
-    return BN_OK;
-}
-
 /* The light tree over the emitting faces, each weighted by its area x mean radiance. */
 static bn_status bn__gather_tree(bn__gather *G, bn_error *err)
 {
@@ -668,7 +636,7 @@ bn_status bn__gather_init(bn__gather *G, const bn_rt *rt, const double *const *t
     G->smooth = o->smooth;
     G->pl = bn_scene_lights(G->scene, &G->npl);
     G->unit = bn_unit_to_metres(bn_scene_unit(G->scene));
-    if ((st = bn__gather_emitters(G, err)) != BN_OK || (G->nem > (size_t)o->tree_emitters &&
+    if ((st = bn__gather_emitters(G, o->merge_emitters, err)) != BN_OK || (G->nem > (size_t)o->tree_emitters &&
                                                           (st = bn__gather_tree(G, err)) != BN_OK))
         return st;
     G->hit_direct = G->nem > 0 && o->hit_emitters > 0 && (G->nem <= (size_t)o->hit_emitters || G->tree);
@@ -813,7 +781,8 @@ static bn_status bn__gather_finish(const bn__gather *G, const bn_camera *cam, co
     stats->shadow_rays = c[1];
     stats->gather_rays = c[2];
     stats->front_hits = c[3];
-    stats->emitters = G->nem;
+    stats->emitters = G->faces;
+    stats->lights = G->nem;
     stats->hit_direct = G->hit_direct;
     stats->light_tree = G->tree != NULL;
     stats->seconds = bn__now() - t0;
@@ -855,6 +824,7 @@ void bn__gather_free(bn__gather *G)
             free(G->vv[l]);
     free(G->vv);
     free(G->em);
+    free(G->owner);
     bn__lights_free(G->tree);
     memset(G, 0, sizeof *G);
 }

@@ -9,10 +9,12 @@
 #include "base/internal.h"
 #include "rt/lights.h"
 
-/* An emitting face: its corners (counter-clockwise from the front), normal and radiance. */
+/* An emitter: an emitting face, or coplanar faces of one light merged (src/gather/emitters.c): its
+ * corners (counter-clockwise from the front), normal and radiance. */
+#define BN__EMITTER_CORNERS 6
 typedef struct bn__emitter {
-    double v[3 * 4];
-    size_t nv, face;
+    double v[3 * BN__EMITTER_CORNERS];
+    size_t nv, face;         /* face: its (lowest) face */
     double n[3], Le[3];
     double area, c[3], diam;   /* area, vertex mean, largest distance between two corners */
 } bn__emitter;
@@ -28,7 +30,8 @@ typedef struct bn__gather {
     const bn_bake *smooth;
     int n, gl, gh;           /* terms kept; light and gather strata per side */
     bn__emitter *em;
-    size_t nem;
+    size_t nem, faces;       /* emitters; the emitting faces they hold */
+    uint32_t *owner;         /* per scene face: its emitter (UINT32_MAX: none), when faces were merged */
     double eps;
     int hit_direct;          /* the hits' KE from the emitters (nem <= hit_emitters, or the tree), not the patches */
     int textured;            /* some material has a reflectance texture: rho per point (bn__rho_at) */
@@ -41,6 +44,14 @@ typedef struct bn__gather {
 /* Streams: the camera's jitter, then the light and gather samples, keyed by pixel (or point) and sample. */
 #define BN__GATHER_STREAM 0x67617468ULL
 
+/* Whether emitter e holds face f (a point on it does not light itself). */
+static inline int bn__em_self(const bn__gather *G, size_t e, size_t f)
+{
+    return G->owner ? G->owner[f] == e : G->em[e].face == f;
+}
+
+/* G->em: the scene's emitting faces, with (merge) the coplanar pieces of one convex light as one. */
+bn_status bn__gather_emitters(bn__gather *G, int merge, bn_error *err);
 /* A stratified grid's side for `samples` (at least 1). */
 int bn__side(int samples);
 /* G for terms[0 .. n] and rest under o: emitters, the light tree, punctual lights, smooth values. */

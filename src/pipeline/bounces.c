@@ -37,6 +37,23 @@ static char *bn__sibling(const char *path, const char *suffix)
     return s;
 }
 
+/* The gather's line in the log: what it chose and what it cost. */
+static void bn__gather_log(const bn_bounces_opts *o, const bn_camera *cam, const bn_gather_stats *gs)
+{
+    char lights[96] = "";
+    if (gs->lights != gs->emitters)
+        snprintf(lights, sizeof lights, " as %zu light%s (coplanar pieces merged)", gs->lights,
+                 gs->lights == 1 ? "" : "s");
+    bn_logf(&o->log, BN_LOG_INFO,
+            "gather: %dx%d x %d spp, %zu emitting face%s%s, %s %d (K2E's hits: KE %s); %.3g shadow rays, %.3g "
+            "gather rays, %.2f s (%.3g rays/s)",
+            cam->width, cam->height, cam->spp, gs->emitters, gs->emitters == 1 ? "" : "s", lights,
+            gs->light_tree ? "picked from a light tree: more than" : "each visited: at most", o->tree_emitters,
+            gs->hit_direct ? "from the emitters" : "of the patches (more lights than the limit)", gs->shadow_rays,
+            gs->gather_rays, gs->seconds,
+            (gs->shadow_rays + gs->gather_rays + gs->camera_rays) / (gs->seconds > 0 ? gs->seconds : 1e-9));
+}
+
 /* The layers' images at the camera's size, rendered (flat, or smooth through a bake). */
 bn_status bn_bounces_render(const bn_scene *scene, const bn_rt *rt, const bn_camera *cam, const double *const *layers,
                             int bounces, const bn_bounces_opts *o, bn_image *imgs, bn_error *err)
@@ -72,15 +89,7 @@ bn_status bn_bounces_render(const bn_scene *scene, const bn_rt *rt, const bn_cam
                      "black (is its eye outside a closed room, or behind the surfaces it looks at?)", cam->eye[0],
                      cam->eye[1], cam->eye[2], 100 * gs.front_hits / gs.camera_rays);
         if (st == BN_OK)
-            bn_logf(&o->log, BN_LOG_INFO,
-                    "gather: %dx%d x %d spp, %zu emitting face%s, %s %d (K2E's hits: KE %s); %.3g shadow rays, "
-                    "%.3g gather rays, %.2f s (%.3g rays/s)",
-                    cam->width, cam->height, cam->spp, gs.emitters, gs.emitters == 1 ? "" : "s",
-                    gs.light_tree ? "picked from a light tree: more than" : "each visited: at most", o->tree_emitters,
-                    gs.hit_direct ? "from the emitters" : "of the patches (more emitting faces than the limit)",
-                    gs.shadow_rays,
-                    gs.gather_rays, gs.seconds,
-                    (gs.shadow_rays + gs.gather_rays + gs.camera_rays) / (gs.seconds > 0 ? gs.seconds : 1e-9));
+            bn__gather_log(o, cam, &gs);
     } else if (st == BN_OK) {
         st = bn_image_render(rt, cam, layers, nl, bake, o->seed, o->threads, imgs, err);
     }
