@@ -617,6 +617,10 @@ static bn_status bn__refine_rounds(bn__refine *R, const bn_bake_refine_opts *o, 
     double min_edge = o->min_edge > 0 ? o->min_edge : 1e-3 * b->eps / 1e-9;
     size_t nv0 = b->nverts;
     int round = 0;
+    if (nv0 + 8 > o->max_vertices)
+        bn_logf(o->log, BN_LOG_INFO, "bake: the element mesh has %zu vertices, the budget %zu: nothing is refined (a "
+                "larger --bake-vertices refines where light changes; each vertex is gathered all the same)", nv0,
+                o->max_vertices);
     while (b->nverts < o->max_vertices) {
         size_t room = (o->max_vertices - b->nverts) / 8, marked = 0, probed = 0, first = b->nverts;
         bn_status st = room ? bn__mark(R, o, *val, floor, min_edge, room, &marked, &probed, err) : BN_OK;
