@@ -619,7 +619,7 @@ static bn_status bn__refine_rounds(bn__refine *R, const bn_bake_refine_opts *o, 
     int round = 0;
     if (nv0 + 8 > o->max_vertices)
         bn_logf(o->log, BN_LOG_INFO, "bake: the element mesh has %zu vertices, the budget %zu: nothing is refined (a "
-                "larger --bake-vertices refines where light changes; each vertex is gathered all the same)", nv0,
+                "larger vertex budget refines where light changes; each vertex is gathered all the same)", nv0,
                 o->max_vertices);
     while (b->nverts < o->max_vertices) {
         size_t room = (o->max_vertices - b->nverts) / 8, marked = 0, probed = 0, first = b->nverts;
