@@ -16,6 +16,7 @@
 #include "base/vec.h"
 #include "formfactor/ff_internal.h"
 #include "formfactor/ff_pair.h"
+#include "transport/links.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -1040,4 +1041,45 @@ BN_TEST(floor_under_a_slab_is_kept_apart)
     free(cls);
     bn_transport_destroy(k);
     cornell_close(&c);
+}
+
+static int link_order(const void *a, const void *b)
+{
+    const bn__link *x = a, *y = b;
+    uint32_t xs = bn__link_s(x), ys = bn__link_s(y);
+    if (x->r != y->r)
+        return x->r < y->r ? -1 : 1;
+    return xs < ys ? -1 : xs > ys;
+}
+
+/* Refinement's links sorted in place by receiver then source (bn__links_sort, a radix sort) come out
+ * in qsort's order, each with its own F and partial bit, for runs of one receiver, receivers up to
+ * 2^31 - 1, every size from none to a million (the top byte's buckets few or many). */
+BN_TEST(links_sort_in_qsorts_order)
+{
+    const size_t sizes[] = {0, 1, 2, 31, 33, 1000, 1000000};
+    const uint32_t rmax[] = {1, 300, 70000, 0x7fffffffu};
+    uint64_t x = 99;
+    for (size_t k = 0; k < sizeof sizes / sizeof *sizes; k++)
+        for (size_t m = 0; m < sizeof rmax / sizeof *rmax; m++) {
+            size_t n = sizes[k], i = 0, bad = 0;
+            bn__link *a = malloc((n + 1) * sizeof *a), *b = malloc((n + 1) * sizeof *b);
+            BN_ASSERT(a && b);
+            while (i < n) {   /* runs of one receiver with distinct sources, as a pass's rounds leave them */
+                x = x * 6364136223846793005ULL + 1442695040888963407ULL;
+                uint32_t r = (uint32_t)((x >> 33) % rmax[m]), run = 1 + (uint32_t)(x >> 58);
+                for (uint32_t j = 0; j < run && i < n; j++, i++)
+                    a[i] = (bn__link){r, ((uint32_t)i * 2654435761u & 0x7fffffffu) | (j & 1 ? BN__LINK_PARTIAL : 0),
+                                      (float)i};
+            }
+            memcpy(b, a, n * sizeof *a);
+            bn__links_sort(a, n);
+            qsort(b, n, sizeof *b, link_order);
+            for (i = 0; i < n; i++)
+                bad += a[i].r != b[i].r || a[i].s_bits != b[i].s_bits || a[i].F != b[i].F;
+            if (bad)
+                BN_FAIL("%zu links, receivers below %u: %zu out of qsort's order", n, rmax[m], bad);
+            free(a);
+            free(b);
+        }
 }

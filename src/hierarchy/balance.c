@@ -113,7 +113,7 @@ static bn_status bn__move_links(const bn__ref *R, bn__vec *work, const size_t *b
     *moved = nrecv - cnt[bn_dist_rank()];
     work->a = recv;
     work->n = work->cap = nrecv;
-    qsort(work->a, work->n, sizeof *work->a, bn__link_cmp);
+    bn__links_sort(work->a, work->n);
     return BN_OK;
 }
 

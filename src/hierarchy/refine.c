@@ -670,15 +670,6 @@ static int bn__round_collect(bn__worker *W, int nt, bn__vec *work, bn__vec *out,
     return 1;
 }
 
-int bn__link_cmp(const void *a, const void *b)
-{
-    const bn__link *x = a, *y = b;
-    if (x->r != y->r)
-        return x->r < y->r ? -1 : 1;
-    uint32_t xs = bn__link_s(x), ys = bn__link_s(y);
-    return xs < ys ? -1 : xs > ys;
-}
-
 /* One pass: every item of *work refined (rounds of BN__DEPTH_PER_ROUND levels); the accepted
  * links replace *work, sorted. *splits: existing links that were split. */
 bn_status bn__pass(const bn__ref *R, bn__worker *W, int nt, bn__vec *work, bn__pass_stats *st, const char *label,
@@ -736,7 +727,7 @@ bn_status bn__pass(const bn__ref *R, bn__worker *W, int nt, bn__vec *work, bn__p
         W[k].rays = 0;
         W[k].ff_rays = ff;
     }
-    qsort(out.a, out.n, sizeof *out.a, bn__link_cmp);
+    bn__links_sort(out.a, out.n);
     free(work->a);
     *work = out;
     return BN_OK;

@@ -74,8 +74,6 @@ typedef struct bn__worker {
 
 /* The point of leaf q (in leaf order) at (u2, u3) in [0,1)^2, uniform in area; its normal. */
 void bn__leaf_point(const bn__ref *R, size_t q, double u2, double u3, double x[3], const double **n);
-/* Links ordered by receiver, then source (qsort). */
-int bn__link_cmp(const void *a, const void *b);
 /* What a pass counts: existing links split (this pass), shadow rays and the most bytes of links held
  * at once (added to / raised across passes). */
 typedef struct bn__pass_stats {

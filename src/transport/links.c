@@ -37,6 +37,94 @@ void bn__oct_decode(uint16_t e, double u[3])
     bn_v3_normalize(u);
 }
 
+/* ---- links ordered by receiver, then source: an in-place radix sort ---- */
+
+/* A link's sort key: receiver, then source (the partial bit left out). */
+static inline uint64_t bn__link_key(const bn__link *l) { return (uint64_t)l->r << 32 | bn__link_s(l); }
+
+static void bn__link_isort(bn__link *a, size_t n)
+{
+    for (size_t i = 1; i < n; i++) {
+        bn__link v = a[i];
+        uint64_t k = bn__link_key(&v);
+        size_t j = i;
+        for (; j > 0 && bn__link_key(&a[j - 1]) > k; j--)
+            a[j] = a[j - 1];
+        a[j] = v;
+    }
+}
+
+/* The byte of the keys at `shift` puts every link in its bucket (each bucket's end into end[256]), in
+ * place: each link moved where its byte says, the one found there moved on (an American flag sort). */
+static void bn__link_flag(bn__link *a, size_t n, int shift, size_t end[256])
+{
+    size_t next[256], cnt[256] = {0}, s = 0;
+    for (size_t i = 0; i < n; i++)
+        cnt[bn__link_key(&a[i]) >> shift & 255]++;
+    for (int b = 0; b < 256; b++) {
+        next[b] = s;
+        s += cnt[b];
+        end[b] = s;
+    }
+    for (int b = 0; b < 256; b++)
+        while (next[b] < end[b]) {
+            bn__link v = a[next[b]];
+            int d = (int)(bn__link_key(&v) >> shift & 255);
+            while (d != b) {
+                bn__link t = a[next[d]];
+                a[next[d]++] = v;
+                v = t;
+                d = (int)(bn__link_key(&v) >> shift & 255);
+            }
+            a[next[b]++] = v;
+        }
+}
+
+/* The keys' bits shift and below, from the byte at shift down (the last byte may reread bits its
+ * bucket shares). */
+static void bn__link_radix(bn__link *a, size_t n, int shift)
+{
+    size_t end[256];
+    if (n <= 32) {
+        bn__link_isort(a, n);
+        return;
+    }
+    bn__link_flag(a, n, shift, end);
+    for (int b = 0; shift > 0 && b < 256; b++) {
+        size_t first = b ? end[b - 1] : 0;
+        if (end[b] - first > 1)
+            bn__link_radix(a + first, end[b] - first, shift >= 8 ? shift - 8 : 0);
+    }
+}
+
+/* Sorts in place, no more memory than the call stack (qsort's merge sort took a copy of the links, and
+ * 4x the time: 12.8 s for 41 M links); the first byte (the keys' top 8 bits) spreads them over 256
+ * buckets, sorted in parallel. The order is the keys' (every link's (r, s) is its own), the same for
+ * any thread count. */
+void bn__links_sort(bn__link *a, size_t n)
+{
+    size_t end[256];
+    uint64_t top = 0;
+    int shift;
+    if (n <= 32) {
+        bn__link_isort(a, n);
+        return;
+    }
+    for (size_t i = 0; i < n; i++)
+        top |= bn__link_key(&a[i]);
+    for (shift = 0; shift < 56 && top >> (shift + 8); shift++)
+        ;   /* the highest set bit minus 7 */
+    bn__link_flag(a, n, shift, end);
+    if (shift == 0)
+        return;
+#pragma omp parallel for schedule(dynamic, 1)
+    for (int b = 0; b < 256; b++) {
+        size_t first = b ? end[b - 1] : 0;
+        if (end[b] - first > 1)
+            bn__link_radix(a + first, end[b] - first, shift >= 8 ? shift - 8 : 0);
+    }
+}
+
 void bn__hop_destroy(void *ctx)
 {
     bn__hop *h = ctx;

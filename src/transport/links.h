@@ -22,6 +22,9 @@ typedef struct bn__link {
 static inline uint32_t bn__link_s(const bn__link *l) { return l->s_bits & ~BN__LINK_PARTIAL; }
 static inline int bn__link_partial(const bn__link *l) { return (l->s_bits & BN__LINK_PARTIAL) != 0; }
 
+/* Links ordered by receiver, then source (the order bn__hop_make takes), in place. */
+void bn__links_sort(bn__link *a, size_t n);
+
 /* Octahedral encoding of a unit vector in 8 + 8 bits (Meyer et al. 2010): ~1 degree. */
 uint16_t bn__oct_encode(const double u[3]);
 void bn__oct_decode(uint16_t e, double u[3]);
