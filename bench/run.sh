@@ -521,7 +521,7 @@ big_scene() {
     t1=$(date +%s.%N)
     peak=$(sed -n 's/.*Maximum resident set size (kbytes): //p' "$work/$name.err" | awk '{ printf "%.0f", $1 / 1024 }')
     links=$(sed -n 's/.*hierarchy pass [0-9]*: \([0-9]*\) links.*/\1/p' "$work/$name.err" | tail -1)
-    bpl=$(sed -n 's/.*refinement held at most .* MiB of links, \([0-9.]*\) B per link.*/\1/p' "$work/$name.err" | tail -1)
+    bpl=$(sed -n 's/.*refinement held at most .*, \([0-9.]*\) B per link.*/\1/p' "$work/$name.err" | tail -1)
     rho=$(sed -n 's/.*spectral radius ~ \([0-9.]*\) .*/\1/p' "$work/$name.err" | tail -1)
     polys=$(grep -c '^f ' "$sc")
     if [ "$rc" != 0 ]; then
