@@ -117,8 +117,9 @@ static void bn__bounces_options(bn_optset *set, bn__bounces_cli *a, bn_cli_commo
                                 "from the solution over the hemisphere; none: each pixel the value of the patch it "
                                 "sees (to look at the patches themselves)"});
     bn_optset_add(set, (bn_opt){"light-samples", 0, BN_OPT_INT, &a->light_samples, NULL, 1, 65536, "N",
-                                "gather: shadow rays per emitting face per pixel sample, rounded up to a square "
-                                "(with the light tree: faces picked per pixel sample, one ray each; default "
+                                "gather: shadow rays per light (emitting faces; coplanar pieces of one light merged) per "
+                                "pixel sample, rounded up to a square (with the light tree: faces picked per pixel "
+                                "sample, one ray each; default "
                                 BN__STR(BN_GATHER_LIGHT_SAMPLES) ")"});
     bn_optset_add(set, (bn_opt){"gather-samples", 0, BN_OPT_INT, &a->gather_samples, NULL, 1, 1 << 20, "N",
                                 "gather: hemisphere rays per pixel sample, rounded up to a square (default "

@@ -148,7 +148,7 @@ bn_status bn_bounces_write(const bn_scene *scene, const bn_rt *rt, const bn_came
     bn_layer *named = bn__calloc(nl, sizeof *named);
     char (*names)[16] = bn__calloc(nl, sizeof *names);
     bn_attr *attrs = bn__calloc(na, sizeof *attrs);
-    char evbuf[32], shading[400];
+    char evbuf[32], shading[480];
     double ev = o->ev;
     bn_status st = imgs && named && names && attrs ? BN_OK : bn_error_set(err, BN_ENOMEM, "out of memory");
     if (st == BN_OK)
@@ -165,9 +165,10 @@ bn_status bn_bounces_write(const bn_scene *scene, const bn_rt *rt, const bn_came
         memcpy(attrs, o->attrs, o->nattrs * sizeof *attrs);
         snprintf(evbuf, sizeof evbuf, "%.4f", ev);
         if (o->gather)
-            snprintf(shading, sizeof shading, "final gather: %d shadow rays per emitting face, %d gather rays per "
-                     "pixel sample, same-face filter radius %d px; hits read %s; KE at K2E's hits from the emitters up "
-                     "to %d emitting faces; above %d emitting faces, picked from a light tree", o->light_samples,
+            snprintf(shading, sizeof shading, "final gather: %d shadow rays per light (emitting faces, coplanar "
+                     "pieces of one light merged), %d gather rays per pixel sample, same-face filter radius %d px; hits "
+                     "read %s; KE at K2E's hits from the emitters up to %d lights; above %d lights, picked from a light "
+                     "tree", o->light_samples,
                      o->gather_samples, o->gather_filter,
                      o->smooth ? "smooth (baked vertex values)" : "flat (patch values)", o->hit_emitters,
                      o->tree_emitters);
