@@ -162,7 +162,7 @@ static bn_status eval_gather(void *user, const double *x, const size_t *patch, s
     go.seed = 7 + first;
     go.quiet = 1;
     return bn_gather_points(g->p->rt, (const double *const *)g->p->res.terms, g->p->res.nterms - 1, g->p->rest, x,
-                            patch, n, &go, out, err);
+                            patch, n, &go, out, NULL, err);
 }
 
 /* The bake's KE (layer 1 of E, KE, ...) at floor point (x, 0, z): the floor triangle holding it. */

@@ -108,9 +108,11 @@ bn_status bn_gather_render(const bn_rt *rt, const bn_camera *cam, const double *
  * rays than an image's pixel does). terms[0..n], 1 <= n <= 20, and rest as for bn_gather_render. out:
  * (n + 3) layers E, KE, ..., K^n E, rest, L, layer-major: out[(l * npts + i) * 3 + c], each at least 0
  * (a hit's direct light is estimated without bias, so near a shadow's edge a mean can dip below 0: held
- * at 0). Deterministic: point i's streams are keyed by i. */
+ * at 0). Deterministic: point i's streams are keyed by i. stats (may be NULL): its rays (gather_rays counts the
+ * near hits' gathers too, beyond npts x hemi_samples), lights and seconds; camera_rays and front_hits 0. */
 bn_status bn_gather_points(const bn_rt *rt, const double *const *terms, int n, const double *rest, const double *x,
-                           const size_t *patch, size_t npts, const bn_gather_opts *o, double *out, bn_error *err);
+                           const size_t *patch, size_t npts, const bn_gather_opts *o, double *out,
+                           bn_gather_stats *stats, bn_error *err);
 
 #ifdef __cplusplus
 }

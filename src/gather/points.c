@@ -13,16 +13,14 @@
 
 /* Point i's layers into out (layer-major: out[(l * npts + i) * 3 + c]): E, KE, K^2 E .. K^n E, rest, L. */
 static void bn__gather_point(const bn__gather *G, const double *x, size_t patch, size_t i, size_t npts, uint64_t seed,
-                             double *hv, double *out)
+                             double *hv, double *out, bn_gather_stats *st)
 {
     bn_hit h = {patch, 0, {x[0], x[1], x[2]}, 1};
-    bn_gather_stats st;
     double acc[6] = {0, 0, 0, 0, 0, 0}, rho[3], L[3] = {0, 0, 0};
     int n = G->n;
     bn__rng r = bn__rng_make(seed ^ BN__GATHER_STREAM ^ BN__GATHER_TAG_POINT, i, 0);
-    memset(&st, 0, sizeof st);
     memset(hv, 0, (size_t)(n + 1) * 3 * sizeof(double));
-    bn__shade(G, &h, &r, acc, hv, rho, &st);
+    bn__shade(G, &h, &r, acc, hv, rho, st);
     for (int c = 0; c < 3; c++) {
         double v[66];   /* E, KE, K^2 E .. K^n E, rest (n <= 20 terms: bn__gather_check's bound) */
         v[0] = acc[c];
@@ -42,7 +40,7 @@ static void bn__gather_point(const bn__gather *G, const double *x, size_t patch,
 
 static bn_status bn__gather_points_body(const bn_rt *rt, const double *const *terms, int n, const double *rest,
                                         const double *x, const size_t *patch, size_t npts, const bn_gather_opts *o,
-                                        double *out, bn_error *err)
+                                        double *out, bn_gather_stats *stats, bn_error *err)
 {
     bn__gather G;
     bn_status st;
@@ -57,6 +55,8 @@ static bn_status bn__gather_points_body(const bn_rt *rt, const double *const *te
 #pragma omp parallel reduction(+ : bad)
     {
         double *hv = malloc((size_t)(n + 1) * 3 * sizeof *hv);
+        bn_gather_stats ts;
+        memset(&ts, 0, sizeof ts);
         bad += !hv;
 #pragma omp for schedule(dynamic, 64)
         for (size_t i = 0; i < npts; i++) {
@@ -70,10 +70,19 @@ static bn_status bn__gather_points_body(const bn_rt *rt, const double *const *te
                 stop = 1;
                 continue;
             }
-            bn__gather_point(&G, x + 3 * i, patch[i], i, npts, o->seed, hv, out);
+            bn__gather_point(&G, x + 3 * i, patch[i], i, npts, o->seed, hv, out, &ts);
         }
         free(hv);
+#pragma omp critical(bn__gather_points_stats)
+        {
+            stats->shadow_rays += ts.shadow_rays;
+            stats->gather_rays += ts.gather_rays;
+        }
     }
+    stats->emitters = G.faces;
+    stats->lights = G.nem;
+    stats->hit_direct = G.hit_direct;
+    stats->light_tree = G.tree != NULL;
     bn__gather_free(&G);
     if (bad)
         return bn_error_set(err, BN_ENOMEM, "gather at points: out of memory for a thread's buffers");
@@ -87,15 +96,22 @@ static bn_status bn__gather_points_body(const bn_rt *rt, const double *const *te
 }
 
 bn_status bn_gather_points(const bn_rt *rt, const double *const *terms, int n, const double *rest, const double *x,
-                           const size_t *patch, size_t npts, const bn_gather_opts *o, double *out, bn_error *err)
+                           const size_t *patch, size_t npts, const bn_gather_opts *o, double *out,
+                           bn_gather_stats *stats, bn_error *err)
 {
     bn_gather_opts def;
+    bn_gather_stats mine;
+    double t0 = bn__now();
     if (!o) {
         bn_gather_opts_default(&def);
         o = &def;
     }
+    if (!stats)
+        stats = &mine;
+    memset(stats, 0, sizeof *stats);
     int prev = bn__threads_begin(o->threads);
-    bn_status st = bn__gather_points_body(rt, terms, n, rest, x, patch, npts, o, out, err);
+    bn_status st = bn__gather_points_body(rt, terms, n, rest, x, patch, npts, o, out, stats, err);
     bn__threads_end(prev);
+    stats->seconds = bn__now() - t0;
     return st;
 }
