@@ -223,16 +223,15 @@ static void bn__direct_em_one(const bn__gather *G, const bn__emitter *em, const 
 static void bn__direct_em_pick(const bn__gather *G, const double x[3], const double n[3], size_t f, bn__rng *r,
                                double out[3], double *rays)
 {
-    double w[BN__PICK_MAX], Fe[BN__PICK_MAX], W = 0, F, est, u;
+    double w[BN__PICK_MAX], W = 0, F, est, u;   /* w: each face's Le F summed over channels */
     size_t e = 0;
     int seen;
     for (size_t k = 0; k < G->nem; k++) {
         const bn__emitter *em = &G->em[k];
         bn__em_view v;
-        Fe[k] = w[k] = 0;
+        w[k] = 0;
         if (bn__em_self(G, k, f) || !bn__em_view_make(G, em, x, n, 0, &v))
             continue;
-        Fe[k] = v.F;
         w[k] = (em->Le[0] + em->Le[1] + em->Le[2]) * v.F;
         W += w[k];
         for (int c = 0; c < 3; c++)
@@ -247,12 +246,14 @@ static void bn__direct_em_pick(const bn__gather *G, const double x[3], const dou
     }
     if (!(w[e] > 0))
         return;
+    const double *Le = G->em[e].Le;
     if (!bn__em_sample(G, &G->em[e], x, n, r, &F, &est, &seen, rays)) {
-        est = Fe[e];   /* no sample of it (a degenerate view): taken as hidden, as a ray to each face takes it */
+        est = w[e] / (Le[0] + Le[1] + Le[2]);   /* no sample of it (a degenerate view): its F, taken as hidden,
+                                                   as a ray to each face takes it */
         seen = 0;
     }
     for (int c = 0; !seen && c < 3; c++)
-        out[c] -= G->em[e].Le[c] * est * W / w[e];
+        out[c] -= Le[c] * est * W / w[e];
 }
 
 /* rho-free direct light at x (normal n) from the punctual lights, added to out: each light's irradiance
