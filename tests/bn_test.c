@@ -1,6 +1,7 @@
 /* The test runner: `test_x --list`, `test_x NAME` (one test), `test_x` (all, in order). */
 #define _POSIX_C_SOURCE 200809L
 #include "bn_test.h"
+#include "bounce/rt.h"
 
 #include <stdint.h>
 
@@ -245,4 +246,39 @@ bn_scene *bn_test_load_meshed(const char *rel, bn_unit unit, size_t patches)
     if (bn_scene_mesh(s, &mo, &err) != BN_OK)
         BN_FAIL("%s", err.msg);
     return s;
+}
+
+/* The scene at path (loaded with lo, meshed by default) gathered from its emission alone (E; KE from the
+ * emitters; no solve) at size x size, one sample a pixel, by go, from its default camera or (sidecar) the
+ * camera file beside it: g[0..3] (E, KE, rest, L) allocated here, the counts into gs. */
+void bn_test_gather_emission(const char *path, const bn_load_opts *lo, int size, int sidecar,
+                             const bn_gather_opts *go, bn_image g[4], bn_gather_stats *gs)
+{
+    bn_scene *s = NULL;
+    bn_rt *rt = NULL;
+    bn_error err;
+    bn_camera cam;
+    size_t np;
+    double *E, *zero;
+    const double *terms[2];
+    BN_ASSERT_STATUS(bn_scene_load(path, lo, &s, &err), BN_OK);
+    BN_ASSERT_STATUS(bn_scene_mesh(s, NULL, &err), BN_OK);
+    BN_ASSERT_STATUS(bn_rt_create(s, 0, &rt, &err), BN_OK);
+    bn_scene_patches(s, &np);
+    BN_ASSERT((E = calloc(3 * np, sizeof *E)) && (zero = calloc(3 * np, sizeof *zero)));
+    bn_scene_patch_emission(s, E);
+    terms[0] = E;
+    terms[1] = zero;
+    bn_camera_default(s, &cam);
+    if (sidecar)
+        BN_ASSERT_STATUS(bn_camera_load_sidecar(path, &cam, NULL, &err), BN_OK);
+    cam.width = cam.height = size;
+    cam.spp = 1;
+    for (int l = 0; l < 4; l++)
+        BN_ASSERT_STATUS(bn_image_alloc(&g[l], size, size, &err), BN_OK);
+    BN_ASSERT_STATUS(bn_gather_render(rt, &cam, terms, 1, zero, go, g, gs, &err), BN_OK);
+    free(E);
+    free(zero);
+    bn_rt_destroy(rt);
+    bn_scene_destroy(s);
 }

@@ -7,6 +7,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include "bounce/gather.h"
 #include "bounce/scene.h"
 #include "bounce/transport.h"
 
@@ -110,6 +111,11 @@ int bn_test_file_exists(const char *path);
 const char *bn_test_cornell_cut_light(int nx);
 /* The same without one cell (b nx + a; -1: none): a hole or a notch in the light. */
 const char *bn_test_cornell_cut_light_without(int nx, int cell);
+/* The scene at path (loaded with lo) gathered from its emission alone (no solve) at size x size, one
+ * sample a pixel, by go, from its default camera or (sidecar) its .camera: g[0..3] (E, KE, rest, L)
+ * allocated here (the caller frees them), the counts into gs. */
+void bn_test_gather_emission(const char *path, const bn_load_opts *lo, int size, int sidecar,
+                             const bn_gather_opts *go, bn_image g[4], bn_gather_stats *gs);
 
 /* Writes `json` to "<tmpdir>/<name>" with every "@URI@" replaced by the data URI of bin[0 .. n) and "@N@"
  * by n (a glTF with its buffer inline): the path (bn_test_tmp's). */

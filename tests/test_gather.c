@@ -470,41 +470,17 @@ BN_TEST(many_emitters_from_the_light_tree_match_one)
 static void light_counts(const char *path, bn_gather_stats *gs)
 {
     bn_load_opts lo;
-    bn_scene *s = NULL;
-    bn_rt *rt = NULL;
-    bn_error err;
-    bn_camera cam;
     bn_gather_opts go;
     bn_image g[4];
-    size_t np;
-    double *E, *zero;
-    const double *terms[2];
     bn_load_opts_default(&lo);
     lo.log.quiet = 1;
     lo.unit = BN_UNIT_MM;
-    BN_ASSERT_STATUS(bn_scene_load(path, &lo, &s, &err), BN_OK);
-    BN_ASSERT_STATUS(bn_scene_mesh(s, NULL, &err), BN_OK);
-    BN_ASSERT_STATUS(bn_rt_create(s, 0, &rt, &err), BN_OK);
-    bn_scene_patches(s, &np);
-    BN_ASSERT((E = calloc(3 * np, sizeof *E)) && (zero = calloc(3 * np, sizeof *zero)));
-    bn_scene_patch_emission(s, E);
-    terms[0] = E;
-    terms[1] = zero;
-    bn_camera_default(s, &cam);
-    cam.width = cam.height = 8;
-    cam.spp = 1;
-    for (int l = 0; l < 4; l++)
-        BN_ASSERT_STATUS(bn_image_alloc(&g[l], 8, 8, &err), BN_OK);
     bn_gather_opts_default(&go);
     go.hemi_samples = 1;
     go.quiet = 1;
-    BN_ASSERT_STATUS(bn_gather_render(rt, &cam, terms, 1, zero, &go, g, gs, &err), BN_OK);
+    bn_test_gather_emission(path, &lo, 8, 0, &go, g, gs);
     for (int l = 0; l < 4; l++)
         bn_image_free(&g[l]);
-    free(E);
-    free(zero);
-    bn_rt_destroy(rt);
-    bn_scene_destroy(s);
 }
 
 /* Issue 33: the light cut into 512 triangles, merged (the default), is one light again: the one quad's

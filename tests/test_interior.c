@@ -169,41 +169,22 @@ BN_TEST(camera_outside_the_room_is_warned)
 BN_TEST(light_tree_matches_every_face_in_the_room)
 {
     bn_load_opts lo;
-    bn_scene *s = NULL;
-    bn_rt *rt = NULL;
-    bn_error err;
-    bn_camera cam;
     bn_image g[2][4];
-    size_t np, m = 0;
-    double *E, *zero, *e, mean[2] = {0, 0};
-    const double *terms[2];
+    size_t m = 0;
+    double *e, mean[2] = {0, 0};
     bn_load_opts_default(&lo);
     lo.log.quiet = 1;
     lo.unit = BN_UNIT_M;
     lo.two_sided = "leaf";
-    BN_ASSERT_STATUS(bn_scene_load(write_room(), &lo, &s, &err), BN_OK);
-    BN_ASSERT_STATUS(bn_scene_mesh(s, NULL, &err), BN_OK);
-    BN_ASSERT_STATUS(bn_rt_create(s, 0, &rt, &err), BN_OK);
-    bn_scene_patches(s, &np);
-    BN_ASSERT((E = calloc(3 * np, sizeof *E)) && (zero = calloc(3 * np, sizeof *zero)));
-    bn_scene_patch_emission(s, E);
-    terms[0] = E;
-    terms[1] = zero;
-    bn_camera_default(s, &cam);
-    BN_ASSERT_STATUS(bn_camera_load_sidecar(write_room(), &cam, NULL, &err), BN_OK);
-    cam.width = cam.height = 64;
-    cam.spp = 1;
     for (int k = 0; k < 2; k++) {
         bn_gather_opts go;
         bn_gather_stats gs;
-        for (int l = 0; l < 4; l++)
-            BN_ASSERT_STATUS(bn_image_alloc(&g[k][l], 64, 64, &err), BN_OK);
         bn_gather_opts_default(&go);
         go.hemi_samples = 1;
         go.tree_emitters = k == 0 ? BN_GATHER_TREE_EMITTERS : 1000;
         go.merge_emitters = 0;   /* the window's two triangles stay two faces too: the tree sees all 49 */
         go.quiet = 1;
-        BN_ASSERT_STATUS(bn_gather_render(rt, &cam, terms, 1, zero, &go, g[k], &gs, &err), BN_OK);
+        bn_test_gather_emission(write_room(), &lo, 64, 1, &go, g[k], &gs);
         BN_ASSERT_EQ(gs.light_tree, k == 0);
     }
     BN_ASSERT((e = malloc(64 * 64 * sizeof *e)) != NULL);
@@ -223,8 +204,4 @@ BN_TEST(light_tree_matches_every_face_in_the_room)
         for (int l = 0; l < 4; l++)
             bn_image_free(&g[k][l]);
     free(e);
-    free(E);
-    free(zero);
-    bn_rt_destroy(rt);
-    bn_scene_destroy(s);
 }
