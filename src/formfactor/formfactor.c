@@ -645,7 +645,7 @@ static void bn__cull_planes(const bn__ffg *g, const size_t *occ, size_t nocc, si
  *   the patch's distance from the occluders (a point by a block's corner sees a far wall appear
  *   within a few millimetres), and with the other patch's size. So the patch the occluders keep
  *   farther from, relative to its size, is integrated (what the other sees is exact whatever its
- *   distance); each of its fan triangles starts as 4 (40 points), or 16 when an occluder comes
+ *   distance); each of its fan triangles starts as 4 (28 points), or 16 when an occluder comes
  *   within the patch's diameter of it, and 4 times more for each halving of the other patch's
  *   size below it when that patch touches an occluder (a sliver cut along a contact line,
  *   against a wall: shadow bands as narrow as the sliver), up to 64; triangles whose points

@@ -98,19 +98,18 @@ static void bn__rules(bn__qctx *q, const double a[3], const double b[3], const d
                       double *q5)
 {
     /* Radon's 7-point degree-5 rule: b1 = (6 + sqrt 15)/21, b2 = (6 - sqrt 15)/21,
-     * weights (155 +- sqrt 15)/1200 and 9/40 at the centroid. */
+     * weights (155 +- sqrt 15)/1200 and 9/40 at the centroid. The degree-2 rule its error is
+     * measured against uses the same points (no evaluations of its own): the centroid, weight
+     * sqrt 15 / 8, and the orbit of b2, each 1 / (18 (a2^2 + 2 b2^2 - 1/3)), both positive. */
     static const double b1 = 0.47014206410511508977, a1 = 0.05971587178976982045;
     static const double b2 = 0.10128650732345633880, a2 = 0.79742698535308732240;
     static const double w1 = 0.13239415278850618074, w2 = 0.12593918054482715260, w0 = 0.225;
-    double s5 = w0 * bn__eval(q, a, b, c, 1.0 / 3, 1.0 / 3, 1.0 / 3);
-    double s2 = 0;
-    s5 += w1 * (bn__eval(q, a, b, c, a1, b1, b1) + bn__eval(q, a, b, c, b1, a1, b1) + bn__eval(q, a, b, c, b1, b1, a1));
-    s5 += w2 * (bn__eval(q, a, b, c, a2, b2, b2) + bn__eval(q, a, b, c, b2, a2, b2) + bn__eval(q, a, b, c, b2, b2, a2));
-    s2 = (bn__eval(q, a, b, c, 2.0 / 3, 1.0 / 6, 1.0 / 6) + bn__eval(q, a, b, c, 1.0 / 6, 2.0 / 3, 1.0 / 6) +
-          bn__eval(q, a, b, c, 1.0 / 6, 1.0 / 6, 2.0 / 3)) /
-         3;
-    *q5 = s5 * area;
-    *q2 = s2 * area;
+    static const double v0 = 0.48412291827592711065, v2 = 0.17195902724135762978;
+    double fc = bn__eval(q, a, b, c, 1.0 / 3, 1.0 / 3, 1.0 / 3);
+    double f1 = bn__eval(q, a, b, c, a1, b1, b1) + bn__eval(q, a, b, c, b1, a1, b1) + bn__eval(q, a, b, c, b1, b1, a1);
+    double f2 = bn__eval(q, a, b, c, a2, b2, b2) + bn__eval(q, a, b, c, b2, a2, b2) + bn__eval(q, a, b, c, b2, b2, a2);
+    *q5 = (w0 * fc + w1 * f1 + w2 * f2) * area;
+    *q2 = (v0 * fc + v2 * f2) * area;
 }
 
 static double bn__tri_area(const double a[3], const double b[3], const double c[3])
@@ -229,7 +228,7 @@ static void bn__leaf_make(bn__qctx *q, bn__leaf *l, const double a[3], const dou
         l->key = -1;   /* cannot be refined further */
 }
 
-/* Leaves kept at most: bounds the work of one pair (about 10 * 4 * BN__MAX_LEAVES / 3 kernel
+/* Leaves kept at most: bounds the work of one pair (about 7 * 4 * BN__MAX_LEAVES / 3 kernel
  * evaluations per leaf) whatever the tolerance asks. */
 #define BN__MAX_LEAVES 20000
 

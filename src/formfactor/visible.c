@@ -277,9 +277,10 @@ static size_t bn__vis_cuts(const bn__vis *V, size_t q, size_t k, double tol, dou
     const double *p0 = V->poly[q].p + 2 * k, *d = V->poly[q].d + 2 * k;
     double dlen = V->poly[q].len[k], elo[2], ehi[2];
     size_t nt = 0;   /* at most two per edge of every polygon: ts never fills */
-    for (int cc = 0; cc < 2; cc++) {
-        elo[cc] = fmin(p0[cc], p0[cc] + d[cc]) - tol;
-        ehi[cc] = fmax(p0[cc], p0[cc] + d[cc]) + tol;
+    for (int cc = 0; cc < 2; cc++) {   /* not fmin/fmax: a call each here (no NaN to handle) */
+        double e0 = p0[cc], e1 = p0[cc] + d[cc];
+        elo[cc] = (e0 < e1 ? e0 : e1) - tol;
+        ehi[cc] = (e0 < e1 ? e1 : e0) + tol;
     }
     ts[nt++] = 0;
     ts[nt++] = 1;
@@ -371,6 +372,19 @@ static void bn__vis_edge(const bn__vis *V, size_t q, size_t k, const double *ts,
     }
 }
 
+/* One projection kept (V->np == 2), the commonest case: clipped to the pyramid, it lies in b, so the
+ * part of b it hides is that convex polygon itself: F of it lifted back to b's plane, no cuts. */
+static double bn__vis_one(const bn__vis *V, const double x[3], const double n[3], const double *b, size_t nb,
+                          int blocked)
+{
+    const bn__poly2 *P = &V->poly[1];
+    double v[3 * BN__VIS_CORNERS], h;
+    for (size_t k = 0; k < P->n; k++)
+        bn__lift(&V->fr, P->p + 2 * k, v + 3 * k);
+    h = bn__ff_point_polygon(x, n, v, P->n);
+    return fmax(blocked ? h : bn__ff_point_polygon(x, n, b, nb) - h, 0);
+}
+
 /* bn__ff_point_visible's work: what x sees of b past the occluders, or (blocked) what they hide of
  * it; *sees whether x sees any of b. */
 static double bn__point_vis(const double x[3], const double n[3], const double *b, size_t nb, const double bn[3],
@@ -401,6 +415,10 @@ static double bn__point_vis(const double x[3], const double n[3], const double *
     if (V.np == 1) {
         *sees = 1;
         return blocked ? 0 : bn__ff_point_polygon(x, n, b, nb);
+    }
+    if (V.np == 2) {   /* one projection, not covering b: part of b is seen */
+        *sees = 1;
+        return bn__vis_one(&V, x, n, b, nb, blocked);
     }
     /* the boundary of b minus the union (or of b and the union): every piece of every edge, cut
      * where other edges cross it, that bounds the region */
