@@ -4,6 +4,47 @@
 
 #include <string.h>
 
+/* F with its provenance lines (command, version, options, scene, the diagnostics) to output. */
+static bn_status bn__ff_write_output(const bn_pipeline *p, const bn_pipeline_opts *po, const bn_cli_common *c,
+                                     const char *output, bn_error *err)
+{
+    const bn_ff_diagnostics *d = &p->ff;
+    char desc[512], *prov;
+    size_t plen;
+    bn_status st;
+    bn_formfactor_opts_describe(&po->ff, desc, sizeof desc);
+    plen = strlen(c->cmdline) + strlen(desc) + 512;
+    prov = malloc(plen);
+    if (!prov)
+        return bn_error_set(err, BN_ENOMEM, "out of memory");
+    snprintf(prov, plen,
+             "# %s\n# bounce %s\n# %s\n# scene %s digest %016llx, %zu patches, unit %s\n"
+             "# row sums min %.9g max %.9g; reciprocity residual %.3g; ||K||_inf %.9g\n",
+             c->cmdline, bn_version(), desc, bn_scene_path(p->scene), bn_scene_digest(p->scene), d->n,
+             bn_unit_name(bn_scene_unit(p->scene)), d->row_sum_min, d->row_sum_max, d->reciprocity_residual,
+             d->k_norm_inf);
+    st = bn_ff_write(p->k, p->scene, output, prov, po->ff.precision, err);
+    free(prov);
+    return st;
+}
+
+/* The options' checks: -o ends in .csv or .bin; every pair's F, so never the hierarchy (which keeps
+ * links, not entries); auto is the storage asked (or the default). */
+static bn_status bn__ff_check(const char *output, const bn_cli_ff *fo, bn_pipeline_opts *po, bn_error *err)
+{
+    if (output) {
+        const char *dot = strrchr(output, '.');
+        if (!dot || (strcmp(dot, ".csv") != 0 && strcmp(dot, ".bin") != 0))
+            return bn_error_set(err, BN_EUSAGE, "-o %s: the output must end in .csv or .bin", output);
+    }
+    if (!strcmp(po->transport, "hierarchical"))
+        return bn_error_set(err, BN_EUSAGE, "--transport hierarchical: the hierarchy keeps links between clusters and "
+                                            "elements, not every F_ij; formfactors takes dense or sparse");
+    if (!strcmp(po->transport, "auto"))
+        po->transport = fo->storage ? fo->storage : BN_STORAGE_DEFAULT;
+    return BN_OK;
+}
+
 int bn_cmd_formfactors(int argc, char **argv, bn_cli_common *c)
 {
     bn_optset set;
@@ -14,8 +55,7 @@ int bn_cmd_formfactors(int argc, char **argv, bn_cli_common *c)
     bn_pipeline_opts po;
     bn_pipeline p;
     bn_status st;
-    char desc[512], *prov = NULL;
-    size_t plen;
+    int prc;
 
     memset(&set, 0, sizeof set);
     memset(&so, 0, sizeof so);
@@ -33,27 +73,11 @@ int bn_cmd_formfactors(int argc, char **argv, bn_cli_common *c)
                                  "write F to FILE (.csv or .bin); without it only the diagnostics are printed"});
     bn_cli_add_common(&set, c);
     bn_error_clear(&err);
-    {
-        int prc;
-        if (!bn_cli_parse_scene_command(&set, argc, argv, pos, &prc))
-            return prc;
-    }
-    if (output) {
-        const char *dot = strrchr(output, '.');
-        if (!dot || (strcmp(dot, ".csv") != 0 && strcmp(dot, ".bin") != 0)) {
-            bn_error_set(&err, BN_EUSAGE, "-o %s: the output must end in .csv or .bin", output);
-            return bn_cli_fail(&err);
-        }
-    }
+    if (!bn_cli_parse_scene_command(&set, argc, argv, pos, &prc))
+        return prc;
     bn_cli_pipeline_opts(&so, &fo, NULL, c, &po);
-    /* this command is every pair's F: never the hierarchy, which keeps links, not entries */
-    if (!strcmp(po.transport, "hierarchical")) {
-        bn_error_set(&err, BN_EUSAGE, "--transport hierarchical: the hierarchy keeps links between clusters and "
-                                      "elements, not every F_ij; formfactors takes dense or sparse");
+    if (bn__ff_check(output, &fo, &po, &err) != BN_OK)
         return bn_cli_fail(&err);
-    }
-    if (!strcmp(po.transport, "auto"))
-        po.transport = fo.storage ? fo.storage : BN_STORAGE_DEFAULT;
     st = bn_pipeline_scene(pos[0], &po, &p, &err);
     if (st == BN_OK)
         st = bn_pipeline_operator(&po, &p, &err);
@@ -65,27 +89,12 @@ int bn_cmd_formfactors(int argc, char **argv, bn_cli_common *c)
     if (!c->quiet)
         bn_ff_diagnostics_print(&p.ff, stdout);
     if (output) {
-        const bn_ff_diagnostics *d = &p.ff;
-        bn_formfactor_opts_describe(&po.ff, desc, sizeof desc);
-        plen = strlen(c->cmdline) + strlen(desc) + 512;
-        prov = malloc(plen);
-        if (!prov) {
-            st = bn_error_set(&err, BN_ENOMEM, "out of memory");
-        } else {
-            snprintf(prov, plen,
-                     "# %s\n# bounce %s\n# %s\n# scene %s digest %016llx, %zu patches, unit %s\n"
-                     "# row sums min %.9g max %.9g; reciprocity residual %.3g; ||K||_inf %.9g\n",
-                     c->cmdline, bn_version(), desc, bn_scene_path(p.scene), bn_scene_digest(p.scene), d->n,
-                     bn_unit_name(bn_scene_unit(p.scene)), d->row_sum_min, d->row_sum_max, d->reciprocity_residual,
-                     d->k_norm_inf);
-            st = bn_ff_write(p.k, p.scene, output, prov, po.ff.precision, &err);
-        }
+        st = bn__ff_write_output(&p, &po, c, output, &err);
         if (st != BN_OK)
             bn_cli_fail(&err);
         else if (!c->quiet)
             printf("wrote                %s\n", output);
     }
-    free(prov);
     bn_pipeline_free(&p);
     return bn_status_exit_code(st);
 }
