@@ -93,10 +93,9 @@ bn_status bn_study_write_csv(const bn_study_result *r, const char *path, const c
     return bn__outfile_commit(&f, err);
 }
 
-void bn_study_print(const bn_study_result *r, FILE *fp)
+/* The printed table's header line. */
+static void bn__study_print_header(const bn_study_result *r, FILE *fp)
 {
-    int bounces = r->param == BN_STUDY_BOUNCES;
-    double lo = INFINITY, hi = 0, lo2 = INFINITY, hi2 = 0;
     fprintf(fp, "study        %s\n", bn_study_param_name(r->param));
     fprintf(fp, "reference    %s (%.3g s)\n", r->reference, r->ref_seconds);
     fprintf(fp, "ref. error   %.3g per surface, %.3g per patch (relative): %s\n", r->ref_error, r->ref_error_patch,
@@ -106,69 +105,87 @@ void bn_study_print(const bn_study_result *r, FILE *fp)
                 r->k_norm, r->spectral_radius, r->norm_E, r->norm_L);
     fprintf(fp, "\n%-13s %-10s %7s %6s %10s %10s %10s %10s %10s %10s", "method", "value", "patches", "iter", "err_surf",
             "err_patch", "err_rms", "err_power", "t_solve_s", "t_total_s");
-    if (bounces || r->param == BN_STUDY_MAX_ITER)
+    if (r->param == BN_STUDY_BOUNCES || r->param == BN_STUDY_MAX_ITER)
         fprintf(fp, " %10s %10s %9s %9s %9s", "err_inf", "bound", "bound/err", "bKE/err", "est/err");
     else
         fprintf(fp, " %8s %10s %8s", "peak_MiB", "K_entries", "K_MiB");
     fputc('\n', fp);
-    for (size_t i = 0; i < r->nrows; i++) {
-        const bn_study_row *w = &r->rows[i];
-        char it[24];
-        if (w->iterations == SIZE_MAX)
-            snprintf(it, sizeof it, "-");
-        else
-            snprintf(it, sizeof it, "%zu", w->iterations);
-        fprintf(fp, "%-13s %-10s %7zu %6s %10.3g %10.3g %10.3g %10.3g %10.4g %10.4g", w->method, w->value, w->patches,
-                it, w->err_surface_max, w->err_max_rel, w->err_rms_rel, w->err_energy_rel, w->t_solve, w->t_total);
-        if (bounces || r->param == BN_STUDY_MAX_ITER) {
-            double ratio = w->err_inf > 0 ? w->bound / w->err_inf : NAN;
-            double r2 = w->err_inf > 0 ? w->bound_ke / w->err_inf : NAN;
-            fprintf(fp, " %10.3g %10.3g %9.3g %9.3g %9.3g", w->err_inf, w->bound, ratio, r2,
-                    w->err_inf > 0 ? w->estimate / w->err_inf : NAN);
-            if (isfinite(ratio) && strcmp(w->method, "truncated") == 0) {
-                lo = fmin(lo, ratio);
-                hi = fmax(hi, ratio);
-                lo2 = fmin(lo2, r2);
-                hi2 = fmax(hi2, r2);
-            }
-        } else
-            fprintf(fp, " %8.1f %10zu %8.1f", w->peak_mb, w->k_entries, w->k_mb);
+}
+
+/* Row w; with the bounds' columns, the truncated rows' bound / error ratios widen [b[0], b[1]] (from
+ * ||E||) and [b[2], b[3]] (from ||KE||). */
+static void bn__study_print_row(const bn_study_row *w, int bound_cols, double b[4], FILE *fp)
+{
+    char it[24];
+    if (w->iterations == SIZE_MAX)
+        snprintf(it, sizeof it, "-");
+    else
+        snprintf(it, sizeof it, "%zu", w->iterations);
+    fprintf(fp, "%-13s %-10s %7zu %6s %10.3g %10.3g %10.3g %10.3g %10.4g %10.4g", w->method, w->value, w->patches, it,
+            w->err_surface_max, w->err_max_rel, w->err_rms_rel, w->err_energy_rel, w->t_solve, w->t_total);
+    if (bound_cols) {
+        double ratio = w->err_inf > 0 ? w->bound / w->err_inf : NAN;
+        double r2 = w->err_inf > 0 ? w->bound_ke / w->err_inf : NAN;
+        fprintf(fp, " %10.3g %10.3g %9.3g %9.3g %9.3g", w->err_inf, w->bound, ratio, r2,
+                w->err_inf > 0 ? w->estimate / w->err_inf : NAN);
+        if (isfinite(ratio) && strcmp(w->method, "truncated") == 0) {
+            b[0] = fmin(b[0], ratio);
+            b[1] = fmax(b[1], ratio);
+            b[2] = fmin(b[2], r2);
+            b[3] = fmax(b[3], r2);
+        }
+    } else
+        fprintf(fp, " %8.1f %10zu %8.1f", w->peak_mb, w->k_entries, w->k_mb);
+    fputc('\n', fp);
+}
+
+static void bn__print_time_or_not(FILE *fp, double t)
+{
+    if (isnan(t))
+        fprintf(fp, "not reached");
+    else
+        fprintf(fp, "%.4g s", t);
+}
+
+/* The equal-error lines: each side's time to the target, and to 3x the reference's own error. */
+static void bn__study_print_equal_error(const bn_study_result *r, FILE *fp)
+{
+    fprintf(fp, "\nequal error  target %.3g %s (reference's own ~%.3g)\n", r->target,
+            r->metric_patch ? "RMS relative error per patch, on the reference's patches" : "per-surface relative error",
+            r->metric_patch ? r->ref_error_patch : r->ref_error);
+    fprintf(fp, "  radiosity  ");
+    bn__print_time_or_not(fp, r->t_radiosity);
+    fprintf(fp, " (best %.3g)\n", r->best_radiosity);
+    fprintf(fp, "  tracer     ");
+    bn__print_time_or_not(fp, r->t_trace);
+    fprintf(fp, " (best %.3g)\n", r->best_trace);
+    if (!isnan(r->ratio))
+        fprintf(fp, "  ratio      the tracer takes %.3g times as long as radiosity\n", r->ratio);
+    if (!isnan(r->fine_target)) {
+        fprintf(fp, "  finest     %.3g (3x the reference's own error): radiosity ", r->fine_target);
+        bn__print_time_or_not(fp, r->t_radiosity_fine);
+        fprintf(fp, ", tracer ");
+        bn__print_time_or_not(fp, r->t_trace_fine);
+        if (!isnan(r->ratio_fine))
+            fprintf(fp, ", ratio %.3g", r->ratio_fine);
         fputc('\n', fp);
     }
-    if (bounces && hi > 0)
+}
+
+void bn_study_print(const bn_study_result *r, FILE *fp)
+{
+    int bounces = r->param == BN_STUDY_BOUNCES, bound_cols = bounces || r->param == BN_STUDY_MAX_ITER;
+    double b[4] = {INFINITY, 0, INFINITY, 0};
+    bn__study_print_header(r, fp);
+    for (size_t i = 0; i < r->nrows; i++)
+        bn__study_print_row(&r->rows[i], bound_cols, b, fp);
+    if (bounces && b[1] > 0)
         fprintf(fp, "\nbound        the a priori bound ||K||^(n+1)/(1-||K||) ||E|| is %.3g to %.3g times the measured "
-                    "||L - S_n||_inf (>= 1 everywhere means it held)\n", lo, hi);
-    if (bounces && hi2 > 0)
+                    "||L - S_n||_inf (>= 1 everywhere means it held)\n", b[0], b[1]);
+    if (bounces && b[3] > 0)
         fprintf(fp, "             from the first reflection, ||K||^n/(1-||K||) ||KE||, it is %.3g to %.3g times; the "
-                    "looseness grows like (||K||_inf / rho(K))^n = (%.4g / %.4g)^n\n", lo2, hi2, r->k_norm, r->spectral_radius);
-    if (!isnan(r->best_trace) || !isnan(r->best_radiosity)) {
-        fprintf(fp, "\nequal error  target %.3g %s (reference's own ~%.3g)\n", r->target,
-                r->metric_patch ? "RMS relative error per patch, on the reference's patches" : "per-surface relative error",
-                r->metric_patch ? r->ref_error_patch : r->ref_error);
-        if (isnan(r->t_radiosity))
-            fprintf(fp, "  radiosity  not reached (best %.3g)\n", r->best_radiosity);
-        else
-            fprintf(fp, "  radiosity  %.4g s (best %.3g)\n", r->t_radiosity, r->best_radiosity);
-        if (isnan(r->t_trace))
-            fprintf(fp, "  tracer     not reached (best %.3g)\n", r->best_trace);
-        else
-            fprintf(fp, "  tracer     %.4g s (best %.3g)\n", r->t_trace, r->best_trace);
-        if (!isnan(r->ratio))
-            fprintf(fp, "  ratio      the tracer takes %.3g times as long as radiosity\n", r->ratio);
-        if (!isnan(r->fine_target)) {
-            fprintf(fp, "  finest     %.3g (3x the reference's own error): radiosity ", r->fine_target);
-            if (isnan(r->t_radiosity_fine))
-                fprintf(fp, "not reached");
-            else
-                fprintf(fp, "%.4g s", r->t_radiosity_fine);
-            fprintf(fp, ", tracer ");
-            if (isnan(r->t_trace_fine))
-                fprintf(fp, "not reached");
-            else
-                fprintf(fp, "%.4g s", r->t_trace_fine);
-            if (!isnan(r->ratio_fine))
-                fprintf(fp, ", ratio %.3g", r->ratio_fine);
-            fputc('\n', fp);
-        }
-    }
+                    "looseness grows like (||K||_inf / rho(K))^n = (%.4g / %.4g)^n\n", b[2], b[3], r->k_norm,
+                r->spectral_radius);
+    if (!isnan(r->best_trace) || !isnan(r->best_radiosity))
+        bn__study_print_equal_error(r, fp);
 }
