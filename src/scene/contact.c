@@ -771,62 +771,75 @@ static size_t bn__count_split(const bn__cx *c, size_t p0, size_t p1)
     return changed;
 }
 
+/* Index scratch of the cuts: tl and tr, each of cap entries. */
+typedef struct bn__cutbuf {
+    size_t *tl, *tr, cap;
+} bn__cutbuf;
+
+/* Both grown to hold at least n. 0 when out of memory. */
+static int bn__cutbuf_reserve(bn__cutbuf *b, size_t n)
+{
+    size_t *a;
+    if (n <= b->cap)
+        return 1;
+    if (!(a = bn__realloc_array(b->tl, n, sizeof *a)))
+        return 0;
+    b->tl = a;
+    if (!(a = bn__realloc_array(b->tr, n, sizeof *a)))
+        return 0;
+    b->tr = a;
+    b->cap = n;
+    return 1;
+}
+
+/* Every piece cut by every contact segment, then (where cuts made fresh vertices) each piece mended
+ * so that its neighbours' new vertices lie on its edges. 0 when out of memory or interrupted. */
+static int bn__cut_pieces(bn__cx *c, bn__cutbuf *b)
+{
+    for (size_t g = 0; g < c->nsegs; g++) {
+        size_t count = c->npieces;
+        if (bn_interrupted() != BN_OK)   /* a big face's cuts take seconds: stop promptly */
+            return 0;
+        for (size_t k = 0; k < count; k++)
+            if (!bn__cutbuf_reserve(b, c->pieces[k].n + 2) || !bn__cut(c, k, &c->segs[g], b->tl, b->tr))
+                return 0;
+    }
+    if (c->nfresh > 0) {
+        size_t count = c->npieces, mcap = 0;
+        for (size_t k = 0; k < count; k++)
+            mcap = mcap > c->pieces[k].n ? mcap : c->pieces[k].n;
+        if (!bn__cutbuf_reserve(b, mcap * 65))
+            return 0;
+        for (size_t k = 0; k < count; k++) {
+            if ((k & 1023) == 0 && bn_interrupted() != BN_OK)   /* pieces x fresh vertices: seconds on a big face */
+                return 0;
+            if (!bn__mend(c, k, b->tl, b->cap))
+                return 0;
+        }
+    }
+    return 1;
+}
+
 static int bn__cut_face(bn__cx *c, size_t f, bn_patch *src, size_t p0, size_t p1, const double (*poly)[2],
                         bn_scene_stats *st)
 {
-    size_t *tl = NULL, *tr = NULL, cap = 0, changed = 0, before;
+    bn__cutbuf b = {NULL, NULL, 0};
+    size_t changed = 0, before;
     int ok = 0;
     c->npool = c->npieces = c->nfresh = 0;
     c->keep = 0;
     for (size_t p = p0; p < p1; p++)
         for (unsigned k = 0; k < src[p].ncorners; k++)
-            c->keep = fmax(c->keep, bn_v3_dist(c->pv + 3 * src[p].corner[k], c->pv + 3 * src[p].corner[(k + 1) % src[p].ncorners]));
+            c->keep = fmax(c->keep, bn_v3_dist(c->pv + 3 * src[p].corner[k],
+                                               c->pv + 3 * src[p].corner[(k + 1) % src[p].ncorners]));
     c->keep *= BN__SLIVER;
     if (!bn__snap_corners(c, &c->s->faces[f], src + p0, p1 - p0, poly))
         return 0;
     for (size_t p = p0; p < p1; p++)
         if (!bn__new_piece(c, src[p].corner, src[p].ncorners, p, 0))
             return 0;
-    for (size_t g = 0; g < c->nsegs; g++) {
-        size_t count = c->npieces;
-        if (bn_interrupted() != BN_OK)   /* a big face's cuts take seconds: stop promptly */
-            goto done;
-        for (size_t k = 0; k < count; k++) {
-            size_t n = c->pieces[k].n + 2;
-            if (n > cap) {
-                size_t *a = bn__realloc_array(tl, n, sizeof *tl), *b;
-                if (!a)
-                    goto done;
-                tl = a;
-                b = bn__realloc_array(tr, n, sizeof *tr);
-                if (!b)
-                    goto done;
-                tr = b;
-                cap = n;
-            }
-            if (!bn__cut(c, k, &c->segs[g], tl, tr))
-                goto done;
-        }
-    }
-    if (c->nfresh > 0) {
-        size_t count = c->npieces, mcap = 0;
-        for (size_t k = 0; k < count; k++)
-            mcap = mcap > c->pieces[k].n ? mcap : c->pieces[k].n;
-        mcap = mcap * 65;
-        if (mcap > cap) {
-            size_t *a = bn__realloc_array(tl, mcap, sizeof *tl);
-            if (!a)
-                goto done;
-            tl = a;
-            cap = mcap;
-        }
-        for (size_t k = 0; k < count; k++) {
-            if ((k & 1023) == 0 && bn_interrupted() != BN_OK)   /* pieces x fresh vertices: seconds on a big face */
-                goto done;
-            if (!bn__mend(c, k, tl, cap))
-                goto done;
-        }
-    }
+    if (!bn__cut_pieces(c, &b))
+        goto done;
     before = c->np;
     for (size_t k = 0; k < c->npieces; k++) {
         const bn__piece *pc = &c->pieces[k];
@@ -846,8 +859,8 @@ static int bn__cut_face(bn__cx *c, size_t f, bn_patch *src, size_t p0, size_t p1
     st->contact_patches_made += (c->np - before) - ((p1 - p0) - changed);
     ok = 1;
 done:
-    free(tl);
-    free(tr);
+    free(b.tl);
+    free(b.tr);
     return ok;
 }
 
