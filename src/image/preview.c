@@ -79,82 +79,100 @@ static bn_status bn__downsample(const bn_image *img, int k, bn_image *out, bn_er
     return BN_OK;
 }
 
+/* The contact sheet's layout: tiles of tw x th (the layers shrunk k times), the sheet sw x sh. */
+enum { BN__SHEET_MARGIN = 10, BN__SHEET_TITLE = 34, BN__SHEET_LABEL = 30, BN__SHEET_FONT = 20 };
+typedef struct bn__sheet {
+    int k, tw, th, sw, sh;
+    unsigned char *rgb;
+    bn__label *labels;
+    char (*text)[96];
+    size_t nl;
+} bn__sheet;
+
+/* The next label's text store (96 bytes), then the label at (x, y) with it. */
+static char *bn__sheet_text(bn__sheet *S) { return S->text[S->nl]; }
+
+static void bn__sheet_label(bn__sheet *S, int x, int y, int size)
+{
+    S->labels[S->nl] = (bn__label){x, y, size, S->text[S->nl]};
+    S->nl++;
+}
+
+/* Layer l's two tiles (row 1 at ev, row 2 at its own exposure) and their labels. */
+static bn_status bn__sheet_layer(bn__sheet *S, const bn_layer *layer, size_t l, double ev, bn_error *err)
+{
+    bn_image small;
+    unsigned char *rgb;
+    double own;
+    bn_status st = bn__downsample(layer->img, S->k, &small, err);
+    if (st != BN_OK)
+        return st;
+    rgb = bn__malloc_array((size_t)S->tw * S->th, 3);
+    if (!rgb) {
+        bn_image_free(&small);
+        return bn_error_set(err, BN_ENOMEM, "out of memory");
+    }
+    own = bn_image_auto_exposure(&small);
+    for (int row = 0; row < 2; row++) {
+        int x0 = BN__SHEET_MARGIN + (int)l * (S->tw + BN__SHEET_MARGIN);
+        int y0 = BN__SHEET_TITLE + row * (BN__SHEET_LABEL + S->th + BN__SHEET_MARGIN) + BN__SHEET_LABEL;
+        bn__to_rgb8(&small, row == 0 ? ev : own, rgb);
+        for (int y = 0; y < S->th; y++)
+            memcpy(S->rgb + 3 * ((size_t)(y0 + y) * S->sw + x0), rgb + 3 * (size_t)y * S->tw, 3 * (size_t)S->tw);
+        if (row == 0)
+            snprintf(bn__sheet_text(S), 96, "%s", layer->name);
+        else
+            snprintf(bn__sheet_text(S), 96, "%s %+.1f EV", layer->name, own);
+        bn__sheet_label(S, x0 + 2, y0 - 8, BN__SHEET_FONT);
+    }
+    free(rgb);
+    bn_image_free(&small);
+    return BN_OK;
+}
+
 bn_status bn_contact_sheet_write(const char *path, const bn_layer *layers, size_t nlayers, double ev, int tile,
                                  const bn_attr *attrs, size_t nattrs, const bn_log *log, bn_error *err)
 {
-    enum { MARGIN = 10, TITLE = 34, LABEL = 30, FONT = 20 };
-    int w, h, k, tw, th, sw, sh, ok = 1;
-    unsigned char *sheet = NULL;
-    bn__label *labels = NULL;
-    char (*text)[96] = NULL;
-    size_t nl = 0;
+    int w, h, ok = 1;
+    bn__sheet S = {0};
     bn_status st = BN_OK;
-
     if (nlayers == 0)
         return bn_error_set(err, BN_EINTERNAL, "%s: no layers", path);
     if (tile <= 0)
         tile = 320;
     w = layers[0].img->width;
     h = layers[0].img->height;
-    k = (w + tile - 1) / tile;
-    tw = (w + k - 1) / k;
-    th = (h + k - 1) / k;
-    sw = MARGIN + (int)nlayers * (tw + MARGIN);
-    sh = TITLE + 2 * (LABEL + th + MARGIN);
-    sheet = bn__malloc_array((size_t)sw * sh, 3);
-    labels = bn__calloc(2 * nlayers + 2, sizeof *labels);
-    text = bn__calloc(2 * nlayers + 2, sizeof *text);
-    if (!sheet || !labels || !text) {
+    S.k = (w + tile - 1) / tile;
+    S.tw = (w + S.k - 1) / S.k;
+    S.th = (h + S.k - 1) / S.k;
+    S.sw = BN__SHEET_MARGIN + (int)nlayers * (S.tw + BN__SHEET_MARGIN);
+    S.sh = BN__SHEET_TITLE + 2 * (BN__SHEET_LABEL + S.th + BN__SHEET_MARGIN);
+    S.rgb = bn__malloc_array((size_t)S.sw * S.sh, 3);
+    S.labels = bn__calloc(2 * nlayers + 2, sizeof *S.labels);
+    S.text = bn__calloc(2 * nlayers + 2, sizeof *S.text);
+    if (!S.rgb || !S.labels || !S.text) {
         st = bn_error_set(err, BN_ENOMEM, "out of memory for the contact sheet");
         goto done;
     }
-    memset(sheet, 24, (size_t)sw * sh * 3);
-    snprintf(text[nl], sizeof text[nl], "row 1: every layer at %+.2f EV", ev);
-    labels[nl] = (bn__label){MARGIN, 24, 18, text[nl]};
-    nl++;
-    snprintf(text[nl], sizeof text[nl], "row 2: each layer normalised on its own");
-    labels[nl] = (bn__label){MARGIN + sw / 2, 24, 18, text[nl]};
-    nl++;
-    for (size_t l = 0; l < nlayers; l++) {
-        bn_image small;
-        unsigned char *rgb;
-        double own;
-        if (layers[l].img->width != w || layers[l].img->height != h) {
+    memset(S.rgb, 24, (size_t)S.sw * S.sh * 3);
+    snprintf(bn__sheet_text(&S), 96, "row 1: every layer at %+.2f EV", ev);
+    bn__sheet_label(&S, BN__SHEET_MARGIN, 24, 18);
+    snprintf(bn__sheet_text(&S), 96, "row 2: each layer normalised on its own");
+    bn__sheet_label(&S, BN__SHEET_MARGIN + S.sw / 2, 24, 18);
+    for (size_t l = 0; l < nlayers && st == BN_OK; l++) {
+        if (layers[l].img->width != w || layers[l].img->height != h)
             st = bn_error_set(err, BN_EINTERNAL, "%s: layers differ in size", path);
-            goto done;
-        }
-        st = bn__downsample(layers[l].img, k, &small, err);
-        if (st != BN_OK)
-            goto done;
-        rgb = bn__malloc_array((size_t)tw * th, 3);
-        if (!rgb) {
-            bn_image_free(&small);
-            st = bn_error_set(err, BN_ENOMEM, "out of memory");
-            goto done;
-        }
-        own = bn_image_auto_exposure(&small);
-        for (int row = 0; row < 2; row++) {
-            int x0 = MARGIN + (int)l * (tw + MARGIN), y0 = TITLE + row * (LABEL + th + MARGIN) + LABEL;
-            bn__to_rgb8(&small, row == 0 ? ev : own, rgb);
-            for (int y = 0; y < th; y++)
-                memcpy(sheet + 3 * ((size_t)(y0 + y) * sw + x0), rgb + 3 * (size_t)y * tw, 3 * (size_t)tw);
-            if (row == 0)
-                snprintf(text[nl], sizeof text[nl], "%s", layers[l].name);
-            else
-                snprintf(text[nl], sizeof text[nl], "%s %+.1f EV", layers[l].name, own);
-            labels[nl] = (bn__label){x0 + 2, y0 - 8, FONT, text[nl]};
-            nl++;
-        }
-        free(rgb);
-        bn_image_free(&small);
+        else
+            st = bn__sheet_layer(&S, &layers[l], l, ev, err);
     }
-    st = bn__write_rgb8(path, sw, sh, sheet, labels, nl, attrs, nattrs, &ok, err);
+    if (st == BN_OK)
+        st = bn__write_rgb8(path, S.sw, S.sh, S.rgb, S.labels, S.nl, attrs, nattrs, &ok, err);
     if (st == BN_OK && !ok)
         bn_warnf(log, BN_W_FONT, NAN, "%s: labels could not be drawn (font %s/DejaVuSans.ttf missing?); the sheet is "
                 "unlabelled", path, BN_FONT_DIR);
 done:
-    free(sheet);
-    free(labels);
-    free(text);
+    free(S.rgb);
+    free(S.labels);
+    free(S.text);
     return st;
 }
