@@ -83,6 +83,52 @@ static void bn__item_power(const bn_crosscheck_input *in, const double *v, const
     }
 }
 
+/* The other level's patches bucketed by face (a counting sort): face f's are order[start[f] ..
+ * start[f + 1]). 0 when out of memory (nothing kept). */
+static int bn__patches_by_face(const bn_patch *q, size_t n2, size_t nf, size_t **start_out, size_t **order_out)
+{
+    size_t *start = bn__calloc(nf + 1, sizeof(size_t)), *order = bn__malloc_array(n2 ? n2 : 1, sizeof(size_t));
+    size_t *fill = bn__malloc_array(nf ? nf : 1, sizeof(size_t));
+    if (!start || !order || !fill) {
+        free(start);
+        free(order);
+        free(fill);
+        return 0;
+    }
+    for (size_t j = 0; j < n2; j++)
+        start[q[j].face + 1]++;
+    for (size_t f = 0; f < nf; f++)
+        start[f + 1] += start[f];
+    memcpy(fill, start, nf * sizeof(size_t));
+    for (size_t j = 0; j < n2; j++)
+        order[fill[q[j].face]++] = j;
+    free(fill);
+    *start_out = start;
+    *order_out = order;
+    return 1;
+}
+
+/* The other level's patch holding patch p's centroid (within eps), else the nearest centroid on
+ * the same face; (size_t)-1 when the face has none there. */
+static size_t bn__matching_patch(const bn_patch *p, const bn_patch *q, const double *qv, const size_t *start,
+                                 const size_t *order, double eps)
+{
+    size_t best = (size_t)-1;
+    double bestd = INFINITY;
+    for (size_t k = start[p->face]; k < start[p->face + 1]; k++) {
+        size_t j = order[k];
+        double d;
+        if (bn__inside(&q[j], qv, p->centroid, eps))
+            return j;
+        d = bn_v3_dist(q[j].centroid, p->centroid);   /* fallback: nearest centroid in the face */
+        if (d < bestd) {
+            bestd = d;
+            best = j;
+        }
+    }
+    return best;
+}
+
 bn_status bn_crosscheck_mesh_tolerance(const bn_scene *fine, const double *fine_layers, const bn_scene *other,
                                        const double *other_layers, int bounces, double *tol, double *power_tol,
                                        bn_error *err)
@@ -98,50 +144,15 @@ bn_status bn_crosscheck_mesh_tolerance(const bn_scene *fine, const double *fine_
         return bn_error_set(err, BN_EINPUT, "crosscheck: the two mesh levels have different faces (%zu and %zu)", nf,
                             nf2);
     eps = 1e-9 * fmax(bn_scene_diameter(fine), 1e-300);   /* containment slack: rounding, far below any patch */
-    /* Bucket the other level's patches by face (counting sort). */
-    start = bn__calloc(nf + 1, sizeof(size_t));
-    order = bn__malloc_array(n2 ? n2 : 1, sizeof(size_t));
-    if (!start || !order) {
-        free(start);
-        free(order);
+    if (!bn__patches_by_face(q, n2, nf, &start, &order))
         return bn_error_set(err, BN_ENOMEM, "crosscheck: out of memory mapping %zu patches", n2);
-    }
-    for (size_t j = 0; j < n2; j++)
-        start[q[j].face + 1]++;
-    for (size_t f = 0; f < nf; f++)
-        start[f + 1] += start[f];
-    {
-        size_t *fill = bn__malloc_array(nf ? nf : 1, sizeof(size_t));
-        if (!fill) {
-            free(start);
-            free(order);
-            return bn_error_set(err, BN_ENOMEM, "crosscheck: out of memory");
-        }
-        memcpy(fill, start, nf * sizeof(size_t));
-        for (size_t j = 0; j < n2; j++)
-            order[fill[q[j].face]++] = j;
-        free(fill);
-    }
     for (size_t i = 0; i < n; i++) {
-        size_t f = p[i].face, best = (size_t)-1;
-        double bestd = INFINITY;
-        for (size_t k = start[f]; k < start[f + 1]; k++) {
-            size_t j = order[k];
-            double d;
-            if (bn__inside(&q[j], qv, p[i].centroid, eps)) {
-                best = j;
-                break;
-            }
-            d = bn_v3_dist(q[j].centroid, p[i].centroid);   /* fallback: nearest centroid in the face */
-            if (d < bestd) {
-                bestd = d;
-                best = j;
-            }
-        }
+        size_t best = bn__matching_patch(&p[i], q, qv, start, order, eps);
         if (best == (size_t)-1) {
             free(start);
             free(order);
-            return bn_error_set(err, BN_EINPUT, "crosscheck: face %zu has no patch on the second mesh level", f);
+            return bn_error_set(err, BN_EINPUT, "crosscheck: face %zu has no patch on the second mesh level",
+                                p[i].face);
         }
         for (size_t l = 0; l < nl; l++)
             for (int c = 0; c < 3; c++)
@@ -150,14 +161,13 @@ bn_status bn_crosscheck_mesh_tolerance(const bn_scene *fine, const double *fine_
     }
     free(start);
     free(order);
-    if (power_tol)
-        for (size_t l = 0; l < nl; l++) {
-            double a[3], b[3];
-            bn_scene_power(fine, fine_layers + l * n * 3, a);   /* n, n2: the scenes' patch counts */
-            bn_scene_power(other, other_layers + l * n2 * 3, b);
-            for (int c = 0; c < 3; c++)
-                power_tol[3 * l + (size_t)c] = fabs(a[c] - b[c]);
-        }
+    for (size_t l = 0; power_tol && l < nl; l++) {
+        double a[3], b[3];
+        bn_scene_power(fine, fine_layers + l * n * 3, a);   /* n, n2: the scenes' patch counts */
+        bn_scene_power(other, other_layers + l * n2 * 3, b);
+        for (int c = 0; c < 3; c++)
+            power_tol[3 * l + (size_t)c] = fabs(a[c] - b[c]);
+    }
     return BN_OK;
 }
 
