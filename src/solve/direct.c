@@ -46,13 +46,56 @@ static bn_status bn__direct_fill(const bn_transport *k, const double *rho, int c
     return BN_OK;
 }
 
+/* The direct solve's buffers: I - K dense (column-major), the right-hand sides, LU pivots and the
+ * row fill's scratch. */
+typedef struct bn__direct_buf {
+    double *A, *b, *vals, *blk;
+    size_t *cols;
+    lapack_int *ipiv;
+} bn__direct_buf;
+
+static void bn__direct_buf_free(bn__direct_buf *B)
+{
+    free(B->A);
+    free(B->b);
+    free(B->ipiv);
+    free(B->cols);
+    free(B->vals);
+    free(B->blk);
+}
+
+/* Channel c (with grey reflectance: all three at once, nrhs 3) solved by LU into L. */
+static bn_status bn__direct_channel(const bn__solve_ctx *ctx, const double *rho, int c, int nrhs, bn__direct_buf *B,
+                                    double *L, int *singular, bn_error *err)
+{
+    size_t n = ctx->n;
+    lapack_int info;
+    bn_status st = bn__direct_fill(ctx->k, rho, c, n, B->A, B->blk, B->cols, B->vals, err);
+    if (st != BN_OK)
+        return st;
+    for (size_t i = 0; i < n; i++)   /* b <- E_c (column-major n x nrhs) */
+        for (int q = 0; q < nrhs; q++)
+            B->b[(size_t)q * n + i] = ctx->E[3 * i + (size_t)(c + q)];
+    info = LAPACKE_dgesv(LAPACK_COL_MAJOR, (lapack_int)n, nrhs, B->A, (lapack_int)n, B->ipiv, B->b, (lapack_int)n);
+    if (info > 0) {
+        *singular = 1;
+        return bn_error_set(err, BN_ENUMERIC,
+                            "direct solve: I - K is singular (channel %c: U(%d,%d) = 0 in the LU factorisation)",
+                            "RGB"[c], (int)info, (int)info);
+    }
+    if (info < 0)
+        return bn_error_set(err, BN_EINTERNAL, "direct solve: LAPACKE_dgesv argument %d is invalid", (int)-info);
+    for (size_t i = 0; i < n; i++)
+        for (int q = 0; q < nrhs; q++)
+            L[3 * i + (size_t)(c + q)] = B->b[(size_t)q * n + i];
+    return BN_OK;
+}
+
 static bn_status bn__direct_solve(const bn__solve_ctx *ctx, double *L, int *singular, bn_error *err)
 {
     size_t n = ctx->n, need = bn_solve_direct_bytes(n), limit = ctx->o->max_memory;
     const double *rho = bn_transport_rho(ctx->k);
-    double *A, *b, *vals, *blk;
-    size_t *cols;
-    lapack_int *ipiv, info;
+    bn__direct_buf B;
     int grey = 1;
     bn_status st = BN_OK;
     *singular = 0;
@@ -68,57 +111,23 @@ static bn_status bn__direct_solve(const bn__solve_ctx *ctx, double *L, int *sing
                             n, (double)need / 1073741824.0, (double)limit / 1073741824.0);
     if (n == 0)
         return BN_OK;
-    A = bn__malloc_array(n * n, sizeof(double));
-    b = bn__malloc_array(3 * n, sizeof(double));
-    ipiv = bn__malloc_array(n, sizeof(lapack_int));
-    cols = bn__malloc_array(n, sizeof(size_t));
-    vals = bn__malloc_array(n, sizeof(double));
-    blk = bn__malloc_array((size_t)BN__FILL_ROWS * n, sizeof(double));
-    if (!A || !b || !ipiv || !cols || !vals || !blk) {
+    B.A = bn__malloc_array(n * n, sizeof(double));
+    B.b = bn__malloc_array(3 * n, sizeof(double));
+    B.ipiv = bn__malloc_array(n, sizeof(lapack_int));
+    B.cols = bn__malloc_array(n, sizeof(size_t));
+    B.vals = bn__malloc_array(n, sizeof(double));
+    B.blk = bn__malloc_array((size_t)BN__FILL_ROWS * n, sizeof(double));
+    if (!B.A || !B.b || !B.ipiv || !B.cols || !B.vals || !B.blk)
         st = bn_error_set(err, BN_ENOMEM, "direct solve: cannot allocate %.3g GiB for %zu patches",
                           (double)need / 1073741824.0, n);
-        goto done;
-    }
     for (size_t i = 0; i < n && grey; i++)
         grey = rho[3 * i] == rho[3 * i + 1] && rho[3 * i] == rho[3 * i + 2];
-    for (int c = 0; c < 3; c++) {
-        int nrhs = grey ? 3 : 1;
-        st = bn__direct_fill(ctx->k, rho, c, n, A, blk, cols, vals, err);
-        if (st != BN_OK)
-            goto done;
-        /* b <- E_c (column-major n x nrhs) */
-        for (size_t i = 0; i < n; i++)
-            for (int q = 0; q < nrhs; q++)
-                b[(size_t)q * n + i] = ctx->E[3 * i + (size_t)(c + q)];
-        info = LAPACKE_dgesv(LAPACK_COL_MAJOR, (lapack_int)n, nrhs, A, (lapack_int)n, ipiv, b, (lapack_int)n);
-        if (info > 0) {
-            *singular = 1;
-            st = bn_error_set(err, BN_ENUMERIC,
-                              "direct solve: I - K is singular (channel %c: U(%d,%d) = 0 in the LU factorisation)",
-                              "RGB"[c], (int)info, (int)info);
-            goto done;
-        }
-        if (info < 0) {
-            st = bn_error_set(err, BN_EINTERNAL, "direct solve: LAPACKE_dgesv argument %d is invalid", (int)-info);
-            goto done;
-        }
-        for (size_t i = 0; i < n; i++)
-            for (int q = 0; q < nrhs; q++)
-                L[3 * i + (size_t)(c + q)] = b[(size_t)q * n + i];
-        if (grey)
-            break;
-        if (bn_interrupted() != BN_OK) {
+    for (int c = 0; c < (grey ? 1 : 3) && st == BN_OK; c++) {
+        st = bn__direct_channel(ctx, rho, c, grey ? 3 : 1, &B, L, singular, err);
+        if (st == BN_OK && !grey && bn_interrupted() != BN_OK)
             st = bn_error_set(err, bn_interrupted(), "direct solve interrupted");
-            goto done;
-        }
     }
-done:
-    free(A);
-    free(b);
-    free(ipiv);
-    free(cols);
-    free(vals);
-    free(blk);
+    bn__direct_buf_free(&B);
     return st;
 }
 
