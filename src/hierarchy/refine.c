@@ -210,13 +210,15 @@ static int bn__second_look(const bn__ref *R, uint32_t r, uint32_t s, float F)
     return bn__ff_vis_noise((double)F * BN__LEAF_RAYS, BN__LEAF_RAYS) > bn__link_ftol(R, r, s);
 }
 
-/* The leaves of m nodes v[j] (m <= 2) where the area fractions u1[j] fall: the last leaf k of each
- * with cum_area[k] <= its target. The searches advance in step, so that two nodes' cache misses
- * overlap (a sampled point pair: most of refinement's time at a million leaves). */
+/* The leaves of m nodes v[j] (m <= BN__FIND_MAX) where the area fractions u1[j] fall: the last leaf k
+ * of each with cum_area[k] <= its target. The searches advance in step, so that their cache misses
+ * overlap (a sampled point pair: most of refinement's time at a million leaves): a link's point pairs
+ * are searched all at once. */
+#define BN__FIND_MAX 32
 static void bn__find_leaves(const bn__tree *t, int m, const uint32_t *v, const double *u1, size_t *leaf)
 {
-    size_t lo[2], hi[2];
-    double a[2];
+    size_t lo[BN__FIND_MAX], hi[BN__FIND_MAX];
+    double a[BN__FIND_MAX];
     int open = 0;
     for (int j = 0; j < m; j++) {
         lo[j] = t->lo[v[j]];
@@ -331,6 +333,36 @@ static double bn__F_kernel(const bn__ref *R, uint32_t r, uint32_t s, bn__worker 
     return sum / S;
 }
 
+/* One point pair of bn__F_sampled: x on leaf qx, y on leaf qy (u: their three numbers each), its
+ * kernel (separated nodes: bounded by their distance; overlapping ones, below min_area: Wallace's
+ * disk, which bounds each term but biases F low by ~a / (pi r^2)) added to *sum unless its shadow
+ * ray is blocked, and r's cosine to *cos_sum. */
+static void bn__pair_sample(const bn__ref *R, size_t qx, size_t qy, const double *u, int sep, double a, bn__worker *w,
+                            double *sum, double *cos_sum, int *seen, int *blocked)
+{
+    double x[3], y[3], d[3], r2, len, cr, cs;
+    const double *nx, *ny;
+    bn__leaf_point(R, qx, u[1], u[2], x, &nx);
+    bn__leaf_point(R, qy, u[4], u[5], y, &ny);
+    bn_v3_sub(y, x, d);
+    r2 = bn_v3_dot(d, d);
+    len = sqrt(r2);
+    if (!(len > 0))
+        return;
+    cr = bn_v3_dot(nx, d) / len;
+    cs = -bn_v3_dot(ny, d) / len;
+    if (cr > 0)
+        *cos_sum += cr;
+    if (!(cr > 0 && cs > 0))
+        return;
+    (*seen)++;
+    if (bn__blocked(R, x, nx, y, ny, w)) {
+        (*blocked)++;
+        return;
+    }
+    *sum += cr * cs * a / (BN_PI * r2 + (sep ? 0 : a));
+}
+
 /* Area-averaged F from r to s (per unit cosine when r is a cluster) by S stratified point pairs with
  * one shadow ray each; S x 4 when the first S find partial visibility (unless split_if_partial: the
  * caller splits such a link, and wants only to know), and for nodes whose bounding spheres overlap
@@ -345,38 +377,29 @@ static double bn__F_sampled(const bn__ref *R, uint32_t r, uint32_t s, int split_
         bn__rng g = bn__rng_make(R->o->ff.seed ^ 0x6869657261726368ull, ((uint64_t)r << 32) | s, (uint64_t)round);
         double a = R->t->area[s] / S, sum = 0, inv = 1.0 / S, cos_sum = 0;
         int seen = 0, blocked = 0;
-        for (int k = 0; k < S; k++) {
-            double x[3], y[3], d[3], r2, len, cr, cs;
-            const double *nx, *ny;
-            const uint32_t v[2] = {r, s};
-            double u[6], u1[2];
-            size_t q[2];
-            for (int i = 0; i < 6; i++)   /* in order: r's three, then s's three */
+        for (int k0 = 0; k0 < S; k0 += BN__FIND_MAX / 2) {
+            int m = S - k0 < BN__FIND_MAX / 2 ? S - k0 : BN__FIND_MAX / 2;
+            double u[6 * BN__FIND_MAX / 2], u1[BN__FIND_MAX];
+            uint32_t v[BN__FIND_MAX];
+            size_t q[BN__FIND_MAX];
+            for (int i = 0; i < 6 * m; i++)   /* per sample in order: r's three, then s's three */
                 u[i] = bn__rng_uniform(&g);
-            u1[0] = (k + u[0]) * inv;
-            u1[1] = (((k * 7 + 3) % S) + u[3]) * inv;
-            bn__find_leaves(R->t, 2, v, u1, q);
-            bn__leaf_point(R, q[0], u[1], u[2], x, &nx);
-            bn__leaf_point(R, q[1], u[4], u[5], y, &ny);
-            bn_v3_sub(y, x, d);
-            r2 = bn_v3_dot(d, d);
-            len = sqrt(r2);
-            if (!(len > 0))
-                continue;
-            cr = bn_v3_dot(nx, d) / len;
-            cs = -bn_v3_dot(ny, d) / len;
-            if (cr > 0)
-                cos_sum += cr;
-            if (!(cr > 0 && cs > 0))
-                continue;
-            seen++;
-            if (bn__blocked(R, x, nx, y, ny, w)) {
-                blocked++;
-                continue;
+            for (int j = 0; j < m; j++) {
+                int k = k0 + j;
+                v[2 * j] = r;
+                v[2 * j + 1] = s;
+                u1[2 * j] = (k + u[6 * j]) * inv;
+                u1[2 * j + 1] = (((k * 7 + 3) % S) + u[6 * j + 3]) * inv;
             }
-            /* separated nodes: the kernel itself (bounded by their distance); overlapping ones (below
-             * min_area): Wallace's disk, which bounds each term but biases F low by ~a / (pi r^2) */
-            sum += cr * cs * a / (BN_PI * r2 + (sep ? 0 : a));
+            bn__find_leaves(R->t, 2 * m, v, u1, q);
+            for (int j = 0; j < 2 * m; j++) {   /* a record spans up to three cache lines */
+                const char *lp = (const char *)&R->leaf[q[j]];
+                __builtin_prefetch(lp);
+                __builtin_prefetch(lp + 64);
+                __builtin_prefetch(lp + sizeof(bn__leaf_geom) - 1);
+            }
+            for (int j = 0; j < m; j++)
+                bn__pair_sample(R, q[2 * j], q[2 * j + 1], u + 6 * j, sep, a, w, &sum, &cos_sum, &seen, &blocked);
         }
         *partial = blocked > 0 && blocked < seen;
         if (*partial && split_if_partial)
