@@ -973,15 +973,69 @@ static bn_status bn__bad_entry(const bn_scene *scene, const bn_ff_diagnostics *d
 
 /* Row sums, entry ranges, reciprocity A_i F_ij = A_j F_ji and ||K||_inf of the stored F; refuses
  * entries outside [0, 1] and rows summing far above 1 (bn__rowsum_error). */
+/* The diagnostics' running state over the rows: the first bad entry, the reciprocity residual. */
+typedef struct bn__diag_scan {
+    size_t bad_i, bad_j, worst_row;
+    double bad_v, rec, sum_dev2;
+} bn__diag_scan;
+
+/* Entry (i, j) = v of row i: counted (nonzero, negative, above 1 or not finite; the first bad one kept)
+ * and, for a stored pair once (j > i), its reciprocity against (j, i); a mirror that is 0 is a broken pair. */
+static bn_status bn__diag_entry(const bn_transport *k, const bn_patch *patch, size_t i, size_t j, double v,
+                                bn_ff_diagnostics *d, bn__diag_scan *S, bn_error *err)
+{
+    double w;
+    int bad = 0;
+    bn_status st;
+    if (v != 0)
+        d->nonzeros++;
+    if (!isfinite(v))
+        bad = 1, d->above_one_entries++;
+    else if (v < 0)
+        bad = 1, d->negative_entries++;
+    else if (v > 1 + BN__F_SLACK)
+        bad = 1, d->above_one_entries++;
+    if (bad && S->bad_i == SIZE_MAX) {
+        S->bad_i = i;
+        S->bad_j = j;
+        S->bad_v = v;
+    }
+    if (v == 0 || j == i)
+        return BN_OK;
+    st = bn_transport_entry(k, j, i, &w, err);
+    if (st == BN_OK && j > i) {
+        double a = patch[i].area * v, c = patch[j].area * w, m = fmax(fabs(a), fabs(c));
+        if (m > 0)
+            S->rec = fmax(S->rec, fabs(a - c) / m);
+    } else if (st == BN_OK && w == 0) {
+        S->rec = 1;
+    }
+    return st;
+}
+
+/* Row i's sum rs into the row statistics and ||K||_inf. */
+static void bn__diag_row(const double *rho, size_t i, double rs, bn_ff_diagnostics *d, bn__diag_scan *S)
+{
+    d->row_sum_min = fmin(d->row_sum_min, rs);
+    if (rs > d->row_sum_max)
+        S->worst_row = i;
+    d->row_sum_max = fmax(d->row_sum_max, rs);
+    S->sum_dev2 += (rs - 1) * (rs - 1);
+    if (rs > 1 + d->row_sum_tol)
+        d->rows_above_one++;
+    for (int c = 0; c < 3; c++)
+        d->k_norm_inf = fmax(d->k_norm_inf, rho[3 * i + c] * rs);
+}
+
 static bn_status bn__diagnose(const bn_scene *scene, const bn_transport *k, const bn_formfactor_opts *o,
                               bn_ff_diagnostics *d, bn_error *err)
 {
-    size_t n = bn_transport_size(k), np, worst_row = 0, bad_i = SIZE_MAX, bad_j = 0, cnt;
+    size_t n = bn_transport_size(k), np, cnt;
     const bn_patch *patch = bn_scene_patches(scene, &np);
     const double *rho = bn_transport_rho(k);
     size_t *cols = bn__malloc_array(n ? n : 1, sizeof(size_t));
     double *vals = bn__malloc_array(n ? n : 1, sizeof(double));
-    double sum_dev2 = 0, rec = 0, bad_v = 0;
+    bn__diag_scan S = {SIZE_MAX, 0, 0, 0, 0, 0};
     bn_status st = (cols && vals) ? BN_OK : bn_error_set(err, BN_ENOMEM, "out of memory");
     d->n = n;
     d->row_sum_min = n ? INFINITY : 0;
@@ -992,59 +1046,25 @@ static bn_status bn__diagnose(const bn_scene *scene, const bn_transport *k, cons
         double rs = 0;
         st = bn_transport_row_entries(k, i, cols, vals, &cnt, err);
         for (size_t q = 0; q < cnt && st == BN_OK; q++) {
-            size_t j = cols[q];
-            double v = vals[q], w;
-            int bad = 0;
-            if (v != 0)
-                d->nonzeros++;
-            if (!isfinite(v))
-                bad = 1, d->above_one_entries++;
-            else if (v < 0)
-                bad = 1, d->negative_entries++;
-            else if (v > 1 + BN__F_SLACK)
-                bad = 1, d->above_one_entries++;
-            if (bad && bad_i == SIZE_MAX) {
-                bad_i = i;
-                bad_j = j;
-                bad_v = v;
-            }
-            rs += v;
-            if (v == 0 || j == i)
-                continue;
-            /* reciprocity, each stored pair once (j > i); a mirror that is 0 is a broken pair */
-            st = bn_transport_entry(k, j, i, &w, err);
-            if (st == BN_OK && j > i) {
-                double a = patch[i].area * v, c = patch[j].area * w, m = fmax(fabs(a), fabs(c));
-                if (m > 0)
-                    rec = fmax(rec, fabs(a - c) / m);
-            } else if (st == BN_OK && w == 0) {
-                rec = 1;
-            }
+            rs += vals[q];
+            st = bn__diag_entry(k, patch, i, cols[q], vals[q], d, &S, err);
         }
-        d->row_sum_min = fmin(d->row_sum_min, rs);
-        if (rs > d->row_sum_max)
-            worst_row = i;
-        d->row_sum_max = fmax(d->row_sum_max, rs);
-        sum_dev2 += (rs - 1) * (rs - 1);
-        if (rs > 1 + d->row_sum_tol)
-            d->rows_above_one++;
-        for (int c = 0; c < 3; c++)
-            d->k_norm_inf = fmax(d->k_norm_inf, rho[3 * i + c] * rs);
+        bn__diag_row(rho, i, rs, d, &S);
     }
     free(cols);
     free(vals);
     if (st != BN_OK)
         return st;
-    d->row_sum_rms_dev = n ? sqrt(sum_dev2 / (double)n) : 0;
-    d->reciprocity_residual = rec;
-    if (bad_i != SIZE_MAX)
-        return bn__bad_entry(scene, d, bad_i, bad_j, bad_v, o, err);
+    d->row_sum_rms_dev = n ? sqrt(S.sum_dev2 / (double)n) : 0;
+    d->reciprocity_residual = S.rec;
+    if (S.bad_i != SIZE_MAX)
+        return bn__bad_entry(scene, d, S.bad_i, S.bad_j, S.bad_v, o, err);
     if ((o->method == BN_FF_HEMISPHERE && d->row_sum_max > 1 + d->row_sum_tol) ||
         (o->method == BN_FF_ANALYTIC && d->row_sum_max > 1 + BN__ROWSUM_ERROR))
         return bn_error_set(err, BN_ENUMERIC,
                             "row %zu of F (patch %zu, face %zu) sums to %.9g, above 1 + %.3g (method %s): the form "
                             "factors are wrong; refusing to use them",
-                            worst_row, worst_row, patch[worst_row].face, d->row_sum_max,
+                            S.worst_row, S.worst_row, patch[S.worst_row].face, d->row_sum_max,
                             o->method == BN_FF_HEMISPHERE ? d->row_sum_tol : BN__ROWSUM_ERROR,
                             bn_ff_method_name(o->method));
     return BN_OK;
