@@ -168,6 +168,61 @@ size_t bn__hop_bytes(const void *ctx)
 }
 
 
+/* Under mpirun (P > 1): every rank's first leaf and the leaf order copied, the exchange buffer. 0 when out
+ * of memory. */
+static int bn__hop_make_dist(bn__hop *h, const bn__hop_shape *t, const size_t *bound)
+{
+    size_t P = (size_t)bn_dist_size();
+    h->bound = bn__malloc_array(P + 1, sizeof *h->bound);
+    h->order = bn__malloc_array(t->npatch, sizeof(uint32_t));
+    h->xchg = bn__malloc_array(3 * t->npatch, sizeof(double));
+    if (!h->bound || !h->order || !h->xchg)
+        return 0;
+    memcpy(h->bound, bound, (P + 1) * sizeof *h->bound);
+    memcpy(h->order, t->order, t->npatch * sizeof(uint32_t));
+    h->plo = bound[bn_dist_rank()];
+    h->phi = bound[bn_dist_rank() + 1];
+    return 1;
+}
+
+/* The tree's shape copied: children, parents, areas, each leaf's patch, the clusters' numbers,
+ * normals (float). */
+static void bn__hop_copy_shape(bn__hop *h, const bn__hop_shape *t)
+{
+    size_t n = t->n;
+    memcpy(h->child, t->child, n * sizeof(uint32_t));
+    memcpy(h->parent, t->parent, n * sizeof(uint32_t));
+    memcpy(h->area, t->area, n * sizeof(double));
+    for (size_t v = 0; v < n; v++) {
+        h->leaf_patch[v] = t->child[v] == BN__NONE ? t->order[t->lo[v]] : BN__NONE;
+        h->cl[v] = t->plane[v] < 0 ? (uint32_t)h->nclusters++ : BN__NONE;
+        for (int c = 0; c < 3; c++)
+            h->normal[3 * v + c] = (float)t->normal[3 * v + c];
+    }
+}
+
+/* The links with F > 0 (sorted by r then s) as rows: start, src, F, and a cluster receiver's
+ * direction to each source. */
+static void bn__hop_copy_links(bn__hop *h, const bn__hop_shape *t, const bn__link *links, size_t nlinks)
+{
+    for (size_t l = 0, k = 0; l < nlinks; l++) {
+        uint32_t r = links[l].r;
+        if (!(links[l].F > 0))
+            continue;
+        h->start[r + 1]++;
+        h->src[k] = bn__link_s(&links[l]);
+        h->F[k] = links[l].F;
+        if (h->cl[r] != BN__NONE) {
+            double u[3];
+            t->dir(t->dir_ctx, r, h->src[k], u);
+            h->dir[k] = bn__oct_encode(u);   /* F is per unit cosine (src/hierarchy/refine.c) */
+        }
+        k++;
+    }
+    for (size_t v = 0; v < t->n; v++)
+        h->start[v + 1] += h->start[v];
+}
+
 bn_status bn__hop_make(const bn__hop_shape *t, const bn__link *links, size_t nlinks, const size_t *bound, bn__hop **out,
                        bn_error *err)
 {
@@ -192,51 +247,16 @@ bn_status bn__hop_make(const bn__hop_shape *t, const bn__link *links, size_t nli
     h->F = bn__malloc_array(kept ? kept : 1, sizeof *h->F);
     h->dir = bn__calloc(kept ? kept : 1, sizeof *h->dir);
     h->Bn = bn__calloc(4 * n, sizeof(double));   /* each node's fourth value stays 0 */
-    h->distributed = bn_dist_size() > 1;
-    if (h->distributed) {
-        size_t P = (size_t)bn_dist_size();
-        h->bound = bn__malloc_array(P + 1, sizeof *h->bound);
-        h->order = bn__malloc_array(t->npatch, sizeof(uint32_t));
-        h->xchg = bn__malloc_array(3 * t->npatch, sizeof(double));
-        if (!h->bound || !h->order || !h->xchg)
-            goto oom;
-        memcpy(h->bound, bound, (P + 1) * sizeof *h->bound);
-        memcpy(h->order, t->order, t->npatch * sizeof(uint32_t));
-        h->plo = bound[bn_dist_rank()];
-        h->phi = bound[bn_dist_rank() + 1];
-    }
     h->G = bn__malloc_array(3 * n, sizeof(double));
-    if (!h->child || !h->parent || !h->leaf_patch || !h->cl || !h->area || !h->normal || !h->start || !h->src ||
-        !h->F || !h->dir || !h->Bn || !h->G)
+    h->distributed = bn_dist_size() > 1;
+    if ((h->distributed && !bn__hop_make_dist(h, t, bound)) || !h->child || !h->parent || !h->leaf_patch || !h->cl ||
+        !h->area || !h->normal || !h->start || !h->src || !h->F || !h->dir || !h->Bn || !h->G)
         goto oom;
-    memcpy(h->child, t->child, n * sizeof(uint32_t));
-    memcpy(h->parent, t->parent, n * sizeof(uint32_t));
-    memcpy(h->area, t->area, n * sizeof(double));
-    for (size_t v = 0; v < n; v++) {
-        h->leaf_patch[v] = t->child[v] == BN__NONE ? t->order[t->lo[v]] : BN__NONE;
-        h->cl[v] = t->plane[v] < 0 ? (uint32_t)h->nclusters++ : BN__NONE;
-        for (int c = 0; c < 3; c++)
-            h->normal[3 * v + c] = (float)t->normal[3 * v + c];
-    }
+    bn__hop_copy_shape(h, t);
     h->Gv = bn__malloc_array(h->nclusters ? 9 * h->nclusters : 1, sizeof(double));
     if (!h->Gv)
         goto oom;
-    for (size_t l = 0, k = 0; l < nlinks; l++) {
-        uint32_t r = links[l].r;
-        if (!(links[l].F > 0))
-            continue;
-        h->start[r + 1]++;
-        h->src[k] = bn__link_s(&links[l]);
-        h->F[k] = links[l].F;
-        if (h->cl[r] != BN__NONE) {
-            double u[3];
-            t->dir(t->dir_ctx, r, h->src[k], u);
-            h->dir[k] = bn__oct_encode(u);   /* F is per unit cosine (src/hierarchy/refine.c) */
-        }
-        k++;
-    }
-    for (size_t v = 0; v < n; v++)
-        h->start[v + 1] += h->start[v];
+    bn__hop_copy_links(h, t, links, nlinks);
     *out = h;
     return BN_OK;
 oom:
