@@ -113,14 +113,62 @@ static void bn__put_value(FILE *fp, double v, uint32_t vbytes)
     }
 }
 
+/* The BNFF header (doc/formfactors.md), the key, the provenance text and the patches' areas. */
+static void bn__write_bnff_head(FILE *fp, const bn__bnff_head *h, const bn_scene *scene, const char *key,
+                                const char *provenance, const char *storage)
+{
+    unsigned char head[BN__BNFF_HEAD];
+    uint32_t v = BN__BNFF_VERSION;
+    memset(head, 0, sizeof head);
+    memcpy(head, "BNFF", 4);
+    memcpy(head + 4, &v, 4);
+    memcpy(head + 8, &h->n, 8);
+    memcpy(head + 16, &h->nnz, 8);
+    memcpy(head + 24, &h->vbytes, 4);
+    memcpy(head + 28, &h->layout, 4);
+    strncpy((char *)head + 32, storage ? storage : "", 16);
+    memcpy(head + 48, &h->klen, 8);
+    memcpy(head + 56, &h->tlen, 8);
+    fwrite(head, 1, sizeof head, fp);
+    if (key)
+        fwrite(key, 1, (size_t)h->klen, fp);
+    if (provenance)
+        fwrite(provenance, 1, (size_t)h->tlen, fp);
+    for (size_t i = 0; i < h->n; i++) {
+        double a = bn__area_m2(scene, i);
+        fwrite(&a, sizeof a, 1, fp);
+    }
+}
+
+/* Indexed rows' index: row starts, then every row's columns. */
+static bn_status bn__write_bnff_index(FILE *fp, const bn_transport *k, size_t n, bn__rows *r, bn_error *err)
+{
+    uint64_t pos = 0;
+    size_t cnt;
+    bn_status st = BN_OK;
+    for (size_t i = 0; i < n && st == BN_OK; i++) {
+        fwrite(&pos, 8, 1, fp);
+        st = bn_transport_row_entries(k, i, r->cols, r->vals, &cnt, err);
+        pos += cnt;
+    }
+    fwrite(&pos, 8, 1, fp);
+    for (size_t i = 0; i < n && st == BN_OK; i++) {
+        st = bn_transport_row_entries(k, i, r->cols, r->vals, &cnt, err);
+        for (size_t q = 0; q < cnt; q++) {
+            uint32_t c = (uint32_t)r->cols[q];
+            fwrite(&c, 4, 1, fp);
+        }
+    }
+    return st;
+}
+
 /* Counts the stored entries (one pass), then writes header, text, areas and rows (a second). */
 static bn_status bn__write_bnff(FILE *fp, const bn_transport *k, const bn_scene *scene, const char *key,
                                 const char *provenance, bn_precision prec, const char *storage, bn_error *err)
 {
     size_t n = bn_transport_size(k), cnt;
-    uint64_t nnz = 0, pos = 0;
+    uint64_t nnz = 0;
     bn__bnff_head h;
-    unsigned char head[BN__BNFF_HEAD];
     bn__rows r;
     bn_status st;
     if (!bn__little_endian())
@@ -135,50 +183,15 @@ static bn_status bn__write_bnff(FILE *fp, const bn_transport *k, const bn_scene 
         return st;
     }
     memset(&h, 0, sizeof h);
-    memset(head, 0, sizeof head);
     h.n = n;
     h.nnz = nnz;
     h.vbytes = bn_precision_bytes(prec);
     h.layout = nnz == (uint64_t)n * n ? 0 : 1;
     h.klen = key ? strlen(key) : 0;
     h.tlen = provenance ? strlen(provenance) : 0;
-    memcpy(head, "BNFF", 4);
-    {
-        uint32_t v = BN__BNFF_VERSION;
-        memcpy(head + 4, &v, 4);
-    }
-    memcpy(head + 8, &h.n, 8);
-    memcpy(head + 16, &h.nnz, 8);
-    memcpy(head + 24, &h.vbytes, 4);
-    memcpy(head + 28, &h.layout, 4);
-    strncpy((char *)head + 32, storage ? storage : "", 16);
-    memcpy(head + 48, &h.klen, 8);
-    memcpy(head + 56, &h.tlen, 8);
-    fwrite(head, 1, sizeof head, fp);
-    if (key)
-        fwrite(key, 1, (size_t)h.klen, fp);
-    if (provenance)
-        fwrite(provenance, 1, (size_t)h.tlen, fp);
-    for (size_t i = 0; i < n; i++) {
-        double a = bn__area_m2(scene, i);
-        fwrite(&a, sizeof a, 1, fp);
-    }
-    if (h.layout == 1) {
-        /* row starts, then every row's columns, then every row's values */
-        for (size_t i = 0; i < n && st == BN_OK; i++) {
-            fwrite(&pos, 8, 1, fp);
-            st = bn_transport_row_entries(k, i, r.cols, r.vals, &cnt, err);
-            pos += cnt;
-        }
-        fwrite(&pos, 8, 1, fp);
-        for (size_t i = 0; i < n && st == BN_OK; i++) {
-            st = bn_transport_row_entries(k, i, r.cols, r.vals, &cnt, err);
-            for (size_t q = 0; q < cnt; q++) {
-                uint32_t c = (uint32_t)r.cols[q];
-                fwrite(&c, 4, 1, fp);
-            }
-        }
-    }
+    bn__write_bnff_head(fp, &h, scene, key, provenance, storage);
+    if (h.layout == 1)
+        st = bn__write_bnff_index(fp, k, n, &r, err);
     for (size_t i = 0; i < n && st == BN_OK && !ferror(fp); i++) {
         st = bn_transport_row_entries(k, i, r.cols, r.vals, &cnt, err);
         for (size_t q = 0; q < cnt; q++)
