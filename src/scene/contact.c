@@ -935,27 +935,56 @@ static int bn__face_cut(bn__cx *c, size_t fi, bn_patch *patches, const size_t *f
     return bn__cut_face(c, fi, patches, first[fi], first[fi + 1], poly, st);
 }
 
+/* The cutter's state for scene s: tolerances from its size (gap when given), the patch vertices pv
+ * (nv of them) to grow. */
+static void bn__cx_init(bn__cx *c, bn_scene *s, double gap, int self, double *pv, size_t nv)
+{
+    double d[3];
+    memset(c, 0, sizeof *c);
+    c->s = s;
+    c->patches = NULL;
+    c->pv = pv;
+    c->nv = c->nv_cap = nv;
+    bn_v3_sub(s->hi, s->lo, d);
+    c->edge = 1e-6 * bn_v3_len(d);
+    c->tol = gap > 0 ? gap : c->edge;
+    c->snap = 1e-9 * bn_v3_len(d);
+    c->self = self || s->nobjs < 2;
+}
+
+/* Every face's contact segments found and its patches cut along them (into c->patches). 0 when out
+ * of memory or interrupted. */
+static int bn__cut_all_faces(bn__cx *c, bn__fgrid *g, bn_patch *patches, const size_t *first,
+                             size_t *stamp, bn_scene_stats *st)
+{
+    bn_scene *s = c->s;
+    for (size_t fi = 0; fi < s->nfaces; fi++) {
+        const bn_face *f = &s->faces[fi];
+        double poly[4][2];
+        c->nsegs = 0;
+        if (bn_interrupted() != BN_OK)
+            return 0;
+        bn__frame_of(s, f, &c->fr);
+        for (unsigned k = 0; k < f->nverts; k++)
+            bn__to2(&c->fr, bn__fvert(s, f, k), poly[k]);
+        if (!bn__face_contacts(c, g, fi, (const double(*)[2])poly, stamp) ||
+            !bn__face_cut(c, fi, patches, first, (const double(*)[2])poly, st))
+            return 0;
+    }
+    return 1;
+}
+
 bn_status bn__mesh_contacts(bn_scene *s, double gap, int self, bn_patch **patches, size_t *np, double **pv,
                             size_t *nv, bn_error *err)
 {
     bn__cx c;
     bn__fgrid g;
     size_t nf = s->nfaces, *first = NULL, *stamp = NULL;
-    double d[3];
     bn_scene_stats *st = &s->stats;
     bn_status rc = BN_ENOMEM;
 
     st->contact_segments = st->contact_faces = st->contact_patches_split = st->contact_patches_made = 0;
-    memset(&c, 0, sizeof c);
-    c.s = s;
-    c.patches = NULL;
-    c.pv = *pv;
-    c.nv = c.nv_cap = *nv;
-    bn_v3_sub(s->hi, s->lo, d);
-    c.edge = 1e-6 * bn_v3_len(d);
-    c.tol = gap > 0 ? gap : c.edge;
-    c.snap = 1e-9 * bn_v3_len(d);
-    c.self = self || s->nobjs < 2;
+    bn__cx_init(&c, s, gap, self, *pv, *nv);
     if (!(c.tol > 0))
         return BN_OK;
     if (!bn__fgrid_build(s, c.tol, &g))
@@ -968,19 +997,8 @@ bn_status bn__mesh_contacts(bn_scene *s, double gap, int self, bn_patch **patche
         rc = bn_error_set(err, BN_EINTERNAL, "contact cuts: patches are not in face order");
         goto fail;
     }
-    for (size_t fi = 0; fi < nf; fi++) {
-        const bn_face *f = &s->faces[fi];
-        double poly[4][2];
-        c.nsegs = 0;
-        if (bn_interrupted() != BN_OK)
-            goto fail;
-        bn__frame_of(s, f, &c.fr);
-        for (unsigned k = 0; k < f->nverts; k++)
-            bn__to2(&c.fr, bn__fvert(s, f, k), poly[k]);
-        if (!bn__face_contacts(&c, &g, fi, (const double(*)[2])poly, stamp) ||
-            !bn__face_cut(&c, fi, *patches, first, (const double(*)[2])poly, st))
-            goto fail;
-    }
+    if (!bn__cut_all_faces(&c, &g, *patches, first, stamp, st))
+        goto fail;
     free(*patches);
     *patches = c.patches;
     *np = c.np;
