@@ -22,21 +22,16 @@ static void bn__colname(FILE *fp, const char *s)
         fputc((*s >= 'a' && *s <= 'z') || (*s >= 'A' && *s <= 'Z') || (*s >= '0' && *s <= '9') ? *s : '_', fp);
 }
 
-bn_status bn_study_write_csv(const bn_study_result *r, const char *path, const char *provenance, bn_error *err)
+/* The CSV's comment lines: provenance, the reference, norms, the equal-error figures, units. */
+static void bn__study_csv_head(const bn_study_result *r, const char *provenance, FILE *fp)
 {
-    bn__outfile f;
-    bn_status st = bn__outfile_open(&f, path, "w", err);
-    FILE *fp;
-    if (st != BN_OK)
-        return st;
-    fp = f.fp;
     if (provenance && *provenance) {
         fputs(provenance, fp);
         if (provenance[strlen(provenance) - 1] != '\n')
             fputc('\n', fp);
     }
-    fprintf(fp, "# study=%s\n# reference=%s\n# reference_patches=%zu\n# reference_seconds=%.6g\n", bn_study_param_name(r->param),
-            r->reference, r->ref_patches, r->ref_seconds);
+    fprintf(fp, "# study=%s\n# reference=%s\n# reference_patches=%zu\n# reference_seconds=%.6g\n",
+            bn_study_param_name(r->param), r->reference, r->ref_patches, r->ref_seconds);
     if (isfinite(r->ref_order))
         fprintf(fp, "# reference_order=%.4g\n# reference_error_unextrapolated=%.6g\n", r->ref_order, r->ref_error_raw);
     fprintf(fp, "# reference_error=%.6g\n# reference_error_patch=%.6g\n# reference_error_how=%s\n", r->ref_error,
@@ -59,37 +54,51 @@ bn_status bn_study_write_csv(const bn_study_result *r, const char *path, const c
                     "# ratio_trace_over_radiosity_fine=%.6g\n",
                 r->fine_target, r->t_radiosity_fine, r->t_trace_fine, r->ratio_fine);
     fprintf(fp, "# units: err_inf W m^-2 sr^-1; err_* relative; bound and estimate W m^-2 sr^-1; t_* seconds; "
-                "peak_mb MiB; ground 0 same mesh, 1 reference patches by centroid, 2 area means of the setting's patches over each reference patch\n");
-    fputs(BN_STUDY_CSV_COLUMNS, fp);
+                "peak_mb MiB; ground 0 same mesh, 1 reference patches by centroid, 2 area means of the setting's "
+                "patches over each reference patch\n");
+}
+
+/* Row w of the CSV. */
+static void bn__study_csv_row(const bn_study_result *r, const bn_study_row *w, FILE *fp)
+{
+    const double v[] = {w->err_inf, w->err_inf_rel, w->err_max_rel, w->err_rms_rel, w->err_l1_rel, w->err_energy_rel,
+                        w->err_surface_max, w->err_surface_mean, w->bound, w->bound_ke, w->estimate, w->t_mesh, w->t_ff,
+                        w->t_solve, w->t_output, w->t_total, w->peak_mb, w->k_norm, w->se_surface_max, w->t_iterate,
+                        (double)w->k_entries, w->k_mb};
+    fprintf(fp, "%s,%s,%s,", bn_study_param_name(r->param), w->method, w->value);
+    bn__num(fp, w->x);
+    fprintf(fp, ",%zu,", w->patches);
+    if (w->iterations == SIZE_MAX)
+        fputs("nan", fp);
+    else
+        fprintf(fp, "%zu", w->iterations);
+    fprintf(fp, ",%d", w->ground);
+    for (size_t k = 0; k < sizeof v / sizeof v[0]; k++) {
+        fputc(',', fp);
+        bn__num(fp, v[k]);
+    }
     for (size_t s = 0; s < r->nsurfaces; s++) {
-        fputs(",err_surf_", fp);
-        bn__colname(fp, r->surface[s]);
+        fputc(',', fp);
+        bn__num(fp, w->err_surface[s]);
     }
     fputc('\n', fp);
-    for (size_t i = 0; i < r->nrows; i++) {
-        const bn_study_row *w = &r->rows[i];
-        const double v[] = {w->err_inf, w->err_inf_rel, w->err_max_rel, w->err_rms_rel, w->err_l1_rel, w->err_energy_rel,
-                            w->err_surface_max, w->err_surface_mean, w->bound, w->bound_ke, w->estimate, w->t_mesh, w->t_ff,
-                            w->t_solve, w->t_output, w->t_total, w->peak_mb, w->k_norm, w->se_surface_max, w->t_iterate,
-                            (double)w->k_entries, w->k_mb};
-        fprintf(fp, "%s,%s,%s,", bn_study_param_name(r->param), w->method, w->value);
-        bn__num(fp, w->x);
-        fprintf(fp, ",%zu,", w->patches);
-        if (w->iterations == SIZE_MAX)
-            fputs("nan", fp);
-        else
-            fprintf(fp, "%zu", w->iterations);
-        fprintf(fp, ",%d", w->ground);
-        for (size_t k = 0; k < sizeof v / sizeof v[0]; k++) {
-            fputc(',', fp);
-            bn__num(fp, v[k]);
-        }
-        for (size_t s = 0; s < r->nsurfaces; s++) {
-            fputc(',', fp);
-            bn__num(fp, w->err_surface[s]);
-        }
-        fputc('\n', fp);
+}
+
+bn_status bn_study_write_csv(const bn_study_result *r, const char *path, const char *provenance, bn_error *err)
+{
+    bn__outfile f;
+    bn_status st = bn__outfile_open(&f, path, "w", err);
+    if (st != BN_OK)
+        return st;
+    bn__study_csv_head(r, provenance, f.fp);
+    fputs(BN_STUDY_CSV_COLUMNS, f.fp);
+    for (size_t s = 0; s < r->nsurfaces; s++) {
+        fputs(",err_surf_", f.fp);
+        bn__colname(f.fp, r->surface[s]);
     }
+    fputc('\n', f.fp);
+    for (size_t i = 0; i < r->nrows; i++)
+        bn__study_csv_row(r, &r->rows[i], f.fp);
     return bn__outfile_commit(&f, err);
 }
 
