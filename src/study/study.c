@@ -722,10 +722,36 @@ static bn_status bn__study_max_iter(bn__study *S, const bn__opctx *C, bn_error *
     return st;
 }
 
-static bn_status bn__study_operator(bn__study *S, bn_error *err)
+/* The reference's lines of the result: what it is (a direct solve of the identical K, n patches,
+ * tdir seconds), the operator's norms, and its error by the a posteriori bound
+ * ||E - (I - K) L||_inf / (1 - ||K||_inf) >= ||L - L*||_inf. */
+static void bn__study_operator_ref(bn__study *S, const bn_solve_result *info, const bn__study_ref *ref, size_t n,
+                                   double tdir)
 {
     const bn_study_opts *o = S->o;
     bn_study_result *R = S->res;
+    R->ref_patches = n;
+    R->ref_seconds = tdir;
+    S->direct_iterate = info->seconds_iterate;
+    R->norm_E = info->norm_E;
+    R->norm_L = ref->norm_L;
+    R->k_norm = info->k_norm_inf;
+    R->spectral_radius = info->spectral_radius;
+    snprintf(R->reference, sizeof R->reference,
+             "direct LAPACK solve of the identical K (%zu patches, ff %s, %s storage)", n,
+             bn_ff_method_name(o->ff.method), bn_precision_name(o->ff.precision));
+    R->ref_error = ref->norm_L > 0 ? info->error_bound / ref->norm_L : info->error_bound;
+    R->ref_error_patch = R->ref_error;
+    snprintf(R->ref_error_how, sizeof R->ref_error_how,
+             "a posteriori bound ||r||_inf / (1 - ||K||_inf) = %.3g W m^-2 sr^-1 (residual %.3g)", info->error_bound,
+             info->residual_max);
+    bn__note(S, "reference: %s; ||K||_inf %.6g, spectral radius %.6g; its error <= %.3g (relative)", R->reference,
+             R->k_norm, R->spectral_radius, R->ref_error);
+}
+
+static bn_status bn__study_operator(bn__study *S, bn_error *err)
+{
+    const bn_study_opts *o = S->o;
     bn_scene *sc = NULL;
     bn_transport *K = NULL;
     double *E = NULL, *L = NULL, tm = 0, tf = 0, tdir = 0;
@@ -750,30 +776,11 @@ static bn_status bn__study_operator(bn__study *S, bn_error *err)
     bn_scene_patch_emission(sc, E);
     dso.method = BN_SOLVE_DIRECT;
     st = bn__solve(K, E, &dso, &L, &info, &tdir, err);
+    if (st == BN_OK)
+        st = bn__study_ref_init(&ref, sc, L, S->res->nsurfaces, err);
     if (st != BN_OK)
         goto done;
-    st = bn__study_ref_init(&ref, sc, L, R->nsurfaces, err);
-    if (st != BN_OK)
-        goto done;
-    R->ref_patches = n;
-    R->ref_seconds = tdir;
-    S->direct_iterate = info.seconds_iterate;
-    R->norm_E = info.norm_E;
-    R->norm_L = ref.norm_L;
-    R->k_norm = info.k_norm_inf;
-    R->spectral_radius = info.spectral_radius;
-    snprintf(R->reference, sizeof R->reference,
-             "direct LAPACK solve of the identical K (%zu patches, ff %s, %s storage)", n,
-             bn_ff_method_name(o->ff.method), bn_precision_name(o->ff.precision));
-    /* Its error: the a posteriori bound ||E - (I - K) L||_inf / (1 - ||K||_inf) >= ||L - L*||_inf. */
-    R->ref_error = ref.norm_L > 0 ? info.error_bound / ref.norm_L : info.error_bound;
-    R->ref_error_patch = R->ref_error;
-    snprintf(R->ref_error_how, sizeof R->ref_error_how,
-             "a posteriori bound ||r||_inf / (1 - ||K||_inf) = %.3g W m^-2 sr^-1 (residual %.3g)", info.error_bound,
-             info.residual_max);
-    bn__note(S, "reference: %s; ||K||_inf %.6g, spectral radius %.6g; its error <= %.3g (relative)", R->reference,
-             R->k_norm, R->spectral_radius, R->ref_error);
-
+    bn__study_operator_ref(S, &info, &ref, n, tdir);
     {
         bn__opctx C = {sc, K, E, &ref, n, tm, tf, tdir};
         if (o->param == BN_STUDY_BOUNCES)
