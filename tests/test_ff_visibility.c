@@ -462,36 +462,52 @@ BN_TEST(point_visible_back_faces_left_out_agree)
     BN_ASSERT_LT(worst_g, 1e-12);
 }
 
-/* One occluder in view takes a short path (what it hides is its own projection, clipped to the
- * pyramid: F of that polygon); listed twice it takes the general one (the boundary of the union,
- * cut edge by edge). The two agree to 1e-12 of F(x -> b) over a grid of points, tilted occluder
- * partly beside the pyramid, both for what is seen and for what is hidden. */
-BN_TEST(point_visible_one_occluder_agrees_with_the_union_path)
+/* One or two occluders in view take short paths (one: what it hides is its own projection, clipped
+ * to the pyramid, F of that polygon; two: F of each less F of their intersection); with a copy of an
+ * occluder listed again they take the general one (the boundary of the union, cut edge by edge). The
+ * two agree to 1e-12 of F(x -> b) over a grid of points, tilted occluders partly beside the pyramid and
+ * overlapping each other, both for what is seen and for what is hidden. */
+static void check_short_path(const char *name, const double *occ, size_t nocc, size_t nref)
 {
-    static const double occ[24] = {0.6, 0.4, 0.5, 2.2, 0.7, 0.8, 2.5, 0.6, 2.1, 0.9, 0.3, 1.7,
-                                   0.6, 0.4, 0.5, 2.2, 0.7, 0.8, 2.5, 0.6, 2.1, 0.9, 0.3, 1.7};
-    const unsigned on[2] = {4, 4};
+    const unsigned on[4] = {4, 4, 4, 4};
     const double b[12] = {0, 0, 3, 0, 3, 3, 3, 3, 3, 3, 0, 3}, bn_[3] = {0, 0, -1}, n[3] = {0, 1, 0};
     double worst = 0;
-    size_t shadowed = 0;
+    size_t shadowed = 0, two = 0;
     for (int a = 0; a < 30; a++)
         for (int k = 0; k < 30; k++) {
             double x[3] = {0.05 + 2.9 * a / 29.0, 0, 0.05 + 0.9 * k / 29.0}, u = bn__ff_point_polygon(x, n, b, 4);
             uint32_t m1, m2;
             int s1, s2;
-            double one = bn__ff_point_visible(x, n, b, 4, bn_, occ, on, NULL, 1, 1e-9, &m1);
-            double two = bn__ff_point_visible(x, n, b, 4, bn_, occ, on, NULL, 2, 1e-9, &m2);
-            double g1 = bn__ff_point_blocked(x, n, b, 4, bn_, occ, on, NULL, 1, 1e-9, &m1, &s1);
-            double g2 = bn__ff_point_blocked(x, n, b, 4, bn_, occ, on, NULL, 2, 1e-9, &m2, &s2);
-            worst = fmax(worst, fmax(fabs(one - two), fabs(g1 - g2)) / u);
+            double one = bn__ff_point_visible(x, n, b, 4, bn_, occ, on, NULL, nocc, 1e-9, &m1);
+            double ref = bn__ff_point_visible(x, n, b, 4, bn_, occ, on, NULL, nref, 1e-9, &m2);
+            double g1 = bn__ff_point_blocked(x, n, b, 4, bn_, occ, on, NULL, nocc, 1e-9, &m1, &s1);
+            double g2 = bn__ff_point_blocked(x, n, b, 4, bn_, occ, on, NULL, nref, 1e-9, &m2, &s2);
+            worst = fmax(worst, fmax(fabs(one - ref), fabs(g1 - g2)) / u);
             BN_ASSERT_EQ(s1, s2);
             BN_ASSERT_NEAR(one + g1, u, 1e-12 * u);
             shadowed += m1 != 0 && g1 > 1e-6 * u && one > 1e-6 * u;
+            two += (m1 & 3u) == 3u;
         }
-    fprintf(stderr, "one occluder against it listed twice: %zu of 900 points partly shadowed; largest difference "
-            "%.2e of F\n", shadowed, worst);
+    fprintf(stderr, "%s: %zu of 900 points partly shadowed, %zu with both occluders in view; largest difference "
+            "%.2e of F\n", name, shadowed, two, worst);
     BN_ASSERT_GT(shadowed, 100);
+    if (nocc == 2)
+        BN_ASSERT_GT(two, 100);
     BN_ASSERT_LT(worst, 1e-12);
+}
+
+BN_TEST(point_visible_short_paths_agree_with_the_union_path)
+{
+    /* A: a tilted quad; B: the planar quad c +- u +- w, c = (1.2, 0.7, 1.5), u = (0.9, 0.1, 0.2),
+     * w = (-0.2, 0.05, 0.6), overlapping A's shadow */
+    static const double one[36] = {0.6, 0.4, 0.5, 2.2, 0.7, 0.8, 2.5, 0.6, 2.1, 0.9, 0.3, 1.7,
+                                   0.6, 0.4, 0.5, 2.2, 0.7, 0.8, 2.5, 0.6, 2.1, 0.9, 0.3, 1.7,
+                                   0.6, 0.4, 0.5, 2.2, 0.7, 0.8, 2.5, 0.6, 2.1, 0.9, 0.3, 1.7};
+    static const double two[36] = {0.6, 0.4, 0.5, 2.2, 0.7, 0.8, 2.5, 0.6, 2.1, 0.9, 0.3, 1.7,
+                                   0.5, 0.55, 0.7, 2.3, 0.75, 1.1, 1.9, 0.85, 2.3, 0.1, 0.65, 1.9,
+                                   0.6, 0.4, 0.5, 2.2, 0.7, 0.8, 2.5, 0.6, 2.1, 0.9, 0.3, 1.7};
+    check_short_path("one occluder against three copies", one, 1, 3);
+    check_short_path("two occluders against the first listed again", two, 2, 3);
 }
 
 BN_TEST(point_visible_grazing_is_continuous)

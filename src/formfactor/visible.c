@@ -385,6 +385,70 @@ static double bn__vis_one(const bn__vis *V, const double x[3], const double n[3]
     return fmax(blocked ? h : bn__ff_point_polygon(x, n, b, nb) - h, 0);
 }
 
+/* F from x of polygon p (m corners in b's frame) lifted back to b's plane. */
+static double bn__vis_F2(const bn__vis *V, const double x[3], const double n[3], const double *p, size_t m)
+{
+    double v[3 * 2 * BN__VIS_CORNERS];
+    for (size_t k = 0; k < m; k++)
+        bn__lift(&V->fr, p + 2 * k, v + 3 * k);
+    return bn__ff_point_polygon(x, n, v, m);
+}
+
+/* P (counter-clockwise) clipped to the inner side of every edge of the convex Q: their intersection
+ * into out (at most P->n + Q->n corners for a convex P); its corner count (0: none), SIZE_MAX when a
+ * clip would overflow (P far from convex: the caller takes the general path). */
+static size_t bn__vis_intersect(const bn__poly2 *P, const bn__poly2 *Q, double *out)
+{
+    double buf[2][2 * 2 * BN__VIS_CORNERS];
+    size_t m = P->n, cur = 0;
+    memcpy(buf[0], P->p, 2 * m * sizeof(double));
+    for (size_t e = 0; e < Q->n && m >= 3; e++) {
+        const double *c0 = Q->p + 2 * e, *nl = Q->nl + 2 * e, *in = buf[cur];
+        double *o = buf[1 - cur];
+        size_t k2 = 0;
+        if (!(Q->len[e] > 0))
+            continue;
+        for (size_t k = 0; k < m; k++) {
+            const double *a = in + 2 * k, *b = in + 2 * (k + 1 < m ? k + 1 : 0);
+            double da = nl[0] * (a[0] - c0[0]) + nl[1] * (a[1] - c0[1]);
+            double db = nl[0] * (b[0] - c0[0]) + nl[1] * (b[1] - c0[1]);
+            if (k2 + 2 > 2 * BN__VIS_CORNERS)
+                return SIZE_MAX;   /* each corner gives at most two */
+            if (da >= 0) {
+                o[2 * k2] = a[0];
+                o[2 * k2++ + 1] = a[1];
+            }
+            if ((da > 0 && db < 0) || (da < 0 && db > 0)) {
+                double t = da / (da - db);
+                o[2 * k2] = a[0] + t * (b[0] - a[0]);
+                o[2 * k2++ + 1] = a[1] + t * (b[1] - a[1]);
+            }
+        }
+        m = k2;
+        cur = 1 - cur;
+    }
+    memcpy(out, buf[cur], 2 * m * sizeof(double));
+    return m >= 3 ? m : 0;
+}
+
+/* Two projections kept (V->np == 3): both lie in b, so what they hide is their union, F(P1) + F(P2) -
+ * F(P1 and P2) (the intersection of two convex polygons, by clipping); x sees some of b unless the
+ * union's area is b's to 1e-9. -1 when the intersection cannot be had (the general path then). */
+static double bn__vis_two(const bn__vis *V, const double x[3], const double n[3], const double *b, size_t nb,
+                          int blocked, int *sees)
+{
+    const bn__poly2 *P1 = &V->poly[1], *P2 = &V->poly[2];
+    double I[2 * 2 * BN__VIS_CORNERS], h;
+    size_t mi = bn__vis_intersect(P1, P2, I);
+    if (mi == SIZE_MAX)
+        return -1;
+    double ai = mi ? bn__area2(I, mi) : 0;
+    double au = bn__area2(P1->p, P1->n) + bn__area2(P2->p, P2->n) - ai, ab = bn__area2(V->poly[0].p, V->poly[0].n);
+    h = bn__vis_F2(V, x, n, P1->p, P1->n) + bn__vis_F2(V, x, n, P2->p, P2->n) - (mi ? bn__vis_F2(V, x, n, I, mi) : 0);
+    *sees = au < ab * (1 - 1e-9);
+    return fmax(blocked ? h : bn__ff_point_polygon(x, n, b, nb) - h, 0);
+}
+
 /* bn__ff_point_visible's work: what x sees of b past the occluders, or (blocked) what they hide of
  * it; *sees whether x sees any of b. */
 static double bn__point_vis(const double x[3], const double n[3], const double *b, size_t nb, const double bn[3],
@@ -419,6 +483,11 @@ static double bn__point_vis(const double x[3], const double n[3], const double *
     if (V.np == 2) {   /* one projection, not covering b: part of b is seen */
         *sees = 1;
         return bn__vis_one(&V, x, n, b, nb, blocked);
+    }
+    if (V.np == 3) {
+        double f = bn__vis_two(&V, x, n, b, nb, blocked, sees);
+        if (f >= 0)
+            return f;
     }
     /* the boundary of b minus the union (or of b and the union): every piece of every edge, cut
      * where other edges cross it, that bounds the region */
