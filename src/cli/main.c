@@ -71,13 +71,10 @@ static char *bn__join_cmdline(int argc, char **argv)
     return s;
 }
 
-int main(int argc, char **argv)
+/* Ctrl-C and kill stop the run cleanly (bn_interrupted); a file-size limit fails a write. */
+static void bn__signals(void)
 {
-    bn_cli_common common;
     struct sigaction sa;
-    int rc;
-    char *cmdline;
-
     memset(&sa, 0, sizeof sa);
     sa.sa_handler = bn__on_signal;
     sigemptyset(&sa.sa_mask);
@@ -86,7 +83,47 @@ int main(int argc, char **argv)
     /* Past a file-size limit (ulimit -f) a write fails with EFBIG, which every writer reports and
      * cleans up after, instead of the default SIGXFSZ killing the process mid-file. */
     signal(SIGXFSZ, SIG_IGN);
+}
 
+/* Under mpirun: join MPI; rank 0 alone prints (outputs: bn__tmpname_commit). The exit code on
+ * failure, else -1. */
+static int bn__join_mpi(int *argc, char ***argv)
+{
+    bn_error err;
+    bn_error_clear(&err);
+    if (bn_dist_init(argc, argv, &err) != BN_OK) {
+        bn_cli_fail(&err);
+        return bn_status_exit_code(err.status);
+    }
+    if (bn_dist_rank() != 0 && (!freopen("/dev/null", "w", stdout) || !freopen("/dev/null", "w", stderr)))
+        bn_dist_abort(1);
+    return -1;
+}
+
+/* The command line for every output's provenance, with the process count under mpirun (NULL when
+ * out of memory). */
+static char *bn__provenance_cmdline(int argc, char **argv)
+{
+    char *cmdline = bn__join_cmdline(argc, argv);
+    if (cmdline && bn_dist_size() > 1) {
+        size_t n = strlen(cmdline) + 48;
+        char *m = malloc(n);
+        if (m) {
+            snprintf(m, n, "mpirun -np %d %s", bn_dist_size(), cmdline);
+            free(cmdline);
+            cmdline = m;
+        }
+    }
+    return cmdline;
+}
+
+int main(int argc, char **argv)
+{
+    bn_cli_common common;
+    int rc;
+    char *cmdline;
+
+    bn__signals();
     if (argc < 2) {
         bn__usage(stderr);
         return 2;
@@ -99,31 +136,12 @@ int main(int argc, char **argv)
         printf("bounce %s\n", bn_version());
         return 0;
     }
-    {   /* under mpirun: join MPI; rank 0 alone prints (outputs: bn__tmpname_commit) */
-        bn_error err;
-        bn_error_clear(&err);
-        if (bn_dist_init(&argc, &argv, &err) != BN_OK) {
-            bn_cli_fail(&err);
-            return bn_status_exit_code(err.status);
-        }
-        if (bn_dist_rank() != 0) {
-            if (!freopen("/dev/null", "w", stdout) || !freopen("/dev/null", "w", stderr))
-                bn_dist_abort(1);
-        }
-    }
+    if ((rc = bn__join_mpi(&argc, &argv)) >= 0)
+        return rc;
     memset(&common, 0, sizeof common);
     common.seed = 1;
     common.quiet = bn_dist_rank() != 0;
-    cmdline = bn__join_cmdline(argc, argv);
-    if (cmdline && bn_dist_size() > 1) {   /* every output's provenance records the process count */
-        size_t n = strlen(cmdline) + 48;
-        char *m = malloc(n);
-        if (m) {
-            snprintf(m, n, "mpirun -np %d %s", bn_dist_size(), cmdline);
-            free(cmdline);
-            cmdline = m;
-        }
-    }
+    cmdline = bn__provenance_cmdline(argc, argv);
     common.cmdline = cmdline ? cmdline : "bounce";
     for (size_t i = 0; i < BN__NCOMMANDS; i++)
         if (strcmp(argv[1], bn__commands[i].name) == 0) {
