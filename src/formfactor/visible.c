@@ -372,19 +372,6 @@ static void bn__vis_edge(const bn__vis *V, size_t q, size_t k, const double *ts,
     }
 }
 
-/* One projection kept (V->np == 2), the commonest case: clipped to the pyramid, it lies in b, so the
- * part of b it hides is that convex polygon itself: F of it lifted back to b's plane, no cuts. */
-static double bn__vis_one(const bn__vis *V, const double x[3], const double n[3], const double *b, size_t nb,
-                          int blocked)
-{
-    const bn__poly2 *P = &V->poly[1];
-    double v[3 * BN__VIS_CORNERS], h;
-    for (size_t k = 0; k < P->n; k++)
-        bn__lift(&V->fr, P->p + 2 * k, v + 3 * k);
-    h = bn__ff_point_polygon(x, n, v, P->n);
-    return fmax(blocked ? h : bn__ff_point_polygon(x, n, b, nb) - h, 0);
-}
-
 /* F from x of polygon p (m corners in b's frame) lifted back to b's plane. */
 static double bn__vis_F2(const bn__vis *V, const double x[3], const double n[3], const double *p, size_t m)
 {
@@ -392,6 +379,12 @@ static double bn__vis_F2(const bn__vis *V, const double x[3], const double n[3],
     for (size_t k = 0; k < m; k++)
         bn__lift(&V->fr, p + 2 * k, v + 3 * k);
     return bn__ff_point_polygon(x, n, v, m);
+}
+
+/* What x sees of b (or, blocked, what is hidden) when the hidden part's F is h. */
+static double bn__vis_result(const double x[3], const double n[3], const double *b, size_t nb, int blocked, double h)
+{
+    return fmax(blocked ? h : bn__ff_point_polygon(x, n, b, nb) - h, 0);
 }
 
 /* P (counter-clockwise) clipped to the inner side of every edge of the convex Q: their intersection
@@ -446,7 +439,7 @@ static double bn__vis_two(const bn__vis *V, const double x[3], const double n[3]
     double au = bn__area2(P1->p, P1->n) + bn__area2(P2->p, P2->n) - ai, ab = bn__area2(V->poly[0].p, V->poly[0].n);
     h = bn__vis_F2(V, x, n, P1->p, P1->n) + bn__vis_F2(V, x, n, P2->p, P2->n) - (mi ? bn__vis_F2(V, x, n, I, mi) : 0);
     *sees = au < ab * (1 - 1e-9);
-    return fmax(blocked ? h : bn__ff_point_polygon(x, n, b, nb) - h, 0);
+    return bn__vis_result(x, n, b, nb, blocked, h);
 }
 
 /* bn__ff_point_visible's work: what x sees of b past the occluders, or (blocked) what they hide of
@@ -480,9 +473,10 @@ static double bn__point_vis(const double x[3], const double n[3], const double *
         *sees = 1;
         return blocked ? 0 : bn__ff_point_polygon(x, n, b, nb);
     }
-    if (V.np == 2) {   /* one projection, not covering b: part of b is seen */
+    if (V.np == 2) {   /* one projection, not covering b (part of b is seen): clipped to the pyramid,
+                          it lies in b, so what it hides is that convex polygon itself, no cuts */
         *sees = 1;
-        return bn__vis_one(&V, x, n, b, nb, blocked);
+        return bn__vis_result(x, n, b, nb, blocked, bn__vis_F2(&V, x, n, V.poly[1].p, V.poly[1].n));
     }
     if (V.np == 3) {
         double f = bn__vis_two(&V, x, n, b, nb, blocked, sees);
